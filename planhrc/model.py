@@ -1,0 +1,264 @@
+"""Immutable values shared by every stage: articulated objects, ground atoms and states.
+
+Conventions (see CONVENTIONS.md of the project): orientations are integer degrees in [0, 360), clockwise
+seen from above; K allowed orientations are {0, step, 2*step, ...} with step = 360 / K.
+
+* Relative formulation: links l1..lN, joints j1..j(N-1); jK joins lK and lK+1 and carries the angle of
+  lK+1 relative to lK, (theta[K+1] - theta[K]) mod 360.
+* Absolute formulation: links l0 (virtual, the table) and l1..lN, joints j1..jN; jK joins lK-1 and lK and
+  carries the absolute orientation of lK. Turning lK about jK (holding lK-1) moves lK..lN, so jK changes and
+  so does every jM with M > K: Affected(jM, lK, jK). Our objects also assert the reflexive
+  Affected(jK, lK, jK), which names lK as the link that turns about jK (the paper's schema ignores it in its
+  conditional effect because of `(not (= ?j2 ?j1))`).
+
+A ground atom is a PDDL-style tuple ``(predicate, arg, ...)`` with lower-case names, e.g.
+``("hasorientation", "deg_90", "obj1_j3")``. A state is a ``frozenset`` of atoms.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+from typing import Iterable, Sequence
+
+Atom = tuple[str, ...]
+State = frozenset[Atom]
+
+CONNECTED = "connected"
+HAS_ORIENTATION = "hasorientation"
+ORIENTATION_ORD = "orientationord"
+AFFECTED = "affected"
+
+
+class ModelError(Exception):
+    """Invalid object description or configuration; the message names the offending field."""
+
+
+class Formulation(str, Enum):
+    RELATIVE = "relative"
+    ABSOLUTE = "absolute"
+
+
+def orientation_values(k: int) -> tuple[int, ...]:
+    """The K allowed orientations in degrees, ascending."""
+    if k < 2 or 360 % k != 0:
+        raise ModelError(f"orientations: 360 must be divisible by K and K >= 2, got {k}")
+    step = 360 // k
+    return tuple(i * step for i in range(k))
+
+
+def orientation_name(deg: int) -> str:
+    return f"deg_{deg}"
+
+
+def snap_angle(angle: float, k: int) -> int:
+    """Snap a continuous angle (any real, degrees) to the nearest allowed orientation; ties go to the smaller."""
+    if not math.isfinite(angle):
+        raise ModelError(f"angle must be finite, got {angle!r}")
+    step = 360 // k
+    a = angle % 360.0
+    lower = int(a // step) * step
+    upper = lower + step
+    choice = lower if (a - lower) <= (upper - a) else upper
+    return int(choice) % 360
+
+
+def relative_from_absolute(link_orientations: Sequence[int]) -> tuple[int, ...]:
+    """Relative angle of link K+1 with respect to link K, for K = 1..N-1: (theta[K+1] - theta[K]) mod 360."""
+    return tuple((b - a) % 360 for a, b in zip(link_orientations, link_orientations[1:]))
+
+
+def absolute_from_relative(first: int, relative: Sequence[int]) -> tuple[int, ...]:
+    """Link orientations from the first link's orientation and the relative joint angles."""
+    out = [first % 360]
+    for r in relative:
+        out.append((out[-1] + r) % 360)
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class ArticulatedObject:
+    """An articulated object: an ordered chain of links, its joints and its allowed orientation set."""
+
+    ident: str
+    formulation: Formulation
+    link_lengths_m: tuple[float, ...]
+    orientations: int
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.ident or not self.ident.replace("_", "").isalnum() or not self.ident[0].isalpha():
+            raise ModelError(f"ident: must start with a letter and be alphanumeric, got {self.ident!r}")
+        if self.ident != self.ident.lower():
+            raise ModelError(f"ident: must be lower case, got {self.ident!r}")
+        if len(self.link_lengths_m) < 2:
+            raise ModelError(f"links: an articulated object needs at least 2 links, got {len(self.link_lengths_m)}")
+        for i, length in enumerate(self.link_lengths_m):
+            if not math.isfinite(length) or length <= 0:
+                raise ModelError(f"links[{i}].length_m: must be a positive finite number, got {length!r}")
+        orientation_values(self.orientations)
+
+    # -- names ---------------------------------------------------------------------------------------
+    @property
+    def n_links(self) -> int:
+        return len(self.link_lengths_m)
+
+    @property
+    def step(self) -> int:
+        return 360 // self.orientations
+
+    def link(self, k: int) -> str:
+        return f"{self.ident}_l{k}"
+
+    def joint(self, k: int) -> str:
+        return f"{self.ident}_j{k}"
+
+    @property
+    def links(self) -> tuple[str, ...]:
+        """Real links l1..lN in chain order."""
+        return tuple(self.link(k) for k in range(1, self.n_links + 1))
+
+    @property
+    def all_links(self) -> tuple[str, ...]:
+        """Links as PDDL objects: the absolute formulation adds the virtual ground link l0."""
+        if self.formulation is Formulation.ABSOLUTE:
+            return (self.link(0),) + self.links
+        return self.links
+
+    @property
+    def joint_indices(self) -> tuple[int, ...]:
+        if self.formulation is Formulation.ABSOLUTE:
+            return tuple(range(1, self.n_links + 1))
+        return tuple(range(1, self.n_links))
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return tuple(self.joint(k) for k in self.joint_indices)
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_indices)
+
+    @property
+    def orientation_degrees(self) -> tuple[int, ...]:
+        return orientation_values(self.orientations)
+
+    @property
+    def orientation_names(self) -> tuple[str, ...]:
+        return tuple(orientation_name(d) for d in self.orientation_degrees)
+
+    def joint_links(self, k: int) -> tuple[str, str]:
+        """(upstream link, downstream link) joined by joint k."""
+        if self.formulation is Formulation.ABSOLUTE:
+            return self.link(k - 1), self.link(k)
+        return self.link(k), self.link(k + 1)
+
+    # -- static facts ----------------------------------------------------------------------------------
+    def connected_atoms(self) -> frozenset[Atom]:
+        atoms = set()
+        for k in self.joint_indices:
+            up, down = self.joint_links(k)
+            atoms.add((CONNECTED, self.joint(k), up))
+            atoms.add((CONNECTED, self.joint(k), down))
+        return frozenset(atoms)
+
+    def ord_atoms(self) -> frozenset[Atom]:
+        names = self.orientation_names
+        return frozenset((ORIENTATION_ORD, names[i], names[(i + 1) % len(names)]) for i in range(len(names)))
+
+    def affected_atoms(self) -> frozenset[Atom]:
+        """Affected(jM, lK, jK) for M >= K (absolute formulation only); see the module docstring."""
+        if self.formulation is not Formulation.ABSOLUTE:
+            return frozenset()
+        atoms = set()
+        for k in self.joint_indices:
+            turned = self.link(k)
+            for m in self.joint_indices:
+                if m >= k:
+                    atoms.add((AFFECTED, self.joint(m), turned, self.joint(k)))
+        return frozenset(atoms)
+
+    def static_atoms(self) -> frozenset[Atom]:
+        return self.connected_atoms() | self.ord_atoms() | self.affected_atoms()
+
+    # -- configurations --------------------------------------------------------------------------------
+    def check_joint_values(self, values: Sequence[int], field: str = "joint_angles_deg") -> tuple[int, ...]:
+        if len(values) != self.n_joints:
+            raise ModelError(f"{field}: expected {self.n_joints} values (one per joint), got {len(values)}")
+        allowed = set(self.orientation_degrees)
+        out = []
+        for i, v in enumerate(values):
+            if isinstance(v, float) and not v.is_integer():
+                raise ModelError(f"{field}[{i}]: {v} is not one of the allowed orientations {sorted(allowed)}")
+            iv = int(v)
+            if iv not in allowed:
+                raise ModelError(f"{field}[{i}]: {v} is not one of the allowed orientations {sorted(allowed)}")
+            out.append(iv)
+        return tuple(out)
+
+    def joint_values_from_links(self, link_orientations: Sequence[int]) -> tuple[int, ...]:
+        """Joint values carried by the formulation, from every real link's absolute orientation."""
+        if len(link_orientations) != self.n_links:
+            raise ModelError(
+                f"link_orientations_deg: expected {self.n_links} values (one per link), got {len(link_orientations)}"
+            )
+        if self.formulation is Formulation.ABSOLUTE:
+            return tuple(int(v) % 360 for v in link_orientations)
+        return relative_from_absolute([int(v) % 360 for v in link_orientations])
+
+    def configuration_atoms(self, joint_values: Sequence[int]) -> frozenset[Atom]:
+        values = self.check_joint_values(joint_values)
+        return frozenset(
+            (HAS_ORIENTATION, orientation_name(v), self.joint(k)) for k, v in zip(self.joint_indices, values)
+        )
+
+    def state(self, joint_values: Sequence[int]) -> State:
+        """A complete state: static facts plus one orientation per joint."""
+        return self.static_atoms() | self.configuration_atoms(joint_values)
+
+    def joint_values_of(self, state: Iterable[Atom]) -> dict[int, int]:
+        """Joint index -> degrees for every HasOrientation atom of the state (partial states give partial maps)."""
+        index = {self.joint(k): k for k in self.joint_indices}
+        out: dict[int, int] = {}
+        for atom in state:
+            if atom[0] == HAS_ORIENTATION and atom[2] in index:
+                out[index[atom[2]]] = int(atom[1].split("_", 1)[1])
+        return out
+
+    def link_orientations_of(self, state: Iterable[Atom], first_link_deg: int = 0) -> tuple[int, ...]:
+        """Absolute link orientations of a complete state (relative: l1 is placed at `first_link_deg`)."""
+        values = self.joint_values_of(state)
+        if len(values) != self.n_joints:
+            raise ModelError("state: not a complete configuration (a joint has no orientation)")
+        ordered = [values[k] for k in self.joint_indices]
+        if self.formulation is Formulation.ABSOLUTE:
+            return tuple(ordered)
+        return absolute_from_relative(first_link_deg, ordered)
+
+
+def make_object(
+    ident: str,
+    formulation: Formulation | str,
+    links: int | Sequence[float],
+    orientations: int,
+    name: str = "",
+    default_length_m: float = 0.155,
+) -> ArticulatedObject:
+    """Build an object from a link count (all of `default_length_m`) or a list of link lengths."""
+    if isinstance(links, bool):
+        raise ModelError("links: must be an integer count or a list of lengths")
+    lengths = (default_length_m,) * links if isinstance(links, int) else tuple(float(x) for x in links)
+    try:
+        form = Formulation(formulation)
+    except ValueError as exc:
+        raise ModelError(f"formulation: must be 'relative' or 'absolute', got {formulation!r}") from exc
+    return ArticulatedObject(ident=ident, formulation=form, link_lengths_m=lengths, orientations=orientations, name=name)
+
+
+def is_subsumed(s1: State | frozenset, s2: State | frozenset) -> bool:
+    """D(s1) ⊑ D(s2): every atom that s2 asserts is asserted by s1 (s2 may be partial)."""
+    return s2 <= s1
+
+
+def format_atom(atom: Atom) -> str:
+    return "(" + " ".join(atom) + ")"

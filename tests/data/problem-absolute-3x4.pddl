@@ -1,0 +1,35 @@
+(define (problem obj1-demo)
+  (:domain planhrc-absolute)
+  (:objects
+    obj1_l0 obj1_l1 obj1_l2 obj1_l3 - link
+    obj1_j1 obj1_j2 obj1_j3 - joint
+    deg_0 deg_90 deg_180 deg_270 - orientation
+  )
+  (:init
+    (affected obj1_j1 obj1_l1 obj1_j1)
+    (affected obj1_j2 obj1_l1 obj1_j1)
+    (affected obj1_j2 obj1_l2 obj1_j2)
+    (affected obj1_j3 obj1_l1 obj1_j1)
+    (affected obj1_j3 obj1_l2 obj1_j2)
+    (affected obj1_j3 obj1_l3 obj1_j3)
+    (connected obj1_j1 obj1_l0)
+    (connected obj1_j1 obj1_l1)
+    (connected obj1_j2 obj1_l1)
+    (connected obj1_j2 obj1_l2)
+    (connected obj1_j3 obj1_l2)
+    (connected obj1_j3 obj1_l3)
+    (hasorientation deg_0 obj1_j1)
+    (hasorientation deg_90 obj1_j2)
+    (hasorientation deg_180 obj1_j3)
+    (orientationord deg_0 deg_90)
+    (orientationord deg_90 deg_180)
+    (orientationord deg_180 deg_270)
+    (orientationord deg_270 deg_0)
+  )
+  (:goal (and
+    (hasorientation deg_0 obj1_j3)
+    (hasorientation deg_90 obj1_j1)
+    (hasorientation deg_90 obj1_j2)
+  ))
+)
+

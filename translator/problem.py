@@ -1,0 +1,75 @@
+"""Write a PDDL problem from an object, an initial state and a (possibly partial) goal state.
+
+One core function writes to a stream; `get_problem` is the thin string wrapper. Every collection is sorted
+so the same input gives byte-identical text.
+"""
+from __future__ import annotations
+
+import io
+from typing import Iterable, TextIO
+
+from planhrc.model import HAS_ORIENTATION, ArticulatedObject, Atom, Formulation, format_atom
+
+from .errors import TranslationError
+
+DOMAIN_NAMES = {Formulation.RELATIVE: "planhrc-relative", Formulation.ABSOLUTE: "planhrc-absolute"}
+
+
+def _degrees(name: str) -> int:
+    return int(name.split("_", 1)[1])
+
+
+def write_problem(
+    out: TextIO,
+    obj: ArticulatedObject,
+    init: Iterable[Atom],
+    goal: Iterable[Atom],
+    problem_name: str,
+    domain_name: str | None = None,
+) -> None:
+    init_atoms = frozenset(init) | obj.static_atoms()
+    goal_atoms = sorted(frozenset(goal))
+    if not goal_atoms:
+        raise TranslationError("goal: the goal state asserts no predicate")
+    objects = {"link": obj.all_links, "joint": obj.joints, "orientation": obj.orientation_names}
+    known = {name for names in objects.values() for name in names}
+    for atom in sorted(init_atoms | frozenset(goal_atoms)):
+        for arg in atom[1:]:
+            if arg not in known:
+                raise TranslationError(f"state: atom {format_atom(atom)} names {arg!r}, which is not part of {obj.ident}")
+    for atom in goal_atoms:
+        if atom[0] != HAS_ORIENTATION:
+            raise TranslationError(f"goal: only hasorientation atoms may be goals, got {format_atom(atom)}")
+    out.write(f"(define (problem {problem_name.lower()})\n")
+    out.write(f"  (:domain {domain_name or DOMAIN_NAMES[obj.formulation]})\n")
+    out.write("  (:objects\n")
+    for type_name in ("link", "joint", "orientation"):
+        names = sorted(objects[type_name], key=_natural_key)
+        out.write(f"    {' '.join(names)} - {type_name}\n")
+    out.write("  )\n")
+    out.write("  (:init\n")
+    for atom in sorted(init_atoms, key=_atom_key):
+        out.write(f"    {format_atom(atom)}\n")
+    out.write("  )\n")
+    out.write("  (:goal (and\n")
+    for atom in sorted(goal_atoms, key=_atom_key):
+        out.write(f"    {format_atom(atom)}\n")
+    out.write("  ))\n)\n")
+
+
+def get_problem(obj: ArticulatedObject, init: Iterable[Atom], goal: Iterable[Atom], problem_name: str,
+                domain_name: str | None = None) -> str:
+    buf = io.StringIO()
+    write_problem(buf, obj, init, goal, problem_name, domain_name)
+    return buf.getvalue()
+
+
+def _natural_key(name: str) -> tuple:
+    head, _, tail = name.rpartition("_")
+    digits = "".join(ch for ch in tail if ch.isdigit())
+    prefix = tail.rstrip("0123456789")
+    return (head, prefix, int(digits) if digits else -1, name)
+
+
+def _atom_key(atom: Atom) -> tuple:
+    return (atom[0],) + tuple(_natural_key(a) for a in atom[1:])
