@@ -1,0 +1,21 @@
+"""Errors of the knowledge base. HTTP status codes are chosen only in kb_service's API layer."""
+
+
+class KBError(Exception):
+    """Root of every knowledge-base error."""
+
+
+class NotFoundError(KBError):
+    """An id names no object, state, problem, plan or action."""
+
+
+class ValidationError(KBError):
+    """Input refused before anything was written; the message names the field."""
+
+
+class ConflictError(KBError):
+    """The write contradicts what is stored (duplicate id, action that is not the current one, ...)."""
+
+
+class ReasonerError(KBError):
+    """The DL reasoner could not run (no Java, Java error, timeout)."""
