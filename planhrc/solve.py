@@ -1,0 +1,166 @@
+"""`planhrc solve`: one problem end to end through the ontology.
+
+object -> initial and goal States in the ABox -> translation -> planning -> VAL -> expected States stored;
+prints the time of each stage and the plan with its expected states.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from planhrc.kb.errors import KBError
+from planhrc.kb.store import KnowledgeBase
+from planhrc.model import ArticulatedObject, ModelError, make_object
+from planhrc.paths import default_tbox_path
+from planhrc.pipeline import Planning, PlanningConfig, merge_macro_steps
+from planner.errors import PlannerError
+from translator.errors import TranslationError
+
+ANY = {"*", "_", "-", "?"}
+
+
+@dataclass(frozen=True)
+class SolveRequest:
+    formulation: str
+    orientations: int
+    init: tuple[int, ...]
+    goal: tuple[int | None, ...]  # None = unconstrained (partial goal)
+    planner: str = "inproc"
+    timeout_s: float = 5.0
+    validate: bool = True
+    link_length_m: float = 0.155
+
+
+def parse_angles(text: str, field: str, allow_any: bool = False) -> tuple[int | None, ...]:
+    values: list[int | None] = []
+    for i, item in enumerate(x.strip() for x in text.split(",")):
+        if allow_any and item in ANY:
+            values.append(None)
+            continue
+        try:
+            number = float(item)
+        except ValueError:
+            raise ModelError(f"{field}[{i}]: {item!r} is not a number of degrees") from None
+        if not number.is_integer():
+            raise ModelError(f"{field}[{i}]: {item} is not an allowed orientation (integer degrees)")
+        values.append(int(number) % 360)
+    return tuple(values)
+
+
+def object_for(request: SolveRequest, ident: str) -> ArticulatedObject:
+    n_values = len(request.init)
+    n_links = n_values if request.formulation == "absolute" else n_values + 1
+    return make_object(ident, request.formulation, [request.link_length_m] * n_links, request.orientations)
+
+
+def goal_atoms_for(obj: ArticulatedObject, goal: Sequence[int | None]) -> frozenset:
+    """HasOrientation atoms for the constrained joints of a (possibly partial) goal."""
+    if len(goal) != obj.n_joints:
+        raise ModelError(f"goal: expected {obj.n_joints} values (one per joint), got {len(goal)}")
+    allowed = set(obj.orientation_degrees)
+    atoms = set()
+    for i, (k, v) in enumerate(zip(obj.joint_indices, goal)):
+        if v is None:
+            continue
+        if v not in allowed:
+            raise ModelError(f"goal[{i}]: {v} is not one of the allowed orientations {sorted(allowed)}")
+        atoms.add(("hasorientation", f"deg_{v}", obj.joint(k)))
+    if not atoms:
+        raise ModelError("goal: at least one value must be given")
+    return frozenset(atoms)
+
+
+def solve(request: SolveRequest, kb: KnowledgeBase, tbox_path: Path) -> dict:
+    """Run the whole pipeline for one request; returns the JSON-ready report."""
+    t0 = time.perf_counter()
+    ident = kb.new_object_id()
+    obj = object_for(request, ident)
+    init_atoms = obj.state(request.init)
+    goal_atoms = goal_atoms_for(obj, request.goal)
+    kb.create_object(obj)
+    init_state = kb.add_state(ident, "initial", init_atoms)
+    goal_state = kb.add_state(ident, "goal", goal_atoms)
+    timings = {"ontology_write": time.perf_counter() - t0}
+    planning = Planning(PlanningConfig(tbox_path, request.planner, request.timeout_s, request.validate))
+    outcome = planning.make_plan(kb, ident, init_state.id, goal_state.id)
+    timings.update(outcome.timings)
+    timings["total"] = time.perf_counter() - t0
+    report: dict = {
+        "status": outcome.status,
+        "planner": outcome.planner,
+        "optimal": outcome.optimal,
+        "message": outcome.message,
+        "object_id": ident,
+        "problem_id": outcome.problem_id,
+        "plan_id": outcome.plan.id if outcome.plan else None,
+        "plan": [],
+        "expected_states": [],
+        "macro_steps": [],
+        "timings_s": {k: round(v, 6) for k, v in timings.items()},
+    }
+    if outcome.plan is not None:
+        plan = outcome.plan
+        report["plan"] = ["(" + " ".join((a.spec.name,) + a.spec.params) + ")" for a in plan.actions]
+        for sid in plan.expected_state_ids:
+            values = obj.joint_values_of(kb.get_state(sid).atoms)
+            report["expected_states"].append([values[k] for k in obj.joint_indices])
+        report["macro_steps"] = [
+            {"steps": [m.first_step, m.last_step], "joint_index": m.joint_index,
+             "turned_link_index": m.turned_link_index, "held_link_index": m.held_link_index,
+             "delta_deg": m.delta_deg}
+            for m in merge_macro_steps(obj, plan.actions)
+        ]
+    return report
+
+
+def add_solve_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("solve", help="solve one problem end to end through the ontology",
+                              description=__doc__)
+    p.add_argument("--formulation", choices=["relative", "absolute"], required=True)
+    p.add_argument("--orientations", type=int, required=True, metavar="K", help="allowed orientations (360 %% K == 0)")
+    p.add_argument("--init", required=True, help="degrees, comma separated (absolute: per link; relative: per joint)")
+    p.add_argument("--goal", required=True, help="degrees, comma separated; '*' leaves a joint unconstrained")
+    p.add_argument("--planner", default="inproc")
+    p.add_argument("--timeout", type=float, default=5.0, metavar="S")
+    p.add_argument("--no-validate", action="store_true", help="skip VAL (not recommended)")
+    p.add_argument("--db", default=None, help="SQLite store (default: in memory)")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=run_solve)
+
+
+def run_solve(args: argparse.Namespace) -> int:
+    try:
+        request = SolveRequest(
+            formulation=args.formulation,
+            orientations=args.orientations,
+            init=tuple(v for v in parse_angles(args.init, "init") if v is not None),
+            goal=parse_angles(args.goal, "goal", allow_any=True),
+            planner=args.planner,
+            timeout_s=args.timeout,
+            validate=not args.no_validate,
+        )
+        with KnowledgeBase(args.db, default_tbox_path()) as kb:
+            report = solve(request, kb, default_tbox_path())
+    except (ModelError, KBError, TranslationError, PlannerError) as exc:
+        print(f"planhrc solve: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        _print_report(report)
+    return 0 if report["status"] == "solved" else 1
+
+
+def _print_report(report: dict) -> None:
+    print(f"status: {report['status']}  planner: {report['planner']}  optimal: {report['optimal']}")
+    if report["message"]:
+        print(f"message: {report['message']}")
+    for i, state in enumerate(report["expected_states"], start=1):
+        step = report["plan"][i - 1] if i <= len(report["plan"]) else ""
+        print(f"  s^e_{i}: {state}  {('-> ' + step) if step else '(goal)'}")
+    print("timings (s): " + ", ".join(f"{k} {v:.4f}" for k, v in report["timings_s"].items()))

@@ -1,0 +1,75 @@
+"""The paper's transition equations, replayed from the TBox's schemas."""
+import pytest
+
+from planhrc.model import make_object
+from planhrc.paths import default_tbox_path
+from planhrc.pipeline import action_motion, merge_macro_steps
+from planhrc.kb.records import ActionSpec, StoredAction
+from planhrc.transition import TransitionError, apply, replay
+from translator.domain import read_domain_model
+
+
+def test_absolute_rotation_propagates_downstream_only():
+    obj = make_object("o", "absolute", 3, 4)
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    actions, states = replay(domain, obj.state([0, 90, 180]), ["(rotateclockwise o_l2 o_l1 o_j2 deg_90 deg_180)"])
+    assert obj.joint_values_of(states[-1]) == {1: 0, 2: 180, 3: 270}
+    assert len(actions[0].cond_eff) == 1  # only j3 is affected (j2 is the rotated joint itself)
+    assert ("affected", "o_j3", "o_l2", "o_j2") in actions[0].cond_eff[0].when
+
+
+def test_relative_rotation_changes_one_joint():
+    obj = make_object("o", "relative", 4, 4)
+    domain = read_domain_model(default_tbox_path(), "relative")
+    _, states = replay(domain, obj.state([0, 90, 180]), ["(rotateanticlockwise o_l3 o_l2 o_j2 deg_90 deg_0)"])
+    assert obj.joint_values_of(states[-1]) == {1: 0, 2: 0, 3: 180}
+
+
+@pytest.mark.parametrize(
+    "step,match",
+    [("(rotateclockwise o_l1 o_l2 o_j2 deg_0 deg_90)", "precondition"),
+     ("(rotateclockwise o_l1 o_l2 o_j1)", "takes 5 arguments"),
+     ("(fly o_l1)", "not a schema")],
+)
+def test_inapplicable_steps_are_refused(step, match):
+    obj = make_object("o", "relative", 3, 4)
+    domain = read_domain_model(default_tbox_path(), "relative")
+    with pytest.raises(TransitionError, match=match):
+        replay(domain, obj.state([0, 0]), [step])
+
+
+def test_apply_does_not_change_its_input():
+    obj = make_object("o", "relative", 3, 4)
+    domain = read_domain_model(default_tbox_path(), "relative")
+    init = obj.state([0, 0])
+    snapshot = set(init)
+    actions, _ = replay(domain, init, ["(rotateclockwise o_l2 o_l1 o_j1 deg_0 deg_90)"])
+    apply(init, actions[0])
+    assert set(init) == snapshot
+
+
+def _stored(step: int, text: str) -> StoredAction:
+    name, *params = text.strip("()").split()
+    return StoredAction(f"a{step}", step, ActionSpec(name, tuple(params), frozenset(), frozenset(), frozenset()))
+
+
+def test_action_motion_relative_upstream_turn_is_opposite():
+    obj = make_object("o", "relative", 4, 8)
+    down = action_motion(obj, _stored(1, "(rotateclockwise o_l3 o_l2 o_j2 deg_0 deg_45)"))
+    up = action_motion(obj, _stored(1, "(rotateclockwise o_l2 o_l3 o_j2 deg_0 deg_45)"))
+    assert down["delta_deg"] == 45 and down["turned_link_index"] == 3 and down["held_link_index"] == 2
+    assert up["delta_deg"] == -45 and up["turned_link_index"] == 2
+
+
+def test_macro_steps_merge_consecutive_same_joint_same_direction():
+    obj = make_object("o", "absolute", 3, 8)
+    actions = [
+        _stored(1, "(rotateclockwise o_l2 o_l1 o_j2 deg_0 deg_45)"),
+        _stored(2, "(rotateclockwise o_l2 o_l1 o_j2 deg_45 deg_90)"),
+        _stored(3, "(rotateanticlockwise o_l2 o_l1 o_j2 deg_90 deg_45)"),
+        _stored(4, "(rotateclockwise o_l3 o_l2 o_j3 deg_0 deg_45)"),
+    ]
+    merged = merge_macro_steps(obj, actions)
+    assert [(m.first_step, m.last_step, m.delta_deg) for m in merged] == [(1, 2, 90), (3, 3, -45), (4, 4, 45)]
+    assert merged[0].expected_state_step == 3
+    assert merged[0].action_ids == ("a1", "a2")
