@@ -1,0 +1,325 @@
+"""HTTP routes of the knowledge-base service. The only module that chooses HTTP status codes:
+
+NotFoundError -> 404, ValidationError / ModelError / TranslationError / bad request body -> 422 (the message
+names the field), ConflictError -> 409, AuthError -> 401. Handlers are plain `def`s: FastAPI runs them in its
+thread pool, and the orchestrator's per-object locks serialize what touches one object.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, FastAPI, Header, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
+
+import planhrc
+from planhrc.kb.errors import ConflictError, NotFoundError, ValidationError
+from planhrc.model import HAS_ORIENTATION, ArticulatedObject, format_atom
+from planhrc.pipeline import action_motion
+from translator.errors import TranslationError
+
+from .auth import AuthError, check_bearer
+from .events import event_public, stream_events
+from .orchestrator import Orchestrator, execution_public
+from .schemas import (
+    DecisionPublic,
+    ErrorPublic,
+    EventPublic,
+    FeedbackCreate,
+    FeedbackPublic,
+    GoalPublic,
+    GoalUpdate,
+    HealthPublic,
+    NextActionPublic,
+    ObjectCreate,
+    ObjectPublic,
+    PerceptionCreate,
+    PlanPublic,
+    ProblemPublic,
+    StatePublic,
+)
+
+log = logging.getLogger(__name__)
+
+ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {"model": ErrorPublic, "description": "A bearer token is configured and missing or wrong."},
+    404: {"model": ErrorPublic, "description": "Unknown object, state, problem, plan or action."},
+    409: {"model": ErrorPublic, "description": "Conflicts with what is stored."},
+    422: {"model": ErrorPublic, "description": "Bad input; the message names the field."},
+}
+RDF_TYPES = {"application/rdf+xml": "xml", "text/turtle": "turtle"}
+
+router = APIRouter(responses={404: ERRORS[404], 422: ERRORS[422]})
+
+
+# -- dependencies -----------------------------------------------------------------------------------------
+def get_orchestrator(request: Request) -> Orchestrator:
+    return request.app.state.orchestrator
+
+
+def require_writer(request: Request, authorization: Annotated[str | None, Header()] = None) -> None:
+    """Every request that changes something needs the bearer token when one is configured."""
+    check_bearer(request.app.state.settings.token, authorization)
+
+
+Orch = Annotated[Orchestrator, Depends(get_orchestrator)]
+Writer = [Depends(require_writer)]
+WRITE_ERRORS = {401: ERRORS[401], 409: ERRORS[409]}
+
+
+# -- objects ------------------------------------------------------------------------------------------------
+@router.post("/objects", status_code=201, response_model=ObjectPublic, dependencies=Writer,
+             responses=WRITE_ERRORS, tags=["objects"])
+def create_object(body: ObjectCreate, orch: Orch) -> dict[str, Any]:
+    """Create an articulated object in the ABox."""
+    links = body.links if isinstance(body.links, int) else [link.length_m for link in body.links]
+    obj = orch.create_object(body.name, links, body.orientations, body.formulation)
+    return _object_public(orch, obj)
+
+
+@router.get("/objects", response_model=list[ObjectPublic], tags=["objects"])
+def list_objects(orch: Orch) -> list[dict[str, Any]]:
+    """Every stored object."""
+    return [_object_public(orch, obj) for obj in orch.kb.list_objects()]
+
+
+@router.get("/objects/{object_id}", response_model=ObjectPublic, tags=["objects"])
+def read_object(object_id: str, orch: Orch) -> dict[str, Any]:
+    """One object with its goal and execution state."""
+    return _object_public(orch, orch.kb.get_object(object_id))
+
+
+@router.put("/objects/{object_id}/goal", response_model=GoalPublic, dependencies=Writer,
+            responses=WRITE_ERRORS, tags=["cooperation"])
+def update_goal(object_id: str, body: GoalUpdate, orch: Orch) -> dict[str, Any]:
+    """Set the goal configuration.
+
+    The goal State is stored at once, with a Problem from the latest perceived state when there is one
+    (`problem_id`, else null). Any current plan is dropped; planning happens at the next perception (the paper:
+    setting a goal triggers a perception), so a goal set before the first perception waits for it."""
+    return orch.set_goal(object_id, body.link_orientations_deg, body.joint_angles_deg)
+
+
+@router.post("/objects/{object_id}/perceptions", response_model=DecisionPublic, dependencies=Writer,
+             responses=WRITE_ERRORS, tags=["cooperation"])
+def create_perception(
+    object_id: str,
+    body: PerceptionCreate,
+    orch: Orch,
+    idempotency_key: Annotated[str | None, Header(max_length=200)] = None,
+) -> dict[str, Any]:
+    """Store a perceived state and apply the cooperation model: goal reached, continue, resume or re-plan."""
+    return orch.handle_perception(object_id, body.link_orientations_deg, idempotency_key)
+
+
+@router.get("/objects/{object_id}/next-action", response_model=NextActionPublic | None, dependencies=Writer,
+            responses=WRITE_ERRORS, tags=["cooperation"])
+def read_next_action(object_id: str, orch: Orch) -> dict[str, Any] | None:
+    """For workers: the action to execute now, marked dispatched (asking again returns the same action);
+    null when there is none (no plan, goal reached, or the last action is done and a perception is due).
+    It changes the execution, so it needs the bearer token when one is configured."""
+    return orch.next_action(object_id)
+
+
+@router.post("/objects/{object_id}/actions/{action_id}/feedback", response_model=FeedbackPublic,
+             dependencies=Writer, responses=WRITE_ERRORS, tags=["cooperation"])
+def create_feedback(
+    object_id: str,
+    action_id: str,
+    body: FeedbackCreate,
+    orch: Orch,
+    idempotency_key: Annotated[str | None, Header(max_length=200)] = None,
+) -> dict[str, Any]:
+    """Report the outcome of the dispatched action."""
+    return orch.handle_feedback(object_id, action_id, body.outcome, body.message, idempotency_key)
+
+
+# -- stored records -------------------------------------------------------------------------------------
+@router.get("/objects/{object_id}/plan", response_model=PlanPublic, tags=["records"])
+def read_object_plan(object_id: str, orch: Orch) -> dict[str, Any]:
+    """The plan being followed (or, when none is, the latest one), with its expected states."""
+    orch.kb.get_object(object_id)
+    execution = orch.kb.get_execution(object_id)
+    plan = orch.kb.get_plan(execution.plan_id) if execution.plan_id else orch.kb.latest_plan(object_id)
+    if plan is None:
+        raise NotFoundError(f"plan: object {object_id} has no plan yet")
+    return _plan_public(orch, plan)
+
+
+@router.get("/plans/{plan_id}", response_model=PlanPublic, tags=["records"])
+def read_plan(plan_id: str, orch: Orch) -> dict[str, Any]:
+    return _plan_public(orch, orch.kb.get_plan(plan_id))
+
+
+@router.get("/states/{state_id}", response_model=StatePublic, tags=["records"])
+def read_state(state_id: str, orch: Orch) -> dict[str, Any]:
+    return _state_public(orch.kb.get_state(state_id))
+
+
+@router.get("/problems/{problem_id}", response_model=ProblemPublic, tags=["records"])
+def read_problem(problem_id: str, orch: Orch) -> dict[str, Any]:
+    p = orch.kb.get_problem(problem_id)
+    return {"id": p.id, "object_id": p.object_id, "init_state_id": p.init_state_id,
+            "goal_state_id": p.goal_state_id, "created_at": p.created_at}
+
+
+@router.get("/objects/{object_id}/pddl/domain", response_class=PlainTextResponse, tags=["pddl"])
+def read_pddl_domain(object_id: str, orch: Orch) -> PlainTextResponse:
+    """The PDDL domain of the object's formulation, written from the TBox."""
+    from translator import get_domain
+
+    obj = orch.kb.get_object(object_id)
+    return PlainTextResponse(get_domain(orch.settings.tbox_path, obj.formulation.value))
+
+
+@router.get("/objects/{object_id}/pddl/problem", response_class=PlainTextResponse, tags=["pddl"])
+def read_pddl_problem(object_id: str, orch: Orch) -> PlainTextResponse:
+    """The PDDL problem of the object's latest Problem (initial state and goal from the ABox)."""
+    from translator.translate import translate
+
+    orch.kb.get_object(object_id)
+    problem = orch.kb.latest_problem(object_id)
+    if problem is None:
+        raise NotFoundError(f"problem: object {object_id} has no problem yet (set a goal and send a perception)")
+    return PlainTextResponse(translate(orch.kb, problem.id, orch.settings.tbox_path).problem)
+
+
+@router.get("/ontology", tags=["records"],
+            responses={200: {"content": {"application/rdf+xml": {}, "text/turtle": {}},
+                             "description": "TBox and ABox."}})
+def read_ontology(orch: Orch, accept: Annotated[str | None, Header()] = None) -> Response:
+    """TBox and ABox as RDF/XML (default) or Turtle (`Accept: text/turtle`)."""
+    media = _rdf_media_type(accept)
+    return Response(orch.kb.export(RDF_TYPES[media]), media_type=media)
+
+
+# -- events ---------------------------------------------------------------------------------------------
+@router.get("/objects/{object_id}/events", response_model=list[EventPublic], tags=["events"])
+def list_events(object_id: str, orch: Orch, after_seq: Annotated[int, Query(ge=0)] = 0) -> list[dict[str, Any]]:
+    """The object's log, oldest first: every decision with its reason, goals, dispatches and feedback."""
+    orch.kb.get_object(object_id)
+    return [event_public(e) for e in orch.kb.list_events(object_id, after_seq=after_seq)]
+
+
+@router.get("/objects/{object_id}/events/stream", tags=["events"],
+            responses={200: {"content": {"text/event-stream": {}}, "description": "Server-Sent Events."}})
+def stream_object_events(
+    object_id: str,
+    request: Request,
+    orch: Orch,
+    after_seq: Annotated[int, Query(ge=0, description="Send events after this seq.")] = 0,
+    max_events: Annotated[int | None, Query(ge=1, description="Stop after this many events.")] = None,
+    timeout_s: Annotated[float | None, Query(gt=0, le=86400, description="Stop after this many seconds.")] = None,
+    last_event_id: Annotated[str | None, Header()] = None,
+) -> StreamingResponse:
+    """Every new event of the object, live, as Server-Sent Events."""
+    orch.kb.get_object(object_id)
+    if last_event_id and last_event_id.isdigit():
+        after_seq = max(after_seq, int(last_event_id))
+    frames = stream_events(lambda seq: orch.kb.list_events(object_id, after_seq=seq), request.is_disconnected,
+                           after_seq=after_seq, max_events=max_events, timeout_s=timeout_s)
+    return StreamingResponse(frames, media_type="text/event-stream",
+                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
+
+
+@router.get("/health", response_model=HealthPublic, tags=["service"])
+def read_health(request: Request, orch: Orch) -> dict[str, Any]:
+    return {"status": "ok", "version": planhrc.__version__, "objects": len(orch.kb.list_objects()),
+            "triples": orch.kb.triple_count(), "auth": bool(request.app.state.settings.token)}
+
+
+# -- errors ---------------------------------------------------------------------------------------------
+def install_error_handlers(app: FastAPI) -> None:
+    """Map the typed errors of the libraries to HTTP status codes."""
+    from planhrc.model import ModelError
+
+    def handler(status: int):
+        async def handle(request: Request, exc: Exception) -> JSONResponse:
+            headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
+            return JSONResponse({"detail": str(exc)}, status_code=status, headers=headers)
+        return handle
+
+    app.add_exception_handler(NotFoundError, handler(404))
+    app.add_exception_handler(ValidationError, handler(422))
+    app.add_exception_handler(ModelError, handler(422))
+    app.add_exception_handler(TranslationError, handler(422))
+    app.add_exception_handler(ConflictError, handler(409))
+    app.add_exception_handler(AuthError, handler(401))
+    app.add_exception_handler(RequestValidationError, _request_validation_error)
+
+
+async def _request_validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+    errors = exc.errors()
+    messages = [f"{_field_path(e.get('loc', ()))}: {e.get('msg', 'invalid')}" for e in errors]
+    return JSONResponse({"detail": "; ".join(messages) or "invalid request",
+                         "errors": [{"loc": list(e.get("loc", ())), "msg": e.get("msg"), "type": e.get("type")}
+                                    for e in errors]},
+                        status_code=422)
+
+
+def _field_path(loc: tuple | list) -> str:
+    parts = list(loc)
+    if parts and parts[0] in ("body", "query", "path", "header"):
+        parts = parts[1:]
+    out = ""
+    for p in parts:
+        if isinstance(p, int):
+            out += f"[{p}]"
+        else:
+            out += ("." if out else "") + str(p)
+    return out or "body"
+
+
+# -- conversions ----------------------------------------------------------------------------------------
+def _rdf_media_type(accept: str | None) -> str:
+    """The first of RDF/XML and Turtle named by the Accept header; RDF/XML when neither is."""
+    if accept:
+        for part in accept.split(","):
+            media = part.split(";")[0].strip().lower()
+            if media in RDF_TYPES:
+                return media
+    return "application/rdf+xml"
+
+
+def _object_public(orch: Orchestrator, obj: ArticulatedObject) -> dict[str, Any]:
+    with orch.locks.hold(obj.ident):
+        execution = orch.kb.get_execution(obj.ident)
+        goal_state_id = orch.goal_state_id(obj.ident)
+    return {
+        "id": obj.ident, "name": obj.name, "formulation": obj.formulation.value, "orientations": obj.orientations,
+        "step_deg": obj.step,
+        "links": [{"name": name, "length_m": length} for name, length in zip(obj.links, obj.link_lengths_m)],
+        "joints": list(obj.joints), "goal_state_id": goal_state_id, "execution": execution_public(execution),
+    }
+
+
+def _atoms_public(atoms) -> list[str]:
+    return [format_atom(a) for a in sorted(atoms)]
+
+
+def _state_public(state) -> dict[str, Any]:
+    joints = {a[2]: int(a[1].split("_", 1)[1]) for a in state.atoms if a[0] == HAS_ORIENTATION and len(a) == 3}
+    return {"id": state.id, "object_id": state.object_id, "kind": state.kind, "atoms": _atoms_public(state.atoms),
+            "joint_values_deg": dict(sorted(joints.items())),
+            "link_orientations_deg": list(state.link_orientations_deg) if state.link_orientations_deg else None,
+            "created_at": state.created_at}
+
+
+def _plan_public(orch: Orchestrator, plan) -> dict[str, Any]:
+    obj = orch.kb.get_object(plan.object_id)
+    steps = []
+    for a in sorted(plan.actions, key=lambda a: a.step):
+        motion = action_motion(obj, a)
+        steps.append({
+            "id": a.id, "step": a.step, "name": a.spec.name, "params": list(a.spec.params),
+            "pre": _atoms_public(a.spec.pre), "eff_neg": _atoms_public(a.spec.eff_neg),
+            "eff_pos": _atoms_public(a.spec.eff_pos),
+            "cond_eff": [{"when": _atoms_public(c.when), "eff_neg": _atoms_public(c.eff_neg),
+                          "eff_pos": _atoms_public(c.eff_pos)} for c in a.spec.cond_eff],
+            **{key: motion[key] for key in ("joint_index", "turned_link_index", "held_link_index", "delta_deg")},
+        })
+    return {"id": plan.id, "object_id": plan.object_id, "problem_id": plan.problem_id, "planner": plan.planner,
+            "steps": steps, "expected_state_ids": list(plan.expected_state_ids),
+            "expected_states": [_state_public(orch.kb.get_state(sid)) for sid in plan.expected_state_ids],
+            "created_at": plan.created_at}

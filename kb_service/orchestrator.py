@@ -1,0 +1,362 @@
+"""The service's one orchestrator: perception -> perceived State -> cooperation model -> (re-)plan -> execution.
+
+Every request that touches an object runs under that object's lock, so one object's requests are serialized
+while different objects proceed in parallel. Each entry point validates its input completely before the first
+write, so a refused request leaves the knowledge base as it was.
+
+Choices the paper leaves open (see also the service README in the report):
+
+* A goal is stored when it is set (PUT goal), together with a Problem from the latest perceived state when one
+  exists. Planning happens at the next perception (the paper: setting a goal triggers a perception), so a goal
+  set before any perception simply waits for the first one.
+* A perception may arrive at any time. If it moves the execution to another step of the same plan while an
+  action is dispatched, that action stays on record for feedback only: its feedback is then recorded as *late*
+  and does not move the execution again (the perception already did). A new plan or a new goal drops the
+  dispatched action (the store keeps a dispatched action only within its plan): its feedback then gets a
+  conflict.
+* The current goal, the latest perceived state and the last feedback are read back from the event log, so a
+  restarted service continues where it stopped.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import threading
+from dataclasses import dataclass, replace
+from typing import Any, Sequence
+
+from planhrc.cooperation import Decision, PlanView, decide
+from planhrc.kb.errors import ConflictError, ValidationError
+from planhrc.kb.records import Execution, StoredAction, StoredPlan, StoredState
+from planhrc.model import HAS_ORIENTATION, ArticulatedObject, make_object, orientation_name, snap_angle
+from planhrc.pipeline import PlanOutcome, Planning, action_motion, config_from_settings, make_plan
+
+from .locks import ObjectLocks
+
+log = logging.getLogger(__name__)
+
+IDLE, READY, DISPATCHED, GOAL_REACHED, NO_PLAN = "idle", "ready", "dispatched", "goal_reached", "no_plan"
+DECISION_KINDS = ("goal_reached", "continue", "resume", "replan", "no_plan")
+
+
+@dataclass
+class _ObjectMemo:
+    """What the event log says about an object, read incrementally (events are append-only)."""
+
+    seq: int = 0
+    goal_state_id: str | None = None
+    perceived_state_id: str | None = None
+    last_outcome: str | None = None
+
+
+class Orchestrator:
+    """Runs the cooperation loop of every object against one knowledge base."""
+
+    def __init__(self, kb: Any, settings: Any, locks: ObjectLocks | None = None,
+                 planning: Planning | None = None) -> None:
+        self.kb = kb
+        self.settings = settings
+        self.locks = locks or ObjectLocks()
+        self.planning = planning or Planning(config_from_settings(settings))
+        self._views: dict[str, tuple[StoredPlan, PlanView]] = {}
+        self._memos: dict[str, _ObjectMemo] = {}
+        self._guard = threading.Lock()
+
+    # -- objects ------------------------------------------------------------------------------------------
+    def create_object(self, name: str, links: int | Sequence[float], orientations: int,
+                      formulation: str) -> ArticulatedObject:
+        make_object("probe", formulation, links, orientations, name)  # ModelError before an id is taken
+        object_id = self.kb.new_object_id()
+        obj = make_object(object_id, formulation, links, orientations, name)
+        with self.locks.hold(object_id):
+            self.kb.create_object(obj)
+            self.kb.add_event(object_id, "object_created", f"object {object_id} created",
+                              {"formulation": obj.formulation.value, "links": obj.n_links,
+                               "orientations": obj.orientations})
+        return obj
+
+    def goal_state_id(self, object_id: str) -> str | None:
+        return self._memo(object_id).goal_state_id
+
+    # -- goal ---------------------------------------------------------------------------------------------
+    def set_goal(self, object_id: str, link_orientations_deg: Sequence[float] | None = None,
+                 joint_angles_deg: Sequence[float | None] | None = None) -> dict[str, Any]:
+        with self.locks.hold(object_id):
+            obj = self.kb.get_object(object_id)
+            atoms = _goal_atoms(obj, link_orientations_deg, joint_angles_deg)
+            memo = self._memo(object_id)
+            goal = self.kb.add_state(object_id, "goal", atoms)
+            problem = None
+            if memo.perceived_state_id is not None:
+                problem = self.kb.add_problem(object_id, memo.perceived_state_id, goal.id)
+            # The old plan was made for another goal: the next perception decides anew.
+            self.kb.set_execution(object_id, Execution(None, None, IDLE, None))
+            self.kb.add_event(object_id, "goal_set",
+                              "goal set; the next perception plans towards it",
+                              {"goal_state_id": goal.id, "problem_id": problem.id if problem else None})
+            return {"goal_state_id": goal.id, "problem_id": problem.id if problem else None}
+
+    # -- perception ---------------------------------------------------------------------------------------
+    def handle_perception(self, object_id: str, link_orientations_deg: Sequence[float],
+                          idempotency_key: str | None = None) -> dict[str, Any]:
+        with self.locks.hold(object_id):
+            obj = self.kb.get_object(object_id)
+            fingerprint = _fingerprint({"perception": list(link_orientations_deg)})
+            replay = self._recall(object_id, idempotency_key, fingerprint)
+            if replay is not None:
+                return replay
+            joint_values = _perceived_joint_values(obj, link_orientations_deg)
+            perceived = self.kb.add_state(object_id, "perceived", obj.state(joint_values),
+                                          link_orientations_deg=tuple(float(v) for v in link_orientations_deg))
+            answer = self._decide_and_act(obj, perceived)
+            self._remember(object_id, idempotency_key, fingerprint, answer)
+            return answer
+
+    def _decide_and_act(self, obj: ArticulatedObject, perceived: StoredState) -> dict[str, Any]:
+        object_id = obj.ident
+        memo = self._memo(object_id)
+        execution = self.kb.get_execution(object_id)
+        if memo.goal_state_id is None:
+            answer = _answer("no_plan", None, perceived.id, None, None,
+                             "no goal is set: PUT /objects/{id}/goal first")
+            self._log_decision(object_id, answer, {})
+            return answer
+
+        goal = self.kb.get_state(memo.goal_state_id)
+        plan, view = self._plan_view(execution.plan_id)
+        decision = decide(perceived.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
+        extra: dict[str, Any] = {"goal_state_id": goal.id}
+
+        if decision.kind == "goal_reached":
+            self.kb.set_execution(object_id, Execution(execution.plan_id, None, GOAL_REACHED,
+                                                       execution.dispatched_action_id))
+            answer = _answer("goal_reached", execution.plan_id, perceived.id, None,
+                             decision.matched_expected_step, decision.reason)
+        elif decision.kind in ("continue", "resume"):
+            assert plan is not None and decision.next_step is not None
+            action = plan.actions[decision.next_step - 1]
+            still_dispatched = execution.status == DISPATCHED and execution.dispatched_action_id == action.id
+            self.kb.set_execution(object_id, Execution(plan.id, decision.next_step,
+                                                       DISPATCHED if still_dispatched else READY,
+                                                       execution.dispatched_action_id))
+            answer = _answer(decision.kind, plan.id, perceived.id, self._action_public(obj, plan, action),
+                             decision.matched_expected_step, decision.reason)
+        else:
+            answer = self._replan(obj, perceived, goal, execution, decision, extra)
+        self._log_decision(object_id, answer, extra)
+        return answer
+
+    def _replan(self, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, execution: Execution,
+                decision: Decision, extra: dict[str, Any]) -> dict[str, Any]:
+        try:
+            outcome = make_plan(self.kb, obj.ident, perceived.id, goal.id, self.settings, planning=self.planning)
+        except Exception as exc:  # a crashing stage must not leave the perception without a decision
+            log.exception("planning failed for %s", obj.ident)
+            outcome = PlanOutcome("error", None, f"{type(exc).__name__}: {exc}")
+        extra.update({"planning_status": outcome.status, "problem_id": outcome.problem_id,
+                      "timings": {k: round(v, 6) for k, v in outcome.timings.items()}})
+        if outcome.status == "solved" and outcome.plan is not None and outcome.plan.actions:
+            plan = outcome.plan
+            self.kb.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
+            reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions"
+            return _answer("replan", plan.id, perceived.id, self._action_public(obj, plan, plan.actions[0]),
+                           decision.matched_expected_step, reason)
+        if outcome.status == "solved":  # the perceived state already satisfies the goal
+            self.kb.set_execution(obj.ident, Execution(None, None, GOAL_REACHED, None))
+            return _answer("goal_reached", None, perceived.id, None, None, outcome.message)
+        self.kb.set_execution(obj.ident, Execution(None, None, NO_PLAN, None))
+        reason = (f"{decision.reason}; planning {outcome.status}: {outcome.message}; "
+                  "a human must bring the object to a workable configuration")
+        return _answer("no_plan", None, perceived.id, None, decision.matched_expected_step, reason)
+
+    def _log_decision(self, object_id: str, answer: dict[str, Any], extra: dict[str, Any]) -> None:
+        action = answer["next_action"]
+        data = {
+            "perceived_state_id": answer["perceived_state_id"],
+            "plan_id": answer["plan_id"],
+            "next_step": action["step"] if action else None,
+            "next_action_id": action["id"] if action else None,
+            "matched_expected_step": answer["matched_expected_step"],
+            **extra,
+        }
+        self.kb.add_event(object_id, answer["decision"], answer["reason"], data)
+
+    # -- dispatch and feedback -------------------------------------------------------------------------------
+    def next_action(self, object_id: str) -> dict[str, Any] | None:
+        """The action to execute now, marked dispatched; None when there is none (no plan, done, goal)."""
+        with self.locks.hold(object_id):
+            obj = self.kb.get_object(object_id)
+            execution = self.kb.get_execution(object_id)
+            plan, _ = self._plan_view(execution.plan_id)
+            if plan is None or execution.status not in (READY, DISPATCHED) or execution.next_step is None:
+                return None
+            if not 1 <= execution.next_step <= len(plan.actions):
+                return None
+            action = plan.actions[execution.next_step - 1]
+            if execution.status == DISPATCHED and execution.dispatched_action_id == action.id:
+                return self._action_public(obj, plan, action)
+            self.kb.set_execution(object_id, Execution(plan.id, execution.next_step, DISPATCHED, action.id))
+            self.kb.add_event(object_id, "dispatched", f"a_{action.step} ({action.spec.name}) dispatched",
+                              {"plan_id": plan.id, "action_id": action.id, "step": action.step})
+            return self._action_public(obj, plan, action)
+
+    def handle_feedback(self, object_id: str, action_id: str, outcome: str, message: str = "",
+                        idempotency_key: str | None = None) -> dict[str, Any]:
+        if outcome not in ("succeeded", "failed", "partial"):
+            raise ValidationError(f"outcome: must be succeeded, failed or partial, got {outcome!r}")
+        with self.locks.hold(object_id):
+            self.kb.get_object(object_id)
+            fingerprint = _fingerprint({"feedback": [action_id, outcome, message]})
+            replay = self._recall(object_id, idempotency_key, fingerprint)
+            if replay is not None:
+                return replay
+            action = self.kb.get_action(action_id)
+            execution = self.kb.get_execution(object_id)
+            if execution.dispatched_action_id != action_id:
+                current = execution.dispatched_action_id or "none"
+                raise ConflictError(
+                    f"action_id: {action_id} is not the current dispatched action of {object_id} (current: {current})"
+                )
+            if execution.status == DISPATCHED:
+                accepted = "current"
+                next_step = action.step + 1 if outcome == "succeeded" else action.step
+                new = Execution(execution.plan_id, next_step, READY, None)
+                reason = f"a_{action.step} {outcome}" + (
+                    ": the next perception checks s^e_{}".format(next_step) if outcome == "succeeded"
+                    else ": the next perception decides whether to retry, resume or re-plan")
+            else:
+                accepted = "late"
+                new = replace(execution, dispatched_action_id=None)
+                reason = f"a_{action.step} {outcome}, reported after a perception had already moved the execution"
+            self.kb.set_execution(object_id, new)
+            self.kb.add_event(object_id, "feedback", reason + (f" ({message})" if message else ""),
+                              {"action_id": action_id, "step": action.step, "outcome": outcome,
+                               "accepted": accepted})
+            answer = {"action_id": action_id, "accepted": accepted, "execution": execution_public(new)}
+            self._remember(object_id, idempotency_key, fingerprint, answer)
+            return answer
+
+    # -- helpers --------------------------------------------------------------------------------------------
+    def _plan_view(self, plan_id: str | None) -> tuple[StoredPlan | None, PlanView | None]:
+        if plan_id is None:
+            return None, None
+        with self._guard:
+            cached = self._views.get(plan_id)
+        if cached is not None:
+            return cached
+        plan = self.kb.get_plan(plan_id)
+        view = PlanView(
+            expected_states=tuple(self.kb.get_state(sid).atoms for sid in plan.expected_state_ids),
+            preconditions=tuple(a.spec.pre for a in sorted(plan.actions, key=lambda a: a.step)),
+        )
+        with self._guard:
+            self._views[plan_id] = (plan, view)
+        return plan, view
+
+    def _memo(self, object_id: str) -> _ObjectMemo:
+        """Bring the memo of an object up to date with its event log (caller holds the object's lock)."""
+        with self._guard:
+            memo = self._memos.setdefault(object_id, _ObjectMemo())
+        for event in self.kb.list_events(object_id, after_seq=memo.seq):
+            memo.seq = max(memo.seq, event.seq)
+            if event.kind == "goal_set":
+                memo.goal_state_id = event.data.get("goal_state_id")
+            elif event.kind == "feedback":
+                memo.last_outcome = event.data.get("outcome")
+            elif event.kind in DECISION_KINDS:
+                memo.perceived_state_id = event.data.get("perceived_state_id") or memo.perceived_state_id
+                memo.last_outcome = None  # a feedback informs only the next decision
+        return memo
+
+    def _action_public(self, obj: ArticulatedObject, plan: StoredPlan, action: StoredAction) -> dict[str, Any]:
+        motion = action_motion(obj, action)
+        return {"id": action.id, "name": action.spec.name, "params": list(action.spec.params),
+                "step": action.step, "plan_id": plan.id, **motion}
+
+    def _recall(self, object_id: str, key: str | None, fingerprint: str) -> dict[str, Any] | None:
+        if not key:
+            return None
+        stored = self.kb.recall_response(object_id, key)
+        if stored is None:
+            return None
+        if stored.get("fingerprint") != fingerprint:
+            raise ConflictError(f"Idempotency-Key: {key!r} was already used with a different request")
+        return stored["response"]
+
+    def _remember(self, object_id: str, key: str | None, fingerprint: str, answer: dict[str, Any]) -> None:
+        if key:
+            self.kb.remember_response(object_id, key, {"fingerprint": fingerprint, "response": answer})
+
+
+def execution_public(execution: Execution) -> dict[str, Any]:
+    return {"plan_id": execution.plan_id, "next_step": execution.next_step, "status": execution.status,
+            "dispatched_action_id": execution.dispatched_action_id}
+
+
+def _answer(kind: str, plan_id: str | None, perceived_state_id: str, next_action: dict[str, Any] | None,
+            matched: int | None, reason: str) -> dict[str, Any]:
+    return {"decision": kind, "plan_id": plan_id, "perceived_state_id": perceived_state_id,
+            "next_action": next_action, "matched_expected_step": matched, "reason": reason}
+
+
+def _fingerprint(body: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
+
+
+def _check_finite(values: Sequence[float | None], field: str) -> None:
+    for i, v in enumerate(values):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
+            raise ValidationError(f"{field}[{i}]: must be a finite number, got {v!r}")
+
+
+def _perceived_joint_values(obj: ArticulatedObject, link_orientations_deg: Sequence[float]) -> tuple[int, ...]:
+    field = "link_orientations_deg"
+    if len(link_orientations_deg) != obj.n_links:
+        raise ValidationError(f"{field}: expected {obj.n_links} values (one per link), got {len(link_orientations_deg)}")
+    _check_finite(link_orientations_deg, field)
+    snapped = [snap_angle(float(v), obj.orientations) for v in link_orientations_deg]
+    return obj.joint_values_from_links(snapped)
+
+
+def _allowed(obj: ArticulatedObject, values: Sequence[float | None], field: str) -> list[int | None]:
+    allowed = set(obj.orientation_degrees)
+    out: list[int | None] = []
+    for i, v in enumerate(values):
+        if v is None:
+            out.append(None)
+            continue
+        if float(v) % 360 not in allowed:
+            raise ValidationError(f"{field}[{i}]: {v} is not one of the allowed orientations {sorted(allowed)}")
+        out.append(int(float(v) % 360))
+    return out
+
+
+def _goal_atoms(obj: ArticulatedObject, link_orientations_deg: Sequence[float] | None,
+                joint_angles_deg: Sequence[float | None] | None) -> frozenset:
+    if (link_orientations_deg is None) == (joint_angles_deg is None):
+        raise ValidationError("link_orientations_deg, joint_angles_deg: give exactly one of them")
+    if link_orientations_deg is not None:
+        field = "link_orientations_deg"
+        if len(link_orientations_deg) != obj.n_links:
+            raise ValidationError(
+                f"{field}: expected {obj.n_links} values (one per link), got {len(link_orientations_deg)}")
+        _check_finite(link_orientations_deg, field)
+        if any(v is None for v in link_orientations_deg):
+            raise ValidationError(f"{field}: every link needs an orientation")
+        values = obj.joint_values_from_links([int(v) for v in _allowed(obj, link_orientations_deg, field)])
+        return obj.configuration_atoms(values)
+    field = "joint_angles_deg"
+    assert joint_angles_deg is not None
+    if len(joint_angles_deg) != obj.n_joints:
+        raise ValidationError(f"{field}: expected {obj.n_joints} values (one per joint), got {len(joint_angles_deg)}")
+    _check_finite(joint_angles_deg, field)
+    values = _allowed(obj, joint_angles_deg, field)
+    if all(v is None for v in values):
+        raise ValidationError(f"{field}: at least one joint needs a value")
+    atoms = set()
+    for k, v in zip(obj.joint_indices, values):
+        if v is not None:
+            atoms.add((HAS_ORIENTATION, orientation_name(v), obj.joint(k)))
+    return frozenset(atoms)

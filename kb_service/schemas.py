@@ -1,0 +1,340 @@
+"""Request and response bodies of the service. Every schema and every field has a description and examples.
+
+Floats in requests refuse NaN and ±Infinity (the JSON parser accepts the `NaN`/`Infinity` tokens; pydantic
+then rejects them with the field's name), so a malformed perception never reaches the knowledge base.
+"""
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def _config(description: str, example: dict[str, Any]) -> ConfigDict:
+    return ConfigDict(json_schema_extra={"description": description, "examples": [example]}, extra="forbid")
+
+
+# -- objects ------------------------------------------------------------------------------------------------
+class LinkSpec(BaseModel):
+    model_config = _config("One link of an articulated object.", {"name": "l1", "length_m": 0.155})
+
+    name: str = Field(min_length=1, max_length=64, description="Name of the link (informative).", examples=["l1"])
+    length_m: FiniteFloat = Field(gt=0, description="Length of the link in metres.", examples=[0.155])
+
+
+class ObjectCreate(BaseModel):
+    model_config = _config(
+        "An articulated object to create: a chain of links, its orientation set and its formulation.",
+        {"name": "rod", "links": 4, "orientations": 4, "formulation": "relative"},
+    )
+
+    name: str = Field(default="", max_length=200, description="Human-readable name.", examples=["rod"])
+    links: Annotated[int, Field(ge=2, le=200)] | list[LinkSpec] = Field(
+        description="Number of links (each 0.155 m long), or the list of links in chain order.",
+        examples=[4, [{"name": "l1", "length_m": 0.155}, {"name": "l2", "length_m": 0.2}]],
+    )
+    orientations: int = Field(
+        ge=2, le=360, description="K, the number of allowed orientations; 360 must be divisible by K.", examples=[4, 8]
+    )
+    formulation: Literal["relative", "absolute"] = Field(
+        description="Planning formulation: joints carry relative angles, or absolute link orientations.",
+        examples=["relative"],
+    )
+
+
+class LinkPublic(BaseModel):
+    model_config = _config("A link as stored: its PDDL name and length.", {"name": "obj1_l1", "length_m": 0.155})
+
+    name: str = Field(description="Name of the link in the ontology and in PDDL.", examples=["obj1_l1"])
+    length_m: float = Field(description="Length of the link in metres.", examples=[0.155])
+
+
+class ExecutionPublic(BaseModel):
+    model_config = _config(
+        "Where the cooperation model stands for one object.",
+        {"plan_id": "plan3", "next_step": 2, "status": "dispatched", "dispatched_action_id": "plan3_a2"},
+    )
+
+    plan_id: str | None = Field(description="Plan being followed, if any.", examples=["plan3"])
+    next_step: int | None = Field(description="1-based step of the next action to execute.", examples=[2])
+    status: str = Field(
+        description="idle, ready, dispatched, goal_reached or no_plan.", examples=["ready", "dispatched"]
+    )
+    dispatched_action_id: str | None = Field(
+        description="Action handed to a worker whose feedback is still accepted.", examples=["plan3_a2"]
+    )
+
+
+class ObjectPublic(BaseModel):
+    model_config = _config(
+        "An articulated object as stored in the knowledge base.",
+        {
+            "id": "obj1", "name": "rod", "formulation": "relative", "orientations": 4, "step_deg": 90,
+            "links": [{"name": "obj1_l1", "length_m": 0.155}, {"name": "obj1_l2", "length_m": 0.155}],
+            "joints": ["obj1_j1"], "goal_state_id": None,
+            "execution": {"plan_id": None, "next_step": None, "status": "idle", "dispatched_action_id": None},
+        },
+    )
+
+    id: str = Field(description="Identifier of the object (also the prefix of its individuals).", examples=["obj1"])
+    name: str = Field(description="Human-readable name.", examples=["rod"])
+    formulation: str = Field(description="relative or absolute.", examples=["relative"])
+    orientations: int = Field(description="K, the number of allowed orientations.", examples=[4])
+    step_deg: int = Field(description="360 / K: the angle of one planned rotation.", examples=[90])
+    links: list[LinkPublic] = Field(description="Links l1..lN in chain order.", examples=[[{"name": "obj1_l1", "length_m": 0.155}]])
+    joints: list[str] = Field(description="Joints that carry orientations, in order.", examples=[["obj1_j1"]])
+    goal_state_id: str | None = Field(description="Current goal state, if one was set.", examples=["st7"])
+    execution: ExecutionPublic = Field(
+        description="Execution state of the cooperation model.",
+        examples=[{"plan_id": None, "next_step": None, "status": "idle", "dispatched_action_id": None}],
+    )
+
+
+# -- goals and perceptions --------------------------------------------------------------------------------
+class GoalUpdate(BaseModel):
+    model_config = _config(
+        "A goal configuration: either every link's orientation, or one angle per joint (null = any).",
+        {"link_orientations_deg": [0, 90, 90, 180]},
+    )
+
+    link_orientations_deg: list[FiniteFloat] | None = Field(
+        default=None,
+        description="Absolute orientation of every link l1..lN, in degrees clockwise; each must be an allowed "
+        "orientation. Relative objects use only the differences.",
+        examples=[[0, 90, 90, 180]],
+    )
+    joint_angles_deg: list[FiniteFloat | None] | None = Field(
+        default=None,
+        description="One value per joint: the N-1 relative angles (relative formulation) or the N link "
+        "orientations (absolute formulation); null leaves that joint free (a partial goal).",
+        examples=[[90, 0, 90], [90, None, 90]],
+    )
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> "GoalUpdate":
+        if (self.link_orientations_deg is None) == (self.joint_angles_deg is None):
+            raise ValueError("link_orientations_deg, joint_angles_deg: give exactly one of them")
+        return self
+
+
+class GoalPublic(BaseModel):
+    model_config = _config(
+        "The stored goal and, when a perceived state already exists, the problem from it to the goal.",
+        {"goal_state_id": "st7", "problem_id": "pb2"},
+    )
+
+    goal_state_id: str = Field(description="The stored goal State.", examples=["st7"])
+    problem_id: str | None = Field(
+        description="Problem (latest perceived state -> goal); null until the first perception arrives.",
+        examples=["pb2", None],
+    )
+
+
+class PerceptionCreate(BaseModel):
+    model_config = _config(
+        "A perceived configuration: the measured orientation of every link, noisy real values.",
+        {"link_orientations_deg": [1.7, 88.9, 91.2, 179.4]},
+    )
+
+    link_orientations_deg: list[FiniteFloat] = Field(
+        description="Measured absolute orientation of every link l1..lN, in degrees clockwise seen from above; "
+        "snapped to the nearest allowed orientation.",
+        examples=[[1.7, 88.9, 91.2, 179.4]],
+    )
+
+
+class NextActionPublic(BaseModel):
+    model_config = _config(
+        "The action to execute next and the motion it means.",
+        {
+            "id": "plan3_a2", "name": "rotateclockwise", "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"],
+            "step": 2, "plan_id": "plan3", "joint_index": 1, "turned_link_index": 2, "held_link_index": 1,
+            "delta_deg": 90, "macro_steps": 1,
+        },
+    )
+
+    id: str = Field(description="Identifier of the action (for feedback).", examples=["plan3_a2"])
+    name: str = Field(description="PDDL action name.", examples=["rotateclockwise"])
+    params: list[str] = Field(description="PDDL arguments: turned link, held link, joint, from, to.",
+                              examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"]])
+    step: int = Field(description="1-based position of the action in its plan.", examples=[2])
+    plan_id: str = Field(description="Plan the action belongs to.", examples=["plan3"])
+    joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])
+    turned_link_index: int = Field(description="Index of the link that turns (with every link beyond it).", examples=[2])
+    held_link_index: int = Field(description="Index of the link held still (0 = the table).", examples=[1])
+    delta_deg: int = Field(description="Signed rotation of the turned link, + clockwise seen from above.", examples=[90])
+    macro_steps: int = Field(description="Number of planned steps this motion stands for.", examples=[1])
+
+
+DecisionKind = Literal["goal_reached", "continue", "resume", "replan", "no_plan"]
+
+
+class DecisionPublic(BaseModel):
+    model_config = _config(
+        "What the cooperation model decided for a perception.",
+        {
+            "decision": "continue", "plan_id": "plan3", "perceived_state_id": "st9", "next_action": None,
+            "matched_expected_step": 2, "reason": "the perceived state is subsumed by the expected state s^e_2: execute a_2",
+        },
+    )
+
+    decision: DecisionKind = Field(
+        description="goal_reached, continue (next planned action), resume (from a later or earlier expected "
+        "state), replan (a new plan was made) or no_plan (no goal, or no plan could be found).",
+        examples=["continue", "resume"],
+    )
+    plan_id: str | None = Field(description="Plan being followed after the decision.", examples=["plan3"])
+    perceived_state_id: str | None = Field(description="The stored perceived State.", examples=["st9"])
+    next_action: NextActionPublic | None = Field(
+        description="Action to execute next, if any (not yet dispatched).", examples=[None]
+    )
+    matched_expected_step: int | None = Field(
+        description="i of the expected state s^e_i that subsumes the perceived state, if any.", examples=[2]
+    )
+    reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by the goal state"])
+
+
+class FeedbackCreate(BaseModel):
+    model_config = _config("A worker's report on a dispatched action.", {"outcome": "succeeded"})
+
+    outcome: Literal["succeeded", "failed", "partial"] = Field(
+        description="succeeded, failed (nothing moved) or partial (moved, but not the whole step).",
+        examples=["succeeded", "failed"],
+    )
+    message: str = Field(default="", max_length=2000, description="Free text from the worker.",
+                         examples=["gripper lost the link"])
+
+
+class FeedbackPublic(BaseModel):
+    model_config = _config(
+        "The execution after a feedback.",
+        {"action_id": "plan3_a2", "accepted": "current",
+         "execution": {"plan_id": "plan3", "next_step": 3, "status": "ready", "dispatched_action_id": None}},
+    )
+
+    action_id: str = Field(description="The action the feedback was about.", examples=["plan3_a2"])
+    accepted: Literal["current", "late"] = Field(
+        description="current: it moved the execution on; late: a perception had already moved it, the feedback "
+        "is only recorded.", examples=["current"],
+    )
+    execution: ExecutionPublic = Field(
+        description="Execution state after the feedback.",
+        examples=[{"plan_id": "plan3", "next_step": 3, "status": "ready", "dispatched_action_id": None}],
+    )
+
+
+# -- stored records -------------------------------------------------------------------------------------
+class StatePublic(BaseModel):
+    model_config = _config(
+        "A stored State: its ground atoms (PDDL syntax) and, for perceived states, the raw observation.",
+        {"id": "st9", "object_id": "obj1", "kind": "perceived", "atoms": ["(hasorientation deg_90 obj1_j1)"],
+         "joint_values_deg": {"obj1_j1": 90}, "link_orientations_deg": [1.7, 88.9], "created_at": 1.7e9},
+    )
+
+    id: str = Field(description="Identifier of the state.", examples=["st9"])
+    object_id: str = Field(description="Object the state describes.", examples=["obj1"])
+    kind: str = Field(description="perceived, expected, goal or initial.", examples=["perceived"])
+    atoms: list[str] = Field(description="Ground atoms, sorted.", examples=[["(hasorientation deg_90 obj1_j1)"]])
+    joint_values_deg: dict[str, int] = Field(description="Orientation carried by each joint the state mentions.",
+                                             examples=[{"obj1_j1": 90}])
+    link_orientations_deg: list[float] | None = Field(description="Raw observed link orientations (perceived).",
+                                                      examples=[[1.7, 88.9]])
+    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
+
+
+class ProblemPublic(BaseModel):
+    model_config = _config(
+        "A stored Problem: from an initial state to a goal state.",
+        {"id": "pb2", "object_id": "obj1", "init_state_id": "st9", "goal_state_id": "st7", "created_at": 1.7e9},
+    )
+
+    id: str = Field(description="Identifier of the problem.", examples=["pb2"])
+    object_id: str = Field(description="Object of the problem.", examples=["obj1"])
+    init_state_id: str = Field(description="Initial State.", examples=["st9"])
+    goal_state_id: str = Field(description="Goal State.", examples=["st7"])
+    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
+
+
+class PlanStepPublic(BaseModel):
+    model_config = _config(
+        "One action of a plan with its ground preconditions and effects.",
+        {"id": "plan3_a1", "step": 1, "name": "rotateclockwise",
+         "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_0", "deg_90"],
+         "pre": ["(hasorientation deg_0 obj1_j1)"], "eff_neg": ["(hasorientation deg_0 obj1_j1)"],
+         "eff_pos": ["(hasorientation deg_90 obj1_j1)"], "cond_eff": [], "joint_index": 1, "turned_link_index": 2,
+         "held_link_index": 1, "delta_deg": 90},
+    )
+
+    id: str = Field(description="Identifier of the action.", examples=["plan3_a1"])
+    step: int = Field(description="1-based position in the plan.", examples=[1])
+    name: str = Field(description="PDDL action name.", examples=["rotateclockwise"])
+    params: list[str] = Field(description="PDDL arguments.", examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_0", "deg_90"]])
+    pre: list[str] = Field(description="Ground preconditions.", examples=[["(hasorientation deg_0 obj1_j1)"]])
+    eff_neg: list[str] = Field(description="Ground negative effects.", examples=[["(hasorientation deg_0 obj1_j1)"]])
+    eff_pos: list[str] = Field(description="Ground positive effects.", examples=[["(hasorientation deg_90 obj1_j1)"]])
+    cond_eff: list[dict[str, list[str]]] = Field(
+        description="Ground conditional effects (absolute formulation): when, eff_neg, eff_pos.",
+        examples=[[{"when": ["(hasorientation deg_0 obj1_j2)"], "eff_neg": ["(hasorientation deg_0 obj1_j2)"],
+                    "eff_pos": ["(hasorientation deg_90 obj1_j2)"]}]])
+    joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])
+    turned_link_index: int = Field(description="Index of the link that turns (with every link beyond it).", examples=[2])
+    held_link_index: int = Field(description="Index of the link held still (0 = the table).", examples=[1])
+    delta_deg: int = Field(description="Signed rotation of the turned link, + clockwise seen from above.", examples=[90])
+
+
+class PlanPublic(BaseModel):
+    model_config = _config(
+        "A stored plan: its actions a_1..a_N and expected states s^e_1..s^e_{N+1}.",
+        {"id": "plan3", "object_id": "obj1", "problem_id": "pb2", "planner": "inproc", "steps": [],
+         "expected_state_ids": ["st10"], "expected_states": [], "created_at": 1.7e9},
+    )
+
+    id: str = Field(description="Identifier of the plan.", examples=["plan3"])
+    object_id: str = Field(description="Object of the plan.", examples=["obj1"])
+    problem_id: str = Field(description="Problem the plan solves.", examples=["pb2"])
+    planner: str = Field(description="Planner that found it.", examples=["inproc"])
+    steps: list[PlanStepPublic] = Field(description="Actions in order.", examples=[[]])
+    expected_state_ids: list[str] = Field(description="Ids of s^e_1..s^e_{N+1}.", examples=[["st10", "st11"]])
+    expected_states: list[StatePublic] = Field(description="The expected states themselves.", examples=[[]])
+    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
+
+
+class EventPublic(BaseModel):
+    model_config = _config(
+        "One entry of an object's log: a decision with its reason, a goal, a dispatch or a feedback.",
+        {"seq": 4, "object_id": "obj1", "kind": "continue", "reason": "the perceived state is subsumed by s^e_2",
+         "data": {"perceived_state_id": "st9", "next_step": 2}, "created_at": 1.7e9},
+    )
+
+    seq: int = Field(description="Position in the log (increasing).", examples=[4])
+    object_id: str = Field(description="Object the event is about.", examples=["obj1"])
+    kind: str = Field(description="goal_reached, continue, resume, replan, no_plan, goal_set, dispatched, feedback.",
+                      examples=["continue"])
+    reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by s^e_2"])
+    data: dict[str, Any] = Field(description="Ids and numbers of the event.", examples=[{"next_step": 2}])
+    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
+
+
+class HealthPublic(BaseModel):
+    model_config = _config(
+        "Liveness of the service and size of its knowledge base.",
+        {"status": "ok", "version": "0.1.0", "objects": 2, "triples": 1520, "auth": False},
+    )
+
+    status: Literal["ok"] = Field(description="Always ok when the service answers.", examples=["ok"])
+    version: str = Field(description="planhrc version.", examples=["0.1.0"])
+    objects: int = Field(description="Number of stored objects.", examples=[2])
+    triples: int = Field(description="Number of triples in the ABox.", examples=[1520])
+    auth: bool = Field(description="Whether writes need a bearer token.", examples=[False])
+
+
+class ErrorPublic(BaseModel):
+    model_config = _config(
+        "An error: the message names the offending field.",
+        {"detail": "link_orientations_deg: expected 4 values (one per link), got 3"},
+    )
+
+    detail: str = Field(description="What was wrong, naming the field.",
+                        examples=["link_orientations_deg: expected 4 values (one per link), got 3"])

@@ -1,0 +1,137 @@
+"""The cooperation model of the paper (section "Reasoning in the Ontology"), as one pure function.
+
+Every perceived state is compared with the normative states of the current plan:
+
+* goal reached: ``D(s^c) ⊑ D(s^g)``;
+* continue with the next action ``a_k`` when ``D(s^c) ⊑ D(s^e_k)`` (the state ``a_k`` starts from) or,
+  unless the last action failed or was done only in part, ``D(s^c) ⊑ D(pre(a_k))`` (``a_k`` is executable
+  even if some unmodelled effect of a successful action made the state differ: the paper's second case);
+* resume from the *latest* expected state ``s^e_i`` that subsumes ``s^c`` (a human did part of the work, or
+  the robot did only part of an action): the next action is ``a_i``;
+* otherwise re-plan from ``s^c`` to the same goal.
+
+Indices follow CONVENTIONS.md: ``s^e_1`` is the state the plan starts from and ``a_j`` turns ``s^e_j`` into
+``s^e_{j+1}``, so the action executable from ``s^e_i`` is ``a_i``. (The paper's text says "resumes from
+``a_{i+1}``", which with its own definition of ``s^e_1 = s^c`` is one step late.)
+
+The function only decides; storing states, planning and dispatching belong to the service's orchestrator.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from planhrc.model import State, is_subsumed
+
+DecisionKind = Literal["goal_reached", "continue", "resume", "replan", "no_plan"]
+Outcome = Literal["succeeded", "failed", "partial"]
+
+
+@dataclass(frozen=True)
+class PlanView:
+    """What the cooperation model needs of a plan: ``s^e_1 .. s^e_{N+1}`` and ``pre(a_1) .. pre(a_N)``."""
+
+    expected_states: tuple[State, ...]
+    preconditions: tuple[State, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.expected_states) != len(self.preconditions) + 1:
+            raise ValueError(
+                f"expected_states: a plan of {len(self.preconditions)} actions needs "
+                f"{len(self.preconditions) + 1} expected states, got {len(self.expected_states)}"
+            )
+
+    @property
+    def n_actions(self) -> int:
+        return len(self.preconditions)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What to do after a perception.
+
+    `next_step` is the 1-based step of the action to execute next (None for goal_reached, replan and
+    no_plan); `matched_expected_step` is the i of the expected state ``s^e_i`` that subsumes the perceived
+    state, when one does.
+    """
+
+    kind: DecisionKind
+    next_step: int | None
+    matched_expected_step: int | None
+    reason: str
+
+
+def decide(
+    perceived: State,
+    goal: State,
+    plan: PlanView | None,
+    next_step: int | None,
+    last_outcome: Outcome | None = None,
+) -> Decision:
+    """Apply the cooperation model to one perceived state.
+
+    `next_step` is the step of the action the execution expects to run next (None when there is none, e.g.
+    no plan yet or the goal was reached before); `last_outcome` is the worker's last feedback: after a failed
+    or partial action only expected states are normative (the paper's first case), after a successful one
+    (or none) ``pre(a_k)`` is too (its second case).
+    """
+    if is_subsumed(perceived, goal):
+        return Decision("goal_reached", None, None, "the perceived state is subsumed by the goal state")
+    if plan is None:
+        return Decision("no_plan", None, None, "there is no plan to follow: plan from the perceived state")
+
+    n = plan.n_actions
+    after = _after(last_outcome)
+    if next_step is not None and 1 <= next_step <= n:
+        if is_subsumed(perceived, plan.expected_states[next_step - 1]):
+            verb = "retry" if last_outcome in ("failed", "partial") else "execute"
+            return Decision(
+                "continue",
+                next_step,
+                next_step,
+                f"{after}the perceived state is subsumed by the expected state s^e_{next_step}: {verb} a_{next_step}",
+            )
+        if last_outcome not in ("failed", "partial") and is_subsumed(perceived, plan.preconditions[next_step - 1]):
+            return Decision(
+                "continue",
+                next_step,
+                None,
+                f"{after}the perceived state differs from s^e_{next_step} but satisfies pre(a_{next_step}): "
+                f"execute a_{next_step}",
+            )
+
+    for i in range(n + 1, 0, -1):  # the latest expected state first
+        if not is_subsumed(perceived, plan.expected_states[i - 1]):
+            continue
+        if i == n + 1:
+            # A valid plan's last state satisfies the goal, which was checked above: the plan is stale.
+            return Decision(
+                "replan",
+                None,
+                i,
+                f"{after}the perceived state matches the plan's final state s^e_{i}, which does not satisfy "
+                "the goal: re-plan",
+            )
+        return Decision(
+            "resume",
+            i,
+            i,
+            f"{after}the perceived state is subsumed by the expected state s^e_{i}"
+            f"{_expected_note(next_step)}: resume from a_{i}",
+        )
+
+    return Decision(
+        "replan",
+        None,
+        None,
+        f"{after}the perceived state is subsumed by no expected state of the plan"
+        f"{_expected_note(next_step)}: re-plan from it",
+    )
+
+
+def _after(last_outcome: str | None) -> str:
+    return "" if last_outcome is None else f"last feedback {last_outcome}; "
+
+
+def _expected_note(next_step: int | None) -> str:
+    return "" if next_step is None else f" (expected s^e_{next_step})"

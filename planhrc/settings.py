@@ -1,0 +1,48 @@
+"""Settings of the service and the pipeline, read from `PLANHRC_*` environment variables.
+
+Nothing is read or created at import time: `get_settings()` builds the process-wide settings on first use
+(cached), and tests build their own with `make_settings(**overrides)`.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Any
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from planhrc.paths import default_tbox_path
+
+
+class Settings(BaseSettings):
+    """Where the knowledge base lives, how the service listens, and how plans are made."""
+
+    model_config = SettingsConfigDict(env_prefix="PLANHRC_", extra="ignore", frozen=True)
+
+    db_path: str | None = Field(
+        default="planhrc.sqlite3",
+        description="SQLite file of the ABox, relative to the current directory; ':memory:' or None for a "
+        "throwaway store (tests).",
+    )
+    tbox_path: str = Field(default_factory=lambda: str(default_tbox_path()), description="OWL file of the TBox.")
+    host: str = Field(default="127.0.0.1", description="Interface the HTTP service binds to.")
+    port: int = Field(default=8000, ge=0, le=65535, description="TCP port of the HTTP service.")
+    token: str | None = Field(
+        default=None,
+        description="When set, every request that changes something needs `Authorization: Bearer <token>`.",
+    )
+    planner: str = Field(default="inproc", description="Planner backend name (see planner/).")
+    planner_timeout_s: float = Field(default=5.0, gt=0, description="Time limit of one planner call.")
+    validate_plans: bool = Field(default=True, description="Check every plan with VAL before storing it.")
+    log_level: str = Field(default="info", description="Logging level of the service (uvicorn names).")
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """The process-wide settings (environment variables), built once on first use."""
+    return Settings()
+
+
+def make_settings(**overrides: Any) -> Settings:
+    """Settings for tests and the CLI: the environment, with the given fields replaced."""
+    return Settings(**overrides)
