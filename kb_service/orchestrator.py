@@ -31,7 +31,8 @@ from planhrc.cooperation import Decision, PlanView, decide
 from planhrc.kb.errors import ConflictError, ValidationError
 from planhrc.kb.records import Execution, StoredAction, StoredPlan, StoredState
 from planhrc.model import HAS_ORIENTATION, ArticulatedObject, make_object, orientation_name, snap_angle
-from planhrc.pipeline import PlanOutcome, Planning, action_motion, config_from_settings, make_plan
+from planhrc.pipeline import (PlanOutcome, Planning, action_motion, config_from_settings, make_plan,
+                              merge_macro_steps)
 
 from .locks import ObjectLocks
 
@@ -221,7 +222,9 @@ class Orchestrator:
                 )
             if execution.status == DISPATCHED:
                 accepted = "current"
-                next_step = action.step + 1 if outcome == "succeeded" else action.step
+                plan, _ = self._plan_view(execution.plan_id)
+                last = self._last_step(self.kb.get_object(object_id), plan, action) if plan else action.step
+                next_step = last + 1 if outcome == "succeeded" else action.step
                 new = Execution(execution.plan_id, next_step, READY, None)
                 reason = f"a_{action.step} {outcome}" + (
                     ": the next perception checks s^e_{}".format(next_step) if outcome == "succeeded"
@@ -270,10 +273,21 @@ class Orchestrator:
                 memo.last_outcome = None  # a feedback informs only the next decision
         return memo
 
+    def _last_step(self, obj: ArticulatedObject, plan: StoredPlan, action: StoredAction) -> int:
+        """Last plan step of the motion that starts with `action` (itself unless macro steps are merged)."""
+        if not getattr(self.settings, "merge_macro_steps", False):
+            return action.step
+        rest = [a for a in plan.actions if a.step >= action.step]
+        return merge_macro_steps(obj, rest)[0].last_step
+
     def _action_public(self, obj: ArticulatedObject, plan: StoredPlan, action: StoredAction) -> dict[str, Any]:
         motion = action_motion(obj, action)
+        last = self._last_step(obj, plan, action)
+        if last > action.step:
+            merged = merge_macro_steps(obj, [a for a in plan.actions if action.step <= a.step <= last])[0]
+            motion.update(delta_deg=merged.delta_deg, macro_steps=last - action.step + 1)
         return {"id": action.id, "name": action.spec.name, "params": list(action.spec.params),
-                "step": action.step, "plan_id": plan.id, **motion}
+                "step": action.step, "last_step": last, "plan_id": plan.id, **motion}
 
     def _recall(self, object_id: str, key: str | None, fingerprint: str) -> dict[str, Any] | None:
         if not key:

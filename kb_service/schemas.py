@@ -150,7 +150,7 @@ class NextActionPublic(BaseModel):
         "The action to execute next and the motion it means.",
         {
             "id": "plan3_a2", "name": "rotateclockwise", "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"],
-            "step": 2, "plan_id": "plan3", "joint_index": 1, "turned_link_index": 2, "held_link_index": 1,
+            "step": 2, "last_step": 2, "plan_id": "plan3", "joint_index": 1, "turned_link_index": 2, "held_link_index": 1,
             "delta_deg": 90, "macro_steps": 1,
         },
     )
@@ -160,6 +160,9 @@ class NextActionPublic(BaseModel):
     params: list[str] = Field(description="PDDL arguments: turned link, held link, joint, from, to.",
                               examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"]])
     step: int = Field(description="1-based position of the action in its plan.", examples=[2])
+    last_step: int = Field(description="Last plan step this motion covers: consecutive steps of one joint in one "
+                           "direction are merged into one macro step; feedback 'succeeded' moves the execution to "
+                           "last_step + 1.", examples=[2])
     plan_id: str = Field(description="Plan the action belongs to.", examples=["plan3"])
     joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])
     turned_link_index: int = Field(description="Index of the link that turns (with every link beyond it).", examples=[2])

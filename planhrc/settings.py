@@ -34,6 +34,11 @@ class Settings(BaseSettings):
     planner: str = Field(default="inproc", description="Planner backend name (see planner/).")
     planner_timeout_s: float = Field(default=5.0, gt=0, description="Time limit of one planner call.")
     validate_plans: bool = Field(default=True, description="Check every plan with VAL before storing it.")
+    merge_macro_steps: bool = Field(
+        default=True,
+        description="Dispatch consecutive steps of one joint in one direction as one motion (the paper's "
+        "two 45 degree steps as one 90 degree step); the expected state after the merged step is checked.",
+    )
     log_level: str = Field(default="info", description="Logging level of the service (uvicorn names).")
 
 

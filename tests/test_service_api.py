@@ -49,6 +49,14 @@ def noisy(links: list[float], amplitude: float = 7.0) -> list[float]:
 # -- fixtures -----------------------------------------------------------------------------------------------
 @pytest.fixture
 def client():
+    """One plan step per dispatched action, so the tests can name every expected state."""
+    with TestClient(create_app(make_settings(db_path=None, token=None, merge_macro_steps=False))) as c:
+        yield c
+
+
+@pytest.fixture
+def macro_client():
+    """The service's default: consecutive steps of one joint in one direction dispatched as one motion."""
     with TestClient(create_app(make_settings(db_path=None, token=None))) as c:
         yield c
 
@@ -315,11 +323,13 @@ def test_perception_while_dispatched_and_late_feedback(client):
     assert client.get(f"/objects/{oid}").json()["execution"]["status"] == "dispatched"
     links = move([0, 0, 0, 0], action)
     after = perceive(client, oid, noisy(links))  # the action's effect is seen before its feedback
-    assert (after["decision"], after["matched_expected_step"]) == ("resume", 2)
+    after_motion = action["last_step"] + 1  # the motion may be a macro step covering several plan steps
+    assert (after["decision"], after["matched_expected_step"]) == ("resume", after_motion)
     r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"})
     assert r.status_code == 200 and r.json()["accepted"] == "late"
-    assert r.json()["execution"]["next_step"] == 2  # the perception already moved on; feedback does not again
-    assert client.get(f"/objects/{oid}/next-action").json()["step"] == 2
+    # the perception already moved on; the feedback does not move it again
+    assert r.json()["execution"]["next_step"] == after_motion
+    assert client.get(f"/objects/{oid}/next-action").json()["step"] == after_motion
 
 
 def test_unsolvable_or_failed_planning_answers_no_plan(client, monkeypatch):
@@ -491,3 +501,19 @@ def test_object_locks_serialize_one_object_and_not_two():
         t.start()
         t.join()
     assert got == {"b": True, "a": False}
+
+
+def test_macro_step_covers_consecutive_steps_and_checks_the_state_after_it(macro_client):
+    client = macro_client
+    oid = new_object(client, links=3, orientations=8)  # relative: 2 joints, 45 degree steps
+    client.put(f"/objects/{oid}/goal", json={"joint_angles_deg": [90, 0]})
+    first = perceive(client, oid, [0, 0, 0])
+    action = client.get(f"/objects/{oid}/next-action").json()
+    assert first["decision"] == "replan"
+    assert (action["step"], action["last_step"], action["macro_steps"]) == (1, 2, 2)
+    assert abs(action["delta_deg"]) == 90  # two 45 degree steps as one 90 degree motion
+    links = move([0, 0, 0], action)
+    r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"})
+    assert r.json()["execution"]["next_step"] == 3
+    answer = perceive(client, oid, noisy(links))
+    assert answer["decision"] == "goal_reached"

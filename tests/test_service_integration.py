@@ -48,6 +48,7 @@ def running_server(db: Path, token: str | None = None) -> Iterator[httpx.Client]
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
     if token:
         env["PLANHRC_TOKEN"] = token
+    env["PLANHRC_MERGE_MACRO_STEPS"] = "false"  # one plan step per action: the episodes name expected states
     log_path = db.parent / f"server-{port}.log"
     log_file = open(log_path, "w")
     proc = subprocess.Popen(serve_command(port, db), cwd=db.parent, env=env, stdout=log_file,
