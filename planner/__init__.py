@@ -1,0 +1,18 @@
+"""Planner backends behind one interface: PDDL text in, `PlanResult` out.
+
+`get_planner(name)` builds a backend from the `PLANNERS` registry; `plan_files` reads PDDL files;
+`validate_plan` checks a plan with VAL; `ground_task` is the low-latency re-planning API of the
+in-process planner for the rotation domain family.
+"""
+from .base import Planner
+from .errors import PlannerError
+from .files import plan_files
+from .inproc import GroundTask, InprocPlanner, ground_task
+from .registry import PLANNERS, available_planners, get_planner
+from .result import PlanResult, PlanStatus
+from .validate import ValidationResult, validate_plan
+
+__all__ = [
+    "GroundTask", "InprocPlanner", "PLANNERS", "Planner", "PlannerError", "PlanResult", "PlanStatus",
+    "ValidationResult", "available_planners", "get_planner", "ground_task", "plan_files", "validate_plan",
+]

@@ -1,0 +1,38 @@
+"""Run a planner process in its own process group with a wall-clock limit (shared by the external backends)."""
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import subprocess
+from dataclasses import dataclass
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ProcessOutcome:
+    returncode: int | None  # None when killed at the time limit
+    stdout: str
+    stderr: str
+
+    @property
+    def timed_out(self) -> bool:
+        return self.returncode is None
+
+
+def run_limited(cmd: list[str], cwd: str, timeout_s: float, env: dict[str, str] | None = None) -> ProcessOutcome:
+    """Run `cmd`; at `timeout_s` kill its whole process group (the planner and everything it started)."""
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=max(timeout_s, 0.001))
+        return ProcessOutcome(proc.returncode, out, err)
+    except subprocess.TimeoutExpired:
+        log.debug("killing process group %d after %.3f s", proc.pid, timeout_s)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        out, err = proc.communicate()
+        return ProcessOutcome(None, out, err)

