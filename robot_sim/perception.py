@@ -1,0 +1,166 @@
+"""Perception of the object's link orientations: a camera with ArUco markers, or noisy simulator poses.
+
+`CameraPerception` renders the head camera's view of the table with TinyRenderer, detects one ArUco marker
+per link and turns each marker's corners into a table angle. Instead of reading the angle off the image
+(whose axes are tilted by the oblique view and flipped: image rows grow downwards), every corner is cast
+back through the camera onto the plane of the marker tops, and the angle is measured on the table in
+the world frame: theta = atan2(-dy, dx), clockwise seen from above from +x.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import cv2
+import numpy as np
+import pybullet
+
+from robot_sim.markers import aruco_dictionary
+from robot_sim.scene import Scene
+
+
+@dataclass(frozen=True)
+class Perception:
+    """One perception: an orientation per link (None when the link was not seen) and the camera frame."""
+
+    link_orientations_deg: tuple[float | None, ...]
+    frame: np.ndarray | None = None
+
+    @property
+    def complete(self) -> bool:
+        return all(v is not None for v in self.link_orientations_deg)
+
+    @property
+    def missing_links(self) -> tuple[int, ...]:
+        """1-based indices of the links whose marker was not seen."""
+        return tuple(i + 1 for i, v in enumerate(self.link_orientations_deg) if v is None)
+
+
+class Perceiver(Protocol):
+    def perceive(self) -> Perception: ...
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """A camera above Baxter's head looking down at the table (the head camera's viewpoint, raised)."""
+
+    eye: tuple[float, float, float] = (0.2, 0.0, 1.2)
+    target: tuple[float, float, float] = (0.6, 0.0, -0.18)
+    up: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    fov_deg: float = 36.0  # vertical
+    width: int = 960
+    height: int = 720
+    near: float = 0.05
+    far: float = 5.0
+    # Markers are only ~20 px wide: detect on enlarged copies, trying each scale until every marker is found.
+    upscales: tuple[int, ...] = (2, 1, 3)
+
+
+def circular_mean_deg(angles: list[float]) -> float:
+    s = sum(math.sin(math.radians(a)) for a in angles)
+    c = sum(math.cos(math.radians(a)) for a in angles)
+    return math.degrees(math.atan2(s, c)) % 360.0
+
+
+def angle_difference_deg(a: float, b: float) -> float:
+    """Signed smallest difference a - b in (-180, 180]."""
+    d = (a - b) % 360.0
+    return d - 360.0 if d > 180.0 else d
+
+
+def table_angle(vector_xy: np.ndarray) -> float:
+    """Orientation of a table vector: degrees clockwise seen from above from +x."""
+    return math.degrees(math.atan2(-vector_xy[1], vector_xy[0])) % 360.0
+
+
+class CameraPerception:
+    """Render, detect markers, back-project their corners onto the table and measure each link's angle."""
+
+    def __init__(self, client, scene: Scene, camera: CameraSpec | None = None) -> None:
+        self.client = client
+        self.scene = scene
+        self.camera = camera or CameraSpec()
+        cam = self.camera
+        self._view = client.computeViewMatrix(list(cam.eye), list(cam.target), list(cam.up))
+        self._proj = client.computeProjectionMatrixFOV(cam.fov_deg, cam.width / cam.height, cam.near, cam.far)
+        view = np.array(self._view, dtype=float).reshape(4, 4).T  # PyBullet matrices are column-major
+        proj = np.array(self._proj, dtype=float).reshape(4, 4).T
+        self._inverse = np.linalg.inv(proj @ view)
+        self._detector = cv2.aruco.ArucoDetector(aruco_dictionary(), self._detector_parameters())
+
+    @staticmethod
+    def _detector_parameters() -> cv2.aruco.DetectorParameters:
+        params = cv2.aruco.DetectorParameters()
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR
+        params.minMarkerPerimeterRate = 0.01
+        params.adaptiveThreshWinSizeMin = 3
+        params.adaptiveThreshWinSizeMax = 23
+        params.adaptiveThreshWinSizeStep = 4
+        params.polygonalApproxAccuracyRate = 0.05
+        params.perspectiveRemovePixelPerCell = 8
+        params.perspectiveRemoveIgnoredMarginPerCell = 0.25
+        return params
+
+    def render(self) -> np.ndarray:
+        cam = self.camera
+        _, _, rgba, _, _ = self.client.getCameraImage(
+            cam.width, cam.height, self._view, self._proj, renderer=pybullet.ER_TINY_RENDERER
+        )
+        return np.reshape(np.asarray(rgba, dtype=np.uint8), (cam.height, cam.width, 4))[:, :, :3].copy()
+
+    def pixel_to_table(self, u: float, v: float, z: float) -> np.ndarray:
+        """The (x, y) where the ray through pixel (u, v) meets the horizontal plane at height z."""
+        cam = self.camera
+        x_ndc = 2.0 * (u + 0.5) / cam.width - 1.0
+        y_ndc = 1.0 - 2.0 * (v + 0.5) / cam.height
+        near = self._inverse @ np.array([x_ndc, y_ndc, -1.0, 1.0])
+        far = self._inverse @ np.array([x_ndc, y_ndc, 1.0, 1.0])
+        near, far = near[:3] / near[3], far[:3] / far[3]
+        t = (z - near[2]) / (far[2] - near[2])
+        return (near + t * (far - near))[:2]
+
+    def marker_angle(self, corners: np.ndarray) -> float:
+        """Table angle of a marker's corner 0 -> corner 1 direction, averaged over its four edges."""
+        z = self.scene.marker_z
+        tl, tr, br, bl = (self.pixel_to_table(float(u), float(v), z) for u, v in corners)
+        along = [table_angle(tr - tl), table_angle(br - bl)]
+        across = [table_angle(bl - tl) - 90.0, table_angle(br - tr) - 90.0]
+        return circular_mean_deg(along + across)
+
+    def perceive(self) -> Perception:
+        frame = self.render()
+        link_ids = [asset.marker_id for asset in self.scene.markers]
+        found = self.detect(frame, set(link_ids))
+        return Perception(tuple(found.get(m) for m in link_ids), frame)
+
+    def detect(self, frame: np.ndarray, wanted: set[int]) -> dict[int, float]:
+        """Marker id -> table angle for the wanted markers seen in `frame`."""
+        grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
+        found: dict[int, float] = {}
+        for k in self.camera.upscales:
+            image = grey if k == 1 else cv2.resize(grey, None, fx=k, fy=k, interpolation=cv2.INTER_CUBIC)
+            corners, ids, _ = self._detector.detectMarkers(image)
+            if ids is not None:
+                for marker_corners, marker_id in zip(corners, ids.ravel()):
+                    if int(marker_id) in wanted and int(marker_id) not in found:
+                        # corner (x, y) of the enlarged image -> pixel coordinates of the frame
+                        pixels = (marker_corners.reshape(4, 2) + 0.5) / k - 0.5
+                        found[int(marker_id)] = self.marker_angle(pixels)
+            if wanted <= found.keys():
+                break
+        return found
+
+
+class FallbackPerception:
+    """Ground-truth link orientations from the simulator plus Gaussian noise (sigma in degrees, seeded)."""
+
+    def __init__(self, scene: Scene, sigma_deg: float = 1.0, seed: int = 0) -> None:
+        self.scene = scene
+        self.sigma_deg = sigma_deg
+        self._rng = np.random.default_rng(seed)
+
+    def perceive(self) -> Perception:
+        truth = self.scene.link_orientations_deg()
+        noise = self._rng.normal(0.0, self.sigma_deg, size=len(truth)) if self.sigma_deg > 0 else np.zeros(len(truth))
+        return Perception(tuple(float((t + n) % 360.0) for t, n in zip(truth, noise)), None)

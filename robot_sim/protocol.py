@@ -1,0 +1,164 @@
+"""The worker's only link to the knowledge-base service: a small HTTP client (httpx).
+
+Connection errors and 5xx answers are retried with exponential backoff (the service may be restarting).
+Every perception and every feedback carries an ``Idempotency-Key`` (uuid4) that stays the same across the
+retries of that one request, so a request that reached the service before the connection dropped is not
+applied twice. 4xx answers are not retried: they raise `ProtocolError` with the service's message.
+"""
+from __future__ import annotations
+
+import logging
+import time
+import uuid
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import httpx
+
+log = logging.getLogger(__name__)
+
+
+class ProtocolError(Exception):
+    """The service refused a request (4xx) or stayed unreachable after every retry."""
+
+    def __init__(self, message: str, status: int | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass(frozen=True)
+class RetryPolicy:
+    attempts: int = 6
+    initial_delay_s: float = 0.2
+    factor: float = 2.0
+    max_delay_s: float = 5.0
+
+    def delays(self) -> list[float]:
+        out, d = [], self.initial_delay_s
+        for _ in range(self.attempts - 1):
+            out.append(min(d, self.max_delay_s))
+            d *= self.factor
+        return out
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The service's answer to a perception (unknown keys are kept in `raw`)."""
+
+    decision: str
+    plan_id: str | None
+    next_action: dict[str, Any] | None
+    matched_expected_step: int | None
+    reason: str
+    raw: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "Decision":
+        if "decision" not in data:
+            raise ProtocolError("decision: missing from the service's answer")
+        return cls(
+            decision=str(data["decision"]),
+            plan_id=data.get("plan_id"),
+            next_action=data.get("next_action"),
+            matched_expected_step=data.get("matched_expected_step"),
+            reason=str(data.get("reason", "")),
+            raw=dict(data),
+        )
+
+
+class KBClient:
+    """Calls of the KB service's cooperation API. Owns its `httpx.Client`; close it (or use `with`)."""
+
+    def __init__(
+        self,
+        base_url: str,
+        token: str | None = None,
+        retry: RetryPolicy | None = None,
+        timeout_s: float = 30.0,
+        sleep: Callable[[float], None] = time.sleep,
+        transport: httpx.BaseTransport | None = None,
+    ) -> None:
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers, timeout=timeout_s, transport=transport)
+        self.retry = retry or RetryPolicy()
+        self._sleep = sleep
+
+    def close(self) -> None:
+        self._http.close()
+
+    def __enter__(self) -> "KBClient":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- transport with retries ------------------------------------------------------------------------------
+    def _request(self, method: str, path: str, json: Any = None, idempotency_key: str | None = None) -> Any:
+        headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        delays = self.retry.delays()
+        for attempt in range(self.retry.attempts):
+            try:
+                response = self._http.request(method, path, json=json, headers=headers)
+            except httpx.TransportError as exc:
+                problem = f"{type(exc).__name__}: {exc}"
+            else:
+                if response.status_code < 400:
+                    return response.json() if response.content else None
+                if response.status_code < 500:
+                    raise ProtocolError(f"{method} {path}: {response.status_code} {_detail(response)}", response.status_code)
+                problem = f"{response.status_code} {_detail(response)}"
+            if attempt < len(delays):
+                log.warning("%s %s failed (%s); retry %d in %.1f s", method, path, problem, attempt + 1, delays[attempt])
+                self._sleep(delays[attempt])
+        raise ProtocolError(f"{method} {path}: gave up after {self.retry.attempts} attempts ({problem})")
+
+    # -- the API ---------------------------------------------------------------------------------------------
+    def create_object(self, name: str, links: int | Sequence[dict[str, Any]], orientations: int, formulation: str) -> dict[str, Any]:
+        body = {"name": name, "links": links if isinstance(links, int) else list(links),
+                "orientations": orientations, "formulation": formulation}
+        return self._request("POST", "/objects", body)
+
+    def set_goal(self, object_id: str, link_orientations_deg: Sequence[float] | None = None,
+                 joint_angles_deg: Sequence[float | None] | None = None) -> dict[str, Any]:
+        if (link_orientations_deg is None) == (joint_angles_deg is None):
+            raise ProtocolError("goal: give exactly one of link_orientations_deg and joint_angles_deg")
+        body = ({"link_orientations_deg": list(link_orientations_deg)} if link_orientations_deg is not None
+                else {"joint_angles_deg": list(joint_angles_deg)})
+        return self._request("PUT", f"/objects/{object_id}/goal", body)
+
+    def post_perception(self, object_id: str, link_orientations_deg: Sequence[float]) -> Decision:
+        """One perception: a fresh idempotency key, reused by every retry of this request."""
+        key = str(uuid.uuid4())
+        body = {"link_orientations_deg": [float(v) for v in link_orientations_deg]}
+        return Decision.from_json(self._request("POST", f"/objects/{object_id}/perceptions", body, key))
+
+    def next_action(self, object_id: str) -> dict[str, Any] | None:
+        """The action to execute now (the service marks it dispatched), or None."""
+        data = self._request("GET", f"/objects/{object_id}/next-action")
+        if isinstance(data, dict) and "next_action" in data and "turned_link_index" not in data:
+            return data["next_action"]  # the wrapped form {"decision": ..., "next_action": ...}
+        return data
+
+    def post_feedback(self, object_id: str, action_id: str, outcome: str, message: str = "") -> dict[str, Any]:
+        key = str(uuid.uuid4())
+        body: dict[str, Any] = {"outcome": outcome}
+        if message:
+            body["message"] = message
+        return self._request("POST", f"/objects/{object_id}/actions/{action_id}/feedback", body, key)
+
+    def read_object(self, object_id: str) -> dict[str, Any]:
+        return self._request("GET", f"/objects/{object_id}")
+
+    def read_plan(self, plan_id: str) -> dict[str, Any]:
+        return self._request("GET", f"/plans/{plan_id}")
+
+    def read_state(self, state_id: str) -> dict[str, Any]:
+        return self._request("GET", f"/states/{state_id}")
+
+
+def _detail(response: httpx.Response) -> str:
+    try:
+        data = response.json()
+    except ValueError:
+        return response.text[:200]
+    return str(data.get("detail", data)) if isinstance(data, dict) else str(data)[:200]

@@ -1,0 +1,412 @@
+"""The robot worker: perceive -> report to the KB service -> execute the next action -> report the outcome.
+
+Each cycle (a "step") the simulated human may act first (`before` events), the worker perceives the object
+and posts the perception; the service's decision says whether the goal is reached or which action comes next.
+The worker asks for that action (which dispatches it), runs the rotation skill — the human may act half-way
+(`during` events), the robot may stop part-way (faults) — and posts the observed outcome.
+
+Everything is recorded in `out_dir`: `summary.json` (decisions, actions, outcomes, timings), one camera frame
+per perception (`frame_NNN.png`), `run.gif`, and `configurations.png` (top views of each successive
+configuration, like the paper's Figs 10-12). The worker owns its PyBullet client; only `robot_sim.protocol`
+talks HTTP.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import re
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+from robot_sim.human import HumanContext, HumanEvent, Scenario, apply_event, get_scenario, goal_differences
+from robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
+from robot_sim.protocol import KBClient, ProtocolError
+from robot_sim.scene import Scene, SceneSpec, SimError, build_scene, direction
+from robot_sim.skills import Outcome, Robot, RotationAction, perform_action
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    step: int
+    human_before: tuple[str, ...]
+    perceived_deg: tuple[float, ...]
+    true_deg: tuple[float, ...]
+    missing_links: tuple[int, ...]
+    decision: str
+    reason: str
+    matched_expected_step: int | None
+    action: dict[str, Any] | None = None
+    outcome: str | None = None
+    human_during: tuple[str, ...] = ()
+    perception_s: float = 0.0
+    service_s: float = 0.0
+    action_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class WorkerSummary:
+    object_id: str
+    scenario: str
+    reached_goal: bool
+    stop_reason: str
+    steps: tuple[StepRecord, ...]
+    configurations: tuple[tuple[float, ...], ...]
+    base_points: tuple[tuple[float, float], ...]
+    out_dir: str
+    wall_s: float
+
+    @property
+    def decisions(self) -> tuple[str, ...]:
+        return tuple(s.decision for s in self.steps)
+
+    @property
+    def outcomes(self) -> tuple[str, ...]:
+        return tuple(s.outcome for s in self.steps if s.outcome is not None)
+
+
+@dataclass
+class _Run:
+    """Mutable bookkeeping of one run (kept private to this module)."""
+
+    records: list[StepRecord] = field(default_factory=list)
+    frames: list[np.ndarray] = field(default_factory=list)  # one per perception (saved as PNG)
+    movie: list[np.ndarray] = field(default_factory=list)  # perceptions plus one frame half-way through each action
+    configurations: list[tuple[float, ...]] = field(default_factory=list)
+    base_points: list[tuple[float, float]] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
+    applied: set[int] = field(default_factory=set)  # indices of scenario events already performed
+
+
+def _joint_index(name: str) -> int:
+    match = re.search(r"_j(\d+)$", name)
+    if not match:
+        raise ProtocolError(f"joint_values_deg: cannot read a joint index from {name!r}")
+    return int(match.group(1))
+
+
+def _read_goal_differences(kb: KBClient, obj: dict[str, Any]) -> dict[int, float]:
+    """The goal as link K -> wanted theta_K - theta_(K-1), read from the service (empty when unknown)."""
+    state_id = obj.get("goal_state_id")
+    if not state_id:
+        return {}
+    try:
+        state = kb.read_state(state_id)
+    except ProtocolError as exc:
+        log.warning("goal: cannot read state %s (%s); 'toward_goal' events will do nothing", state_id, exc)
+        return {}
+    values = {_joint_index(name): v for name, v in (state.get("joint_values_deg") or {}).items()}
+    return goal_differences(str(obj.get("formulation", "relative")), values)
+
+
+def _following_action(kb: KBClient, action: dict[str, Any]) -> tuple[int, int, float] | None:
+    """(turned, held, delta) of the plan's action after `action`, or None."""
+    plan_id, step = action.get("plan_id"), action.get("step")
+    if not plan_id or step is None:
+        return None
+    try:
+        plan = kb.read_plan(str(plan_id))
+    except ProtocolError as exc:
+        log.warning("plan %s: cannot read it (%s)", plan_id, exc)
+        return None
+    for entry in plan.get("steps", []):
+        if entry.get("step") == int(step) + 1:
+            return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
+    return None
+
+
+def _perceive(perceiver, fallback: FallbackPerception, tries: int = 2) -> tuple[Perception, tuple[float, ...]]:
+    """Perceive; retry when a marker is missing, then fill what is still missing from the fallback."""
+    seen = perceiver.perceive()
+    for _ in range(tries - 1):
+        if seen.complete:
+            break
+        seen = perceiver.perceive()
+    if seen.complete:
+        return seen, tuple(seen.link_orientations_deg)
+    backup = fallback.perceive().link_orientations_deg
+    log.warning("perception: links %s not seen; using the simulator's (noisy) values for them", seen.missing_links)
+    return seen, tuple(v if v is not None else b for v, b in zip(seen.link_orientations_deg, backup))
+
+
+def run_worker(
+    kb_url: str,
+    object_id: str,
+    scene_spec: SceneSpec | None = None,
+    human_scenario: Scenario | str = "none",
+    out_dir: str | Path = "worker-out",
+    gui: bool = False,
+    max_steps: int = 30,
+    token: str | None = None,
+    perception: str = "camera",
+    goal_link_orientations_deg: Sequence[float] | None = None,
+    sigma_deg: float = 1.0,
+    seed: int = 0,
+    kb: KBClient | None = None,
+    record_motion: bool = True,
+    record_frames: bool = True,
+) -> WorkerSummary:
+    """Run the cooperation loop against the KB service until the goal is reached, or it cannot go on.
+
+    `record_frames=False` skips the camera frames and the GIF when perceiving without the camera (faster);
+    `record_motion=False` leaves out the GIF's frames taken half-way through each action.
+    """
+    if perception not in ("camera", "fallback"):
+        raise SimError(f"perception: must be 'camera' or 'fallback', got {perception!r}")
+    start = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    own_kb = kb is None
+    kb = kb or KBClient(kb_url, token=token)
+    client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+    scene: Scene | None = None
+    try:
+        if goal_link_orientations_deg is not None:
+            kb.set_goal(object_id, link_orientations_deg=list(goal_link_orientations_deg))
+        obj = kb.read_object(object_id)
+        links = obj.get("links") or []
+        spec = scene_spec or SceneSpec(n_links=len(links), link_length_m=float(links[0]["length_m"]))
+        if spec.n_links != len(links):
+            raise SimError(f"scene_spec.n_links: {spec.n_links}, but object {object_id} has {len(links)} links")
+        scenario = human_scenario if isinstance(human_scenario, Scenario) else get_scenario(human_scenario, spec.n_links)
+        scene = build_scene(client, spec)
+        robot = Robot(scene, realtime_s=0.01 if gui else 0.0)
+        camera = CameraPerception(client, scene)
+        fallback = FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed)
+        perceiver = camera if perception == "camera" else fallback
+        context = HumanContext(step_deg=float(obj.get("step_deg") or 360 / int(obj["orientations"])),
+                               goal_differences=_read_goal_differences(kb, obj))
+        run = _Run()
+        summary_reason = _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, context,
+                               max_steps, run, record_motion=record_motion and record_frames,
+                               record_frames=record_frames)
+        reached = summary_reason == "goal_reached"
+        summary = WorkerSummary(
+            object_id=object_id,
+            scenario=scenario.name,
+            reached_goal=reached,
+            stop_reason=summary_reason,
+            steps=tuple(run.records),
+            configurations=tuple(run.configurations),
+            base_points=tuple(run.base_points),
+            out_dir=str(out),
+            wall_s=time.perf_counter() - start,
+        )
+        _save(out, summary, run, spec)
+        return summary
+    finally:
+        if scene is not None:
+            scene.close()
+        client.disconnect()
+        if own_kb:
+            kb.close()
+
+
+def _events(scenario: Scenario, run: _Run, step: int, when: str) -> list[tuple[int, HumanEvent]]:
+    return [(i, e) for i, e in enumerate(scenario.events) if e.at_step == step and e.when == when and i not in run.applied]
+
+
+def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, context, max_steps, run,
+          max_failures: int = 3, record_motion: bool = True, record_frames: bool = True) -> str:
+    """Perceive -> decide -> act until the goal; returns why it stopped."""
+    step = 1
+    failures, last_failed = 0, None  # consecutive failures of the same action: the robot cannot do it
+    while step <= max_steps:
+        human_before = []
+        for index, event in _events(scenario, run, step, "before"):
+            run.applied.add(index)
+            if (done := apply_event(scene, event, context)) is not None:
+                human_before.append(done)
+
+        t0 = time.perf_counter()
+        seen, values = _perceive(perceiver, fallback)
+        t1 = time.perf_counter()
+        decision = kb.post_perception(object_id, values)
+        t2 = time.perf_counter()
+        frame = seen.frame if seen.frame is not None or not record_frames else camera.render()
+        if frame is not None:
+            run.frames.append(frame)
+            run.movie.append(frame)
+        _, theta = scene.configuration()
+        run.configurations.append(tuple(round(v, 3) for v in theta))
+        run.base_points.append(scene.base_point())
+        run.labels.append(f"{step}: {decision.decision}")
+        base = dict(step=step, human_before=tuple(human_before), perceived_deg=tuple(round(v, 2) for v in values),
+                    true_deg=tuple(round(v, 2) for v in scene.link_orientations_deg()), missing_links=seen.missing_links,
+                    decision=decision.decision, reason=decision.reason,
+                    matched_expected_step=decision.matched_expected_step, perception_s=t1 - t0, service_s=t2 - t1)
+        log.info("step %d: %s (%s)", step, decision.decision, decision.reason)
+
+        if decision.decision == "goal_reached":
+            run.records.append(StepRecord(**base))
+            pending = [e for i, e in enumerate(scenario.events) if i not in run.applied and e.at_step > step]
+            if not pending:
+                return "goal_reached"
+            # the robot is idle: the next scheduled human intervention happens now
+            step = max(step + 1, min(e.at_step for e in pending))
+            continue
+        if decision.decision == "no_plan":
+            run.records.append(StepRecord(**base))
+            return "no_plan"
+
+        data = kb.next_action(object_id)
+        if data is None:
+            run.records.append(StepRecord(**base))
+            return "no_action"
+        action = RotationAction.from_api(data)
+        context.busy_links = (action.turned_link, action.held_link)
+        during_events = _events(scenario, run, step, "during")
+        if any(e.kind == "next_planned" for _, e in during_events):
+            context.next_planned = _following_action(kb, data)
+        human_during: list[str] = []
+
+        def interrupt(done: int, total: int) -> bool:
+            if done == total // 2 and record_motion:
+                run.movie.append(camera.render())  # the arms at work
+            if during_events and done >= total / 2:
+                while during_events:
+                    index, event = during_events.pop(0)
+                    run.applied.add(index)
+                    if (what := apply_event(scene, event, context)) is not None:
+                        human_during.append(what)
+            return False
+
+        fault = scenario.fault_at(step)
+        before = scene.link_orientations_deg()
+        t3 = time.perf_counter()
+        outcome = perform_action(scene, robot, action, interrupt=interrupt,
+                                 stop_fraction=fault.stop_fraction if fault else None)
+        t4 = time.perf_counter()
+        if outcome is Outcome.PARTIAL:
+            turned_change = angle_difference_deg(scene.link_orientations_deg()[action.turned_link - 1],
+                                                 before[action.turned_link - 1])
+            context.partial = (action.turned_link, action.held_link, action.delta_deg - turned_change)
+        context.busy_links = ()
+        if action.action_id is not None:
+            kb.post_feedback(object_id, action.action_id, outcome.value)
+        failures = failures + 1 if outcome is Outcome.FAILED and action.action_id == last_failed else (
+            1 if outcome is Outcome.FAILED else 0)
+        last_failed = action.action_id if outcome is Outcome.FAILED else None
+        run.records.append(StepRecord(**base, action=dict(data), outcome=outcome.value,
+                                      human_during=tuple(human_during), action_s=t4 - t3))
+        log.info("step %d: %s -> %s", step, action, outcome.value)
+        if failures >= max_failures:
+            return "repeated_failure"
+        step += 1
+    return "max_steps"
+
+
+# -- records ---------------------------------------------------------------------------------------------
+def _save(out: Path, summary: WorkerSummary, run: _Run, spec: SceneSpec) -> None:
+    from PIL import Image
+
+    data = asdict(summary)
+    data["decisions"] = list(summary.decisions)
+    data["outcomes"] = list(summary.outcomes)
+    (out / "summary.json").write_text(json.dumps(data, indent=2, default=str))
+    for i, frame in enumerate(run.frames):
+        Image.fromarray(frame).save(out / f"frame_{i:03d}.png")
+    images = [Image.fromarray(f).resize((f.shape[1] // 2, f.shape[0] // 2)) for f in run.movie]
+    if images:
+        images[0].save(out / "run.gif", save_all=True, append_images=images[1:], duration=800, loop=0)
+    if run.configurations:
+        draw_configurations(out / "configurations.png", run.configurations, run.base_points, spec.link_length_m, run.labels)
+
+
+def draw_configurations(
+    path: Path,
+    configurations: Sequence[Sequence[float]],
+    base_points: Sequence[Sequence[float]],
+    link_length_m: float,
+    labels: Sequence[str] = (),
+) -> None:
+    """Small top views of each configuration: the robot's forward axis (+x) up, its right (-y) to the right."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(configurations)
+    cols = min(n, 6)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(2.0 * cols, 2.0 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for i, (theta, base) in enumerate(zip(configurations, base_points)):
+        points = [np.asarray(base, dtype=float)]
+        for t in theta:
+            points.append(points[-1] + link_length_m * direction(t))
+        xs = [-p[1] for p in points]  # robot's right to the right of the drawing
+        ys = [p[0] for p in points]  # forward up
+        ax = axes.ravel()[i]
+        ax.plot(xs, ys, "-", color="tab:blue", linewidth=3)
+        ax.plot(xs[1:-1], ys[1:-1], "o", color="black", markersize=3)
+        ax.plot(xs[0], ys[0], "s", color="tab:red", markersize=4)
+        ax.set_aspect("equal")
+        span = link_length_m * len(theta)
+        ax.set_xlim(xs[0] - span, xs[0] + span)
+        ax.set_ylim(ys[0] - span, ys[0] + span)
+        ax.set_title(labels[i] if i < len(labels) else str(i + 1), fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# -- command line ----------------------------------------------------------------------------------------
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected comma-separated degrees, got {text!r}") from exc
+
+
+def add_worker_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = subparsers.add_parser("worker", help="run the simulated Baxter worker against the KB service",
+                              description="Perceive, ask the KB service for actions and execute them in PyBullet.")
+    p.add_argument("--kb", required=True, help="base URL of the KB service, e.g. http://127.0.0.1:8000")
+    p.add_argument("--object", required=True, dest="object_id", help="object id in the KB service")
+    p.add_argument("--gui", action="store_true", help="show the PyBullet GUI")
+    p.add_argument("--token", default=None, help="bearer token for the service's writes")
+    p.add_argument("--perception", choices=("camera", "fallback"), default="camera")
+    p.add_argument("--scenario", default="none", help="human scenario: none, fig13, fig14 or random:SEED:N")
+    p.add_argument("--out", default="worker-out", help="folder for frames, GIF, configurations.png, summary.json")
+    p.add_argument("--max-steps", type=int, default=30)
+    p.add_argument("--initial", type=_floats, default=None, help="initial link orientations, e.g. 90,90,90,90,90")
+    p.add_argument("--base", type=_floats, default=None, help="base point x,y of the object on the table (m)")
+    p.add_argument("--goal", type=_floats, default=None, help="goal link orientations to PUT before starting")
+    p.add_argument("--sigma", type=float, default=1.0, help="noise (deg) of the fallback perception")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=run_worker_cli)
+    return p
+
+
+def run_worker_cli(args: argparse.Namespace) -> int:
+    spec = None
+    if args.initial is not None or args.base is not None:
+        with KBClient(args.kb, token=args.token) as kb:
+            obj = kb.read_object(args.object_id)
+        links = obj["links"]
+        kwargs: dict[str, Any] = {"n_links": len(links), "link_length_m": float(links[0]["length_m"])}
+        if args.initial is not None:
+            kwargs["initial_orientations_deg"] = args.initial
+        if args.base is not None:
+            kwargs["base_point_xy"] = tuple(args.base[:2])
+        spec = SceneSpec(**kwargs)
+    try:
+        summary = run_worker(args.kb, args.object_id, spec, args.scenario, args.out, args.gui, args.max_steps,
+                             args.token, args.perception, args.goal, args.sigma, args.seed)
+    except (ProtocolError, SimError) as exc:
+        print(f"worker: {exc}")
+        return 1
+    print(json.dumps({"reached_goal": summary.reached_goal, "stop_reason": summary.stop_reason,
+                      "decisions": list(summary.decisions), "outcomes": list(summary.outcomes),
+                      "steps": len(summary.steps), "wall_s": round(summary.wall_s, 2), "out_dir": summary.out_dir}))
+    return 0 if summary.reached_goal else 1
