@@ -155,6 +155,13 @@ class KBClient:
     def read_state(self, state_id: str) -> dict[str, Any]:
         return self._request("GET", f"/states/{state_id}")
 
+    def read_events(self, object_id: str) -> list[dict[str, Any]]:
+        """Every event of the object (decisions with their reasons), oldest first."""
+        return self._request("GET", f"/objects/{object_id}/events")
+
+    def health(self) -> dict[str, Any]:
+        return self._request("GET", "/health")
+
 
 def _detail(response: httpx.Response) -> str:
     try:

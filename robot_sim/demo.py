@@ -1,0 +1,220 @@
+"""`planhrc demo`: the KB service and a Baxter worker run a cooperation scenario to the end.
+
+Unless `--kb URL` names a running service, the demo starts `planhrc serve` as a separate process on a free
+loopback port, on the embedded SQLite store in the output folder, protected by a fresh token. Each episode
+creates an object, sets its goal and runs the worker (PyBullet Baxter, camera perception, simulated human)
+until the goal is reached. The output folder gets, per episode, the camera frames (PNG), an animated GIF and
+a picture of the configuration sequence (like the paper's Figs 10-12), and one `summary.json` with every
+decision and its reason, the re-plans, resumes, actions and the time to goal.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import secrets
+import socket
+import subprocess
+import sys
+import time
+from collections import Counter
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+from robot_sim.scene import SceneSpec, SimError, random_orientations
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DemoScenario:
+    """One cell set-up: the object, where it starts, where it should end, and what the human does."""
+
+    name: str
+    formulation: str
+    orientations: int
+    initial_deg: tuple[float, ...]
+    goal_deg: tuple[float, ...]
+    human: str
+    description: str
+
+
+DEMO_SCENARIOS: dict[str, DemoScenario] = {
+    "paper-3-4": DemoScenario(
+        "paper-3-4", "relative", 4, (90.0, 90.0, 90.0), (90.0, 180.0, 270.0), "none",
+        "the paper's 3-4 example (Figs 10-11): 3 links, 90 degree resolution, no human",
+    ),
+    "fig13": DemoScenario(
+        "fig13", "relative", 4, (90.0,) * 5, (90.0, 90.0, 90.0, 180.0, 90.0), "fig13",
+        "Fig 13: the human turns a link while the robot works on another (the goal comes early), then "
+        "disturbs a link and the robot restores it",
+    ),
+    "fig14": DemoScenario(
+        "fig14", "absolute", 8, (90.0,) * 5, (90.0, 45.0, 90.0, 135.0, 90.0), "fig14",
+        "Fig 14: a robot rotation stops half-way; the human completes it and also turns the last link",
+    ),
+}
+
+
+def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interventions: int = 3) -> DemoScenario:
+    """A random reachable goal (seeded) and `interventions` random human moves at random moments."""
+    rng = np.random.default_rng(seed)
+    spec = SceneSpec(n_links=n_links)
+    goal = random_orientations(rng, spec, step_deg=360 / orientations)
+    formulation = ("relative", "absolute")[seed % 2]
+    return DemoScenario(f"random-{seed}", formulation, orientations, (90.0,) * n_links, goal,
+                        f"random:{seed}:{interventions}", "random goal and random human interventions")
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextmanager
+def kb_service(out_dir: Path, token: str, startup_timeout_s: float = 90.0) -> Iterator[str]:
+    """`planhrc serve` as a child process on a free loopback port; yields its URL, stops it afterwards."""
+    port = free_port()
+    db = out_dir / "planhrc.sqlite3"
+    log_path = out_dir / "kb-service.log"
+    env = dict(os.environ, PLANHRC_TOKEN=token)
+    cmd = [sys.executable, "-m", "planhrc.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
+           "--db", str(db)]
+    with log_path.open("w") as log_file:
+        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, env=env)
+        url = f"http://127.0.0.1:{port}"
+        try:
+            deadline = time.monotonic() + startup_timeout_s
+            with KBClient(url, retry=RetryPolicy(attempts=1)) as probe:
+                while True:
+                    if proc.poll() is not None:
+                        raise SimError(f"the KB service exited with {proc.returncode}; see {log_path}")
+                    try:
+                        probe.health()
+                        break
+                    except ProtocolError:
+                        if time.monotonic() > deadline:
+                            raise SimError(f"the KB service did not answer within {startup_timeout_s} s") from None
+                        time.sleep(0.2)
+            yield url
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir: Path, gui: bool,
+                perception: str, max_steps: int, seed: int) -> dict:
+    from robot_sim.worker import run_worker
+
+    with KBClient(kb_url, token=token) as kb:
+        obj = kb.create_object(scenario.name, len(scenario.initial_deg), scenario.orientations, scenario.formulation)
+        spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg)
+        summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
+                             token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
+                             seed=seed, kb=kb)
+        events = kb.read_events(obj["id"])
+    decisions = [e for e in events if e["kind"] in ("goal_reached", "continue", "resume", "replan", "no_plan")]
+    counts = Counter(e["kind"] for e in decisions)
+    actions = [s.action for s in summary.steps if s.action is not None]
+    return {
+        "scenario": scenario.name,
+        "description": scenario.description,
+        "object_id": obj["id"],
+        "formulation": scenario.formulation,
+        "orientations": scenario.orientations,
+        "initial_deg": list(scenario.initial_deg),
+        "goal_deg": list(scenario.goal_deg),
+        "human": scenario.human,
+        "reached_goal": summary.reached_goal,
+        "stop_reason": summary.stop_reason,
+        "time_to_goal_s": round(summary.wall_s, 3),
+        "replans": counts.get("replan", 0),
+        "resumes": counts.get("resume", 0),
+        "decision_counts": dict(counts),
+        "actions": [{"step": a.get("step"), "last_step": a.get("last_step"), "name": a.get("name"),
+                     "joint_index": a.get("joint_index"), "turned_link_index": a.get("turned_link_index"),
+                     "held_link_index": a.get("held_link_index"), "delta_deg": a.get("delta_deg")}
+                    for a in actions],
+        "outcomes": list(summary.outcomes),
+        "decisions": [{"seq": e["seq"], "kind": e["kind"], "reason": e["reason"]} for e in decisions],
+        "out_dir": str(out_dir),
+    }
+
+
+def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str | None = None,
+             token: str | None = None, episodes: int = 1, perception: str = "camera", max_steps: int = 40,
+             seed: int = 0) -> dict:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if scenario_name == "random":
+        scenarios = [random_scenario(seed + i) for i in range(episodes)]
+    elif scenario_name in DEMO_SCENARIOS:
+        scenarios = [DEMO_SCENARIOS[scenario_name]] * episodes
+    else:
+        raise SimError(f"scenario: unknown {scenario_name!r}; choose from {sorted(DEMO_SCENARIOS)} or random")
+    started = time.perf_counter()
+    results = []
+
+    def run_all(url: str, tok: str | None) -> None:
+        for i, sc in enumerate(scenarios):
+            folder = out_dir if len(scenarios) == 1 else out_dir / f"episode-{i + 1:03d}"
+            result = run_episode(url, tok, sc, folder, gui, perception, max_steps, seed + i)
+            results.append(result)
+            print(f"[demo] {sc.name}: {'goal reached' if result['reached_goal'] else result['stop_reason']} "
+                  f"in {result['time_to_goal_s']:.1f} s, {len(result['actions'])} actions, "
+                  f"{result['replans']} re-plans, {result['resumes']} resumes", flush=True)
+
+    if kb_url is None:
+        token = token or secrets.token_urlsafe(16)
+        with kb_service(out_dir, token) as url:
+            run_all(url, token)
+    else:
+        run_all(kb_url, token or os.environ.get("PLANHRC_TOKEN"))
+    summary = {
+        "scenario": scenario_name,
+        "episodes": len(results),
+        "reached_goal": sum(r["reached_goal"] for r in results),
+        "perception": perception,
+        "wall_s": round(time.perf_counter() - started, 3),
+        "results": results,
+    }
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def add_demo_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("demo", help="KB service + Baxter worker: one cooperation scenario to the end",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenario", default="fig13", choices=sorted(DEMO_SCENARIOS) + ["random"])
+    p.add_argument("--gui", action="store_true", help="show the PyBullet window")
+    p.add_argument("--out", default="demo-out", help="output folder")
+    p.add_argument("--kb", default=None, metavar="URL", help="use a running KB service instead of starting one")
+    p.add_argument("--token", default=None, help="bearer token of the service given by --kb (or PLANHRC_TOKEN)")
+    p.add_argument("--episodes", type=int, default=1, help="episodes to run (random: a new goal and human each)")
+    p.add_argument("--perception", choices=["camera", "fallback"], default="camera",
+                   help="camera: ArUco markers in rendered images; fallback: simulator poses + Gaussian noise")
+    p.add_argument("--max-steps", type=int, default=40)
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=run_demo_cli)
+
+
+def run_demo_cli(args: argparse.Namespace) -> int:
+    try:
+        summary = run_demo(args.scenario, Path(args.out), args.gui, args.kb, args.token, args.episodes,
+                           args.perception, args.max_steps, args.seed)
+    except (SimError, ProtocolError) as exc:
+        print(f"planhrc demo: {exc}", file=sys.stderr)
+        return 1
+    print(f"[demo] {summary['reached_goal']}/{summary['episodes']} episodes reached the goal; "
+          f"summary in {Path(args.out) / 'summary.json'}")
+    return 0 if summary["reached_goal"] == summary["episodes"] else 1
