@@ -261,6 +261,9 @@ def build(path: Path = OUT) -> Path:
         class GoalState(State):
             comment = ["A goal state (may be partial)."]
 
+        class InitialState(State):
+            comment = ["An initial state given by the user rather than perceived (complete)."]
+
         class observes(ObjectProperty):
             comment = ["The perceived absolute link orientations behind a perceived state."]
             domain = [PerceivedState]
@@ -269,6 +272,15 @@ def build(path: Path = OUT) -> Path:
         class stateOf(ObjectProperty, FunctionalProperty):
             domain = [State]
             range = [ArticulatedObject]
+
+        class aboutObject(ObjectProperty, FunctionalProperty):
+            comment = ["The articulated object a problem, plan or action is about."]
+            range = [ArticulatedObject]
+
+        class observedDegrees(DataProperty, FunctionalProperty):
+            comment = ["The raw perceived angle (degrees) behind an observed LinkOrientation, before snapping."]
+            domain = [LinkOrientation]
+            range = [float]
 
         class createdAt(DataProperty, FunctionalProperty):
             range = [float]
@@ -465,9 +477,10 @@ def _build_domain_models(onto, ns: dict) -> None:
         dm.pddlName = [f"planhrc-{form}"]
         dm.pddlRequirements = [requirements]
         dm.pddlTypes = ["link joint orientation"]
-        for action, forward in (("rotateclockwise", True), ("rotateanticlockwise", False)):
+        for order, (action, forward) in enumerate((("rotateclockwise", True), ("rotateanticlockwise", False)), 1):
             p = f"{form}_{action}"
             s = ActionSchema(p)
+            s.position = order
             s.describesActionName = action
             s.schemaFormulation = form
             l1, l2 = var(p, "l1", "link", 1), var(p, "l2", "link", 2)

@@ -1,0 +1,1099 @@
+"""The persistent knowledge base: the planHRC TBox plus an ABox of objects, states, problems and plans.
+
+The ontology lives in an owlready2 `World` backed by SQLite. The TBox file is loaded into the world once; every
+ABox individual goes into the ontology `http://planhrc.org/abox#` with a readable IRI whose fragment is the PDDL
+name (`obj42_l3`, `obj42_j3`, `deg_90`) or a name built from it (`obj42_state_7`, `obj42_state_7_ho_j3`,
+`obj42_connected_j3_l2`, `obj42_plan_2_a5`).
+
+Writes go straight into owlready2's quad tables (`objs`, `datas`) in one SQLite transaction, after the whole
+input has been validated; a write either commits completely or not at all. Nothing here loads ABox individuals
+as owlready2 Python objects, so owlready2's entity cache never goes stale. Records read back are cached (they
+are immutable). What is not ontology knowledge (events, the execution cursor, idempotent responses, id
+counters) is kept in small side tables of the same SQLite database and committed in the same transaction.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import logging
+import math
+import re
+import sqlite3
+import threading
+import time
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+from owlready2 import World
+from owlready2.base import owl_named_individual, owl_ontology, rdf_type
+
+from planhrc.model import (
+    AFFECTED,
+    CONNECTED,
+    HAS_ORIENTATION,
+    ORIENTATION_ORD,
+    ArticulatedObject,
+    Atom,
+    Formulation,
+    ModelError,
+    format_atom,
+    orientation_name,
+    snap_angle,
+)
+
+from .errors import ConflictError, KBError, NotFoundError, ValidationError
+from .records import (
+    STATE_KINDS,
+    ActionSpec,
+    CondEffect,
+    Execution,
+    StoredAction,
+    StoredEvent,
+    StoredPlan,
+    StoredProblem,
+    StoredState,
+)
+
+log = logging.getLogger(__name__)
+
+TBOX_IRI = "http://planhrc.org/ontology/planhrc.owl#"
+ABOX_IRI = "http://planhrc.org/abox#"
+
+STATE_CLASSES = {
+    "perceived": "PerceivedState",
+    "expected": "ExpectedState",
+    "goal": "GoalState",
+    "initial": "InitialState",
+}
+COMPLETE_KINDS = frozenset({"perceived", "expected", "initial"})
+ACTION_CLASSES = {"rotateclockwise": "RotateClockwise", "rotateanticlockwise": "RotateAntiClockwise"}
+EXECUTION_STATUSES = ("idle", "ready", "dispatched", "goal_reached", "no_plan")
+
+# PDDL predicate -> (OWL class, PDDL argument types, OWL property of each PDDL argument, IRI tag).
+# The property order matches the TBox annotation pddlArgumentOrder (a test checks it).
+PREDICATES: dict[str, tuple[str, tuple[str, ...], tuple[str, ...], str]] = {
+    CONNECTED: ("Connected", ("joint", "link"), ("arg1", "arg2"), "connected"),
+    HAS_ORIENTATION: ("HasOrientation", ("orientation", "joint"), ("arg2", "arg1"), "ho"),
+    ORIENTATION_ORD: ("OrientationOrd", ("orientation", "orientation"), ("arg1", "arg2"), "ord"),
+    AFFECTED: ("Affected", ("joint", "link", "joint"), ("arg1", "arg2", "arg3"), "affected"),
+}
+PREDICATE_OF_CLASS = {v[0]: k for k, v in PREDICATES.items()}
+
+_TBOX_TERMS = (
+    "ArticulatedObject Link Joint Orientation Connected HasOrientation OrientationOrd Affected LinkOrientation "
+    "CondPredicate RotateClockwise RotateAntiClockwise State PerceivedState ExpectedState GoalState InitialState "
+    "Problem Plan degrees lengthM chainIndex formulation objectName isVirtual hasLink hasJoint allowedOrientation "
+    "nextLink arg1 arg2 arg3 forall when effNeg_a effPos_a params pre effNeg effPos condEff stepIndex paramList "
+    "nextAction madeof observes stateOf aboutObject observedDegrees createdAt init goal solves expectedState "
+    "plannerName position"
+).split()
+
+_SIDE_TABLES = (
+    "CREATE TABLE IF NOT EXISTS planhrc_meta (key TEXT PRIMARY KEY, value TEXT)",
+    "CREATE TABLE IF NOT EXISTS planhrc_counter (name TEXT PRIMARY KEY, value INTEGER)",
+    "CREATE TABLE IF NOT EXISTS planhrc_event (object_id TEXT, seq INTEGER, kind TEXT, reason TEXT, data TEXT,"
+    " created_at REAL, PRIMARY KEY (object_id, seq))",
+    "CREATE TABLE IF NOT EXISTS planhrc_execution (object_id TEXT PRIMARY KEY, plan_id TEXT, next_step INTEGER,"
+    " status TEXT, dispatched_action_id TEXT)",
+    "CREATE TABLE IF NOT EXISTS planhrc_response (object_id TEXT, key TEXT, response TEXT,"
+    " PRIMARY KEY (object_id, key))",
+)
+
+_ID_SUFFIX = re.compile(r"_(\d+)$")
+
+
+def _short(obj: ArticulatedObject, name: str) -> str:
+    """Short form of an argument inside an IRI fragment: `obj1_j3` -> `j3`, `deg_90` -> `90`."""
+    if name.startswith("deg_"):
+        return name[4:]
+    return name[len(obj.ident) + 1:]
+
+
+def atom_fragment(obj: ArticulatedObject, prefix: str, atom: Atom) -> str:
+    """IRI fragment of a reified predicate: prefix + tag + arguments in OWL argument order."""
+    _, _, props, tag = PREDICATES[atom[0]]
+    by_prop = sorted(zip(props, atom[1:]))
+    return "_".join([prefix, tag] + [_short(obj, name) for _, name in by_prop])
+
+
+class _ObjectInfo:
+    """An object and the lookups validation needs (names -> PDDL type, static facts)."""
+
+    def __init__(self, obj: ArticulatedObject):
+        self.obj = obj
+        self.types: dict[str, str] = {}
+        for name in obj.all_links:
+            self.types[name] = "link"
+        for name in obj.joints:
+            self.types[name] = "joint"
+        for name in obj.orientation_names:
+            self.types[name] = "orientation"
+        self.static = obj.static_atoms()
+        self.static_fragment = {atom: atom_fragment(obj, obj.ident, atom) for atom in self.static}
+
+
+class _Batch:
+    """Triples collected during a write, flushed in one go."""
+
+    def __init__(self, kb: "KnowledgeBase"):
+        self.kb = kb
+        self.new_iris: list[str] = []
+        self.objs: list[tuple[str | int, int, str | int]] = []
+        self.datas: list[tuple[str | int, int, Any]] = []
+
+    def individual(self, name: str, *classes: str) -> str:
+        self.new_iris.append(name)
+        self.objs.append((name, rdf_type, owl_named_individual))
+        for cls in classes:
+            self.objs.append((name, rdf_type, self.kb._t[cls]))
+        return name
+
+    def rel(self, s: str, prop: str, o: str | int) -> None:
+        self.objs.append((s, self.kb._t[prop], o))
+
+    def data(self, s: str, prop: str, value: Any) -> None:
+        self.datas.append((s, self.kb._t[prop], value))
+
+
+class KnowledgeBase:
+    """TBox + ABox in one owlready2 World on SQLite; every method is thread safe (one RLock)."""
+
+    def __init__(self, path: str | None, tbox_path: Path | str):
+        self._lock = threading.RLock()
+        self._path = path
+        self._tbox_path = Path(tbox_path)
+        if not self._tbox_path.is_file():
+            raise KBError(f"tbox_path: no such file {self._tbox_path}")
+        self._world = World(filename=str(path)) if path else World()
+        self._db: sqlite3.Connection = self._world.graph.db
+        self._closed = False
+        try:
+            if path:
+                # WAL + synchronous=NORMAL: a commit does not wait for fsync (durable across process crashes,
+                # the last commits may be lost on power loss); the plain journal costs ~13 ms per write.
+                self._db.commit()
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute("PRAGMA synchronous=NORMAL")
+            for sql in _SIDE_TABLES:
+                self._db.execute(sql)
+            self._load_tbox()
+            self._abox = self._world.get_ontology(ABOX_IRI)
+            self._c = self._abox.graph.c
+            abox_sid = self._storid(ABOX_IRI.rstrip("#"))
+            if not self._world.graph.execute(
+                "SELECT 1 FROM objs WHERE s=? AND p=? AND o=? LIMIT 1", (abox_sid, rdf_type, owl_ontology)
+            ).fetchone():
+                self._db.execute("INSERT INTO objs VALUES (?,?,?,?)", (self._c, abox_sid, rdf_type, owl_ontology))
+            self._t = {term: self._storid(TBOX_IRI + term) for term in _TBOX_TERMS}
+            self._world.save()
+        except Exception:
+            self._world.close()
+            raise
+        self._iri_sid: dict[str, int] = {}
+        self._sid_name: dict[int, str] = {}
+        self._objects: dict[str, _ObjectInfo] = {}
+        self._states: dict[str, StoredState] = {}
+        self._problems: dict[str, StoredProblem] = {}
+        self._plans: dict[str, StoredPlan] = {}
+        self._actions: dict[str, StoredAction] = {}
+
+    # -- life cycle -------------------------------------------------------------------------------------
+    def _load_tbox(self) -> None:
+        data = self._tbox_path.read_bytes()
+        digest = hashlib.sha256(data).hexdigest()
+        row = self._db.execute("SELECT value FROM planhrc_meta WHERE key='tbox_sha256'").fetchone()
+        onto = self._world.get_ontology(TBOX_IRI)
+        if row is None or row[0] != digest:
+            if row is not None:
+                log.warning("TBox %s changed since this database was written: reloading it", self._tbox_path)
+            onto.load(fileobj=io.BytesIO(data), reload=row is not None)
+            self._db.execute("INSERT OR REPLACE INTO planhrc_meta VALUES ('tbox_sha256', ?)", (digest,))
+
+    @property
+    def world(self) -> World:
+        """The owlready2 world (read it under `lock`; reasoners work on copies)."""
+        return self._world
+
+    @property
+    def lock(self) -> threading.RLock:
+        return self._lock
+
+    @property
+    def tbox_path(self) -> Path:
+        return self._tbox_path
+
+    def close(self) -> None:
+        with self._lock:
+            if not self._closed:
+                self._closed = True
+                self._world.save()
+                self._world.close()
+
+    def __enter__(self) -> "KnowledgeBase":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- low level --------------------------------------------------------------------------------------
+    def _storid(self, iri: str, create: bool = True) -> int | None:
+        return self._world.graph._abbreviate(iri, create)
+
+    def _sid(self, name: str) -> int | None:
+        """Storid of an existing ABox individual, or None."""
+        sid = self._iri_sid.get(name)
+        if sid is None:
+            sid = self._storid(ABOX_IRI + name, False)
+            if sid is not None:
+                self._iri_sid[name] = sid
+                self._sid_name[sid] = name
+        return sid
+
+    def _names(self, sids: Iterable[int]) -> None:
+        """Fill the storid -> name cache for these storids in one query."""
+        missing = [s for s in set(sids) if s not in self._sid_name]
+        for i in range(0, len(missing), 500):
+            chunk = missing[i:i + 500]
+            q = "SELECT storid, iri FROM resources WHERE storid IN (%s)" % ",".join("?" * len(chunk))
+            for sid, iri in self._db.execute(q, chunk):
+                name = iri[len(ABOX_IRI):] if iri.startswith(ABOX_IRI) else iri
+                self._sid_name[sid] = name
+                self._iri_sid.setdefault(name, sid)
+
+    def _is_a(self, sid: int, cls: str) -> bool:
+        return self._db.execute(
+            "SELECT 1 FROM objs WHERE s=? AND p=? AND o=? LIMIT 1", (sid, rdf_type, self._t[cls])
+        ).fetchone() is not None
+
+    def _types(self, sid: int) -> set[int]:
+        return {o for (o,) in self._db.execute("SELECT o FROM objs WHERE s=? AND p=?", (sid, rdf_type))}
+
+    def _obj1(self, sid: int, prop: str) -> int | None:
+        row = self._db.execute("SELECT o FROM objs WHERE s=? AND p=? LIMIT 1", (sid, self._t[prop])).fetchone()
+        return row[0] if row else None
+
+    def _objn(self, sid: int, prop: str) -> list[int]:
+        return [o for (o,) in self._db.execute("SELECT o FROM objs WHERE s=? AND p=?", (sid, self._t[prop]))]
+
+    def _data1(self, sid: int, prop: str) -> Any:
+        row = self._db.execute("SELECT o, d FROM datas WHERE s=? AND p=? LIMIT 1", (sid, self._t[prop])).fetchone()
+        if row is None:
+            return None
+        return self._world._to_python(row[0], row[1])
+
+    def _next_counter(self, name: str) -> int:
+        row = self._db.execute("SELECT value FROM planhrc_counter WHERE name=?", (name,)).fetchone()
+        value = (row[0] if row else 0) + 1
+        self._db.execute("INSERT OR REPLACE INTO planhrc_counter VALUES (?, ?)", (name, value))
+        return value
+
+    def _flush(self, batch: _Batch) -> None:
+        """Allocate storids for the new individuals and insert every triple (inside the open transaction)."""
+        graph = self._world.graph
+        names = batch.new_iris
+        if names:
+            n = len(names)
+            graph.execute("UPDATE store SET current_resource=current_resource+?", (n,))
+            last = graph.execute("SELECT current_resource FROM store").fetchone()[0]
+            first = last - n + 1
+            rows = [(first + i, ABOX_IRI + name) for i, name in enumerate(names)]
+            self._db.executemany("INSERT INTO resources VALUES (?,?)", rows)
+            for sid, iri in rows:
+                name = iri[len(ABOX_IRI):]
+                self._iri_sid[name] = sid
+                self._sid_name[sid] = name
+
+        def resolve(x: str | int) -> int:
+            if isinstance(x, int):
+                return x
+            sid = self._sid(x)
+            if sid is None:
+                raise KBError(f"internal: individual {x!r} was neither stored nor created")
+            return sid
+
+        c = self._c
+        self._db.executemany(
+            "INSERT INTO objs VALUES (?,?,?,?)", [(c, resolve(s), p, resolve(o)) for s, p, o in batch.objs]
+        )
+        rows = []
+        for s, p, value in batch.datas:
+            o, d = self._world._to_rdf(value)
+            rows.append((c, resolve(s), p, o, d))
+        self._db.executemany("INSERT INTO datas VALUES (?,?,?,?,?)", rows)
+
+    def _commit(self) -> None:
+        self._world.save()
+
+    def _write(self, fill) -> Any:
+        """Run `fill()` (which adds triples / side-table rows) in one transaction; roll back on any error."""
+        try:
+            result = fill()
+            self._commit()
+            return result
+        except BaseException:
+            self._db.rollback()
+            self._forget_uncommitted()
+            raise
+
+    def _forget_uncommitted(self) -> None:
+        # Storids handed out in a rolled-back transaction are invalid: drop the name caches.
+        self._iri_sid.clear()
+        self._sid_name.clear()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise KBError("knowledge base: closed")
+
+    # -- objects ----------------------------------------------------------------------------------------
+    def new_object_id(self) -> str:
+        """A fresh object id `objN`; N is never handed out twice, even across restarts."""
+        with self._lock:
+            self._check_open()
+
+            def fill() -> str:
+                while True:
+                    ident = f"obj{self._next_counter('object')}"
+                    if self._sid(ident) is None:
+                        return ident
+
+            return self._write(fill)
+
+    def create_object(self, obj: ArticulatedObject) -> None:
+        with self._lock:
+            self._check_open()
+            if not isinstance(obj, ArticulatedObject):
+                raise ValidationError(f"object: expected an ArticulatedObject, got {type(obj).__name__}")
+            clashes = [n for n in (obj.ident,) + obj.all_links + obj.joints if self._sid(n) is not None]
+            if clashes:
+                raise ConflictError(f"object.ident: {obj.ident!r} already exists (IRI {ABOX_IRI}{clashes[0]})")
+            info = _ObjectInfo(obj)
+
+            def fill() -> None:
+                b = _Batch(self)
+                o = b.individual(obj.ident, "ArticulatedObject")
+                b.data(o, "formulation", obj.formulation.value)
+                b.data(o, "objectName", obj.name)
+                b.data(o, "createdAt", time.time())
+                previous = None
+                for k, link in enumerate(obj.all_links):
+                    index = int(link.rsplit("_l", 1)[1])
+                    b.individual(link, "Link")
+                    b.data(link, "chainIndex", index)
+                    if index == 0:
+                        b.data(link, "isVirtual", True)
+                    else:
+                        b.data(link, "lengthM", float(obj.link_lengths_m[index - 1]))
+                        b.data(link, "isVirtual", False)
+                    b.rel(o, "hasLink", link)
+                    if previous is not None:
+                        b.rel(previous, "nextLink", link)
+                    previous = link
+                for k in obj.joint_indices:
+                    joint = obj.joint(k)
+                    b.individual(joint, "Joint")
+                    b.data(joint, "chainIndex", k)
+                    b.rel(o, "hasJoint", joint)
+                for deg, name in zip(obj.orientation_degrees, obj.orientation_names):
+                    sid = self._sid(name)
+                    if sid is None or not self._is_a(sid, "Orientation"):
+                        b.individual(name, "Orientation")
+                        b.data(name, "degrees", deg)
+                    b.rel(o, "allowedOrientation", name)
+                for atom in sorted(info.static):
+                    self._add_predicate(b, info, info.static_fragment[atom], atom)
+                self._flush(b)
+
+            self._write(fill)
+            self._objects[obj.ident] = info
+
+    def _add_predicate(self, b: _Batch, info: _ObjectInfo, name: str, atom: Atom) -> str:
+        cls, _, props, _ = PREDICATES[atom[0]]
+        b.individual(name, cls)
+        for prop, arg in zip(props, atom[1:]):
+            b.rel(name, prop, arg)
+        return name
+
+    def _info(self, object_id: str, field: str | None = None) -> _ObjectInfo:
+        """The object's info; unknown -> ValidationError naming `field` (writes) or NotFoundError (reads)."""
+        info = self._objects.get(object_id) if isinstance(object_id, str) else None
+        if info is None and isinstance(object_id, str):
+            obj = self._load_object(object_id)
+            if obj is not None:
+                info = self._objects[object_id] = _ObjectInfo(obj)
+        if info is None:
+            if field is None:
+                raise NotFoundError(f"object_id: no object {object_id!r}")
+            raise ValidationError(f"{field}: no object {object_id!r}")
+        return info
+
+    def _load_object(self, ident: str) -> ArticulatedObject | None:
+        sid = self._sid(ident)
+        if sid is None or not self._is_a(sid, "ArticulatedObject"):
+            return None
+        links = self._objn(sid, "hasLink")
+        lengths: dict[int, float] = {}
+        for link in links:
+            if self._data1(link, "isVirtual"):
+                continue
+            lengths[int(self._data1(link, "chainIndex"))] = float(self._data1(link, "lengthM"))
+        n_orient = len(self._objn(sid, "allowedOrientation"))
+        return ArticulatedObject(
+            ident=ident,
+            formulation=Formulation(self._data1(sid, "formulation")),
+            link_lengths_m=tuple(lengths[k] for k in sorted(lengths)),
+            orientations=n_orient,
+            name=self._data1(sid, "objectName") or "",
+        )
+
+    def get_object(self, object_id: str) -> ArticulatedObject:
+        with self._lock:
+            self._check_open()
+            return self._info(object_id).obj
+
+    def list_objects(self) -> tuple[ArticulatedObject, ...]:
+        with self._lock:
+            self._check_open()
+            sids = [s for (s,) in self._db.execute(
+                "SELECT s FROM objs WHERE c=? AND p=? AND o=?", (self._c, rdf_type, self._t["ArticulatedObject"])
+            )]
+            self._names(sids)
+            idents = sorted((self._sid_name[s] for s in sids), key=_natural_key)
+            return tuple(self._info(i).obj for i in idents)
+
+    # -- validation helpers -----------------------------------------------------------------------------
+    def _check_atom(self, info: _ObjectInfo, atom: Any, field: str) -> Atom:
+        if not isinstance(atom, tuple) or not atom or not all(isinstance(x, str) for x in atom):
+            raise ValidationError(f"{field}: an atom is a tuple of names, got {atom!r}")
+        spec = PREDICATES.get(atom[0])
+        if spec is None:
+            raise ValidationError(f"{field}: atom {format_atom(atom)}: unknown predicate {atom[0]!r}")
+        _, types, _, _ = spec
+        if len(atom) - 1 != len(types):
+            raise ValidationError(
+                f"{field}: atom {format_atom(atom)}: {atom[0]} takes {len(types)} arguments, got {len(atom) - 1}"
+            )
+        for i, (arg, typ) in enumerate(zip(atom[1:], types), start=1):
+            got = info.types.get(arg)
+            if got is None:
+                raise ValidationError(
+                    f"{field}: atom {format_atom(atom)}: argument {i} {arg!r} is no {typ} of object {info.obj.ident!r}"
+                )
+            if got != typ:
+                raise ValidationError(
+                    f"{field}: atom {format_atom(atom)}: argument {i} {arg!r} is a {got}, expected a {typ}"
+                )
+        return atom
+
+    def _check_state_atoms(self, info: _ObjectInfo, kind: str, atoms: Any, field: str) -> dict[str, Atom]:
+        """Validate a state's atoms; returns joint -> its hasorientation atom."""
+        if not isinstance(atoms, (set, frozenset)):
+            raise ValidationError(f"{field}: expected a frozenset of atoms, got {type(atoms).__name__}")
+        if not atoms:
+            raise ValidationError(f"{field}: a state needs at least one atom")
+        by_joint: dict[str, Atom] = {}
+        static = info.static
+        # Static facts of the object are valid by construction; only the rest needs checking. Sorting the rest
+        # makes the first error reported the same on every run.
+        rest = [atom for atom in atoms if atom not in static]
+        try:
+            rest.sort()
+        except TypeError:
+            rest.sort(key=repr)
+        for atom in rest:
+            self._check_atom(info, atom, field)
+            if atom[0] == HAS_ORIENTATION:
+                joint = atom[2]
+                if joint in by_joint:
+                    raise ValidationError(
+                        f"{field}: two orientations for joint {joint!r} in one state: "
+                        f"{format_atom(by_joint[joint])} and {format_atom(atom)}"
+                    )
+                by_joint[joint] = atom
+            elif atom not in info.static:
+                raise ValidationError(f"{field}: atom {format_atom(atom)} is not a fact of object {info.obj.ident!r}")
+        if kind in COMPLETE_KINDS:
+            missing = [j for j in info.obj.joints if j not in by_joint]
+            if missing:
+                raise ValidationError(
+                    f"{field}: a {kind} state is complete but has no orientation for joint(s) {', '.join(missing)}"
+                )
+        return by_joint
+
+    def _check_observation(
+        self, info: _ObjectInfo, kind: str, by_joint: dict[str, Atom], values: Any
+    ) -> tuple[tuple[float, ...], tuple[int, ...]] | None:
+        if values is None:
+            return None
+        obj = info.obj
+        field = "link_orientations_deg"
+        if kind != "perceived":
+            raise ValidationError(f"{field}: only perceived states carry observed link orientations, not {kind!r}")
+        if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
+            raise ValidationError(f"{field}: expected a sequence of numbers")
+        if len(values) != obj.n_links:
+            raise ValidationError(f"{field}: expected {obj.n_links} values (one per link), got {len(values)}")
+        raw: list[float] = []
+        for i, v in enumerate(values):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValidationError(f"{field}[{i}]: must be a finite number, got {v!r}")
+            raw.append(float(v))
+        snapped = tuple(snap_angle(v, obj.orientations) for v in raw)
+        try:
+            expected = obj.joint_values_from_links(snapped)
+        except ModelError as exc:
+            raise ValidationError(str(exc)) from None
+        for k, deg in zip(obj.joint_indices, expected):
+            atom = by_joint.get(obj.joint(k))
+            if atom is not None and atom[1] != orientation_name(deg):
+                raise ValidationError(
+                    f"{field}: the observation gives {orientation_name(deg)} for joint {obj.joint(k)}, "
+                    f"but atoms say {format_atom(atom)}"
+                )
+        return tuple(raw), snapped
+
+    # -- states -----------------------------------------------------------------------------------------
+    def _add_state_triples(
+        self, b: _Batch, info: _ObjectInfo, kind: str, atoms: frozenset[Atom],
+        observation: tuple[tuple[float, ...], tuple[int, ...]] | None, step: int | None, created_at: float,
+    ) -> str:
+        obj = info.obj
+        state_id = f"{obj.ident}_state_{self._next_counter(obj.ident + ':state')}"
+        s = b.individual(state_id, STATE_CLASSES[kind])
+        b.rel(s, "stateOf", obj.ident)
+        b.data(s, "createdAt", created_at)
+        if step is not None:
+            b.data(s, "stepIndex", step)
+        for atom in sorted(atoms):
+            if atom[0] == HAS_ORIENTATION:
+                pred = self._add_predicate(b, info, f"{state_id}_ho_{_short(obj, atom[2])}", atom)
+            else:
+                pred = info.static_fragment[atom]
+            b.rel(s, "madeof", pred)
+        if observation is not None:
+            raw, snapped = observation
+            for k, (value, deg) in enumerate(zip(raw, snapped), start=1):
+                p = b.individual(f"{state_id}_lo_l{k}", "LinkOrientation")
+                b.rel(p, "arg1", obj.link(k))
+                b.rel(p, "arg2", orientation_name(deg))
+                b.data(p, "observedDegrees", value)
+                b.rel(s, "observes", p)
+        return state_id
+
+    def add_state(
+        self,
+        object_id: str,
+        kind: str,
+        atoms: frozenset[Atom],
+        link_orientations_deg: Sequence[float] | None = None,
+    ) -> StoredState:
+        with self._lock:
+            self._check_open()
+            info = self._info(object_id, "object_id")
+            if kind not in STATE_KINDS:
+                raise ValidationError(f"kind: must be one of {', '.join(STATE_KINDS)}, got {kind!r}")
+            by_joint = self._check_state_atoms(info, kind, atoms, "atoms")
+            observation = self._check_observation(info, kind, by_joint, link_orientations_deg)
+            atoms = frozenset(atoms)
+            created = time.time()
+
+            def fill() -> str:
+                b = _Batch(self)
+                state_id = self._add_state_triples(b, info, kind, atoms, observation, None, created)
+                self._flush(b)
+                return state_id
+
+            state_id = self._write(fill)
+            record = StoredState(
+                id=state_id, object_id=info.obj.ident, kind=kind, atoms=atoms, created_at=created,
+                link_orientations_deg=observation[0] if observation else None,
+            )
+            self._states[state_id] = record
+            return record
+
+    def _predicate_atoms(self, pred_sids: Sequence[int]) -> dict[int, Atom]:
+        """Atoms of reified predicate individuals, read with a few queries."""
+        out: dict[int, Atom] = {}
+        if not pred_sids:
+            return out
+        class_of = {self._t[cls]: pddl for cls, pddl in PREDICATE_OF_CLASS.items()}
+        props = {self._t["arg1"]: "arg1", self._t["arg2"]: "arg2", self._t["arg3"]: "arg3"}
+        kinds: dict[int, str] = {}
+        args: dict[int, dict[str, int]] = {}
+        sids = list(dict.fromkeys(pred_sids))
+        for i in range(0, len(sids), 400):
+            chunk = sids[i:i + 400]
+            marks = ",".join("?" * len(chunk))
+            q = f"SELECT s, p, o FROM objs WHERE s IN ({marks}) AND p IN (?,?,?,?)"
+            for s, p, o in self._db.execute(q, chunk + [rdf_type] + list(props)):
+                if p == rdf_type:
+                    if o in class_of:
+                        kinds[s] = class_of[o]
+                else:
+                    args.setdefault(s, {})[props[p]] = o
+        self._names(o for d in args.values() for o in d.values())
+        for s in sids:
+            pddl = kinds.get(s)
+            if pddl is None:
+                raise KBError(f"internal: predicate individual {s} has no predicate class")
+            _, _, order, _ = PREDICATES[pddl]
+            out[s] = (pddl,) + tuple(self._sid_name[args[s][prop]] for prop in order)
+        return out
+
+    def _load_state(self, state_id: str) -> StoredState | None:
+        sid = self._sid(state_id)
+        if sid is None:
+            return None
+        types = self._types(sid)
+        kind = next((k for k, cls in STATE_CLASSES.items() if self._t[cls] in types), None)
+        if kind is None:
+            return None
+        obj_sid = self._obj1(sid, "stateOf")
+        self._names([obj_sid])
+        atoms = frozenset(self._predicate_atoms(self._objn(sid, "madeof")).values())
+        observed = None
+        lo = self._objn(sid, "observes")
+        if lo:
+            values: dict[int, float] = {}
+            for p in lo:
+                link = self._obj1(p, "arg1")
+                values[int(self._data1(link, "chainIndex"))] = float(self._data1(p, "observedDegrees"))
+            observed = tuple(values[k] for k in sorted(values))
+        return StoredState(
+            id=state_id, object_id=self._sid_name[obj_sid], kind=kind, atoms=atoms,
+            created_at=float(self._data1(sid, "createdAt")), link_orientations_deg=observed,
+        )
+
+    def get_state(self, state_id: str) -> StoredState:
+        with self._lock:
+            self._check_open()
+            record = self._states.get(state_id)
+            if record is None:
+                record = self._load_state(state_id) if isinstance(state_id, str) else None
+                if record is None:
+                    raise NotFoundError(f"state_id: no state {state_id!r}")
+                self._states[state_id] = record
+            return record
+
+    # -- problems ---------------------------------------------------------------------------------------
+    def add_problem(self, object_id: str, init_state_id: str, goal_state_id: str) -> StoredProblem:
+        with self._lock:
+            self._check_open()
+            info = self._info(object_id, "object_id")
+            states = {}
+            for field, sid in (("init_state_id", init_state_id), ("goal_state_id", goal_state_id)):
+                try:
+                    st = self.get_state(sid)
+                except NotFoundError:
+                    raise ValidationError(f"{field}: no state {sid!r}") from None
+                if st.object_id != info.obj.ident:
+                    raise ValidationError(f"{field}: state {sid!r} belongs to object {st.object_id!r}")
+                states[field] = st
+            if states["init_state_id"].kind not in COMPLETE_KINDS:
+                raise ValidationError(
+                    f"init_state_id: the initial state must be complete (perceived, initial or expected), "
+                    f"{init_state_id!r} is a {states['init_state_id'].kind} state"
+                )
+            created = time.time()
+
+            def fill() -> str:
+                b = _Batch(self)
+                pid = f"{info.obj.ident}_problem_{self._next_counter(info.obj.ident + ':problem')}"
+                b.individual(pid, "Problem")
+                b.rel(pid, "aboutObject", info.obj.ident)
+                b.rel(pid, "init", init_state_id)
+                b.rel(pid, "goal", goal_state_id)
+                b.data(pid, "createdAt", created)
+                self._flush(b)
+                return pid
+
+            pid = self._write(fill)
+            record = StoredProblem(pid, info.obj.ident, init_state_id, goal_state_id, created)
+            self._problems[pid] = record
+            return record
+
+    def _load_problem(self, problem_id: str) -> StoredProblem | None:
+        sid = self._sid(problem_id)
+        if sid is None or not self._is_a(sid, "Problem"):
+            return None
+        refs = [self._obj1(sid, p) for p in ("aboutObject", "init", "goal")]
+        self._names(refs)
+        o, i, g = (self._sid_name[r] for r in refs)
+        return StoredProblem(problem_id, o, i, g, float(self._data1(sid, "createdAt")))
+
+    def get_problem(self, problem_id: str) -> StoredProblem:
+        with self._lock:
+            self._check_open()
+            record = self._problems.get(problem_id)
+            if record is None:
+                record = self._load_problem(problem_id) if isinstance(problem_id, str) else None
+                if record is None:
+                    raise NotFoundError(f"problem_id: no problem {problem_id!r}")
+                self._problems[problem_id] = record
+            return record
+
+    def _latest(self, object_id: str, cls: str) -> str | None:
+        info = self._info(object_id)
+        obj_sid = self._sid(info.obj.ident)
+        q = ("SELECT a.s FROM objs a JOIN objs t ON t.s = a.s WHERE a.p=? AND a.o=? AND t.p=? AND t.o=?")
+        sids = [s for (s,) in self._db.execute(q, (self._t["aboutObject"], obj_sid, rdf_type, self._t[cls]))]
+        if not sids:
+            return None
+        self._names(sids)
+        return max((self._sid_name[s] for s in sids), key=_natural_key)
+
+    def latest_problem(self, object_id: str) -> StoredProblem | None:
+        with self._lock:
+            self._check_open()
+            pid = self._latest(object_id, "Problem")
+            return self.get_problem(pid) if pid else None
+
+    # -- plans ------------------------------------------------------------------------------------------
+    def _check_action(self, info: _ObjectInfo, i: int, spec: Any) -> None:
+        field = f"actions[{i}]"
+        if not isinstance(spec, ActionSpec):
+            raise ValidationError(f"{field}: expected an ActionSpec, got {type(spec).__name__}")
+        if spec.name not in ACTION_CLASSES:
+            raise ValidationError(f"{field}.name: must be one of {', '.join(ACTION_CLASSES)}, got {spec.name!r}")
+        if not isinstance(spec.params, tuple) or not spec.params:
+            raise ValidationError(f"{field}.params: expected a non-empty tuple of names")
+        for k, p in enumerate(spec.params):
+            if not isinstance(p, str) or p not in info.types:
+                raise ValidationError(f"{field}.params[{k}]: {p!r} is no link, joint or orientation of object "
+                                      f"{info.obj.ident!r}")
+        for part in ("pre", "eff_neg", "eff_pos"):
+            atoms = getattr(spec, part)
+            if not isinstance(atoms, (set, frozenset)):
+                raise ValidationError(f"{field}.{part}: expected a frozenset of atoms")
+            for atom in sorted(atoms, key=repr):
+                self._check_atom(info, atom, f"{field}.{part}")
+        if not isinstance(spec.cond_eff, tuple):
+            raise ValidationError(f"{field}.cond_eff: expected a tuple of CondEffect")
+        for c, ce in enumerate(spec.cond_eff):
+            if not isinstance(ce, CondEffect):
+                raise ValidationError(f"{field}.cond_eff[{c}]: expected a CondEffect, got {type(ce).__name__}")
+            for part in ("when", "eff_neg", "eff_pos"):
+                atoms = getattr(ce, part)
+                if not isinstance(atoms, (set, frozenset)):
+                    raise ValidationError(f"{field}.cond_eff[{c}].{part}: expected a frozenset of atoms")
+                for atom in sorted(atoms, key=repr):
+                    self._check_atom(info, atom, f"{field}.cond_eff[{c}].{part}")
+
+    def add_plan(
+        self,
+        problem_id: str,
+        planner: str,
+        actions: Sequence[ActionSpec],
+        expected_states: Sequence[frozenset[Atom]],
+    ) -> StoredPlan:
+        with self._lock:
+            self._check_open()
+            try:
+                problem = self.get_problem(problem_id)
+            except NotFoundError:
+                raise ValidationError(f"problem_id: no problem {problem_id!r}") from None
+            info = self._info(problem.object_id, "problem_id")
+            if not isinstance(planner, str) or not planner:
+                raise ValidationError("planner: must be a non-empty string")
+            actions = tuple(actions)
+            expected_states = tuple(expected_states)
+            if len(expected_states) != len(actions) + 1:
+                raise ValidationError(
+                    f"expected_states: a plan of {len(actions)} actions needs {len(actions) + 1} expected states "
+                    f"(s^e_1 .. s^e_N+1), got {len(expected_states)}"
+                )
+            for i, spec in enumerate(actions):
+                self._check_action(info, i, spec)
+            for i, atoms in enumerate(expected_states):
+                self._check_state_atoms(info, "expected", atoms, f"expected_states[{i}]")
+            created = time.time()
+            ident = info.obj.ident
+
+            def fill() -> tuple[str, tuple[StoredAction, ...], tuple[str, ...]]:
+                b = _Batch(self)
+                plan_id = f"{ident}_plan_{self._next_counter(ident + ':plan')}"
+                b.individual(plan_id, "Plan")
+                b.rel(plan_id, "aboutObject", ident)
+                b.rel(plan_id, "solves", problem_id)
+                b.data(plan_id, "plannerName", planner)
+                b.data(plan_id, "createdAt", created)
+                stored = []
+                previous = None
+                for step, spec in enumerate(actions, start=1):
+                    aid = f"{plan_id}_a{step}"
+                    self._add_action_triples(b, info, aid, step, spec)
+                    b.rel(plan_id, "madeof", aid)
+                    if previous:
+                        b.rel(previous, "nextAction", aid)
+                    previous = aid
+                    stored.append(StoredAction(aid, step, spec))
+                state_ids = []
+                for step, atoms in enumerate(expected_states, start=1):
+                    sid = self._add_state_triples(b, info, "expected", frozenset(atoms), None, step, created)
+                    b.rel(plan_id, "expectedState", sid)
+                    state_ids.append(sid)
+                self._flush(b)
+                return plan_id, tuple(stored), tuple(state_ids)
+
+            plan_id, stored, state_ids = self._write(fill)
+            for sid, atoms in zip(state_ids, expected_states):
+                self._states[sid] = StoredState(sid, ident, "expected", frozenset(atoms), created)
+            for a in stored:
+                self._actions[a.id] = a
+            record = StoredPlan(plan_id, ident, problem_id, planner, stored, state_ids, created)
+            self._plans[plan_id] = record
+            return record
+
+    def _add_action_triples(self, b: _Batch, info: _ObjectInfo, aid: str, step: int, spec: ActionSpec) -> None:
+        b.individual(aid, ACTION_CLASSES[spec.name])
+        b.data(aid, "stepIndex", step)
+        b.data(aid, "paramList", " ".join(spec.params))
+        b.rel(aid, "aboutObject", info.obj.ident)
+        for p in dict.fromkeys(spec.params):
+            b.rel(aid, "params", p)
+        made: dict[Atom, str] = {}
+
+        def pred(atom: Atom) -> str:
+            name = info.static_fragment.get(atom) or made.get(atom)
+            if name is None:
+                name = made[atom] = self._add_predicate(b, info, atom_fragment(info.obj, aid, atom), atom)
+            return name
+
+        for part, prop in (("pre", "pre"), ("eff_neg", "effNeg"), ("eff_pos", "effPos")):
+            for atom in sorted(getattr(spec, part)):
+                b.rel(aid, prop, pred(atom))
+        for c, ce in enumerate(spec.cond_eff, start=1):
+            cid = b.individual(f"{aid}_ce{c}", "CondPredicate")
+            b.data(cid, "position", c)
+            b.rel(aid, "condEff", cid)
+            quantified = {a for atom in ce.eff_neg | ce.eff_pos for a in atom[1:]} - set(spec.params)
+            for name in sorted(quantified):
+                b.rel(cid, "forall", name)
+            for part, prop in (("when", "when"), ("eff_neg", "effNeg_a"), ("eff_pos", "effPos_a")):
+                for atom in sorted(getattr(ce, part)):
+                    b.rel(cid, prop, pred(atom))
+
+    def _load_action(self, action_id: str) -> StoredAction | None:
+        sid = self._sid(action_id)
+        if sid is None:
+            return None
+        types = self._types(sid)
+        name = next((n for n, cls in ACTION_CLASSES.items() if self._t[cls] in types), None)
+        if name is None:
+            return None
+        parts: dict[str, list[int]] = {p: self._objn(sid, p) for p in ("pre", "effNeg", "effPos")}
+        ces = sorted(self._objn(sid, "condEff"), key=lambda c: int(self._data1(c, "position")))
+        ce_parts = [{p: self._objn(c, p) for p in ("when", "effNeg_a", "effPos_a")} for c in ces]
+        every = [s for lst in parts.values() for s in lst] + [s for d in ce_parts for lst in d.values() for s in lst]
+        atoms = self._predicate_atoms(every)
+
+        def fs(sids: list[int]) -> frozenset[Atom]:
+            return frozenset(atoms[s] for s in sids)
+
+        spec = ActionSpec(
+            name=name,
+            params=tuple((self._data1(sid, "paramList") or "").split()),
+            pre=fs(parts["pre"]), eff_neg=fs(parts["effNeg"]), eff_pos=fs(parts["effPos"]),
+            cond_eff=tuple(CondEffect(fs(d["when"]), fs(d["effNeg_a"]), fs(d["effPos_a"])) for d in ce_parts),
+        )
+        return StoredAction(action_id, int(self._data1(sid, "stepIndex")), spec)
+
+    def get_action(self, action_id: str) -> StoredAction:
+        with self._lock:
+            self._check_open()
+            record = self._actions.get(action_id)
+            if record is None:
+                record = self._load_action(action_id) if isinstance(action_id, str) else None
+                if record is None:
+                    raise NotFoundError(f"action_id: no action {action_id!r}")
+                self._actions[action_id] = record
+            return record
+
+    def _load_plan(self, plan_id: str) -> StoredPlan | None:
+        sid = self._sid(plan_id)
+        if sid is None or not self._is_a(sid, "Plan"):
+            return None
+        refs = [self._obj1(sid, "aboutObject"), self._obj1(sid, "solves")]
+        action_sids = self._objn(sid, "madeof")
+        state_sids = self._objn(sid, "expectedState")
+        self._names(refs + action_sids + state_sids)
+        actions = sorted((self.get_action(self._sid_name[a]) for a in action_sids), key=lambda a: a.step)
+        states = sorted(state_sids, key=lambda s: int(self._data1(s, "stepIndex")))
+        return StoredPlan(
+            id=plan_id, object_id=self._sid_name[refs[0]], problem_id=self._sid_name[refs[1]],
+            planner=self._data1(sid, "plannerName"), actions=tuple(actions),
+            expected_state_ids=tuple(self._sid_name[s] for s in states),
+            created_at=float(self._data1(sid, "createdAt")),
+        )
+
+    def get_plan(self, plan_id: str) -> StoredPlan:
+        with self._lock:
+            self._check_open()
+            record = self._plans.get(plan_id)
+            if record is None:
+                record = self._load_plan(plan_id) if isinstance(plan_id, str) else None
+                if record is None:
+                    raise NotFoundError(f"plan_id: no plan {plan_id!r}")
+                self._plans[plan_id] = record
+            return record
+
+    def latest_plan(self, object_id: str) -> StoredPlan | None:
+        with self._lock:
+            self._check_open()
+            pid = self._latest(object_id, "Plan")
+            return self.get_plan(pid) if pid else None
+
+    # -- events, execution, idempotent responses (side tables) ------------------------------------------
+    def add_event(self, object_id: str, kind: str, reason: str, data: dict) -> StoredEvent:
+        with self._lock:
+            self._check_open()
+            info = self._info(object_id, "object_id")
+            if not isinstance(kind, str) or not kind:
+                raise ValidationError("kind: must be a non-empty string")
+            if not isinstance(reason, str):
+                raise ValidationError("reason: must be a string")
+            data = {} if data is None else data
+            if not isinstance(data, dict):
+                raise ValidationError(f"data: expected a dict, got {type(data).__name__}")
+            try:
+                text = json.dumps(data, sort_keys=True, allow_nan=False)
+            except (TypeError, ValueError) as exc:
+                raise ValidationError(f"data: not JSON-serialisable ({exc})") from None
+            created = time.time()
+            ident = info.obj.ident
+
+            def fill() -> int:
+                row = self._db.execute("SELECT MAX(seq) FROM planhrc_event WHERE object_id=?", (ident,)).fetchone()
+                seq = (row[0] or 0) + 1
+                self._db.execute("INSERT INTO planhrc_event VALUES (?,?,?,?,?,?)",
+                                 (ident, seq, kind, reason, text, created))
+                return seq
+
+            seq = self._write(fill)
+            return StoredEvent(seq, ident, kind, reason, json.loads(text), created)
+
+    def list_events(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
+        with self._lock:
+            self._check_open()
+            ident = self._info(object_id).obj.ident
+            rows = self._db.execute(
+                "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id=? AND seq>? "
+                "ORDER BY seq", (ident, int(after_seq)),
+            ).fetchall()
+            return tuple(StoredEvent(s, ident, k, r, json.loads(d), c) for s, k, r, d, c in rows)
+
+    def get_execution(self, object_id: str) -> Execution:
+        with self._lock:
+            self._check_open()
+            ident = self._info(object_id).obj.ident
+            row = self._db.execute(
+                "SELECT plan_id, next_step, status, dispatched_action_id FROM planhrc_execution WHERE object_id=?",
+                (ident,),
+            ).fetchone()
+            if row is None:
+                return Execution(plan_id=None, next_step=None, status="idle")
+            return Execution(*row)
+
+    def set_execution(self, object_id: str, execution: Execution) -> None:
+        with self._lock:
+            self._check_open()
+            ident = self._info(object_id, "object_id").obj.ident
+            if not isinstance(execution, Execution):
+                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
+            if execution.status not in EXECUTION_STATUSES:
+                raise ValidationError(
+                    f"execution.status: must be one of {', '.join(EXECUTION_STATUSES)}, got {execution.status!r}"
+                )
+            plan = None
+            if execution.plan_id is not None:
+                try:
+                    plan = self.get_plan(execution.plan_id)
+                except NotFoundError:
+                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
+                if plan.object_id != ident:
+                    raise ValidationError(f"execution.plan_id: plan {plan.id!r} belongs to object {plan.object_id!r}")
+            if execution.next_step is not None:
+                if isinstance(execution.next_step, bool) or not isinstance(execution.next_step, int):
+                    raise ValidationError("execution.next_step: must be an integer or None")
+                if plan is None:
+                    raise ValidationError("execution.next_step: needs a plan_id")
+                if not 1 <= execution.next_step <= len(plan.actions) + 1:
+                    raise ValidationError(
+                        f"execution.next_step: must be in 1..{len(plan.actions) + 1}, got {execution.next_step}"
+                    )
+            if execution.dispatched_action_id is not None:
+                if plan is None or execution.dispatched_action_id not in {a.id for a in plan.actions}:
+                    raise ValidationError(
+                        f"execution.dispatched_action_id: {execution.dispatched_action_id!r} is no action of plan "
+                        f"{execution.plan_id!r}"
+                    )
+
+            def fill() -> None:
+                self._db.execute(
+                    "INSERT OR REPLACE INTO planhrc_execution VALUES (?,?,?,?,?)",
+                    (ident, execution.plan_id, execution.next_step, execution.status, execution.dispatched_action_id),
+                )
+
+            self._write(fill)
+
+    def recall_response(self, object_id: str, key: str) -> dict | None:
+        """The response remembered under an idempotency key, or None (the object need not exist)."""
+        with self._lock:
+            self._check_open()
+            row = self._db.execute(
+                "SELECT response FROM planhrc_response WHERE object_id=? AND key=?", (str(object_id), str(key))
+            ).fetchone()
+            return json.loads(row[0]) if row else None
+
+    def remember_response(self, object_id: str, key: str, response: dict) -> None:
+        """Remember the response to an idempotent request; the first response stored under a key wins."""
+        with self._lock:
+            self._check_open()
+            if not isinstance(key, str) or not key:
+                raise ValidationError("key: must be a non-empty string")
+            if not isinstance(response, dict):
+                raise ValidationError(f"response: expected a dict, got {type(response).__name__}")
+            try:
+                text = json.dumps(response, sort_keys=True, allow_nan=False)
+            except (TypeError, ValueError) as exc:
+                raise ValidationError(f"response: not JSON-serialisable ({exc})") from None
+
+            def fill() -> None:
+                self._db.execute("INSERT OR IGNORE INTO planhrc_response VALUES (?,?,?)", (str(object_id), key, text))
+
+            self._write(fill)
+
+    # -- whole-ontology views -----------------------------------------------------------------------------
+    def ntriples(self) -> bytes:
+        """TBox + ABox as N-Triples (what the reasoners and `export` read)."""
+        with self._lock:
+            self._check_open()
+            buf = io.BytesIO()
+            self._world.save(buf, format="ntriples")
+            return buf.getvalue()
+
+    def export(self, fmt: str = "xml") -> bytes:
+        """TBox + ABox serialised by rdflib as RDF/XML (`xml`) or Turtle (`turtle`)."""
+        import rdflib
+
+        if fmt not in ("xml", "turtle"):
+            raise ValidationError(f"fmt: must be 'xml' or 'turtle', got {fmt!r}")
+        graph = rdflib.Graph()
+        graph.parse(data=self.ntriples(), format="nt")
+        graph.bind("planhrc", TBOX_IRI)
+        graph.bind("abox", ABOX_IRI)
+        graph.bind("owl", "http://www.w3.org/2002/07/owl#")
+        out = graph.serialize(format=fmt)
+        return out.encode("utf-8") if isinstance(out, str) else out
+
+    def triple_count(self) -> int:
+        with self._lock:
+            self._check_open()
+            a = self._db.execute("SELECT COUNT(*) FROM objs").fetchone()[0]
+            b = self._db.execute("SELECT COUNT(*) FROM datas").fetchone()[0]
+            return a + b
+
+
+def _natural_key(name: str) -> tuple[str, int]:
+    m = _ID_SUFFIX.search(name)
+    return (name[: m.start()], int(m.group(1))) if m else (name, -1)

