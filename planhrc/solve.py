@@ -80,7 +80,7 @@ def solve(request: SolveRequest, kb: KnowledgeBase, tbox_path: Path) -> dict:
     t0 = time.perf_counter()
     ident = kb.new_object_id()
     obj = object_for(request, ident)
-    init_atoms = obj.state(request.init)
+    init_atoms = obj.state(obj.check_joint_values(request.init, field="init"))
     goal_atoms = goal_atoms_for(obj, request.goal)
     kb.create_object(obj)
     init_state = kb.add_state(ident, "initial", init_atoms)

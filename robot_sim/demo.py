@@ -27,7 +27,7 @@ from typing import Iterator
 import numpy as np
 
 from robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
-from robot_sim.scene import SceneSpec, SimError, random_orientations
+from robot_sim.scene import SceneSpec, SimError, is_workable
 
 log = logging.getLogger(__name__)
 
@@ -62,13 +62,37 @@ DEMO_SCENARIOS: dict[str, DemoScenario] = {
 }
 
 
+def reachable_goal(rng: np.random.Generator, spec: SceneSpec, formulation: str, orientations: int,
+                   max_joints: int = 4, max_steps: int = 3, attempts: int = 10_000) -> tuple[float, ...]:
+    """A random goal a few steps away whose configuration, and every configuration the plan passes through
+    (our planners emit actions in chain order; turning lK moves lK..lN), stay within the robot's reach.
+    The relative formulation does not move l1, so its goals keep l1 where it is."""
+    step = 360.0 / orientations
+    start = list(spec.orientations0)
+    first = 1 if formulation == "absolute" else 2
+    for _ in range(attempts):
+        links = rng.choice(np.arange(first, spec.n_links + 1), size=int(rng.integers(1, max_joints + 1)),
+                           replace=False)
+        changes = {int(k): int(rng.choice([s for s in range(-max_steps, max_steps + 1) if s])) for k in links}
+        theta, ok = list(start), True
+        for link in sorted(changes):
+            for _ in range(abs(changes[link])):
+                d = step if changes[link] > 0 else -step
+                theta = [t + d if i >= link - 1 else t for i, t in enumerate(theta)]
+                ok = ok and is_workable(spec, theta)
+        if ok:
+            return tuple(t % 360.0 for t in theta)
+    raise SimError(f"no reachable random goal found in {attempts} attempts")
+
+
 def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interventions: int = 3) -> DemoScenario:
-    """A random reachable goal (seeded) and `interventions` random human moves at random moments."""
+    """A random reachable goal (seeded), either formulation, and `interventions` random human moves at random
+    moments (each keeps the object within the robot's reach)."""
     rng = np.random.default_rng(seed)
     spec = SceneSpec(n_links=n_links)
-    goal = random_orientations(rng, spec, step_deg=360 / orientations)
     formulation = ("relative", "absolute")[seed % 2]
-    return DemoScenario(f"random-{seed}", formulation, orientations, (90.0,) * n_links, goal,
+    goal = reachable_goal(rng, spec, formulation, orientations)
+    return DemoScenario(f"random-{seed}", formulation, orientations, spec.orientations0, goal,
                         f"random:{seed}:{interventions}", "random goal and random human interventions")
 
 
@@ -147,6 +171,7 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
                      "held_link_index": a.get("held_link_index"), "delta_deg": a.get("delta_deg")}
                     for a in actions],
         "outcomes": list(summary.outcomes),
+        "human_assists": summary.human_assists,
         "decisions": [{"seq": e["seq"], "kind": e["kind"], "reason": e["reason"]} for e in decisions],
         "out_dir": str(out_dir),
     }
@@ -184,6 +209,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
         "scenario": scenario_name,
         "episodes": len(results),
         "reached_goal": sum(r["reached_goal"] for r in results),
+        "reached_goal_without_human_assist": sum(r["reached_goal"] and not r["human_assists"] for r in results),
         "perception": perception,
         "wall_s": round(time.perf_counter() - started, 3),
         "results": results,

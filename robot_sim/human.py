@@ -24,7 +24,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from robot_sim.scene import Scene, SimError
+from robot_sim.scene import Scene, SimError, is_workable
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +40,7 @@ class HumanEvent:
     delta_deg: float | None = None
     kind: str = "rotate"
     direction: int = 1
+    keep_workable: bool = False  # a considerate human: only moves that leave the object within the robot's reach
 
     def __post_init__(self) -> None:
         if self.at_step < 1:
@@ -69,6 +70,8 @@ class Scenario:
     name: str
     events: tuple[HumanEvent, ...] = ()
     faults: tuple[RobotFault, ...] = ()
+    # The paper: when a robot action is not successful, the human can do it on the robot's behalf.
+    assists_after_failures: int | None = None
 
     def events_at(self, step: int, when: str) -> tuple[HumanEvent, ...]:
         return tuple(e for e in self.events if e.at_step == step and e.when == when)
@@ -89,7 +92,7 @@ def scenario_fig13() -> Scenario:
     """While the robot does its first action the human does the plan's second one (the robot resumes further
     on: the goal comes early); later the human disturbs link 2, and the robot puts it back."""
     return Scenario(
-        "fig13",
+        "fig13", assists_after_failures=2,
         events=(
             HumanEvent(at_step=1, when="during", kind="next_planned"),
             HumanEvent(at_step=3, when="before", kind="rotate", link=2, delta_deg=None, direction=1),
@@ -100,7 +103,7 @@ def scenario_fig13() -> Scenario:
 def scenario_fig14() -> Scenario:
     """The robot's second rotation stops half-way; the human completes it and also turns the last link."""
     return Scenario(
-        "fig14",
+        "fig14", assists_after_failures=2,
         events=(
             HumanEvent(at_step=3, when="before", kind="complete_partial"),
             HumanEvent(at_step=3, when="before", kind="rotate", link=-1, delta_deg=None, direction=-1),
@@ -122,13 +125,14 @@ def scenario_random(seed: int = 0, n: int = 3, max_step: int = 6, n_links: int =
                     link=int(rng.integers(1, n_links + 1)),
                     delta_deg=None,
                     direction=int(rng.choice([-1, 1])),
+                    keep_workable=True,
                 )
                 for _ in range(n)
             ),
             key=lambda e: (e.at_step, e.when),
         )
     )
-    return Scenario(f"random-{seed}-{n}", events=events)
+    return Scenario(f"random-{seed}-{n}", events=events, assists_after_failures=2)
 
 
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
@@ -196,6 +200,8 @@ def apply_event(scene: Scene, event: HumanEvent, context: HumanContext) -> str |
         if not 1 <= link <= n:
             raise SimError(f"link: {event.link} is not a link of a {n}-link object")
         delta = event.delta_deg if event.delta_deg is not None else event.direction * context.step_deg
+        if event.keep_workable:
+            return _considerate_rotation(scene, link, delta, context)
         scene.rotate_at_joint(link, delta, "downstream")
         return f"human turned l{link} by {delta:+g} deg"
     if event.kind == "next_planned":
@@ -229,3 +235,26 @@ def apply_event(scene: Scene, event: HumanEvent, context: HumanContext) -> str |
             return f"human turned l{link} by {delta:+g} deg towards the goal"
     log.info("human: no link to turn towards the goal")
     return None
+
+
+def _considerate_rotation(scene: Scene, link: int, delta: float, context: HumanContext) -> str | None:
+    """Turn `link` (or, while the robot works, a link beyond its hands) by `delta`, or the other way, so that
+    the object stays within the robot's reach; do nothing when no such move exists."""
+    first_free = max(context.busy_links, default=0) + 1
+    candidates = [link] if link >= first_free else []
+    candidates += [k for k in range(first_free, scene.n_links + 1) if k != link]
+    base, theta = scene.configuration()
+    for k in candidates:
+        for d in (delta, -delta):
+            trial = [t + d if i >= k - 1 else t for i, t in enumerate(theta)]
+            if is_workable(scene.spec, trial, base):
+                scene.rotate_at_joint(k, d, "downstream")
+                return f"human turned l{k} by {d:+g} deg"
+    log.info("human: no move of l%d or beyond keeps the object workable", link)
+    return None
+
+
+def assist_failed_action(scene: Scene, turned_link: int, held_link: int, delta_deg: float) -> str:
+    """The human performs the rotation the robot could not (the paper's cooperation model)."""
+    scene.rotate_link(turned_link, held_link, delta_deg)
+    return f"human did the robot's failed action: l{turned_link} (holding l{held_link}) by {delta_deg:+g} deg"

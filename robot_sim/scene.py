@@ -286,6 +286,16 @@ def is_valid_configuration(
     return True
 
 
+# Where Baxter's grippers reach on the table (x forward, y left), with a margin: measured by IK in this scene.
+REACH_REGION: tuple[float, float, float, float] = (0.40, 0.78, -0.55, 0.55)
+
+
+def is_workable(spec: SceneSpec, orientations_deg: Sequence[float],
+                base_point_xy: Sequence[float] | None = None) -> bool:
+    """A valid configuration whose every joint point lies where the robot can grasp the links."""
+    return is_valid_configuration(spec, orientations_deg, base_point_xy, region=REACH_REGION)
+
+
 def random_orientations(
     rng: np.random.Generator, spec: SceneSpec, step_deg: float | None = None, attempts: int = 10_000
 ) -> tuple[float, ...]:

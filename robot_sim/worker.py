@@ -25,7 +25,8 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from robot_sim.human import HumanContext, HumanEvent, Scenario, apply_event, get_scenario, goal_differences
+from robot_sim.human import (HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action, get_scenario,
+                             goal_differences)
 from robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
 from robot_sim.protocol import KBClient, ProtocolError
 from robot_sim.scene import Scene, SceneSpec, SimError, build_scene, direction
@@ -47,6 +48,7 @@ class StepRecord:
     action: dict[str, Any] | None = None
     outcome: str | None = None
     human_during: tuple[str, ...] = ()
+    human_assist: str | None = None
     perception_s: float = 0.0
     service_s: float = 0.0
     action_s: float = 0.0
@@ -71,6 +73,10 @@ class WorkerSummary:
     @property
     def outcomes(self) -> tuple[str, ...]:
         return tuple(s.outcome for s in self.steps if s.outcome is not None)
+
+    @property
+    def human_assists(self) -> int:
+        return sum(1 for s in self.steps if s.human_assist)
 
 
 @dataclass
@@ -295,8 +301,13 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, co
         failures = failures + 1 if outcome is Outcome.FAILED and action.action_id == last_failed else (
             1 if outcome is Outcome.FAILED else 0)
         last_failed = action.action_id if outcome is Outcome.FAILED else None
+        assist = None
+        if scenario.assists_after_failures is not None and failures >= scenario.assists_after_failures:
+            # the paper: when the robot cannot do an action, the human does it on the robot's behalf
+            assist = assist_failed_action(scene, action.turned_link, action.held_link, action.delta_deg)
+            failures, last_failed = 0, None
         run.records.append(StepRecord(**base, action=dict(data), outcome=outcome.value,
-                                      human_during=tuple(human_during), action_s=t4 - t3))
+                                      human_during=tuple(human_during), human_assist=assist, action_s=t4 - t3))
         log.info("step %d: %s -> %s", step, action, outcome.value)
         if failures >= max_failures:
             return "repeated_failure"

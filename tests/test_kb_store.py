@@ -92,7 +92,8 @@ def test_new_object_id_skips_existing_ids(kb):
 def test_readable_iris(kb):
     w = _fill(kb)
     text = kb.export("turtle").decode()
-    for fragment in ("obj1_l3", "obj1_j3", "deg_90", "obj1_l0", w["states"][0].id, w["states"][0].id + "_ho_j2",
+    ho_j2 = next(a for a in w["states"][0].atoms if a[0] == "hasorientation" and a[2] == "obj1_j2")
+    for fragment in ("obj1_l3", "obj1_j3", "deg_90", "obj1_l0", w["states"][0].id, f"obj1_ho_j2_{ho_j2[1][4:]}",
                      "obj1_connected_j1_l0", "obj1_ord_270_0", "obj1_affected_j3_l2_j2", w["plan"].id + "_a1"):
         assert f"abox:{fragment}" in text, fragment
 
@@ -269,7 +270,10 @@ def test_export_parses_with_rdflib(kb, fmt, rdf_format):
     w = _fill(kb)
     g = rdflib.Graph()
     g.parse(data=kb.export(fmt), format=rdf_format)
-    ho = rdflib.URIRef(ABOX_IRI + w["states"][0].id + "_ho_j1")
+    ho_j1 = next(a for a in w["states"][0].atoms if a[0] == "hasorientation" and a[2] == "obj1_j1")
+    ho = rdflib.URIRef(ABOX_IRI + f"obj1_ho_j1_{ho_j1[1][4:]}")
+    state = rdflib.URIRef(ABOX_IRI + w["states"][0].id)
+    assert (state, rdflib.URIRef(TBOX_IRI + "madeof"), ho) in g
     assert (ho, rdflib.RDF.type, rdflib.URIRef(TBOX_IRI + "HasOrientation")) in g
     assert (ho, rdflib.URIRef(TBOX_IRI + "arg1"), rdflib.URIRef(ABOX_IRI + "obj1_j1")) in g
     assert (rdflib.URIRef(TBOX_IRI + "Link"), rdflib.RDF.type, rdflib.OWL.Class) in g

@@ -2,8 +2,10 @@
 
 The ontology lives in an owlready2 `World` backed by SQLite. The TBox file is loaded into the world once; every
 ABox individual goes into the ontology `http://planhrc.org/abox#` with a readable IRI whose fragment is the PDDL
-name (`obj42_l3`, `obj42_j3`, `deg_90`) or a name built from it (`obj42_state_7`, `obj42_state_7_ho_j3`,
-`obj42_connected_j3_l2`, `obj42_plan_2_a5`).
+name (`obj42_l3`, `obj42_j3`, `deg_90`) or a name built from it (`obj42_state_7`, `obj42_ho_j3_90`,
+`obj42_connected_j3_l2`, `obj42_plan_2_a5`). A ground predicate is one individual of its object, whichever
+states and actions it belongs to (as the paper writes `has_orientation_j1_45`): a state is the set of
+predicate individuals it is `madeof`, so a new state costs its `madeof` links, not new predicates.
 
 Writes go straight into owlready2's quad tables (`objs`, `datas`) in one SQLite transaction, after the whole
 input has been validated; a write either commits completely or not at all. Nothing here loads ABox individuals
@@ -131,6 +133,12 @@ class _ObjectInfo:
             self.types[name] = "orientation"
         self.static = obj.static_atoms()
         self.static_fragment = {atom: atom_fragment(obj, obj.ident, atom) for atom in self.static}
+        self.shared_stored: set[str] = set()  # object-level HasOrientation individuals known to be stored
+        # every well-formed HasOrientation atom of the object, with the name of its individual
+        self.orientation_atom_name = {
+            (HAS_ORIENTATION, o, j): atom_fragment(obj, obj.ident, (HAS_ORIENTATION, o, j))
+            for j in obj.joints for o in obj.orientation_names
+        }
 
 
 class _Batch:
@@ -141,6 +149,7 @@ class _Batch:
         self.new_iris: list[str] = []
         self.objs: list[tuple[str | int, int, str | int]] = []
         self.datas: list[tuple[str | int, int, Any]] = []
+        self.shared: set[str] = set()  # object-level predicate individuals this batch creates
 
     def individual(self, name: str, *classes: str) -> str:
         self.new_iris.append(name)
@@ -304,9 +313,14 @@ class KnowledgeBase:
                 self._iri_sid[name] = sid
                 self._sid_name[sid] = name
 
+        known = self._iri_sid
+
         def resolve(x: str | int) -> int:
             if isinstance(x, int):
                 return x
+            sid = known.get(x)
+            if sid is not None:
+                return sid
             sid = self._sid(x)
             if sid is None:
                 raise KBError(f"internal: individual {x!r} was neither stored nor created")
@@ -407,6 +421,17 @@ class KnowledgeBase:
             self._write(fill)
             self._objects[obj.ident] = info
 
+    def _shared_predicate(self, b: _Batch, info: _ObjectInfo, atom: Atom) -> str:
+        """The object's individual for a HasOrientation atom, created in this batch on first use."""
+        name = info.orientation_atom_name[atom]
+        if name in info.shared_stored or name in b.shared:
+            return name
+        if self._sid(name) is not None:
+            info.shared_stored.add(name)
+            return name
+        b.shared.add(name)
+        return self._add_predicate(b, info, name, atom)
+
     def _add_predicate(self, b: _Batch, info: _ObjectInfo, name: str, atom: Atom) -> str:
         cls, _, props, _ = PREDICATES[atom[0]]
         b.individual(name, cls)
@@ -495,13 +520,15 @@ class KnowledgeBase:
         static = info.static
         # Static facts of the object are valid by construction; only the rest needs checking. Sorting the rest
         # makes the first error reported the same on every run.
+        well_formed = info.orientation_atom_name
         rest = [atom for atom in atoms if atom not in static]
         try:
             rest.sort()
         except TypeError:
             rest.sort(key=repr)
         for atom in rest:
-            self._check_atom(info, atom, field)
+            if atom not in well_formed:
+                self._check_atom(info, atom, field)
             if atom[0] == HAS_ORIENTATION:
                 joint = atom[2]
                 if joint in by_joint:
@@ -566,7 +593,7 @@ class KnowledgeBase:
             b.data(s, "stepIndex", step)
         for atom in sorted(atoms):
             if atom[0] == HAS_ORIENTATION:
-                pred = self._add_predicate(b, info, f"{state_id}_ho_{_short(obj, atom[2])}", atom)
+                pred = self._shared_predicate(b, info, atom)
             else:
                 pred = info.static_fragment[atom]
             b.rel(s, "madeof", pred)
@@ -855,6 +882,8 @@ class KnowledgeBase:
 
         def pred(atom: Atom) -> str:
             name = info.static_fragment.get(atom) or made.get(atom)
+            if name is None and atom[0] == HAS_ORIENTATION:
+                name = made[atom] = self._shared_predicate(b, info, atom)
             if name is None:
                 name = made[atom] = self._add_predicate(b, info, atom_fragment(info.obj, aid, atom), atom)
             return name
