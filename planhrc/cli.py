@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("kb_service.cli", "add_serve_parser"),
     "worker": ("robot_sim.worker", "add_worker_parser"),
     "demo": ("robot_sim.demo", "add_demo_parser"),
+    "sim-bench": ("robot_sim.measure", "add_sim_bench_parser"),
 }
 
 

@@ -1,0 +1,96 @@
+"""`planhrc sim-bench`: what the simulated cell measures, as numbers (a benchmark, not a test).
+
+* marker-based orientation error per link: random valid configurations, the head camera's ArUco estimate
+  against the simulator's ground truth (mean, p95, max in degrees, missed markers);
+* camera perception time per frame (render + detection);
+* wall time of one rotation action (plan the arm motions + execute), in DIRECT mode.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+from robot_sim.perception import CameraPerception, angle_difference_deg
+from robot_sim.scene import SceneSpec, build_scene, is_workable, random_orientations
+from robot_sim.skills import Outcome, Robot, RotationAction, perform_action
+
+
+def _percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
+
+
+def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dict:
+    rng = np.random.default_rng(seed)
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    spec = SceneSpec()
+    scene = build_scene(client, spec)
+    try:
+        camera = CameraPerception(client, scene)
+        errors, frame_s, missed = [], [], 0
+        for _ in range(configurations):
+            scene.set_configuration(random_orientations(rng, spec))
+            t = time.perf_counter()
+            seen = camera.perceive()
+            frame_s.append(time.perf_counter() - t)
+            truth = scene.link_orientations_deg()
+            for est, true in zip(seen.link_orientations_deg, truth):
+                if est is None:
+                    missed += 1
+                else:
+                    errors.append(abs(angle_difference_deg(est, true)))
+        robot = Robot(scene)
+        rotation_s, outcomes = [], []
+        scene.set_configuration(spec.orientations0)
+        while len(rotation_s) < rotations:
+            link = int(rng.integers(2, spec.n_links + 1))
+            delta = float(rng.choice([-90.0, -45.0, 45.0, 90.0]))
+            _, theta = scene.configuration()
+            trial = [t + delta if i >= link - 1 else t for i, t in enumerate(theta)]
+            if not is_workable(spec, trial):
+                continue
+            t = time.perf_counter()
+            outcome = perform_action(scene, robot, RotationAction(turned_link=link, held_link=link - 1,
+                                                                  delta_deg=delta))
+            rotation_s.append(time.perf_counter() - t)
+            outcomes.append(outcome.value)
+            if outcome is not Outcome.SUCCEEDED:
+                scene.set_configuration(spec.orientations0)
+    finally:
+        scene.close()
+        client.disconnect()
+    return {
+        "marker_error_deg": {"links": len(errors), "mean": statistics.fmean(errors), "p95": _percentile(errors, 0.95),
+                             "max": max(errors), "missed_markers": missed},
+        "perception_s": {"median": statistics.median(frame_s), "max": max(frame_s)},
+        "rotation_action_s": {"median": statistics.median(rotation_s), "max": max(rotation_s),
+                              "succeeded": outcomes.count("succeeded"), "of": len(outcomes)},
+        "configurations": configurations,
+        "seed": seed,
+    }
+
+
+def add_sim_bench_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("sim-bench", help="marker error, perception time and rotation wall time in simulation",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--configurations", type=int, default=20)
+    p.add_argument("--rotations", type=int, default=20)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="also write the numbers to this JSON file")
+    p.set_defaults(func=run_sim_bench)
+
+
+def run_sim_bench(args: argparse.Namespace) -> int:
+    result = measure(args.configurations, args.rotations, args.seed)
+    text = json.dumps(result, indent=2)
+    print(text)
+    if args.out:
+        Path(args.out).write_text(text)
+    return 0
