@@ -1,7 +1,7 @@
 """Benchmark (not a test): `python -m planner.bench [--links 20] [--orientations 12] [--fd-timeout 60]`.
 
 Reports in-process grounding time and median re-planning time, Fast Downward whole-process times and VAL
-time, for both formulations. Needs the golden domains (tests/data) and the translator.
+time, for both formulations and the paper's exact absolute domain; the domains come from the translator.
 """
 from __future__ import annotations
 
@@ -14,6 +14,8 @@ import time
 from pathlib import Path
 
 from planhrc.model import make_object
+from planhrc.paths import default_tbox_path
+from translator.domain import get_domain
 from translator.problem import get_problem
 
 from .inproc import ground_task
@@ -23,10 +25,10 @@ from .validate import validate_plan
 log = logging.getLogger(__name__)
 
 
-CASES = {  # case -> (formulation, domain file, problem's domain name)
-    "relative": ("relative", "domain-relative.pddl", None),
-    "absolute": ("absolute", "domain-absolute.pddl", None),
-    "absolute-paper": ("absolute", "domain-absolute-paper.pddl", "planhrc-absolute-paper"),
+CASES = {  # case -> (formulation, the paper's exact schema?, problem's domain name)
+    "relative": ("relative", False, None),
+    "absolute": ("absolute", False, None),
+    "absolute-paper": ("absolute", True, "planhrc-absolute-paper"),
 }
 
 
@@ -39,12 +41,11 @@ def make_problem(formulation: str, links: int, k: int, seed: int, domain_name: s
     return obj, get_problem(obj, obj.configuration_atoms(init), goal, f"bench-{formulation}", domain_name)
 
 
-def bench(data: Path, links: int, k: int, fd_timeout: float, replans: int = 100) -> dict:
+def bench(tbox: Path, links: int, k: int, fd_timeout: float, replans: int = 100) -> dict:
     out: dict = {}
-    paper = {"relative": (data / "domain-relative.pddl").read_text(),
-             "absolute": (data / "domain-absolute-paper.pddl").read_text()}
-    for case, (formulation, domain_file, domain_name) in CASES.items():
-        domain = (data / domain_file).read_text()
+    paper = {f: get_domain(tbox, f, paper_exact=True) for f in ("relative", "absolute")}
+    for case, (formulation, paper_exact, domain_name) in CASES.items():
+        domain = get_domain(tbox, formulation, paper_exact=paper_exact)
         obj, problem = make_problem(formulation, links, k, seed=1, domain_name=domain_name)
         grounds = []
         for _ in range(5):
@@ -84,10 +85,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--links", type=int, default=20)
     parser.add_argument("--orientations", type=int, default=12)
     parser.add_argument("--fd-timeout", type=float, default=60.0)
-    parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parent.parent / "tests" / "data")
+    parser.add_argument("--tbox", type=Path, default=default_tbox_path())
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
-    result = bench(args.data, args.links, args.orientations, args.fd_timeout)
+    result = bench(args.tbox, args.links, args.orientations, args.fd_timeout)
     print(json.dumps(result, indent=2))
     return 0
 

@@ -16,6 +16,7 @@ import argparse
 import json
 import logging
 import re
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -415,7 +416,7 @@ def run_worker_cli(args: argparse.Namespace) -> int:
         summary = run_worker(args.kb, args.object_id, spec, args.scenario, args.out, args.gui, args.max_steps,
                              args.token, args.perception, args.goal, args.sigma, args.seed)
     except (ProtocolError, SimError) as exc:
-        print(f"worker: {exc}")
+        print(f"planhrc worker: {exc}", file=sys.stderr)
         return 1
     print(json.dumps({"reached_goal": summary.reached_goal, "stop_reason": summary.stop_reason,
                       "decisions": list(summary.decisions), "outcomes": list(summary.outcomes),
