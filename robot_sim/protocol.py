@@ -28,7 +28,7 @@ class ProtocolError(Exception):
 
 @dataclass(frozen=True)
 class RetryPolicy:
-    attempts: int = 6
+    attempts: int = 10  # about 25 s in all: long enough for the KB service to restart
     initial_delay_s: float = 0.2
     factor: float = 2.0
     max_delay_s: float = 5.0
