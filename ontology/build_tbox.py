@@ -282,6 +282,19 @@ def build(path: Path = OUT) -> Path:
             domain = [LinkOrientation]
             range = [float]
 
+        class staticFactOf(ObjectProperty):
+            comment = ["staticFactOf(p, x): predicate p (Connected, OrientationOrd, Affected) holds in every state"
+                       " of object x; states that include their object's static facts say so with"
+                       " includesStaticFacts, and a SWRL rule derives their madeof links."]
+            domain = [Predicate]
+            range = [ArticulatedObject]
+
+        class includesStaticFacts(DataProperty, FunctionalProperty):
+            comment = ["A state made of its object's static facts (every staticFactOf predicate) besides the"
+                       " predicates it lists with madeof."]
+            domain = [State]
+            range = [bool]
+
         class createdAt(DataProperty, FunctionalProperty):
             range = [float]
 
@@ -346,6 +359,7 @@ def build(path: Path = OUT) -> Path:
             "turns(?j, ?l), nextLink(?l, ?m), turns(?k, ?m) -> nextJoint(?j, ?k)",
             "turns(?j, ?l), downstreamJoint(?j, ?k) -> affectsJoint(?j, ?k)",
             "turns(?j, ?l) -> affectsJoint(?j, ?j)",
+            "State(?s), includesStaticFacts(?s, true), stateOf(?s, ?x), staticFactOf(?p, ?x) -> madeof(?s, ?p)",
             "PerceivedState(?s), observes(?s, ?p), observes(?s, ?q), arg1(?p, ?a), arg1(?q, ?b), nextLink(?a, ?b),"
             " arg2(?p, ?oa), arg2(?q, ?ob), degrees(?oa, ?x), degrees(?ob, ?y), subtract(?d, ?y, ?x),"
             " add(?e, ?d, 360), mod(?r, ?e, 360), Orientation(?o), degrees(?o, ?r) -> relativeOrientation(?q, ?o)",

@@ -114,6 +114,26 @@ def test_swrl_derives_relative_orientations_of_a_perceived_state():
         assert derive_relative_orientations(kb, state.id) == relative_from_absolute(snapped)
 
 
+@pytest.mark.reasoner
+def test_swrl_completes_the_madeof_links_of_a_compact_state():
+    """A complete state lists only its configuration; Pellet derives its madeof links to the static facts."""
+    from planhrc.kb.reasoner import _pairs, reason_in_place
+    from planhrc.kb.store import atom_fragment
+
+    with KnowledgeBase(None, TBOX) as kb:
+        obj = make_object("obj1", "absolute", 3, 4)
+        kb.create_object(obj)
+        state = kb.add_state("obj1", "expected", obj.state([0, 90, 180]))
+        told = {o for s, o in _pairs(kb.world, "madeof") if s == state.id}
+        assert len(told) == 3  # only the three HasOrientation predicates are told
+        consistent, _ = reason_in_place(kb.world, "pellet", 120.0)
+        assert consistent
+        derived = {o for s, o in _pairs(kb.world, "madeof") if s == state.id}
+        statics = {atom_fragment(obj, "obj1", atom) for atom in obj.static_atoms()}
+        assert derived == told | statics
+        assert kb.get_state(state.id).atoms == obj.state([0, 90, 180])
+
+
 # -- DL subsumption agrees with the fast check ----------------------------------------------------------
 def _pairs(n: int, seed: int = 7):
     """Pairs (s1, s2) on 20-link objects of both formulations: about half subsumed, many partial goals."""

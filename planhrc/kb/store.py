@@ -88,7 +88,7 @@ _TBOX_TERMS = (
     "Problem Plan degrees lengthM chainIndex formulation objectName isVirtual hasLink hasJoint allowedOrientation "
     "nextLink arg1 arg2 arg3 forall when effNeg_a effPos_a params pre effNeg effPos condEff stepIndex paramList "
     "nextAction madeof observes stateOf aboutObject observedDegrees createdAt init goal solves expectedState "
-    "plannerName position"
+    "plannerName position staticFactOf includesStaticFacts"
 ).split()
 
 _SIDE_TABLES = (
@@ -415,7 +415,8 @@ class KnowledgeBase:
                         b.data(name, "degrees", deg)
                     b.rel(o, "allowedOrientation", name)
                 for atom in sorted(info.static):
-                    self._add_predicate(b, info, info.static_fragment[atom], atom)
+                    name = self._add_predicate(b, info, info.static_fragment[atom], atom)
+                    b.rel(name, "staticFactOf", obj.ident)
                 self._flush(b)
 
             self._write(fill)
@@ -591,9 +592,16 @@ class KnowledgeBase:
         b.data(s, "createdAt", created_at)
         if step is not None:
             b.data(s, "stepIndex", step)
+        # A state with all of its object's static facts lists only the rest: the static facts are linked to the
+        # object once (staticFactOf) and the TBox's SWRL rule derives the state's madeof links to them.
+        compact = info.static <= atoms
+        if compact:
+            b.data(s, "includesStaticFacts", True)
         for atom in sorted(atoms):
             if atom[0] == HAS_ORIENTATION:
                 pred = self._shared_predicate(b, info, atom)
+            elif compact:
+                continue
             else:
                 pred = info.static_fragment[atom]
             b.rel(s, "madeof", pred)
@@ -678,6 +686,8 @@ class KnowledgeBase:
         obj_sid = self._obj1(sid, "stateOf")
         self._names([obj_sid])
         atoms = frozenset(self._predicate_atoms(self._objn(sid, "madeof")).values())
+        if self._data1(sid, "includesStaticFacts"):
+            atoms |= self._info(self._sid_name[obj_sid]).static
         observed = None
         lo = self._objn(sid, "observes")
         if lo:
