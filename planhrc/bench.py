@@ -15,7 +15,7 @@ the absolute formulation the relative optimum plus the cyclic distance of l1's r
 both.
 
 `--replan` measures the re-planning loop on 20 links x 12 orientations: a new perceived state in the ABox ->
-translation -> planning -> VAL -> expected states stored, median of repeated runs, beside the whole-process
+translation -> planning -> VAL -> expected states stored, median of repeated runs (`--replan-runs`), beside the whole-process
 time of Fast Downward on the same problem.
 """
 from __future__ import annotations
@@ -300,6 +300,7 @@ def add_bench_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-validate", action="store_true")
     p.add_argument("--replan", action="store_true", help="also measure the re-planning loop on 20 x 12")
     p.add_argument("--replan-only", action="store_true", help="only measure the re-planning loop")
+    p.add_argument("--replan-runs", type=int, default=30, help="re-plans measured per formulation (median)")
     p.add_argument("--out", default="bench-results", help="output folder")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_bench)
@@ -319,7 +320,7 @@ def run_bench(args: argparse.Namespace) -> int:
         Formulation(f)
     extra: dict = {}
     if args.replan or args.replan_only:
-        extra["replan"] = [measure_replan(f) for f in formulations]
+        extra["replan"] = [measure_replan(f, runs=args.replan_runs) for f in formulations]
         for r in extra["replan"]:
             print(json.dumps(r))
     if args.replan_only:
