@@ -48,3 +48,12 @@ def test_bench_command_refuses_unknown_planner(tmp_path, capsys):
                  "--out", str(tmp_path), "--no-progress"])
     assert code == 2
     assert "nosuchplanner" in capsys.readouterr().err
+
+
+def test_replan_measurement_reports_every_stage():
+    from planhrc.bench import measure_replan
+
+    result = measure_replan("absolute", links=5, orientations=4, runs=3, fd_runs=1)
+    assert result["replan_median_s"] > 0 and result["first_run_s"] > 0
+    assert {"translate", "plan", "validate", "expected_states", "store"} <= set(result["stage_medians_s"])
+    assert result.get("fd_lama_status", "solved") == "solved"
