@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Set up `.venv` at the repository root (once, or again when pyproject.toml changes) and run a task.
 
-    python3 run.py demo [ARGS...]   # the main job: `planhrc demo` on the embedded store
-    python3 run.py test [ARGS...]   # the whole test suite (every marker)
-    python3 run.py planhrc ARGS...  # any `planhrc` command inside the environment
+    python3 ./run.py demo [ARGS...]   # the main job: `planhrc demo` on the embedded store
+    python3 ./run.py test [ARGS...]   # the whole test suite (every marker)
+    python3 ./run.py planhrc ARGS...  # any `planhrc` command inside the environment
 
 Only the standard library is used here, so this works from a fresh clone with nothing but python3.
 """
