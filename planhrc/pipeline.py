@@ -20,6 +20,7 @@ from typing import Any, Sequence
 from planhrc.kb.records import StoredAction, StoredPlan
 from planhrc.model import ArticulatedObject, Formulation, State, is_subsumed
 from planhrc.transition import TransitionError, parse_step, replay
+from planner.errors import PlannerError
 from planner.inproc import GroundTask, ground_task
 from planner.registry import get_planner
 from planner.result import PlanResult, PlanStatus
@@ -54,6 +55,7 @@ class PlanningConfig:
     planner: str = "inproc"
     timeout_s: float = 5.0
     validate: bool = True
+    fallback_planner: str | None = "fd-lama"  # used when the in-process planner cannot take the task
 
 
 def config_from_settings(settings: Any) -> PlanningConfig:
@@ -62,6 +64,7 @@ def config_from_settings(settings: Any) -> PlanningConfig:
         planner=getattr(settings, "planner", "inproc"),
         timeout_s=float(getattr(settings, "planner_timeout_s", 5.0)),
         validate=bool(getattr(settings, "validate_plans", True)),
+        fallback_planner=getattr(settings, "fallback_planner", "fd-lama") or None,
     )
 
 
@@ -87,13 +90,20 @@ class Planning:
         return grounded
 
     def run_planner(self, task: PddlTask, init: State, goal: State) -> PlanResult:
-        if self.config.planner == "inproc":
-            start = time.perf_counter()
-            grounded = self._grounded(task)
-            result = grounded.solve(init, goal)
-            return PlanResult(result.status, result.plan, time.perf_counter() - start, result.planner,
-                              result.message, result.optimal)
-        return get_planner(self.config.planner).solve(task.domain, task.problem, self.config.timeout_s)
+        if self.config.planner != "inproc":
+            return get_planner(self.config.planner).solve(task.domain, task.problem, self.config.timeout_s)
+        start = time.perf_counter()
+        try:
+            result = self._grounded(task).solve(init, goal)
+        except PlannerError as exc:  # the task is outside the rotation family the in-process planner knows
+            result = PlanResult(PlanStatus.ERROR, (), 0.0, "inproc", str(exc))
+        if result.status is PlanStatus.ERROR and self.config.fallback_planner:
+            log.warning("in-process planner cannot take %s (%s); using %s", task.problem_id, result.message,
+                        self.config.fallback_planner)
+            remaining = max(0.1, self.config.timeout_s - (time.perf_counter() - start))
+            return get_planner(self.config.fallback_planner).solve(task.domain, task.problem, remaining)
+        return PlanResult(result.status, result.plan, time.perf_counter() - start, result.planner,
+                          result.message, result.optimal)
 
     def make_plan(self, kb: KnowledgeBase, object_id: str, init_state_id: str, goal_state_id: str) -> PlanOutcome:
         """Store a Problem (init, goal), plan it, validate the plan and store it with its expected states."""

@@ -32,6 +32,11 @@ class Settings(BaseSettings):
         description="When set, every request that changes something needs `Authorization: Bearer <token>`.",
     )
     planner: str = Field(default="inproc", description="Planner backend name (see planner/).")
+    fallback_planner: str | None = Field(
+        default="fd-lama",
+        description="Planner used when the in-process planner cannot take a task (a domain outside the rotation "
+        "family, e.g. after the TBox gained an action); empty for none.",
+    )
     planner_timeout_s: float = Field(default=5.0, gt=0, description="Time limit of one planner call.")
     validate_plans: bool = Field(default=True, description="Check every plan with VAL before storing it.")
     merge_macro_steps: bool = Field(

@@ -105,3 +105,20 @@ def test_solve_command_refuses_bad_input(capsys, args, message):
     code = main(["solve", "--formulation", "absolute", "--orientations", "4", *args])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_task_the_in_process_planner_refuses_goes_to_the_fallback_planner(kb, monkeypatch):
+    """Isolates the fallback: grounding is made to refuse the task; Fast Downward (real) then plans it."""
+    import planhrc.pipeline as pipeline
+    from planner.errors import PlannerError
+
+    def refuse(domain, problem):
+        raise PlannerError("domain: not a member of the rotation family")
+
+    monkeypatch.setattr(pipeline, "ground_task", refuse)
+    obj, init, goal = _setup(kb, "relative", 4, 4, (0, 0, 0, 0), (0, 90, 90, 0))
+    outcome = Planning(PlanningConfig(default_tbox_path())).make_plan(kb, obj.ident, init.id, goal.id)
+    assert outcome.status == "solved" and outcome.planner == "fd-lama"
+    assert len(outcome.plan.actions) == 2
+    none = Planning(PlanningConfig(default_tbox_path(), fallback_planner=None))
+    assert none.make_plan(kb, obj.ident, init.id, goal.id).status == "error"
