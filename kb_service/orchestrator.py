@@ -30,7 +30,7 @@ from typing import Any, Sequence
 from planhrc.cooperation import Decision, PlanView, decide
 from planhrc.kb.errors import ConflictError, ValidationError
 from planhrc.kb.records import Execution, StoredAction, StoredPlan, StoredState
-from planhrc.model import HAS_ORIENTATION, ArticulatedObject, make_object, orientation_name, snap_angle
+from planhrc.model import ArticulatedObject, make_object, snap_angle
 from planhrc.pipeline import (PlanOutcome, Planning, action_motion, config_from_settings, make_plan,
                               merge_macro_steps)
 
@@ -361,16 +361,5 @@ def _goal_atoms(obj: ArticulatedObject, link_orientations_deg: Sequence[float] |
             raise ValidationError(f"{field}: every link needs an orientation")
         values = obj.joint_values_from_links([int(v) for v in _allowed(obj, link_orientations_deg, field)])
         return obj.configuration_atoms(values)
-    field = "joint_angles_deg"
     assert joint_angles_deg is not None
-    if len(joint_angles_deg) != obj.n_joints:
-        raise ValidationError(f"{field}: expected {obj.n_joints} values (one per joint), got {len(joint_angles_deg)}")
-    _check_finite(joint_angles_deg, field)
-    values = _allowed(obj, joint_angles_deg, field)
-    if all(v is None for v in values):
-        raise ValidationError(f"{field}: at least one joint needs a value")
-    atoms = set()
-    for k, v in zip(obj.joint_indices, values):
-        if v is not None:
-            atoms.add((HAS_ORIENTATION, orientation_name(v), obj.joint(k)))
-    return frozenset(atoms)
+    return obj.partial_configuration_atoms(joint_angles_deg, field="joint_angles_deg")

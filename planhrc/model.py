@@ -196,6 +196,27 @@ class ArticulatedObject:
             out.append(iv)
         return tuple(out)
 
+    def partial_configuration_atoms(self, values: Sequence[float | None], field: str = "goal") -> frozenset[Atom]:
+        """HasOrientation atoms of a (possibly partial) goal: one value per joint, None leaves a joint free.
+
+        Values are degrees taken modulo 360 and must be allowed orientations exactly (a goal is not snapped)."""
+        if len(values) != self.n_joints:
+            raise ModelError(f"{field}: expected {self.n_joints} values (one per joint), got {len(values)}")
+        allowed = set(self.orientation_degrees)
+        atoms = set()
+        for i, (k, v) in enumerate(zip(self.joint_indices, values)):
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ModelError(f"{field}[{i}]: must be a finite number, got {v!r}")
+            degrees = float(v) % 360
+            if degrees not in allowed:
+                raise ModelError(f"{field}[{i}]: {v} is not one of the allowed orientations {sorted(allowed)}")
+            atoms.add((HAS_ORIENTATION, orientation_name(int(degrees)), self.joint(k)))
+        if not atoms:
+            raise ModelError(f"{field}: at least one joint needs a value")
+        return frozenset(atoms)
+
     def joint_values_from_links(self, link_orientations: Sequence[int]) -> tuple[int, ...]:
         """Joint values carried by the formulation, from every real link's absolute orientation."""
         if len(link_orientations) != self.n_links:

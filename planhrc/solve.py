@@ -11,7 +11,6 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 from planhrc.kb.errors import KBError
 from planhrc.kb.store import KnowledgeBase
@@ -58,30 +57,13 @@ def object_for(request: SolveRequest, ident: str) -> ArticulatedObject:
     return make_object(ident, request.formulation, [request.link_length_m] * n_links, request.orientations)
 
 
-def goal_atoms_for(obj: ArticulatedObject, goal: Sequence[int | None]) -> frozenset:
-    """HasOrientation atoms for the constrained joints of a (possibly partial) goal."""
-    if len(goal) != obj.n_joints:
-        raise ModelError(f"goal: expected {obj.n_joints} values (one per joint), got {len(goal)}")
-    allowed = set(obj.orientation_degrees)
-    atoms = set()
-    for i, (k, v) in enumerate(zip(obj.joint_indices, goal)):
-        if v is None:
-            continue
-        if v not in allowed:
-            raise ModelError(f"goal[{i}]: {v} is not one of the allowed orientations {sorted(allowed)}")
-        atoms.add(("hasorientation", f"deg_{v}", obj.joint(k)))
-    if not atoms:
-        raise ModelError("goal: at least one value must be given")
-    return frozenset(atoms)
-
-
 def solve(request: SolveRequest, kb: KnowledgeBase, tbox_path: Path) -> dict:
     """Run the whole pipeline for one request; returns the JSON-ready report."""
     t0 = time.perf_counter()
     ident = kb.new_object_id()
     obj = object_for(request, ident)
     init_atoms = obj.state(obj.check_joint_values(request.init, field="init"))
-    goal_atoms = goal_atoms_for(obj, request.goal)
+    goal_atoms = obj.partial_configuration_atoms(request.goal, field="goal")
     kb.create_object(obj)
     init_state = kb.add_state(ident, "initial", init_atoms)
     goal_state = kb.add_state(ident, "goal", goal_atoms)

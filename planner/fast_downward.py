@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .errors import PlannerError
 from .plan_file import read_best_plan
-from .process import run_limited
+from .process import installed_file, run_limited
 from .result import PlanResult, PlanStatus
 
 log = logging.getLogger(__name__)
@@ -46,14 +46,7 @@ _WHEN = re.compile(r"\(\s*when[\s(]", re.IGNORECASE)
 
 
 def fast_downward_script() -> Path:
-    try:
-        import up_fast_downward
-    except ImportError as exc:  # pragma: no cover - dependency of the project
-        raise PlannerError("fast downward: the up-fast-downward package is not installed") from exc
-    path = Path(up_fast_downward.__file__).resolve().parent / "downward" / "fast-downward.py"
-    if not path.is_file():
-        raise PlannerError(f"fast downward: driver not found at {path}")
-    return path
+    return installed_file("up_fast_downward", "downward/fast-downward.py", "fast downward")
 
 
 def has_conditional_effects(domain: str) -> bool:

@@ -1,13 +1,29 @@
 """Run a planner process in its own process group with a wall-clock limit (shared by the external backends)."""
 from __future__ import annotations
 
+import importlib
 import logging
 import os
 import signal
 import subprocess
 from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import PlannerError
 
 log = logging.getLogger(__name__)
+
+
+def installed_file(package: str, relative: str, what: str) -> Path:
+    """A file shipped inside an installed Python package (a planner or validator binary, a driver script)."""
+    try:
+        module = importlib.import_module(package)
+    except ImportError as exc:  # pragma: no cover - dependency of the project
+        raise PlannerError(f"{what}: the {package} package is not installed") from exc
+    path = Path(module.__file__).resolve().parent / relative
+    if not path.is_file():
+        raise PlannerError(f"{what}: {relative} not found at {path}")
+    return path
 
 
 @dataclass(frozen=True)

