@@ -14,8 +14,8 @@ COPY translator ./translator
 COPY planner ./planner
 COPY robot_sim ./robot_sim
 COPY ontology ./ontology
-# Editable install keeps ontology/planhrc.owl where the package expects it (the repository layout).
-RUN pip install -e .
+# A regular (non-editable) install: the TBox travels as package data of planhrc.ontology.
+RUN pip install .
 VOLUME ["/data"]
 EXPOSE 8000
 HEALTHCHECK --interval=5s --timeout=3s --retries=12 \

@@ -13,7 +13,7 @@ COPY translator ./translator
 COPY planner ./planner
 COPY robot_sim ./robot_sim
 COPY ontology ./ontology
-RUN pip install -e .
+RUN pip install .
 VOLUME ["/out"]
 # The demo against an external KB service: creates the object and goal, then runs the worker loop.
 CMD ["planhrc", "demo", "--kb", "http://kb:8000", "--scenario", "fig13", "--out", "/out"]

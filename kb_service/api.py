@@ -17,7 +17,7 @@ import planhrc
 from planhrc.kb.errors import ConflictError, NotFoundError, ValidationError
 from planhrc.model import HAS_ORIENTATION, ArticulatedObject, format_atom
 from planhrc.pipeline import action_motion
-from translator.errors import TranslationError
+from planhrc.translator.errors import TranslationError
 
 from .auth import AuthError, check_bearer
 from .events import event_public, stream_events
@@ -167,7 +167,7 @@ def read_problem(problem_id: str, orch: Orch) -> dict[str, Any]:
 @router.get("/objects/{object_id}/pddl/domain", response_class=PlainTextResponse, tags=["pddl"])
 def read_pddl_domain(object_id: str, orch: Orch) -> PlainTextResponse:
     """The PDDL domain of the object's formulation, written from the TBox."""
-    from translator import get_domain
+    from planhrc.translator import get_domain
 
     obj = orch.kb.get_object(object_id)
     return PlainTextResponse(get_domain(orch.settings.tbox_path, obj.formulation.value))
@@ -176,7 +176,7 @@ def read_pddl_domain(object_id: str, orch: Orch) -> PlainTextResponse:
 @router.get("/objects/{object_id}/pddl/problem", response_class=PlainTextResponse, tags=["pddl"])
 def read_pddl_problem(object_id: str, orch: Orch) -> PlainTextResponse:
     """The PDDL problem of the object's latest Problem (initial state and goal from the ABox)."""
-    from translator.translate import translate
+    from planhrc.translator.translate import translate
 
     orch.kb.get_object(object_id)
     problem = orch.kb.latest_problem(object_id)

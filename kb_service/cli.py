@@ -1,6 +1,6 @@
 """`planhrc serve`: run the knowledge-base service with uvicorn.
 
-Registered by `planhrc.cli` through `add_serve_parser`; `python -m kb_service.cli serve ...` works too.
+Registered by `planhrc.cli` through `add_serve_parser`; `python -m planhrc.kb_service.cli serve ...` works too.
 """
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def run_serve(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m kb_service.cli")
+    parser = argparse.ArgumentParser(prog="python -m planhrc.kb_service.cli")
     add_serve_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     return int(args.func(args) or 0)

@@ -35,11 +35,11 @@ from typing import Iterable, Sequence
 
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
-from planner.registry import available_planners, get_planner
-from planner.result import PlanStatus
-from planner.validate import validate_plan
-from translator.domain import get_domain
-from translator.problem import get_problem
+from planhrc.planner.registry import available_planners, get_planner
+from planhrc.planner.result import PlanStatus
+from planhrc.planner.validate import validate_plan
+from planhrc.translator.domain import get_domain
+from planhrc.translator.problem import get_problem
 
 log = logging.getLogger(__name__)
 

@@ -13,13 +13,13 @@ from typing import Callable
 # command -> (module, name of its `add_*_parser(subparsers)` function)
 COMMANDS: dict[str, tuple[str, str]] = {
     "ontology": ("planhrc.kb.check", "add_ontology_parser"),
-    "plan": ("planner.cli", "add_plan_parser"),
+    "plan": ("planhrc.planner.cli", "add_plan_parser"),
     "solve": ("planhrc.solve", "add_solve_parser"),
     "bench": ("planhrc.bench", "add_bench_parser"),
-    "serve": ("kb_service.cli", "add_serve_parser"),
-    "worker": ("robot_sim.worker", "add_worker_parser"),
-    "demo": ("robot_sim.demo", "add_demo_parser"),
-    "sim-bench": ("robot_sim.measure", "add_sim_bench_parser"),
+    "serve": ("planhrc.kb_service.cli", "add_serve_parser"),
+    "worker": ("planhrc.robot_sim.worker", "add_worker_parser"),
+    "demo": ("planhrc.robot_sim.demo", "add_demo_parser"),
+    "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser"),
 }
 
 

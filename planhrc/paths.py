@@ -1,10 +1,24 @@
-"""Where the project's files are: the TBox ships in the repository's `ontology/` folder."""
+"""Where the project's data files are: they travel as package data and are found with `importlib.resources`,
+so a wheel installed anywhere finds them as a source checkout does."""
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+
+class DataFileError(FileNotFoundError):
+    """A data file that should ship with the package is not there (a broken install)."""
+
+
+def package_file(package: str, name: str) -> Path:
+    """The file `name` shipped inside `package`, as a real path (pip installs packages as plain folders)."""
+    traversable = resources.files(package) / name
+    path = Path(str(traversable))
+    if not path.is_file():
+        raise DataFileError(f"{name} is missing from the installed package {package}")
+    return path
 
 
 def default_tbox_path() -> Path:
-    return REPO_ROOT / "ontology" / "planhrc.owl"
+    """The TBox shipped with the package: `planhrc/ontology/planhrc.owl` (the repository's `ontology/`)."""
+    return package_file("planhrc.ontology", "planhrc.owl")

@@ -20,13 +20,13 @@ from typing import Any, Sequence
 from planhrc.kb.records import StoredAction, StoredPlan
 from planhrc.model import ArticulatedObject, Formulation, State, is_subsumed
 from planhrc.transition import TransitionError, parse_step, replay
-from planner.errors import PlannerError
-from planner.inproc import GroundTask, ground_task
-from planner.registry import get_planner
-from planner.result import PlanResult, PlanStatus
-from planner.validate import validate_plan
-from translator.domain import read_domain_model
-from translator.translate import PddlTask, translate
+from planhrc.planner.errors import PlannerError
+from planhrc.planner.inproc import GroundTask, ground_task
+from planhrc.planner.registry import get_planner
+from planhrc.planner.result import PlanResult, PlanStatus
+from planhrc.planner.validate import validate_plan
+from planhrc.translator.domain import read_domain_model
+from planhrc.translator.translate import PddlTask, translate
 
 if TYPE_CHECKING:  # the store is only a type here: the stage works on any object with its read methods
     from planhrc.kb.store import KnowledgeBase

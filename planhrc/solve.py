@@ -17,8 +17,8 @@ from planhrc.kb.store import KnowledgeBase
 from planhrc.model import ArticulatedObject, ModelError, make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import Planning, PlanningConfig, merge_macro_steps
-from planner.errors import PlannerError
-from translator.errors import TranslationError
+from planhrc.planner.errors import PlannerError
+from planhrc.translator.errors import TranslationError
 
 ANY = {"*", "_", "-", "?"}
 

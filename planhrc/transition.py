@@ -11,7 +11,7 @@ from typing import Iterator, Mapping, Sequence
 
 from planhrc.kb.records import ActionSpec, CondEffect
 from planhrc.model import Atom, State
-from translator.domain import ActionSchemaSpec, DomainModelSpec, Literal
+from planhrc.translator.domain import ActionSchemaSpec, DomainModelSpec, Literal
 
 
 class TransitionError(Exception):

@@ -1,4 +1,4 @@
-"""Benchmark (not a test): `python -m planner.bench [--links 20] [--orientations 12] [--fd-timeout 60]`.
+"""Benchmark (not a test): `python -m planhrc.planner.bench [--links 20] [--orientations 12] [--fd-timeout 60]`.
 
 Reports in-process grounding time and median re-planning time, Fast Downward whole-process times and VAL
 time, for both formulations and the paper's exact absolute domain; the domains come from the translator.
@@ -15,8 +15,8 @@ from pathlib import Path
 
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
-from translator.domain import get_domain
-from translator.problem import get_problem
+from planhrc.translator.domain import get_domain
+from planhrc.translator.problem import get_problem
 
 from .inproc import ground_task
 from .registry import get_planner
@@ -81,7 +81,7 @@ def bench(tbox: Path, links: int, k: int, fd_timeout: float, replans: int = 100)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m planner.bench")
+    parser = argparse.ArgumentParser(prog="python -m planhrc.planner.bench")
     parser.add_argument("--links", type=int, default=20)
     parser.add_argument("--orientations", type=int, default=12)
     parser.add_argument("--fd-timeout", type=float, default=60.0)

@@ -26,8 +26,8 @@ from typing import Iterator
 
 import numpy as np
 
-from robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
-from robot_sim.scene import SceneSpec, SimError, is_workable
+from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+from planhrc.robot_sim.scene import SceneSpec, SimError, is_workable
 
 log = logging.getLogger(__name__)
 
@@ -139,7 +139,7 @@ def kb_service(out_dir: Path, token: str, startup_timeout_s: float = 90.0) -> It
 
 def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir: Path, gui: bool,
                 perception: str, max_steps: int, seed: int) -> dict:
-    from robot_sim.worker import run_worker
+    from planhrc.robot_sim.worker import run_worker
 
     with KBClient(kb_url, token=token) as kb:
         obj = kb.create_object(scenario.name, len(scenario.initial_deg), scenario.orientations, scenario.formulation)

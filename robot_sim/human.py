@@ -24,7 +24,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from robot_sim.scene import Scene, SimError, is_workable
+from planhrc.robot_sim.scene import Scene, SimError, is_workable
 
 log = logging.getLogger(__name__)
 

@@ -17,9 +17,9 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from robot_sim.perception import CameraPerception, angle_difference_deg
-from robot_sim.scene import SceneSpec, build_scene, is_workable, random_orientations
-from robot_sim.skills import Outcome, Robot, RotationAction, perform_action
+from planhrc.robot_sim.perception import CameraPerception, angle_difference_deg
+from planhrc.robot_sim.scene import SceneSpec, build_scene, is_workable, random_orientations
+from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
 
 
 def _percentile(values: list[float], q: float) -> float:

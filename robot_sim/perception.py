@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 import pybullet
 
-from robot_sim.markers import aruco_dictionary
-from robot_sim.scene import Scene
+from planhrc.robot_sim.markers import aruco_dictionary
+from planhrc.robot_sim.scene import Scene
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from typing import Sequence
 import numpy as np
 import pybullet
 
-from robot_sim.markers import MarkerAsset, write_marker_asset
+from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
 PACKAGE_PREFIX = "package://example-robot-data/"

@@ -15,7 +15,7 @@ from typing import Any, Callable, Mapping, Sequence, Union
 
 import numpy as np
 
-from robot_sim.scene import (
+from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
     Scene,

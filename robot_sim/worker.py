@@ -26,12 +26,12 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from robot_sim.human import (HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action, get_scenario,
+from planhrc.robot_sim.human import (HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action, get_scenario,
                              goal_differences)
-from robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
-from robot_sim.protocol import KBClient, ProtocolError
-from robot_sim.scene import Scene, SceneSpec, SimError, build_scene, direction
-from robot_sim.skills import Outcome, Robot, RotationAction, perform_action
+from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
+from planhrc.robot_sim.protocol import KBClient, ProtocolError
+from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene, direction
+from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
 
 log = logging.getLogger(__name__)
 

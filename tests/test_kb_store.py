@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import importlib.util
 import threading
+from pathlib import Path
 
 import pytest
 import rdflib
@@ -12,7 +13,9 @@ from planhrc.kb.errors import ConflictError, NotFoundError, ValidationError
 from planhrc.kb.records import ActionSpec, Execution
 from planhrc.kb.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase
 from planhrc.model import make_object, snap_angle
-from planhrc.paths import REPO_ROOT, default_tbox_path
+from planhrc.paths import default_tbox_path
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
 from tests.test_kb_scenarios import plan_for
 
 TBOX = default_tbox_path()

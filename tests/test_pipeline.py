@@ -8,7 +8,7 @@ from planhrc.kb.store import KnowledgeBase
 from planhrc.model import is_subsumed, make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import Planning, PlanningConfig
-from planner.result import PlanResult, PlanStatus
+from planhrc.planner.result import PlanResult, PlanStatus
 from tests.scenarios import SCENARIOS
 
 
@@ -110,7 +110,7 @@ def test_solve_command_refuses_bad_input(capsys, args, message):
 def test_a_task_the_in_process_planner_refuses_goes_to_the_fallback_planner(kb, monkeypatch):
     """Isolates the fallback: grounding is made to refuse the task; Fast Downward (real) then plans it."""
     import planhrc.pipeline as pipeline
-    from planner.errors import PlannerError
+    from planhrc.planner.errors import PlannerError
 
     def refuse(domain, problem):
         raise PlannerError("domain: not a member of the rotation family")

@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 
 from planhrc.model import make_object
-from planner import Planner, PlannerError, PlanStatus, available_planners, get_planner, plan_files, validate_plan
-from planner.cli import main as cli_main
-from planner.fast_downward import has_conditional_effects
-from planner.registry import PLANNERS
-from translator.problem import get_problem
+from planhrc.planner import Planner, PlannerError, PlanStatus, available_planners, get_planner, plan_files, validate_plan
+from planhrc.planner.cli import main as cli_main
+from planhrc.planner.fast_downward import has_conditional_effects
+from planhrc.planner.registry import PLANNERS
+from planhrc.translator.problem import get_problem
 
 DATA = Path(__file__).parent / "data"
 DOMAINS = {f: (DATA / f"domain-{f}.pddl").read_text() for f in ("relative", "absolute", "absolute-paper")}

@@ -5,10 +5,10 @@ from pathlib import Path
 import pytest
 
 from planhrc.model import Formulation, make_object
-from planner import PlanStatus, ground_task, validate_plan
-from planner.errors import PlannerError
-from planner.inproc import InprocPlanner, OutsideFamilyError
-from translator.problem import get_problem
+from planhrc.planner import PlanStatus, ground_task, validate_plan
+from planhrc.planner.errors import PlannerError
+from planhrc.planner.inproc import InprocPlanner, OutsideFamilyError
+from planhrc.translator.problem import get_problem
 
 DATA = Path(__file__).parent / "data"
 DOMAINS = {

@@ -4,11 +4,11 @@ from pathlib import Path
 import pytest
 
 from planhrc.model import make_object
-from planner.errors import PlannerError
-from planner.inproc import recognise_schema
-from planner.pddl import parse_domain, parse_problem
-from planner.plan_file import parse_plan_text, read_best_plan
-from translator.problem import get_problem
+from planhrc.planner.errors import PlannerError
+from planhrc.planner.inproc import recognise_schema
+from planhrc.planner.pddl import parse_domain, parse_problem
+from planhrc.planner.plan_file import parse_plan_text, read_best_plan
+from planhrc.translator.problem import get_problem
 
 DATA = Path(__file__).parent / "data"
 

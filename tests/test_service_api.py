@@ -14,8 +14,8 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")  # starlette's notice about httpx2
     from fastapi.testclient import TestClient
 
-from kb_service.app import create_app
-from kb_service import schemas
+from planhrc.kb_service.app import create_app
+from planhrc.kb_service import schemas
 from planhrc.model import absolute_from_relative
 from planhrc.settings import make_settings
 
@@ -333,7 +333,7 @@ def test_perception_while_dispatched_and_late_feedback(client):
 
 
 def test_unsolvable_or_failed_planning_answers_no_plan(client, monkeypatch):
-    import kb_service.orchestrator as orchestrator
+    import planhrc.kb_service.orchestrator as orchestrator
     from planhrc.pipeline import PlanOutcome
 
     monkeypatch.setattr(orchestrator, "make_plan",
@@ -488,7 +488,7 @@ def test_next_action_is_dispatched_once(client):
 def test_object_locks_serialize_one_object_and_not_two():
     import threading
 
-    from kb_service.locks import ObjectLocks
+    from planhrc.kb_service.locks import ObjectLocks
 
     locks = ObjectLocks()
     got: dict[str, bool] = {}

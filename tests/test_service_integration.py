@@ -1,4 +1,4 @@
-"""The service as a real process (`planhrc serve`, or `python -m kb_service.cli serve` when the planhrc CLI
+"""The service as a real process (`planhrc serve`, or `python -m planhrc.kb_service.cli serve` when the planhrc CLI
 does not offer it), driven over HTTP by a simulated worker: whole episodes, a restart on the same database,
 two objects in parallel, idempotent retries, the bearer token from the environment and the live event stream.
 """
@@ -36,9 +36,9 @@ def free_port() -> int:
 def serve_command(port: int, db: Path) -> list[str]:
     """`planhrc serve` through the project CLI when it registers the command, else the service's own CLI."""
     args = ["serve", "--host", "127.0.0.1", "--port", str(port), "--db", str(db), "--log-level", "warning"]
-    if importlib.util.find_spec("planhrc.cli") is not None and "kb_service.cli" in (REPO / "planhrc" / "cli.py").read_text():
+    if importlib.util.find_spec("planhrc.cli") is not None and "planhrc.kb_service.cli" in (REPO / "planhrc" / "cli.py").read_text():
         return [sys.executable, "-m", "planhrc.cli", *args]
-    return [sys.executable, "-m", "kb_service.cli", *args]
+    return [sys.executable, "-m", "planhrc.kb_service.cli", *args]
 
 
 @contextmanager

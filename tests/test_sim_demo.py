@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from robot_sim.demo import DEMO_SCENARIOS, run_demo
+from planhrc.robot_sim.demo import DEMO_SCENARIOS, run_demo
 
 pytestmark = [pytest.mark.sim, pytest.mark.integration, pytest.mark.slow]
 
@@ -28,7 +28,7 @@ def test_paper_scenarios_reach_the_goal(name, tmp_path):
 
 
 def test_unknown_scenario_is_refused(tmp_path):
-    from robot_sim.scene import SimError
+    from planhrc.robot_sim.scene import SimError
 
     with pytest.raises(SimError, match="scenario"):
         run_demo("fig99", tmp_path)

@@ -10,7 +10,7 @@ pytestmark = [pytest.mark.sim, pytest.mark.integration]
 @pytest.fixture(scope="module")
 def service_url():
     uvicorn = pytest.importorskip("uvicorn")
-    from kb_service.app import create_app
+    from planhrc.kb_service.app import create_app
     from planhrc.settings import make_settings
 
     app = create_app(make_settings(db_path=None, token="tok"))
@@ -29,8 +29,8 @@ def service_url():
 
 @pytest.mark.parametrize("formulation", ["relative", "absolute"])
 def test_fig14_run_reaches_the_goal_through_the_service(service_url, tmp_path, formulation):
-    from robot_sim.protocol import KBClient
-    from robot_sim.worker import run_worker
+    from planhrc.robot_sim.protocol import KBClient
+    from planhrc.robot_sim.worker import run_worker
 
     with KBClient(service_url, token="tok") as kb:
         obj = kb.create_object("rod", 5, 8, formulation)
@@ -51,9 +51,9 @@ def test_worker_survives_a_restart_of_the_service_and_no_perception_counts_twice
     import sys
     from pathlib import Path
 
-    from robot_sim.demo import free_port
-    from robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
-    from robot_sim.worker import run_worker
+    from planhrc.robot_sim.demo import free_port
+    from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+    from planhrc.robot_sim.worker import run_worker
 
     repo = Path(__file__).resolve().parent.parent
     port, db = free_port(), tmp_path / "kb.sqlite3"

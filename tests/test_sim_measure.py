@@ -1,7 +1,7 @@
 """`planhrc sim-bench` reports marker error and timings from real renders and skill executions."""
 import pytest
 
-from robot_sim.measure import measure
+from planhrc.robot_sim.measure import measure
 
 pytestmark = pytest.mark.sim
 

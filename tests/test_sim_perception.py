@@ -4,8 +4,8 @@ import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
-from robot_sim.perception import CameraPerception, FallbackPerception, angle_difference_deg
-from robot_sim.scene import SceneSpec, build_scene, random_orientations
+from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, angle_difference_deg
+from planhrc.robot_sim.scene import SceneSpec, build_scene, random_orientations
 
 pytestmark = pytest.mark.sim
 

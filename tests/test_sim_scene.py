@@ -3,8 +3,8 @@ import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
-from robot_sim.perception import angle_difference_deg
-from robot_sim.scene import SceneSpec, SimError, build_scene, joint_between
+from planhrc.robot_sim.perception import angle_difference_deg
+from planhrc.robot_sim.scene import SceneSpec, SimError, build_scene, joint_between
 
 pytestmark = pytest.mark.sim
 

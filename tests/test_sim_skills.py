@@ -3,9 +3,9 @@ import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
-from robot_sim.perception import angle_difference_deg
-from robot_sim.scene import SceneSpec, build_scene, set_arm_joints
-from robot_sim.skills import Grip, MoveArm, Outcome, Robot, RotateObject, RotationAction, execute, perform_action, rotate_skill
+from planhrc.robot_sim.perception import angle_difference_deg
+from planhrc.robot_sim.scene import SceneSpec, build_scene, set_arm_joints
+from planhrc.robot_sim.skills import Grip, MoveArm, Outcome, Robot, RotateObject, RotationAction, execute, perform_action, rotate_skill
 
 pytestmark = pytest.mark.sim
 

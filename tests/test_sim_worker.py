@@ -5,10 +5,10 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 
-from robot_sim.human import HumanEvent, Scenario, get_scenario
-from robot_sim.perception import Perception
-from robot_sim.scene import SceneSpec
-from robot_sim.worker import _perceive, run_worker
+from planhrc.robot_sim.human import HumanEvent, Scenario, get_scenario
+from planhrc.robot_sim.perception import Perception
+from planhrc.robot_sim.scene import SceneSpec
+from planhrc.robot_sim.worker import _perceive, run_worker
 
 pytestmark = pytest.mark.sim
 

@@ -6,7 +6,7 @@ from planhrc.paths import default_tbox_path
 from planhrc.pipeline import action_motion, merge_macro_steps
 from planhrc.kb.records import ActionSpec, StoredAction
 from planhrc.transition import TransitionError, apply, replay
-from translator.domain import read_domain_model
+from planhrc.translator.domain import read_domain_model
 
 
 def test_absolute_rotation_propagates_downstream_only():

@@ -5,8 +5,8 @@ import pytest
 
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
-from translator import SymbolError, SymbolTable, TranslationError, get_domain, get_problem
-from translator.translate import symbols_for
+from planhrc.translator import SymbolError, SymbolTable, TranslationError, get_domain, get_problem
+from planhrc.translator.translate import symbols_for
 
 DATA = Path(__file__).parent / "data"
 
@@ -83,8 +83,8 @@ def test_independent_parser_reads_domain_and_problem(formulation, tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("formulation", ["relative", "absolute"])
 def test_fast_downward_solves_translated_problem(formulation):
-    from planner.registry import get_planner
-    from planner.validate import validate_plan
+    from planhrc.planner.registry import get_planner
+    from planhrc.planner.validate import validate_plan
 
     obj = make_object("o", formulation, 5, 4)
     init = obj.state([0] * obj.n_joints)
