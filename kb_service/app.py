@@ -11,6 +11,7 @@ import planhrc
 from planhrc.settings import Settings, get_settings
 
 from .api import install_error_handlers, router
+from .guard import GuardPolicy, RequestGuard
 from .locks import ObjectLocks
 from .orchestrator import Orchestrator
 
@@ -49,6 +50,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     app.state.settings = settings
+    app.add_middleware(RequestGuard, policy=GuardPolicy(
+        token=settings.token, read_token=settings.read_token, protect_reads=settings.protect_reads,
+        max_body_bytes=settings.max_body_bytes))
     install_error_handlers(app)
     app.include_router(router)
     return app

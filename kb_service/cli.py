@@ -18,6 +18,10 @@ def add_serve_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
                    help="SQLite file of the ABox (default planhrc.sqlite3, env PLANHRC_DB_PATH; ':memory:' for none)")
     p.add_argument("--token", default=None,
                    help="bearer token required for writes (env PLANHRC_TOKEN; default: no authentication)")
+    p.add_argument("--read-token", default=None,
+                   help="read-only bearer token, accepted for reads when reads are protected (env PLANHRC_READ_TOKEN)")
+    p.add_argument("--protect-reads", action="store_true", default=None,
+                   help="reads of the knowledge base need a token too (env PLANHRC_PROTECT_READS)")
     p.add_argument("--tbox", default=None, help="TBox OWL file (default: the repository's ontology/planhrc.owl)")
     p.add_argument("--planner", default=None, help="planner backend (default inproc)")
     p.add_argument("--log-level", default=None, help="uvicorn log level (default info)")
@@ -34,6 +38,7 @@ def run_serve(args: argparse.Namespace) -> int:
 
     overrides = {key: value for key, value in {
         "host": args.host, "port": args.port, "db_path": args.db, "token": args.token,
+        "read_token": args.read_token, "protect_reads": args.protect_reads,
         "tbox_path": args.tbox, "planner": args.planner, "log_level": args.log_level,
     }.items() if value is not None}
     settings = make_settings(**overrides)

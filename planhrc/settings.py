@@ -45,6 +45,20 @@ class Settings(BaseSettings):
         "two 45 degree steps as one 90 degree step); the expected state after the merged step is checked.",
     )
     log_level: str = Field(default="info", description="Logging level of the service (uvicorn names).")
+    read_token: str | None = Field(
+        default=None,
+        description="A second, read-only bearer token: accepted for reads of the knowledge base when "
+        "`protect_reads` is on, never for writes.",
+    )
+    protect_reads: bool = Field(
+        default=False,
+        description="Reads of the knowledge base (objects, states, problems, plans, events, ontology) need the "
+        "token or the read-only token too; /health, the API docs and the console page stay open.",
+    )
+    max_body_bytes: int = Field(
+        default=1_048_576, ge=1024, le=1_073_741_824,
+        description="Largest request body accepted; larger ones get 413 before they are read.",
+    )
 
 
 @lru_cache

@@ -1,0 +1,152 @@
+"""Untrusted input costs nothing before it is trusted, against a real `planhrc serve` process.
+
+The token is checked from the headers before the body is read; a `Content-Length` over the limit gets 413
+without reading; a chunked body is cut at the limit; reads can be put behind the token (or a read-only token).
+The sockets here announce a 150 MB body and send only its first bytes: an answer that comes back at once proves
+the server did not wait for, or read, the rest.
+"""
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+import httpx
+import pytest
+
+from planhrc.kb_service.guard import GuardPolicy, RequestGuard, is_data_path, token_matches
+
+pytestmark = pytest.mark.integration
+
+TOKEN, READ_TOKEN = "s3cret-writer", "s3cret-reader"
+LIMIT = 64 * 1024
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def guarded_server(tmp_path: Path, protect_reads: bool) -> Iterator[int]:
+    port = _free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
+    env.update(PLANHRC_TOKEN=TOKEN, PLANHRC_READ_TOKEN=READ_TOKEN, PLANHRC_MAX_BODY_BYTES=str(LIMIT),
+               PLANHRC_PROTECT_READS="true" if protect_reads else "false")
+    proc = subprocess.Popen([sys.executable, "-m", "planhrc.cli", "serve", "--port", str(port), "--db",
+                             str(tmp_path / "kb.sqlite3"), "--log-level", "warning"],
+                            cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            assert proc.poll() is None, "the server exited"
+            try:
+                if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            assert time.monotonic() < deadline, "no /health within 60 s"
+            time.sleep(0.1)
+        yield port
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _raw_request(port: int, head: str, first_bytes: bytes = b"") -> tuple[int, dict, float]:
+    """Send a request head (and the first bytes of a body), read the answer: status, JSON body, seconds."""
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+        start = time.perf_counter()
+        sock.sendall(head.encode("latin-1") + first_bytes)
+        data = b""
+        while b"\r\n\r\n" not in data:
+            chunk = sock.recv(65536)
+            if not chunk:
+                break
+            data += chunk
+        header_block, _, body = data.partition(b"\r\n\r\n")
+        length = next((int(line.split(b":")[1]) for line in header_block.split(b"\r\n")
+                       if line.lower().startswith(b"content-length:")), 0)
+        while len(body) < length:
+            chunk = sock.recv(65536)
+            if not chunk:
+                break
+            body += chunk
+        seconds = time.perf_counter() - start
+    status = int(header_block.split(b" ")[1])
+    return status, json.loads(body) if body else {}, seconds
+
+
+def _count_objects(port: int) -> int:
+    return len(httpx.get(f"http://127.0.0.1:{port}/objects", headers={"Authorization": f"Bearer {TOKEN}"}).json())
+
+
+def test_huge_bodies_are_refused_before_they_are_read(tmp_path: Path):
+    with guarded_server(tmp_path, protect_reads=False) as port:
+        huge = 150 * 1024 * 1024
+        # no token: 401 from the headers alone, although 150 MB are announced and 1 KB is sent
+        status, body, seconds = _raw_request(
+            port, f"POST /objects HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                  f"Content-Length: {huge}\r\n\r\n", b"{" + b" " * 1023)
+        assert status == 401 and "Bearer" in body["detail"]
+        assert seconds < 1.0
+        # with the token: 413 from the announced length, body never read
+        status, body, seconds = _raw_request(
+            port, f"POST /objects HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n"
+                  f"Content-Type: application/json\r\nContent-Length: {huge}\r\n\r\n", b"{" + b" " * 1023)
+        assert status == 413 and str(LIMIT) in body["detail"]
+        assert seconds < 1.0
+        # chunked, no length: cut as soon as the limit is passed (sent: limit + 1 KB of a far larger body)
+        chunk = b" " * 4096
+        chunks = b"".join(b"%x\r\n%s\r\n" % (len(chunk), chunk) for _ in range(LIMIT // 4096 + 1))
+        status, body, seconds = _raw_request(
+            port, f"POST /objects HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n"
+                  f"Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n", chunks)
+        assert status == 413
+        assert seconds < 1.0
+        assert _count_objects(port) == 0  # nothing was created by any of them
+        # a body within the limit still works
+        ok = httpx.post(f"http://127.0.0.1:{port}/objects", headers={"Authorization": f"Bearer {TOKEN}"},
+                        json={"name": "bar", "links": 3, "orientations": 4, "formulation": "relative"})
+        assert ok.status_code == 201, ok.text
+        assert _count_objects(port) == 1
+
+
+def test_reads_behind_the_token_when_asked(tmp_path: Path):
+    with guarded_server(tmp_path, protect_reads=True) as port:
+        base = f"http://127.0.0.1:{port}"
+        assert httpx.get(f"{base}/health").status_code == 200  # liveness stays open
+        assert httpx.get(f"{base}/openapi.json").status_code == 200
+        refused = httpx.get(f"{base}/objects")
+        assert refused.status_code == 401 and refused.headers["www-authenticate"] == "Bearer"
+        assert httpx.get(f"{base}/ontology").status_code == 401
+        reader = {"Authorization": f"Bearer {READ_TOKEN}"}
+        assert httpx.get(f"{base}/objects", headers=reader).status_code == 200
+        # the read-only token never writes
+        write = httpx.post(f"{base}/objects", headers=reader,
+                           json={"name": "bar", "links": 3, "orientations": 4, "formulation": "relative"})
+        assert write.status_code == 401
+        assert _count_objects(port) == 0
+
+
+def test_policy_helpers():
+    assert token_matches("Bearer abc", None, "abc") and token_matches("bearer  abc ", "abc")
+    assert not token_matches("Bearer abd", "abc") and not token_matches("Basic abc", "abc")
+    assert not token_matches("Bearer ", None, "") and not token_matches(None, "abc")
+    assert is_data_path("/objects") and is_data_path("/objects/obj1/plan") and is_data_path("/ontology")
+    assert not is_data_path("/objectsx") and not is_data_path("/health") and not is_data_path("/")
+    guard = RequestGuard(app=None, policy=GuardPolicy(TOKEN, None, False, LIMIT))  # type: ignore[arg-type]
+    assert guard._refuse_before_body("POST", "/objects", {"authorization": f"Bearer {TOKEN}",
+                                                          "content-length": "12x"})[0] == 400
+    assert guard._refuse_before_body("GET", "/objects", {}) is None
