@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "worker": ("planhrc.robot_sim.worker", "add_worker_parser"),
     "demo": ("planhrc.robot_sim.demo", "add_demo_parser"),
     "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser"),
+    "service-bench": ("planhrc.service_bench", "add_service_bench_parser"),
 }
 
 

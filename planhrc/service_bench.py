@@ -1,0 +1,414 @@
+"""`planhrc service-bench`: the KB service as a cell uses it for weeks, measured over HTTP (not a test).
+
+Each part starts its own `planhrc serve` process on a fresh SQLite file and drives it with real requests:
+
+* **objects** — p50/p95 of a re-planning perception on one object while 1, 200, 1,000 … objects are stored;
+* **history** — one object receives thousands of perceptions (each forces a new plan); at each checkpoint: the
+  re-planning perception's p50/p95, every read route's latency, `/ontology`'s size, the server's RSS and the
+  worst wait of `/health` while the slowest read runs;
+* **contention** — another object's worst perception latency while a large absolute object plans;
+* **refusal** — the time to refuse a 150 MB body without the token, and over the size limit with it.
+
+Prints one JSON document on stdout (`--out DIR` also writes `service-bench.json` and a Markdown table).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import random
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import httpx
+
+TOKEN = "service-bench-token"
+READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
+
+
+@dataclass(frozen=True)
+class Server:
+    base: str
+    pid: int
+
+
+def percentile(values: list[float], q: float) -> float:
+    """The q-quantile (0..1) by linear interpolation; NaN for no values."""
+    if not values:
+        return float("nan")
+    ordered = sorted(values)
+    k = (len(ordered) - 1) * q
+    lo, hi = int(k), min(int(k) + 1, len(ordered) - 1)
+    return ordered[lo] + (ordered[hi] - ordered[lo]) * (k - lo)
+
+
+def rss_mb(pid: int) -> float:
+    """Resident set size of a process in MiB (Linux /proc)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextmanager
+def running_service(workdir: Path, extra_env: dict[str, str] | None = None) -> Iterator[Server]:
+    """`planhrc serve` on a fresh store in `workdir`, stopped (with its process group) on the way out."""
+    port = _free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
+    env.update({"PLANHRC_TOKEN": TOKEN, **(extra_env or {})})
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planhrc.cli", "serve", "--port", str(port), "--db", str(workdir / "kb.sqlite3"),
+         "--log-level", "warning"],
+        cwd=workdir, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 90
+        while True:
+            if proc.poll() is not None:
+                raise RuntimeError(f"planhrc serve exited with {proc.returncode}")
+            try:
+                if httpx.get(f"{base}/health", timeout=2).status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            if time.monotonic() > deadline:
+                raise RuntimeError("planhrc serve did not answer /health within 90 s")
+            time.sleep(0.1)
+        yield Server(base, proc.pid)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(timeout=20)
+        except (ProcessLookupError, subprocess.TimeoutExpired):
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            proc.wait()
+
+
+def _client(server: Server, timeout: float) -> httpx.Client:
+    return httpx.Client(base_url=server.base, timeout=timeout, headers={"Authorization": f"Bearer {TOKEN}"})
+
+
+def create_object(client: httpx.Client, links: int, orientations: int, formulation: str, name: str) -> str:
+    r = client.post("/objects", json={"name": name, "links": links, "orientations": orientations,
+                                      "formulation": formulation})
+    r.raise_for_status()
+    return str(r.json()["id"])
+
+
+def random_angles(rng: random.Random, links: int, orientations: int) -> list[float]:
+    step = 360 // orientations
+    return [float(rng.randrange(orientations) * step) for _ in range(links)]
+
+
+def set_goal(client: httpx.Client, object_id: str, angles: list[float]) -> None:
+    client.put(f"/objects/{object_id}/goal", json={"link_orientations_deg": angles}).raise_for_status()
+
+
+def perceive(client: httpx.Client, object_id: str, angles: list[float]) -> tuple[float, str]:
+    """Post one perception; the wall time and the decision."""
+    t = time.perf_counter()
+    r = client.post(f"/objects/{object_id}/perceptions", json={"link_orientations_deg": angles})
+    seconds = time.perf_counter() - t
+    r.raise_for_status()
+    return seconds, str(r.json()["decision"])
+
+
+def replanning_latencies(client: httpx.Client, object_id: str, links: int, orientations: int, count: int,
+                         rng: random.Random) -> list[float]:
+    """Seconds of `count` perceptions that each force a new plan (random configurations far from the plan)."""
+    out = []
+    for _ in range(count):
+        seconds, decision = perceive(client, object_id, random_angles(rng, links, orientations))
+        if decision == "replan":
+            out.append(seconds)
+    return out
+
+
+def summary_ms(values: list[float]) -> dict[str, float]:
+    return {"n": len(values), "p50_ms": round(percentile(values, 0.5) * 1000, 2),
+            "p95_ms": round(percentile(values, 0.95) * 1000, 2),
+            "max_ms": round(max(values) * 1000, 2) if values else float("nan")}
+
+
+# -- parts ----------------------------------------------------------------------------------------------------
+def bench_objects(counts: list[int], samples: int, links: int, orientations: int, seed: int) -> list[dict[str, Any]]:
+    rng = random.Random(seed)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server, \
+            _client(server, 120) as client:
+        stored = 0
+        probe = create_object(client, links, orientations, "relative", "probe")
+        set_goal(client, probe, random_angles(rng, links, orientations))
+        stored = 1
+        for count in sorted(counts):
+            while stored < count:
+                create_object(client, links, orientations, "relative", f"filler{stored}")
+                stored += 1
+            lat = replanning_latencies(client, probe, links, orientations, samples, rng)
+            rows.append({"objects": count, **summary_ms(lat), "rss_mb": round(rss_mb(server.pid), 1)})
+            print(f"[service-bench] objects={count}: {rows[-1]}", file=sys.stderr, flush=True)
+    return rows
+
+
+def _timed_get(client: httpx.Client, path: str, headers: dict[str, str] | None = None) -> tuple[float, int, int]:
+    t = time.perf_counter()
+    try:
+        r = client.get(path, headers=headers)
+    except httpx.TimeoutException:
+        return float("inf"), 0, 0
+    return time.perf_counter() - t, r.status_code, len(r.content)
+
+
+def _read_paths(object_id: str, last_seq: int) -> dict[str, str]:
+    return {"object": f"/objects/{object_id}", "plan": f"/objects/{object_id}/plan",
+            "events": f"/objects/{object_id}/events?after_seq={max(0, last_seq - 50)}",
+            "pddl_problem": f"/objects/{object_id}/pddl/problem", "ontology": "/ontology"}
+
+
+def _health_worst_wait(server: Server, during: Callable[[], Any]) -> tuple[float, Any]:
+    """Run `during` while polling /health from another connection; the worst /health latency seen."""
+    stop = threading.Event()
+    worst = [0.0]
+
+    def poll() -> None:
+        with httpx.Client(base_url=server.base, timeout=120) as c:
+            while not stop.is_set():
+                t = time.perf_counter()
+                try:
+                    c.get("/health")
+                except httpx.TransportError:
+                    pass
+                worst[0] = max(worst[0], time.perf_counter() - t)
+                time.sleep(0.01)
+
+    thread = threading.Thread(target=poll, daemon=True)
+    thread.start()
+    try:
+        result = during()
+    finally:
+        stop.set()
+        thread.join(timeout=130)
+    return worst[0], result
+
+
+def bench_history(checkpoints: list[int], samples: int, links: int, orientations: int, formulation: str,
+                  read_timeout: float, seed: int) -> list[dict[str, Any]]:
+    rng = random.Random(seed)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server, \
+            _client(server, read_timeout) as client:
+        obj = create_object(client, links, orientations, formulation, "history")
+        set_goal(client, obj, random_angles(rng, links, orientations))
+        sent = 0
+        for checkpoint in sorted(checkpoints):
+            while sent < checkpoint - samples:
+                perceive(client, obj, random_angles(rng, links, orientations))
+                sent += 1
+            lat = replanning_latencies(client, obj, links, orientations, samples, rng)
+            sent += samples
+            events = client.get(f"/objects/{obj}/events", params={"after_seq": 0}).json()
+            last_seq = int(events[-1]["seq"]) if events else 0
+            reads: dict[str, Any] = {}
+            for name, path in _read_paths(obj, last_seq).items():
+                times = []
+                size = 0
+                for _ in range(1 if name == "ontology" else 5):
+                    seconds, status, size = _timed_get(client, path)
+                    times.append(seconds)
+                    if status != 200:
+                        break
+                reads[name] = {"p50_ms": round(percentile(times, 0.5) * 1000, 2),
+                               "max_ms": round(max(times) * 1000, 2), "bytes": size,
+                               "status": status if times[-1] != float("inf") else "timeout"}
+            slowest = max(READ_ROUTES, key=lambda n: reads[n]["max_ms"])
+            worst_health, _ = _health_worst_wait(server, lambda: _timed_get(client, _read_paths(obj, last_seq)[slowest]))
+            row = {"perceptions": checkpoint, "replan": summary_ms(lat), "reads": reads,
+                   "slowest_read": slowest, "health_worst_ms_during_slowest_read": round(worst_health * 1000, 2),
+                   "rss_mb": round(rss_mb(server.pid), 1)}
+            rows.append(row)
+            print(f"[service-bench] history {checkpoint}: replan p50 {row['replan']['p50_ms']} ms, "
+                  f"rss {row['rss_mb']} MB, slowest read {slowest} {reads[slowest]['max_ms']} ms",
+                  file=sys.stderr, flush=True)
+    return rows
+
+
+def bench_contention(big_links: int, big_orientations: int, small_samples: int, seed: int) -> dict[str, Any]:
+    """The worst latency of a small object's perceptions while a large absolute object plans."""
+    rng = random.Random(seed)
+    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server, \
+            _client(server, 600) as client:
+        small = create_object(client, 8, 12, "relative", "small")
+        set_goal(client, small, random_angles(rng, 8, 12))
+        big = create_object(client, big_links, big_orientations, "absolute", "big")
+        set_goal(client, big, random_angles(rng, big_links, big_orientations))
+        quiet = replanning_latencies(client, small, 8, 12, small_samples, rng)
+        big_seconds: list[float] = []
+
+        def plan_big() -> None:
+            with _client(server, 600) as c:
+                big_seconds.append(perceive(c, big, random_angles(rng, big_links, big_orientations))[0])
+
+        thread = threading.Thread(target=plan_big)
+        thread.start()
+        busy: list[float] = []
+        time.sleep(0.05)
+        while thread.is_alive() and len(busy) < 10 * small_samples:
+            busy.extend(replanning_latencies(client, small, 8, 12, 1, rng))
+        thread.join()
+        return {"big_object": f"{big_links} links x {big_orientations} orientations, absolute",
+                "big_perception_s": round(big_seconds[0], 2) if big_seconds else None,
+                "small_quiet": summary_ms(quiet), "small_while_big_plans": summary_ms(busy)}
+
+
+def bench_refusal() -> dict[str, Any]:
+    """Seconds to answer a request announcing a 150 MB body, with only its first KB sent."""
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server:
+        host, port = server.base.rsplit(":", 1)
+        for label, auth in (("no_token", ""), ("token_over_limit", f"Authorization: Bearer {TOKEN}\r\n")):
+            head = (f"POST /objects HTTP/1.1\r\nHost: x\r\n{auth}Content-Type: application/json\r\n"
+                    f"Content-Length: {150 * 1024 * 1024}\r\n\r\n").encode()
+            with socket.create_connection(("127.0.0.1", int(port)), timeout=30) as sock:
+                t = time.perf_counter()
+                sock.sendall(head + b"{" + b" " * 1023)
+                first = sock.recv(4096)
+                seconds = time.perf_counter() - t
+            status = int(first.split(b" ")[1]) if first else 0
+            out[label] = {"status": status, "ms": round(seconds * 1000, 2)}
+        out["rss_mb_after"] = round(rss_mb(server.pid), 1)
+    return out
+
+
+# -- command --------------------------------------------------------------------------------------------------
+def _int_list(text: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected whole numbers separated by commas, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive whole numbers, got {text!r}")
+    return values
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text!r}")
+    return value
+
+
+def add_service_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
+    p = subparsers.add_parser("service-bench", help="measure the KB service with a long history (not a test)",
+                              description=__doc__.splitlines()[0] if __doc__ else None)
+    p.add_argument("--parts", default="objects,history,contention,refusal",
+                   help="comma-separated: objects, history, contention, refusal")
+    p.add_argument("--objects", type=_int_list, default=[1, 200, 1000], help="stored-object counts (1,200,1000)")
+    p.add_argument("--checkpoints", type=_int_list, default=[100, 1000, 10000],
+                   help="perception counts on one object at which to measure (100,1000,10000)")
+    p.add_argument("--samples", type=_positive_int, default=30, help="re-planning perceptions per measurement")
+    p.add_argument("--links", type=_positive_int, default=8)
+    p.add_argument("--orientations", type=_positive_int, default=12)
+    p.add_argument("--formulation", choices=["relative", "absolute"], default="relative")
+    p.add_argument("--big-links", type=_positive_int, default=200, help="links of the large object (contention)")
+    p.add_argument("--big-orientations", type=_positive_int, default=12)
+    p.add_argument("--read-timeout", type=float, default=120.0, help="seconds before a read counts as a timeout")
+    p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--out", type=Path, default=None, help="also write service-bench.json and .md here")
+    p.set_defaults(func=run_service_bench)
+    return p
+
+
+def run_service_bench(args: argparse.Namespace) -> int:
+    parts = {p.strip() for p in args.parts.split(",") if p.strip()}
+    unknown = parts - {"objects", "history", "contention", "refusal"}
+    if unknown:
+        print(f"planhrc service-bench: --parts: unknown part(s) {', '.join(sorted(unknown))}", file=sys.stderr)
+        return 2
+    report: dict[str, Any] = {"machine": {"cpu": _cpu_model(), "cores": os.cpu_count(),
+                                          "python": platform.python_version()}}
+    try:
+        if "refusal" in parts:
+            report["refusal"] = bench_refusal()
+        if "objects" in parts:
+            report["objects"] = bench_objects(args.objects, args.samples, args.links, args.orientations, args.seed)
+        if "history" in parts:
+            report["history"] = bench_history(args.checkpoints, args.samples, args.links, args.orientations,
+                                              args.formulation, args.read_timeout, args.seed)
+        if "contention" in parts:
+            report["contention"] = bench_contention(args.big_links, args.big_orientations, args.samples, args.seed)
+    except (RuntimeError, httpx.HTTPError) as exc:
+        print(f"planhrc service-bench: {exc}", file=sys.stderr)
+        return 1
+    text = json.dumps(report, indent=2)
+    print(text)
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "service-bench.json").write_text(text + "\n")
+        (args.out / "service-bench.md").write_text(markdown(report))
+    return 0
+
+
+def markdown(report: dict[str, Any]) -> str:
+    lines = [f"Machine: {report['machine']['cpu']}, {report['machine']['cores']} cores, "
+             f"Python {report['machine']['python']}.", ""]
+    if "objects" in report:
+        lines += ["| objects stored | re-planning perception p50 | p95 | server RSS |", "|---|---|---|---|"]
+        lines += [f"| {r['objects']} | {r['p50_ms']} ms | {r['p95_ms']} ms | {r['rss_mb']} MB |"
+                  for r in report["objects"]]
+        lines.append("")
+    if "history" in report:
+        lines += ["| perceptions on one object | re-plan p50 | p95 | " + " | ".join(READ_ROUTES)
+                  + " | /health worst wait | RSS |", "|---" * (5 + len(READ_ROUTES)) + "|"]
+        for r in report["history"]:
+            reads = " | ".join(f"{r['reads'][n]['max_ms']} ms" for n in READ_ROUTES)
+            lines.append(f"| {r['perceptions']} | {r['replan']['p50_ms']} ms | {r['replan']['p95_ms']} ms | {reads} "
+                         f"| {r['health_worst_ms_during_slowest_read']} ms | {r['rss_mb']} MB |")
+        lines.append("")
+    if "contention" in report:
+        c = report["contention"]
+        lines.append(f"Contention: while a {c['big_object']} object planned ({c['big_perception_s']} s), another "
+                     f"object's perceptions took p50 {c['small_while_big_plans']['p50_ms']} ms, worst "
+                     f"{c['small_while_big_plans']['max_ms']} ms (alone: p50 {c['small_quiet']['p50_ms']} ms).")
+        lines.append("")
+    if "refusal" in report:
+        r = report["refusal"]
+        lines.append(f"Refusing a 150 MB body: without the token {r['no_token']['ms']} ms "
+                     f"({r['no_token']['status']}), over the limit with it {r['token_over_limit']['ms']} ms "
+                     f"({r['token_over_limit']['status']}).")
+    return "\n".join(lines) + "\n"
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"

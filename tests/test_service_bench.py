@@ -1,0 +1,41 @@
+"""`planhrc service-bench` runs end to end on tiny sizes and reports what it says it measures."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from planhrc.service_bench import percentile
+
+pytestmark = pytest.mark.integration
+
+
+def test_percentile_interpolates():
+    assert percentile([3.0, 1.0, 2.0], 0.5) == 2.0
+    assert percentile([0.0, 10.0], 0.95) == pytest.approx(9.5)
+    assert percentile([5.0], 0.95) == 5.0
+
+
+def test_service_bench_reports_numbers(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "refusal,objects,history",
+                          "--objects", "1,3", "--checkpoints", "4", "--samples", "3", "--links", "4",
+                          "--orientations", "4", "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout)
+    assert report["refusal"]["no_token"]["status"] == 401
+    assert report["refusal"]["token_over_limit"]["status"] == 413
+    assert [row["objects"] for row in report["objects"]] == [1, 3]
+    assert all(row["p50_ms"] > 0 and row["rss_mb"] > 0 for row in report["objects"])
+    (row,) = report["history"]
+    assert row["perceptions"] == 4 and set(row["reads"]) == {"object", "plan", "events", "pddl_problem", "ontology"}
+    assert (tmp_path / "service-bench.md").read_text().count("|") > 10
+
+
+def test_service_bench_refuses_bad_parts():
+    out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "objects,bogus"],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines() == ["planhrc service-bench: --parts: unknown part(s) bogus"]
