@@ -1,4 +1,8 @@
-"""`planhrc plan DOMAIN PROBLEM --planner NAME --timeout S --json` (wired into planhrc.cli by the lead)."""
+"""`planhrc plan DOMAIN PROBLEM [--planner NAME] [--no-fallback] --timeout S --json`.
+
+The files go through the one fallback chain (`planner.chain`): `--planner` picks the first planner, the
+default chain (in-process, then Fast Downward LAMA) follows unless `--no-fallback` is given.
+"""
 from __future__ import annotations
 
 import argparse
@@ -6,17 +10,20 @@ import json
 import sys
 from typing import Any
 
+from .chain import DEFAULT_CHAIN, plan_with_fallback
 from .errors import PlannerError
-from .files import plan_files
+from .files import read_pddl
 from .registry import PLANNERS
-from .result import PlanStatus
+from .result import PlanResult, PlanStatus
 
 
 def add_plan_parser(subparsers: Any) -> argparse.ArgumentParser:
     parser = subparsers.add_parser("plan", help="plan for a PDDL domain and problem")
     parser.add_argument("domain", help="PDDL domain file")
     parser.add_argument("problem", help="PDDL problem file")
-    parser.add_argument("--planner", default="inproc", choices=list(PLANNERS), help="planner backend")
+    parser.add_argument("--planner", default=DEFAULT_CHAIN[0], choices=list(PLANNERS),
+                        help=f"first planner to try (default chain: {', '.join(DEFAULT_CHAIN)})")
+    parser.add_argument("--no-fallback", action="store_true", help="run only --planner, no fallback")
     parser.add_argument("--timeout", type=float, default=60.0, help="time limit in seconds")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.set_defaults(func=run_plan)
@@ -26,7 +33,8 @@ def add_plan_parser(subparsers: Any) -> argparse.ArgumentParser:
 def run_plan(args: argparse.Namespace) -> int:
     """Exit status 0 when solved, 1 otherwise (including bad input, reported on stderr)."""
     try:
-        result = plan_files(args.domain, args.problem, args.planner, args.timeout)
+        domain, problem = read_pddl(args.domain, "domain"), read_pddl(args.problem, "problem")
+        result = plan_with_fallback(domain, problem, plan_chain(args.planner, args.no_fallback), args.timeout)
     except PlannerError as exc:
         if args.json:
             print(json.dumps({"status": "error", "plan": [], "seconds": 0.0, "planner": args.planner,
@@ -34,15 +42,30 @@ def run_plan(args: argparse.Namespace) -> int:
         print(f"planhrc plan: {exc}", file=sys.stderr)
         return 1
     if args.json:
-        print(json.dumps({"status": result.status.value, "plan": list(result.plan),
-                          "seconds": round(result.seconds, 6), "planner": result.planner,
-                          "message": result.message, "optimal": result.optimal}))
+        print(json.dumps(result_json(result)))
     else:
+        for attempt in result.attempts[:-1]:
+            print(f"; {attempt.planner} declined: {attempt.status.value}"
+                  + (f" ({attempt.message})" if attempt.message else ""))
         print(f"; {result.planner}: {result.status.value} in {result.seconds:.3f} s"
               + (f" ({result.message})" if result.message else ""))
         for step in result.plan:
             print(step)
     return 0 if result.status is PlanStatus.SOLVED else 1
+
+
+def plan_chain(first: str, no_fallback: bool = False) -> tuple[str, ...]:
+    """`first`, then the default chain's other planners (none with `no_fallback`)."""
+    if no_fallback:
+        return (first,)
+    return (first, *(name for name in DEFAULT_CHAIN if name != first))
+
+
+def result_json(result: PlanResult) -> dict[str, Any]:
+    return {"status": result.status.value, "plan": list(result.plan), "seconds": round(result.seconds, 6),
+            "planner": result.planner, "message": result.message, "optimal": result.optimal,
+            "attempts": [{"planner": a.planner, "status": a.status.value, "message": a.message,
+                          "seconds": round(a.seconds, 6)} for a in result.attempts]}
 
 
 def main(argv: list[str] | None = None) -> int:

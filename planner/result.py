@@ -13,12 +13,23 @@ class PlanStatus(str, Enum):
 
 
 @dataclass(frozen=True)
+class PlannerAttempt:
+    """One planner's try inside a fallback chain: its name, the status it answered, why, and how long it took."""
+
+    planner: str
+    status: PlanStatus
+    message: str
+    seconds: float
+
+
+@dataclass(frozen=True)
 class PlanResult:
     """Outcome of one planner call.
 
     `plan` holds one lower-case ``"(action arg ...)"`` string per step (empty unless solved);
     `seconds` is wall-clock time of the call; `optimal` is True only when the backend proves the plan
-    shortest, False when it is known not to, None when unknown.
+    shortest, False when it is known not to, None when unknown. `attempts` lists, in order, every planner a
+    fallback chain tried (the last one produced this result); it is empty for a single planner's call.
     """
 
     status: PlanStatus
@@ -27,6 +38,7 @@ class PlanResult:
     planner: str
     message: str = ""
     optimal: bool | None = None
+    attempts: tuple[PlannerAttempt, ...] = ()
 
     @property
     def solved(self) -> bool:

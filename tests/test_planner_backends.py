@@ -209,7 +209,7 @@ def test_cli_exit_code_is_one_when_not_solved(capsys, tmp_path):
     problem = (DATA / "problem-relative-3x4.pddl").read_text().replace("(orientationord deg_270 deg_0)", "")
     path = tmp_path / "p.pddl"
     path.write_text(problem)
-    code = cli_main(["plan", str(DATA / "domain-relative.pddl"), str(path), "--json"])
+    code = cli_main(["plan", str(DATA / "domain-relative.pddl"), str(path), "--no-fallback", "--json"])
     assert code == 1
     assert json.loads(capsys.readouterr().out)["status"] == "error"
 
