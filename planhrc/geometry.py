@@ -1,0 +1,286 @@
+"""Where an articulated object may lie in the cell: the table, Baxter's body and the reach of its arms.
+
+A pure layer-0 module (it imports only `planhrc.model` and numpy): the simulator uses it to draw random goals
+and human moves, the service can use it to check every expected state of a plan before dispatching it.
+
+Frames and angles follow CONVENTIONS.md: +x is the robot's forward axis, +y its left; a link's orientation is
+in degrees clockwise seen from above from +x, so its direction on the table is (cos theta, -sin theta). Link lK
+runs from joint point pK to pK+1; p1 is the object's base point.
+
+`configuration_feasible(geometry, angles)` answers with a `Feasibility`: ok, and one `Infeasibility` per
+problem (a machine-readable code, the link it concerns and a sentence), checking that
+
+* every link lies on the table (``off_table``),
+* no link is inside the robot's body (``inside_robot``),
+* every grasp point (a link's centre) is within reach of one of the arms (``out_of_reach``),
+* no two links overlap or fold onto each other (``overlap``).
+
+`sweep_feasible` checks the configurations a rotation passes through, in small increments; `rotated` gives
+the configuration after one (the inertial assumption A1: every link beyond the turned one moves with it).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from planhrc.model import ArticulatedObject, ModelError
+
+CODES = ("off_table", "inside_robot", "out_of_reach", "overlap")
+
+
+class GeometryError(ModelError):
+    """A geometric input that cannot describe an object on the table; the message names the field."""
+
+
+@dataclass(frozen=True)
+class Table:
+    """The table top: a rectangle (centre and size in metres) at height `top_z`."""
+
+    center_xy: tuple[float, float] = (0.6, 0.0)
+    size_xy: tuple[float, float] = (0.6, 1.3)
+    top_z: float = -0.18
+
+    def bounds(self, margin_m: float = 0.0) -> tuple[float, float, float, float]:
+        """(x_min, x_max, y_min, y_max), shrunk by `margin_m` on every side."""
+        (cx, cy), (sx, sy) = self.center_xy, self.size_xy
+        return (cx - sx / 2 + margin_m, cx + sx / 2 - margin_m, cy - sy / 2 + margin_m, cy + sy / 2 - margin_m)
+
+
+@dataclass(frozen=True)
+class RobotBody:
+    """Baxter on its pedestal at the origin: its body's footprint and where its grippers reach at table height.
+
+    An arm reaches a table point whose horizontal distance from its shoulder is at most `reach_m` and that lies
+    either in front of `near_x_m` or on the arm's own side beyond `own_side_y_m` (across the body, close to the
+    torso, the wrist cannot point down at every yaw). Measured by inverse kinematics in the simulated cell, with
+    a margin: both gripper yaws (along and across the robot's forward axis) reach every such point.
+    """
+
+    footprint_xy: tuple[float, float, float, float] = (-0.35, 0.28, -0.38, 0.38)  # x_min, x_max, y_min, y_max
+    left_shoulder_xy: tuple[float, float] = (0.064, 0.259)
+    right_shoulder_xy: tuple[float, float] = (0.064, -0.259)
+    reach_m: float = 0.78
+    near_x_m: float = 0.42
+    own_side_y_m: float = 0.2
+
+
+@dataclass(frozen=True)
+class Cell:
+    """The table and the robot: everything an object's configuration is checked against."""
+
+    table: Table = Table()
+    robot: RobotBody = RobotBody()
+
+
+@dataclass(frozen=True)
+class ObjectGeometry:
+    """An object's links as bars on the table: lengths, width and where its base point p1 lies."""
+
+    link_lengths_m: tuple[float, ...]
+    base_point_xy: tuple[float, float] = (0.6, 0.39)
+    link_width_m: float = 0.03
+
+    def __post_init__(self) -> None:
+        if not self.link_lengths_m:
+            raise GeometryError("link_lengths_m: an object has at least one link")
+        if any(not (math.isfinite(v) and v > 0) for v in self.link_lengths_m):
+            raise GeometryError(f"link_lengths_m: every length must be a positive number, got {self.link_lengths_m}")
+        if len(self.base_point_xy) != 2 or not all(math.isfinite(v) for v in self.base_point_xy):
+            raise GeometryError(f"base_point_xy: expected two finite numbers, got {self.base_point_xy}")
+        if not (math.isfinite(self.link_width_m) and self.link_width_m > 0):
+            raise GeometryError(f"link_width_m: must be a positive number, got {self.link_width_m}")
+
+    @property
+    def n_links(self) -> int:
+        return len(self.link_lengths_m)
+
+    @classmethod
+    def of(cls, obj: ArticulatedObject, base_point_xy: tuple[float, float] | None = None) -> "ObjectGeometry":
+        """The geometry of a KB object placed with its base point at `base_point_xy` (default: the cell's)."""
+        if base_point_xy is None:
+            return cls(tuple(obj.link_lengths_m))
+        return cls(tuple(obj.link_lengths_m), (float(base_point_xy[0]), float(base_point_xy[1])))
+
+    def placed(self, base_point_xy: Sequence[float]) -> "ObjectGeometry":
+        return ObjectGeometry(self.link_lengths_m, (float(base_point_xy[0]), float(base_point_xy[1])), self.link_width_m)
+
+
+@dataclass(frozen=True)
+class Infeasibility:
+    """One reason a configuration is not feasible: `code` (see CODES), the 1-based link, and a sentence."""
+
+    code: str
+    link: int
+    message: str
+    distance_m: float = 0.0  # how far off (beyond the table's edge, beyond reach); 0 when not a distance
+
+    def __str__(self) -> str:
+        return self.message
+
+
+@dataclass(frozen=True)
+class Feasibility:
+    ok: bool
+    reasons: tuple[Infeasibility, ...] = ()
+
+    @property
+    def links(self) -> tuple[int, ...]:
+        """The links named by the reasons, in order, each once."""
+        return tuple(dict.fromkeys(r.link for r in self.reasons))
+
+    @property
+    def codes(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(r.code for r in self.reasons))
+
+    def sentence(self) -> str:
+        return "feasible" if self.ok else "; ".join(r.message for r in self.reasons)
+
+
+def direction(theta_deg: float) -> np.ndarray:
+    """Unit vector on the table of a link at orientation theta (clockwise from +x, seen from above)."""
+    t = math.radians(theta_deg)
+    return np.array([math.cos(t), -math.sin(t)])
+
+
+def _check_angles(geometry: ObjectGeometry, angles: Sequence[float]) -> tuple[float, ...]:
+    if len(angles) != geometry.n_links:
+        raise GeometryError(f"angles: expected {geometry.n_links} values (one per link), got {len(angles)}")
+    try:
+        values = tuple(float(a) for a in angles)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(f"angles: expected numbers, got {list(angles)!r}") from exc
+    if not all(math.isfinite(v) for v in values):
+        raise GeometryError(f"angles: expected finite numbers, got {list(angles)!r}")
+    return values
+
+
+def joint_points(geometry: ObjectGeometry, angles: Sequence[float]) -> tuple[np.ndarray, ...]:
+    """p1 .. p(N+1) on the table, for link orientations `angles` (degrees)."""
+    values = _check_angles(geometry, angles)
+    points = [np.asarray(geometry.base_point_xy, dtype=float)]
+    for length, theta in zip(geometry.link_lengths_m, values):
+        points.append(points[-1] + length * direction(theta))
+    return tuple(points)
+
+
+def link_centres(geometry: ObjectGeometry, angles: Sequence[float]) -> tuple[np.ndarray, ...]:
+    """The grasp point of each link: its centre."""
+    points = joint_points(geometry, angles)
+    return tuple((a + b) / 2.0 for a, b in zip(points, points[1:]))
+
+
+def _segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
+    def point_segment(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> float:
+        d = s1 - s0
+        t = float(np.clip(np.dot(p - s0, d) / max(float(np.dot(d, d)), 1e-12), 0.0, 1.0))
+        return float(np.linalg.norm(p - (s0 + t * d)))
+
+    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+    if cross(a0, a1, b0) * cross(a0, a1, b1) < 0 and cross(b0, b1, a0) * cross(b0, b1, a1) < 0:
+        return 0.0
+    return min(point_segment(a0, b0, b1), point_segment(a1, b0, b1), point_segment(b0, a0, a1),
+               point_segment(b1, a0, a1))
+
+
+def _outside_by(point: np.ndarray, bounds: tuple[float, float, float, float]) -> float:
+    """How far `point` lies outside the rectangle `bounds` (0 inside)."""
+    dx = max(bounds[0] - point[0], 0.0, point[0] - bounds[1])
+    dy = max(bounds[2] - point[1], 0.0, point[1] - bounds[3])
+    return float(math.hypot(dx, dy))
+
+
+def reach_shortfall(point_xy: Sequence[float], robot: RobotBody | None = None) -> float:
+    """How far a table point lies beyond the reach of the nearer arm that could take it (0 when reachable)."""
+    robot = robot or RobotBody()
+    p = np.asarray(point_xy, dtype=float)
+    best = math.inf
+    for shoulder, side in ((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0)):
+        beyond = max(0.0, float(np.linalg.norm(p - np.asarray(shoulder))) - robot.reach_m)
+        if p[0] < robot.near_x_m and side * p[1] < robot.own_side_y_m:
+            beyond = max(beyond, min(robot.near_x_m - p[0], robot.own_side_y_m - side * p[1]))
+        best = min(best, beyond)
+    return best
+
+
+def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], cell: Cell | None = None,
+                           min_fold_gap_deg: float = 25.0) -> Feasibility:
+    """Whether the object with link orientations `angles` lies on the table, clear of the robot, graspable,
+    and without overlapping itself; every problem found is named (see the module's docstring)."""
+    cell = cell or Cell()
+    points = joint_points(geometry, angles)
+    values = _check_angles(geometry, angles)
+    half_width = geometry.link_width_m / 2.0
+    table = cell.table.bounds(margin_m=half_width)
+    body = cell.robot.footprint_xy
+    reasons: list[Infeasibility] = []
+    for k in range(1, geometry.n_links + 1):
+        a, b = points[k - 1], points[k]
+        off = max(_outside_by(a, table), _outside_by(b, table))
+        if off > 1e-9:
+            reasons.append(Infeasibility("off_table", k, f"link {k} leaves the table: {off:.2f} m past its edge", float(off)))
+        if _segment_box_overlap(a, b, body, half_width):
+            reasons.append(Infeasibility("inside_robot", k, f"link {k} lies inside the robot's body"))
+        short = reach_shortfall((a + b) / 2.0, cell.robot)
+        if short > 1e-9:
+            reasons.append(Infeasibility("out_of_reach", k, f"link {k} unreachable: {short:.2f} m beyond reach", float(short)))
+    for k in range(1, geometry.n_links):  # neighbours fold onto each other
+        fold = (values[k] - values[k - 1]) % 360.0
+        if abs(fold - 180.0) < min_fold_gap_deg:
+            reasons.append(Infeasibility("overlap", k + 1, f"link {k + 1} folds back onto link {k}"))
+    for i in range(geometry.n_links):
+        for j in range(i + 2, geometry.n_links):
+            gap = _segment_distance(points[i], points[i + 1], points[j], points[j + 1])
+            if gap < geometry.link_width_m:
+                reasons.append(Infeasibility("overlap", j + 1, f"link {j + 1} overlaps link {i + 1}"))
+    return Feasibility(not reasons, tuple(reasons))
+
+
+def _segment_box_overlap(a: np.ndarray, b: np.ndarray, box: tuple[float, float, float, float], pad: float) -> bool:
+    """Whether the bar from a to b (half width `pad`) enters the rectangle `box`, sampled every centimetre."""
+    length = float(np.linalg.norm(b - a))
+    n = max(2, int(math.ceil(length / 0.01)) + 1)
+    grown = (box[0] - pad, box[1] + pad, box[2] - pad, box[3] + pad)
+    for t in np.linspace(0.0, 1.0, n):
+        p = a + t * (b - a)
+        if grown[0] <= p[0] <= grown[1] and grown[2] <= p[1] <= grown[3]:
+            return True
+    return False
+
+
+def rotated(geometry: ObjectGeometry, angles: Sequence[float], turned_link: int, held_link: int,
+            delta_deg: float) -> tuple[ObjectGeometry, tuple[float, ...]]:
+    """The object after turning `turned_link` by `delta_deg` (+ = clockwise) about its joint with `held_link`
+    (0 = the table). A downstream turn moves the turned link and every link after it; an upstream turn moves
+    the links before the joint and so the base point."""
+    values = _check_angles(geometry, angles)
+    n = geometry.n_links
+    if not 1 <= turned_link <= n:
+        raise GeometryError(f"turned_link: must be in 1..{n}, got {turned_link}")
+    if not 0 <= held_link <= n or abs(turned_link - held_link) != 1:
+        raise GeometryError(f"held_link: must be a neighbour of link {turned_link} (0 = the table), got {held_link}")
+    if turned_link > held_link:
+        return geometry, tuple((v + delta_deg) % 360.0 if i >= turned_link - 1 else v for i, v in enumerate(values))
+    pivot = joint_points(geometry, values)[held_link - 1]
+    t = -math.radians(delta_deg)
+    d = np.asarray(geometry.base_point_xy) - pivot
+    base = pivot + np.array([math.cos(t) * d[0] - math.sin(t) * d[1], math.sin(t) * d[0] + math.cos(t) * d[1]])
+    new_values = tuple((v + delta_deg) % 360.0 if i < held_link - 1 else v for i, v in enumerate(values))
+    return geometry.placed(base), new_values
+
+
+def sweep_feasible(geometry: ObjectGeometry, angles: Sequence[float], turned_link: int, held_link: int,
+                   delta_deg: float, increment_deg: float = 5.0, cell: Cell | None = None) -> Feasibility:
+    """Whether every configuration a rotation passes through is feasible (checked every `increment_deg`); the
+    first infeasible one's reasons are returned."""
+    n = max(1, int(math.ceil(abs(delta_deg) / increment_deg)))
+    for i in range(1, n + 1):
+        placed, values = rotated(geometry, angles, turned_link, held_link, delta_deg * i / n)
+        result = configuration_feasible(placed, values, cell)
+        if not result.ok:
+            return result
+    return Feasibility(True)
