@@ -44,7 +44,9 @@ def run_serve(args: argparse.Namespace) -> int:
     settings = make_settings(**overrides)
     logging.basicConfig(level=settings.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=settings.log_level.lower())
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=settings.log_level.lower(),
+                # an open event stream (a console page) must not keep a stopping service alive
+                timeout_graceful_shutdown=2)
     return 0
 
 
