@@ -19,6 +19,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 STAMP = VENV / ".planhrc-installed"
+CHROMIUM = Path("/usr/bin/chromium")
 
 
 def venv_python() -> Path:
@@ -45,6 +46,23 @@ def ensure_environment() -> Path:
     return venv_python()
 
 
+def ensure_chromium() -> None:
+    """The browser tests drive Debian's Chromium: install the `chromium` package when it is missing and apt is
+    usable (as root). Otherwise say why; those tests then skip with the same reason."""
+    if CHROMIUM.exists():
+        return
+    if os.name != "posix" or os.geteuid() != 0 or not Path("/usr/bin/apt-get").exists():
+        print(f"[run.py] {CHROMIUM} is missing and apt-get cannot be used here (needs root on Debian): "
+              "the browser tests will skip", flush=True)
+        return
+    print("[run.py] installing Debian's chromium for the browser tests", flush=True)
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    ok = subprocess.run(["apt-get", "update", "-qq"], env=env).returncode == 0 and subprocess.run(
+        ["apt-get", "install", "-y", "-qq", "--no-install-recommends", "chromium"], env=env).returncode == 0
+    if not ok or not CHROMIUM.exists():
+        print("[run.py] installing chromium failed: the browser tests will skip", flush=True)
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] in {"-h", "--help"}:
         print(__doc__)
@@ -54,6 +72,7 @@ def main(argv: list[str]) -> int:
     if task == "setup":
         return 0
     if task == "test":
+        ensure_chromium()
         cmd = [py, "-m", "pytest", *rest]
     elif task == "demo":
         cmd = [py, "-m", "planhrc.cli", "demo", *rest]

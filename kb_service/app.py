@@ -11,6 +11,7 @@ import planhrc
 from planhrc.settings import Settings, get_settings
 
 from .api import install_error_handlers, router
+from .console import install_console
 from .guard import GuardPolicy, RequestGuard
 from .locks import ObjectLocks
 from .orchestrator import Orchestrator
@@ -48,6 +49,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         description="Ontology (TBox + ABox), cooperation model and plans of articulated objects manipulated by "
         "a robot and a human together.",
         lifespan=lifespan,
+        docs_url=None,  # served offline by install_console
+        redoc_url=None,
     )
     app.state.settings = settings
     app.add_middleware(RequestGuard, policy=GuardPolicy(
@@ -55,4 +58,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         max_body_bytes=settings.max_body_bytes))
     install_error_handlers(app)
     app.include_router(router)
+    install_console(app)
     return app

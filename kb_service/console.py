@@ -1,0 +1,115 @@
+"""The cell console at `/` and the API documentation at `/docs` and `/redoc`, all served from installed files.
+
+The console is plain HTML, JavaScript and CSS shipped as package data (`console/`): no build step, nothing
+fetched from elsewhere. It only reads and posts goals and perceptions through the JSON API; it never takes an
+action for execution (that is the worker's). Swagger UI and ReDoc load their scripts from the `fastapi-offline`
+package's files, so the documentation works on a network that reaches no CDN. The OpenAPI document declares the
+bearer-token scheme on every operation that takes an `Authorization` header, so the docs page has an Authorize
+button.
+"""
+from __future__ import annotations
+
+from importlib.resources import files
+from pathlib import Path
+from typing import Any, Callable
+
+from fastapi import FastAPI, Request
+from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
+from fastapi.responses import FileResponse, HTMLResponse
+from fastapi.staticfiles import StaticFiles
+
+CONSOLE_URL = "/"
+CONSOLE_ASSETS_URL = "/console"
+DOCS_URL = "/docs"
+REDOC_URL = "/redoc"
+DOCS_ASSETS_URL = "/docs-assets"
+SECURITY_SCHEME = "bearerToken"
+# What the pages may load: only this service. Swagger UI and ReDoc need their inline start-up script and styles
+# (and ReDoc a worker from a blob); the one outside image ReDoc's bundle names (its logo) is thereby never fetched.
+DOCS_POLICY = ("default-src 'self'; script-src 'self' 'unsafe-inline' blob:; worker-src 'self' blob:; "
+               "style-src 'self' 'unsafe-inline'; img-src 'self' data:; font-src 'self' data:")
+CONSOLE_POLICY = "default-src 'self'; img-src 'self' data:"
+
+
+def console_dir() -> Path:
+    """The console's static files, as installed with `planhrc.kb_service`."""
+    return Path(str(files("planhrc.kb_service") / "console"))
+
+
+def docs_assets_dir() -> Path:
+    """Swagger UI and ReDoc scripts and styles shipped by the `fastapi-offline` package."""
+    return Path(str(files("fastapi_offline") / "static"))
+
+
+def install_console(app: FastAPI) -> None:
+    """Mount the console, the offline docs and their assets on an app built with docs_url=redoc_url=None."""
+    app.mount(CONSOLE_ASSETS_URL, StaticFiles(directory=console_dir()), name="console-assets")
+    app.mount(DOCS_ASSETS_URL, StaticFiles(directory=docs_assets_dir()), name="docs-assets")
+    index = console_dir() / "index.html"
+    oauth2_redirect_url = app.swagger_ui_oauth2_redirect_url or "/docs/oauth2-redirect"
+
+    @app.get(CONSOLE_URL, include_in_schema=False)
+    def read_console() -> FileResponse:
+        return FileResponse(index, media_type="text/html",
+                            headers={"Cache-Control": "no-cache", "Content-Security-Policy": CONSOLE_POLICY})
+
+    @app.get(DOCS_URL, include_in_schema=False)
+    def read_swagger_ui(request: Request) -> HTMLResponse:
+        root = request.scope.get("root_path", "")
+        page = get_swagger_ui_html(
+            openapi_url=f"{root}{app.openapi_url}", title=f"{app.title} - Swagger UI",
+            oauth2_redirect_url=f"{root}{oauth2_redirect_url}",
+            swagger_js_url=f"{root}{DOCS_ASSETS_URL}/swagger-ui-bundle.js",
+            swagger_css_url=f"{root}{DOCS_ASSETS_URL}/swagger-ui.css",
+            swagger_favicon_url=f"{root}{DOCS_ASSETS_URL}/favicon.png",
+            swagger_ui_parameters={"persistAuthorization": True},
+        )
+        page.headers["Content-Security-Policy"] = DOCS_POLICY
+        return page
+
+    @app.get(oauth2_redirect_url, include_in_schema=False)
+    def read_swagger_ui_redirect() -> HTMLResponse:
+        return get_swagger_ui_oauth2_redirect_html()
+
+    @app.get(REDOC_URL, include_in_schema=False)
+    def read_redoc(request: Request) -> HTMLResponse:
+        root = request.scope.get("root_path", "")
+        page = get_redoc_html(
+            openapi_url=f"{root}{app.openapi_url}", title=f"{app.title} - ReDoc",
+            redoc_js_url=f"{root}{DOCS_ASSETS_URL}/redoc.standalone.js",
+            redoc_favicon_url=f"{root}{DOCS_ASSETS_URL}/favicon.png", with_google_fonts=False,
+        )
+        page.headers["Content-Security-Policy"] = DOCS_POLICY
+        return page
+
+    app.openapi = openapi_with_bearer(app.openapi)  # type: ignore[method-assign]
+
+
+def openapi_with_bearer(build: Callable[[], dict[str, Any]]) -> Callable[[], dict[str, Any]]:
+    """Wrap FastAPI's OpenAPI builder: declare the bearer scheme where an operation takes `Authorization`.
+
+    The header parameter itself is dropped from those operations (OpenAPI ignores a header parameter named
+    Authorization; the security requirement is how a client is told to send it)."""
+    def openapi() -> dict[str, Any]:
+        schema = build()  # FastAPI caches the document: this adds the scheme once
+        schemes = schema.setdefault("components", {}).setdefault("securitySchemes", {})
+        if SECURITY_SCHEME in schemes:
+            return schema
+        schemes[SECURITY_SCHEME] = {
+            "type": "http", "scheme": "bearer",
+            "description": "The token given to `planhrc serve --token` (or PLANHRC_TOKEN). Requests that change "
+            "the knowledge base need it when the service has one; reads stay open.",
+        }
+        for operations in schema.get("paths", {}).values():
+            for operation in operations.values():
+                params = operation.get("parameters", [])
+                auth = [p for p in params if p.get("in") == "header" and p.get("name", "").lower() == "authorization"]
+                if not auth:
+                    continue
+                operation["parameters"] = [p for p in params if p not in auth]
+                if not operation["parameters"]:
+                    del operation["parameters"]
+                operation.setdefault("security", [{SECURITY_SCHEME: []}])
+        return schema
+
+    return openapi

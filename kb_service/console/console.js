@@ -1,0 +1,466 @@
+// planHRC cell console: reads the knowledge-base service's JSON API and its event stream; posts only goals and
+// perceptions (it never takes an action for execution: that is the worker's). No build step, no libraries.
+"use strict";
+
+const SVG_NS = "http://www.w3.org/2000/svg";
+const DECISIONS = new Set(["goal_reached", "continue", "resume", "replan", "no_plan"]);
+const TOKEN_KEY = "planhrc-console-token";
+
+const view = {
+  objects: [], objectId: null, obj: null, perceived: null, goal: null, plan: null,
+  viewStep: null, draft: null, lastSeq: 0, stream: null, retry: null, refreshTimer: null,
+  // what the log needs to tell who changed the object
+  lastJoints: null, feedbackSince: null, queue: Promise.resolve(), auth: false,
+};
+
+const $ = (id) => document.getElementById(id);
+
+// -- HTTP ---------------------------------------------------------------------------------------------------
+class ApiError extends Error {}
+
+async function api(method, path, body) {
+  const headers = { Accept: "application/json" };
+  if (body !== undefined) headers["Content-Type"] = "application/json";
+  const token = $("token").value.trim();
+  if (token && method !== "GET") headers.Authorization = `Bearer ${token}`;
+  let response;
+  try {
+    response = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  } catch (err) {
+    setService(false);
+    throw new ApiError(`the service does not answer (${err.message})`);
+  }
+  setService(true);
+  const text = await response.text();
+  let data = null;
+  try { data = text ? JSON.parse(text) : null; } catch (_) { data = text; }
+  if (!response.ok) {
+    const detail = data && typeof data === "object" && "detail" in data ? data.detail : text;
+    throw new ApiError(typeof detail === "string" ? detail : JSON.stringify(detail));
+  }
+  return data;
+}
+
+async function apiOrNull(path) {
+  try { return await api("GET", path); } catch (err) { return null; }
+}
+
+function setService(up) {
+  const pill = $("service");
+  pill.textContent = up ? (view.auth ? "service up · writes need a token" : "service up") : "service unreachable";
+  pill.className = "pill " + (up ? "ok" : "down");
+}
+
+// -- geometry -----------------------------------------------------------------------------------------------
+const norm = (a) => ((a % 360) + 360) % 360;
+
+// Orientation of every link from a stored state, in degrees clockwise seen from above.
+// Relative: joints carry θ(k+1) − θk and l1 is not tracked (it is taken from `reference`); absolute: jK carries θK.
+// A joint the state leaves free (a partial goal) keeps the reference's value.
+function linkAngles(obj, state, reference) {
+  if (!obj || !state) return null;
+  if (state.link_orientations_deg) return state.link_orientations_deg.slice();
+  const n = obj.links.length;
+  const ref = reference || new Array(n).fill(0);
+  const values = state.joint_values_deg || {};
+  const out = new Array(n);
+  if (obj.formulation === "absolute") {
+    for (let k = 0; k < n; k++) {
+      const v = values[obj.joints[k]];
+      out[k] = v === undefined ? ref[k] : v;
+    }
+  } else {
+    out[0] = ref[0];
+    for (let k = 1; k < n; k++) {
+      const v = values[obj.joints[k - 1]];
+      out[k] = out[k - 1] + (v === undefined ? ref[k] - ref[k - 1] : v);
+    }
+  }
+  return out.map(norm);
+}
+
+// Joint positions in drawing units: the whole chain fits a circle of RADIUS around the first joint.
+const RADIUS = 190;
+
+function chainPoints(obj, angles) {
+  const total = obj.links.reduce((sum, l) => sum + l.length_m, 0);
+  const scale = RADIUS / total;
+  const pts = [[0, 0]];
+  obj.links.forEach((link, k) => {
+    const [x, y] = pts[k];
+    const a = (angles[k] * Math.PI) / 180;  // clockwise from the robot's forward axis (up on the page)
+    pts.push([x + scale * link.length_m * Math.sin(a), y - scale * link.length_m * Math.cos(a)]);
+  });
+  return pts;
+}
+
+const shortName = (name) => name.replace(/^.*_/, "");
+
+function svg(tag, attrs, parent, text) {
+  const el = document.createElementNS(SVG_NS, tag);
+  for (const [k, v] of Object.entries(attrs)) el.setAttribute(k, v);
+  if (text !== undefined) el.textContent = text;
+  if (parent) parent.appendChild(el);
+  return el;
+}
+
+// -- drawing ------------------------------------------------------------------------------------------------
+function perceivedAngles() { return linkAngles(view.obj, view.perceived, null); }
+
+// The perceived orientations snapped to the allowed ones: what the planner saw, the reference of other states.
+function snappedAngles() {
+  const angles = perceivedAngles(), step = view.obj && view.obj.step_deg;
+  return angles && step ? angles.map((a) => norm(Math.round(a / step) * step)) : angles;
+}
+
+function goalAngles() {
+  if (view.draft) return view.draft;
+  return linkAngles(view.obj, view.goal, snappedAngles());
+}
+
+function expectedState() {
+  const plan = view.plan, ex = view.obj && view.obj.execution;
+  if (!plan) return null;
+  if (view.viewStep !== null) return plan.expected_states[view.viewStep] || null;  // s^e after step viewStep
+  if (!ex || ex.plan_id !== plan.id || ex.next_step === null) return null;
+  return plan.expected_states[ex.next_step] || null;  // s^e_{next+1}: after the next action
+}
+
+function draw() {
+  const root = $("drawing");
+  root.replaceChildren();
+  const obj = view.obj;
+  if (!obj) return;
+  const r = RADIUS + 20;
+  root.setAttribute("viewBox", `${-r} ${-r} ${2 * r} ${2 * r}`);
+  svg("line", { x1: 0, y1: r - 8, x2: 0, y2: -r + 8, class: "axis" }, root);
+  svg("text", { x: 4, y: -r + 16, class: "axis-label" }, root, "robot forward (0°)");
+  svg("circle", { cx: 0, cy: 0, r: 7, class: "base" }, root);
+
+  const perceived = perceivedAngles();
+  const goal = goalAngles();
+  const expected = linkAngles(obj, expectedState(), snappedAngles());
+  const layers = [
+    [goal, "goal" + (view.draft ? " draft" : ""), 16],
+    [expected, "expected", 11],
+    [perceived, "perceived", 6],
+  ];
+  for (const [angles, cls, width] of layers) {
+    if (!angles) continue;
+    const pts = chainPoints(obj, angles);
+    const g = svg("g", { class: cls.split(" ")[0] + "-layer" }, root);
+    angles.forEach((a, k) => {
+      // a bar (not a line: a vertical line has an empty box and cannot be hit), rotated from the page's x axis
+      const len = Math.hypot(pts[k + 1][0] - pts[k][0], pts[k + 1][1] - pts[k][1]);
+      const line = svg("rect", { x: 0, y: -width / 2, width: len, height: width, rx: width / 2, class: `link ${cls}`,
+                                 transform: `translate(${pts[k][0]} ${pts[k][1]}) rotate(${a - 90})`, "data-link": k }, g);
+      if (cls.startsWith("goal")) {
+        line.addEventListener("click", (ev) => turnDraftLink(k, ev.shiftKey ? -1 : 1));
+        svg("title", {}, line, `turn ${shortName(obj.links[k].name)} (and the links after it) one step`);
+      }
+    });
+    if (cls === "perceived") {
+      pts.slice(1, -1).forEach(([x, y]) => svg("circle", { cx: x, cy: y, r: 4, class: "joint" }, g));
+      angles.forEach((a, k) => {
+        const [x0, y0] = pts[k], [x1, y1] = pts[k + 1];
+        svg("text", { x: (x0 + x1) / 2 + 8, y: (y0 + y1) / 2 - 8 }, g, `${shortName(obj.links[k].name)} ${a.toFixed(0)}°`);
+      });
+    }
+  }
+  drawAngleTable(perceived, goal, expected);
+}
+
+function drawAngleTable(perceived, goal, expected) {
+  const obj = view.obj, table = $("angles");
+  table.replaceChildren();
+  const head = table.insertRow();
+  ["", ...obj.links.map((l) => shortName(l.name))].forEach((t) => { const th = document.createElement("th"); th.textContent = t; head.appendChild(th); });
+  const rows = [["perceived", perceived], [view.draft ? "goal (draft)" : "goal", goal],
+                [view.viewStep !== null ? `expected after a_${view.viewStep}` : "expected next", expected]];
+  for (const [label, angles] of rows) {
+    const row = table.insertRow();
+    row.insertCell().textContent = label;
+    obj.links.forEach((_, k) => { row.insertCell().textContent = angles ? `${Number(angles[k]).toFixed(angles === perceived ? 1 : 0)}°` : "–"; });
+  }
+}
+
+function turnDraftLink(k, sign) {
+  const obj = view.obj;
+  const base = goalAngles() || perceivedAngles() || new Array(obj.links.length).fill(0);
+  view.draft = base.map((a, i) => (i >= k ? norm(Math.round(a + sign * obj.step_deg)) : norm(Math.round(a))));
+  $("goal-kind").value = "link_orientations_deg";
+  fillGoalInputs();
+  draw();
+}
+
+// -- plan ---------------------------------------------------------------------------------------------------
+function drawPlan() {
+  const list = $("plan");
+  list.replaceChildren();
+  const plan = view.plan, ex = view.obj && view.obj.execution;
+  if (!plan) { $("plan-meta").textContent = "none yet"; return; }
+  const following = ex && ex.plan_id === plan.id;
+  const status = ex ? ex.status : "";
+  const n = plan.steps.length;
+  $("plan-meta").textContent = `${plan.id} · ${n} step${n === 1 ? "" : "s"} · ${plan.planner}` + (following ? ` · ${status}` : " · not followed");
+  for (const s of plan.steps) {
+    const li = document.createElement("li");
+    const dir = s.delta_deg > 0 ? "clockwise" : "anticlockwise";
+    const held = s.held_link_index === 0 ? "table" : `l${s.held_link_index}`;
+    li.textContent = `a_${s.step} ${s.name}: joint j${s.joint_index}, hold ${held}, turn l${s.turned_link_index} ${dir} ${Math.abs(s.delta_deg)}°`;
+    li.dataset.step = s.step;
+    const done = following && (status === "goal_reached" || (ex.next_step !== null && s.step < ex.next_step));
+    if (done) li.classList.add("done");
+    if (following && ex.next_step === s.step && status !== "goal_reached") li.classList.add("current");
+    if (view.viewStep === s.step) li.classList.add("viewing");
+    li.addEventListener("click", () => { view.viewStep = view.viewStep === s.step ? null : s.step; drawPlan(); draw(); });
+    list.appendChild(li);
+  }
+  $("expected-label").textContent = view.viewStep !== null ? `expected after a_${view.viewStep}` : "expected after the next action";
+}
+
+// -- objects ------------------------------------------------------------------------------------------------
+async function loadObjects() {
+  const health = await apiOrNull("health");
+  if (health) { view.auth = health.auth; setService(true); }
+  const objects = await apiOrNull("objects");
+  if (!objects) return;
+  view.objects = objects;
+  const list = $("objects");
+  list.replaceChildren();
+  for (const o of objects) {
+    const li = document.createElement("li");
+    const b = document.createElement("button");
+    b.type = "button";
+    b.dataset.objectId = o.id;
+    b.textContent = `${o.id} ${o.name}`;
+    const small = document.createElement("small");
+    small.textContent = `${o.formulation} · ${o.links.length} links · K=${o.orientations} · ${o.execution.status}`;
+    b.appendChild(small);
+    if (o.id === view.objectId) b.classList.add("selected");
+    b.addEventListener("click", () => selectObject(o.id));
+    li.appendChild(b);
+    list.appendChild(li);
+  }
+  const wanted = new URLSearchParams(location.search).get("object");
+  if (!view.objectId && objects.length) selectObject(objects.some((o) => o.id === wanted) ? wanted : objects[0].id);
+}
+
+function selectObject(id) {
+  if (view.stream) view.stream.close();
+  clearTimeout(view.retry);
+  Object.assign(view, { objectId: id, obj: null, perceived: null, goal: null, plan: null, viewStep: null,
+                        draft: null, lastSeq: 0, lastJoints: null, feedbackSince: null, queue: Promise.resolve() });
+  history.replaceState(null, "", `?object=${encodeURIComponent(id)}`);
+  document.querySelectorAll("#objects button").forEach((b) => b.classList.toggle("selected", b.dataset.objectId === id));
+  $("log").replaceChildren();
+  $("error").textContent = "";
+  refresh().then(() => { fillGoalInputs(); fillPerceptionInputs(); });
+  connect();
+}
+
+async function refresh() {
+  const id = view.objectId;
+  if (!id) return;
+  const obj = await apiOrNull(`objects/${id}`);
+  if (!obj || id !== view.objectId) return;
+  view.obj = obj;
+  const goalChanged = (view.goal ? view.goal.id : null) !== obj.goal_state_id;
+  view.goal = obj.goal_state_id ? await apiOrNull(`states/${obj.goal_state_id}`) : null;
+  if (goalChanged && !view.draft && !$("goal-inputs").contains(document.activeElement)) fillGoalInputs();
+  view.plan = await apiOrNull(`objects/${id}/plan`);
+  const ex = obj.execution;
+  $("object-title").textContent = `${obj.id} ${obj.name} — ${obj.formulation}, ${obj.links.length} links, K=${obj.orientations} (${obj.step_deg}° a step)`;
+  $("object-status").textContent = `execution: ${ex.status}` + (ex.plan_id ? ` · plan ${ex.plan_id}` : "") +
+    (ex.next_step ? ` · next step a_${ex.next_step}` : "") + (ex.dispatched_action_id ? ` · dispatched ${ex.dispatched_action_id}` : "");
+  const small = document.querySelector(`#objects button[data-object-id="${id}"] small`);
+  if (small) small.textContent = `${obj.formulation} · ${obj.links.length} links · K=${obj.orientations} · ${ex.status}`;
+  if ($("goal-inputs").children.length === 0) fillGoalInputs();
+  if ($("perception-inputs").children.length === 0) fillPerceptionInputs();
+  drawPlan();
+  draw();
+}
+
+function scheduleRefresh() {
+  clearTimeout(view.refreshTimer);
+  view.refreshTimer = setTimeout(refresh, 60);
+}
+
+// -- the decision log over Server-Sent Events ---------------------------------------------------------------
+function connect() {
+  const id = view.objectId;
+  if (!id) return;
+  // A new EventSource after an error starts from the last event shown; the browser's own reconnects send
+  // Last-Event-ID, which the service honours the same way.
+  const source = new EventSource(`objects/${id}/events/stream?after_seq=${view.lastSeq}`);
+  view.stream = source;
+  $("stream").textContent = "connecting…";
+  source.onopen = () => { $("stream").textContent = "live"; loadObjects(); scheduleRefresh(); };
+  source.onerror = () => {
+    $("stream").textContent = "reconnecting…";
+    setService(false);
+    if (source.readyState === EventSource.CLOSED) {
+      clearTimeout(view.retry);
+      view.retry = setTimeout(() => { if (view.objectId === id) connect(); }, 1000);
+    }
+  };
+  const onEvent = (msg) => {
+    const event = JSON.parse(msg.data);
+    if (event.object_id !== view.objectId || event.seq <= view.lastSeq) return;
+    view.lastSeq = event.seq;
+    view.queue = view.queue.then(() => logEvent(event)).catch((err) => console.error(err));
+    scheduleRefresh();
+  };
+  for (const kind of ["object_created", "goal_set", "dispatched", "feedback", ...DECISIONS]) source.addEventListener(kind, onEvent);
+  source.onmessage = onEvent;
+}
+
+// Who changed the object between two perceptions: the robot (a feedback came in, with its outcome) or a human
+// (the perceived configuration changed and no robot action explains it).
+async function actorOf(event) {
+  const stateId = event.data.perceived_state_id;
+  const state = stateId ? await apiOrNull(`states/${stateId}`) : null;
+  const joints = state ? JSON.stringify(state.joint_values_deg) : null;
+  const before = view.lastJoints, feedback = view.feedbackSince;
+  view.lastJoints = joints;
+  view.feedbackSince = null;
+  if (before === null) return ["", "first perception of the object"];
+  if (joints === before) {
+    return feedback ? ["robot", `robot: a_${feedback.step} ${feedback.outcome}, the object did not change`] : ["", "nothing changed"];
+  }
+  if (feedback && feedback.outcome !== "failed") {
+    const off = event.kind === "resume" || event.kind === "replan" ? " — not where the plan expected" : "";
+    return ["robot", `robot: a_${feedback.step} ${feedback.outcome}${off}`];
+  }
+  const why = feedback ? `a_${feedback.step} failed, yet the object changed` : "no robot action explains this change";
+  return ["human", `human: ${why}`];
+}
+
+async function logEvent(event) {
+  const li = document.createElement("li");
+  li.className = event.kind;
+  li.dataset.seq = event.seq;
+  let actor = null;
+  if (DECISIONS.has(event.kind)) actor = await actorOf(event);
+  else if (event.kind === "feedback") {
+    view.feedbackSince = event.data;
+    actor = ["robot", `robot: a_${event.data.step} ${event.data.outcome}` + (event.data.accepted === "late" ? " (late)" : "")];
+    if (event.data.outcome !== "succeeded") li.classList.add("failure");
+  } else if (event.kind === "goal_set") actor = ["", "operator or task: a new goal"];
+  else if (event.kind === "dispatched") actor = ["robot", `robot took a_${event.data.step}`];
+  if (event.kind === "no_plan" || (event.data && event.data.planning_status && event.data.planning_status !== "solved")) li.classList.add("failure");
+  const seq = document.createElement("span"); seq.className = "seq"; seq.textContent = `#${event.seq} ${new Date(event.created_at * 1000).toLocaleTimeString()}`;
+  const kind = document.createElement("span"); kind.className = "kind"; kind.textContent = event.kind.replace("_", " ");
+  const reason = document.createElement("span"); reason.className = "reason"; reason.textContent = event.reason;
+  li.append(seq, kind, reason);
+  if (actor) {
+    const who = document.createElement("span");
+    who.className = `actor ${actor[0]}`;
+    who.textContent = actor[1];
+    li.appendChild(who);
+  }
+  const log = $("log");
+  log.prepend(li);  // newest first
+  if (DECISIONS.has(event.kind) && event.data.perceived_state_id) {
+    const state = await apiOrNull(`states/${event.data.perceived_state_id}`);
+    if (state && event.object_id === view.objectId) { view.perceived = state; fillPerceptionInputs(); draw(); }
+  }
+}
+
+// -- operator panel -----------------------------------------------------------------------------------------
+function numberInput(container, label, value, name) {
+  const wrap = document.createElement("label");
+  wrap.textContent = label;
+  const input = document.createElement("input");
+  input.type = "text";
+  input.inputMode = "decimal";
+  input.name = name;
+  input.value = value === null || value === undefined ? "" : String(value);
+  wrap.appendChild(input);
+  container.appendChild(wrap);
+  return input;
+}
+
+function fillGoalInputs() {
+  const obj = view.obj, box = $("goal-inputs");
+  box.replaceChildren();
+  if (!obj) return;
+  const byLinks = $("goal-kind").value === "link_orientations_deg";
+  if (byLinks) {
+    const angles = goalAngles() || perceivedAngles() || new Array(obj.links.length).fill(0);
+    obj.links.forEach((l, k) => numberInput(box, shortName(l.name), Math.round(angles[k]), `goal-${k}`));
+  } else {
+    const values = (view.goal && view.goal.joint_values_deg) || {};
+    obj.joints.forEach((j, k) => numberInput(box, shortName(j), values[j], `goal-${k}`));
+  }
+}
+
+function fillPerceptionInputs() {
+  const obj = view.obj, box = $("perception-inputs");
+  if (!obj) return;
+  if (box.contains(document.activeElement)) return;  // do not overwrite what a person is typing
+  box.replaceChildren();
+  const angles = perceivedAngles() || new Array(obj.links.length).fill(0);
+  obj.links.forEach((l, k) => numberInput(box, shortName(l.name), Number(angles[k]).toFixed(1).replace(/\.0$/, ""), `perceived-${k}`));
+}
+
+// Values as typed: a number stays a number, an empty field is null, anything else goes to the API as written,
+// so the service's own message names the field.
+function readInputs(box) {
+  return Array.from(box.querySelectorAll("input")).map((input) => {
+    const text = input.value.trim();
+    if (text === "") return null;
+    const n = Number(text);
+    return Number.isFinite(n) ? n : text;
+  });
+}
+
+async function submit(form, action) {
+  $("error").textContent = "";
+  $("notice").textContent = "";
+  const buttons = form.querySelectorAll("button");
+  buttons.forEach((b) => { b.disabled = true; });
+  try {
+    $("notice").textContent = await action();
+  } catch (err) {
+    $("error").textContent = err instanceof ApiError ? err.message : String(err);
+  } finally {
+    buttons.forEach((b) => { b.disabled = false; });
+  }
+}
+
+function setupOperator() {
+  const token = $("token");
+  token.value = localStorage.getItem(TOKEN_KEY) || "";
+  token.addEventListener("change", () => localStorage.setItem(TOKEN_KEY, token.value.trim()));
+  $("goal-kind").addEventListener("change", fillGoalInputs);
+  $("goal-reset").addEventListener("click", () => { view.draft = null; fillGoalInputs(); draw(); });
+  $("goal-inputs").addEventListener("input", () => {
+    if ($("goal-kind").value !== "link_orientations_deg") return;
+    const values = readInputs($("goal-inputs"));
+    if (values.every((v) => typeof v === "number")) { view.draft = values.map(norm); draw(); }
+  });
+  $("goal-form").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    if (!view.objectId) return;
+    submit($("goal-form"), async () => {
+      const body = { [$("goal-kind").value]: readInputs($("goal-inputs")) };
+      const answer = await api("PUT", `objects/${view.objectId}/goal`, body);
+      view.draft = null;
+      await refresh();
+      return `goal ${answer.goal_state_id} set` + (answer.problem_id ? ` (problem ${answer.problem_id})` : "; planning waits for the next perception");
+    });
+  });
+  $("perception-form").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    if (!view.objectId) return;
+    submit($("perception-form"), async () => {
+      const answer = await api("POST", `objects/${view.objectId}/perceptions`, { link_orientations_deg: readInputs($("perception-inputs")) });
+      return `${answer.decision}: ${answer.reason}`;
+    });
+  });
+}
+
+setupOperator();
+loadObjects();
+setInterval(() => { if (!view.objectId) loadObjects(); }, 2000);  // objects created while nobody is selected
