@@ -58,5 +58,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         max_body_bytes=settings.max_body_bytes))
     install_error_handlers(app)
     app.include_router(router)
-    install_console(app)
+    install_console(app, protect_reads=settings.protect_reads)
     return app

@@ -18,6 +18,8 @@ from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagge
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
+from .guard import is_data_path
+
 CONSOLE_URL = "/"
 CONSOLE_ASSETS_URL = "/console"
 DOCS_URL = "/docs"
@@ -41,8 +43,11 @@ def docs_assets_dir() -> Path:
     return Path(str(files("fastapi_offline") / "static"))
 
 
-def install_console(app: FastAPI) -> None:
-    """Mount the console, the offline docs and their assets on an app built with docs_url=redoc_url=None."""
+def install_console(app: FastAPI, protect_reads: bool = False) -> None:
+    """Mount the console, the offline docs and their assets on an app built with docs_url=redoc_url=None.
+
+    `protect_reads`: the service asks for the token on reads of the knowledge base too (see `guard`), so the
+    OpenAPI document declares the scheme on those operations as well."""
     app.mount(CONSOLE_ASSETS_URL, StaticFiles(directory=console_dir()), name="console-assets")
     app.mount(DOCS_ASSETS_URL, StaticFiles(directory=docs_assets_dir()), name="docs-assets")
     index = console_dir() / "index.html"
@@ -82,11 +87,12 @@ def install_console(app: FastAPI) -> None:
         page.headers["Content-Security-Policy"] = DOCS_POLICY
         return page
 
-    app.openapi = openapi_with_bearer(app.openapi)  # type: ignore[method-assign]
+    app.openapi = openapi_with_bearer(app.openapi, protect_reads)  # type: ignore[method-assign]
 
 
-def openapi_with_bearer(build: Callable[[], dict[str, Any]]) -> Callable[[], dict[str, Any]]:
-    """Wrap FastAPI's OpenAPI builder: declare the bearer scheme where an operation takes `Authorization`.
+def openapi_with_bearer(build: Callable[[], dict[str, Any]], protect_reads: bool = False) -> Callable[[], dict[str, Any]]:
+    """Wrap FastAPI's OpenAPI builder: declare the bearer scheme where an operation takes `Authorization`, and
+    on every read of the knowledge base when reads are protected.
 
     The header parameter itself is dropped from those operations (OpenAPI ignores a header parameter named
     Authorization; the security requirement is how a client is told to send it)."""
@@ -100,11 +106,11 @@ def openapi_with_bearer(build: Callable[[], dict[str, Any]]) -> Callable[[], dic
             "description": "The token given to `planhrc serve --token` (or PLANHRC_TOKEN). Requests that change "
             "the knowledge base need it when the service has one; reads stay open.",
         }
-        for operations in schema.get("paths", {}).values():
+        for path, operations in schema.get("paths", {}).items():
             for operation in operations.values():
                 params = operation.get("parameters", [])
                 auth = [p for p in params if p.get("in") == "header" and p.get("name", "").lower() == "authorization"]
-                if not auth:
+                if not auth and not (protect_reads and is_data_path(path)):
                     continue
                 operation["parameters"] = [p for p in params if p not in auth]
                 if not operation["parameters"]:

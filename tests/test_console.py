@@ -47,7 +47,7 @@ def free_port() -> int:
 
 
 @contextmanager
-def serve(db: Path, port: int | None = None, token: str | None = None) -> Iterator[str]:
+def serve(db: Path, port: int | None = None, token: str | None = None, *extra: str) -> Iterator[str]:
     """`planhrc serve` as a process on a loopback port; yields its base URL and stops it afterwards."""
     port = port or free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
@@ -56,6 +56,7 @@ def serve(db: Path, port: int | None = None, token: str | None = None) -> Iterat
             "--db", str(db), "--log-level", "warning"]
     if token:
         args += ["--token", token]
+    args += list(extra)
     log_path = db.parent / f"serve-{port}.log"
     with open(log_path, "w") as log_file:
         proc = subprocess.Popen(args, cwd=db.parent, env=env, stdout=log_file, stderr=subprocess.STDOUT)
@@ -285,6 +286,28 @@ def test_the_log_reconnects_after_a_service_restart(browser, tmp_path):
             stored = [e["seq"] for e in httpx.get(f"{base}/objects/{oid}/events").json()]
             assert sorted(seqs) == stored  # every event once, none twice
         page.close()
+
+
+def test_with_protected_reads_the_token_field_opens_the_page(browser, tmp_path):
+    """Reads need the (read-only) token too: the page says so, and works once the token is typed."""
+    with serve(tmp_path / "kb.sqlite3", None, TOKEN, "--protect-reads", "--read-token", "look") as base:
+        headers = {"Authorization": f"Bearer {TOKEN}"}
+        body = {"name": "rod", "links": 3, "orientations": 4, "formulation": "relative"}
+        oid = httpx.post(f"{base}/objects", json=body, headers=headers).json()["id"]
+        httpx.put(f"{base}/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]}, headers=headers)
+        schema = httpx.get(f"{base}/openapi.json").json()
+        assert schema["paths"]["/objects"]["get"]["security"] == [{"bearerToken": []}]
+        assert "security" not in schema["paths"]["/health"]["get"]
+        page = open_page(browser, f"{base}/?object={oid}", [], bypass_csp=True)
+        try:
+            page.wait_for_function("document.getElementById('error').textContent.includes('reads of the knowledge base')")
+            page.fill("#token", "look")
+            page.dispatch_event("#token", "change")
+            page.wait_for_selector("#log li.goal_set")
+            page.wait_for_selector(f"#objects button[data-object-id={oid}]")
+            assert page.locator("#plan-meta").inner_text() == "none yet"
+        finally:
+            page.close()
 
 
 @pytest.mark.skipif(os.environ.get("PLANHRC_CONSOLE_SCREENSHOTS") != "1", reason="set PLANHRC_CONSOLE_SCREENSHOTS=1 to refresh docs/")

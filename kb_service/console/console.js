@@ -22,7 +22,7 @@ async function api(method, path, body) {
   const headers = { Accept: "application/json" };
   if (body !== undefined) headers["Content-Type"] = "application/json";
   const token = $("token").value.trim();
-  if (token && method !== "GET") headers.Authorization = `Bearer ${token}`;
+  if (token) headers.Authorization = `Bearer ${token}`;
   let response;
   try {
     response = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
@@ -223,8 +223,13 @@ function drawPlan() {
 async function loadObjects() {
   const health = await apiOrNull("health");
   if (health) { view.auth = health.auth; setService(true); }
-  const objects = await apiOrNull("objects");
-  if (!objects) return;
+  let objects;
+  try {
+    objects = await api("GET", "objects");
+  } catch (err) {
+    $("error").textContent = err.message;  // e.g. reads need the token on this service
+    return;
+  }
   view.objects = objects;
   const list = $("objects");
   list.replaceChildren();
@@ -247,7 +252,7 @@ async function loadObjects() {
 }
 
 function selectObject(id) {
-  if (view.stream) view.stream.close();
+  if (view.stream) view.stream.abort();
   clearTimeout(view.retry);
   Object.assign(view, { objectId: id, obj: null, perceived: null, goal: null, plan: null, viewStep: null,
                         draft: null, lastSeq: 0, lastJoints: null, feedbackSince: null, queue: Promise.resolve() });
@@ -287,32 +292,64 @@ function scheduleRefresh() {
 }
 
 // -- the decision log over Server-Sent Events ---------------------------------------------------------------
+// The stream is read with fetch (not EventSource) so it can carry the bearer token when the service protects
+// reads. After a cut (a restart of the service, a network hiccup) it reconnects and sends Last-Event-ID: the
+// service then sends only what the page has not shown.
 function connect() {
   const id = view.objectId;
   if (!id) return;
-  // A new EventSource after an error starts from the last event shown; the browser's own reconnects send
-  // Last-Event-ID, which the service honours the same way.
-  const source = new EventSource(`objects/${id}/events/stream?after_seq=${view.lastSeq}`);
-  view.stream = source;
+  const controller = new AbortController();
+  view.stream = controller;
   $("stream").textContent = "connecting…";
-  source.onopen = () => { $("stream").textContent = "live"; loadObjects(); scheduleRefresh(); };
-  source.onerror = () => {
-    $("stream").textContent = "reconnecting…";
-    setService(false);
-    if (source.readyState === EventSource.CLOSED) {
-      clearTimeout(view.retry);
-      view.retry = setTimeout(() => { if (view.objectId === id) connect(); }, 1000);
-    }
+  const headers = { Accept: "text/event-stream" };
+  const token = $("token").value.trim();
+  if (token) headers.Authorization = `Bearer ${token}`;
+  if (view.lastSeq > 0) headers["Last-Event-ID"] = String(view.lastSeq);
+  const retry = (why) => {
+    if (controller.signal.aborted || view.objectId !== id) return;
+    $("stream").textContent = why;
+    clearTimeout(view.retry);
+    view.retry = setTimeout(() => { if (view.objectId === id) connect(); }, 1000);
   };
-  const onEvent = (msg) => {
-    const event = JSON.parse(msg.data);
-    if (event.object_id !== view.objectId || event.seq <= view.lastSeq) return;
-    view.lastSeq = event.seq;
-    view.queue = view.queue.then(() => logEvent(event)).catch((err) => console.error(err));
-    scheduleRefresh();
-  };
-  for (const kind of ["object_created", "goal_set", "dispatched", "feedback", ...DECISIONS]) source.addEventListener(kind, onEvent);
-  source.onmessage = onEvent;
+  fetch(`objects/${encodeURIComponent(id)}/events/stream`, { headers, signal: controller.signal, cache: "no-store" })
+    .then(async (response) => {
+      if (!response.ok) {
+        let detail = `HTTP ${response.status}`;
+        try { detail = (await response.json()).detail || detail; } catch (_) { /* not JSON */ }
+        setService(true);
+        $("error").textContent = detail;
+        retry("not streaming: " + detail);
+        return;
+      }
+      setService(true);
+      $("stream").textContent = "live";
+      loadObjects();
+      scheduleRefresh();
+      const reader = response.body.pipeThrough(new TextDecoderStream()).getReader();
+      let buffer = "";
+      for (;;) {
+        const { value, done } = await reader.read();
+        if (done) break;
+        buffer += value.replace(/\r\n/g, "\n");
+        let cut;
+        while ((cut = buffer.indexOf("\n\n")) >= 0) {
+          onFrame(buffer.slice(0, cut));
+          buffer = buffer.slice(cut + 2);
+        }
+      }
+      retry("reconnecting…");
+    })
+    .catch(() => { setService(false); retry("reconnecting…"); });
+}
+
+function onFrame(frame) {
+  const data = frame.split("\n").filter((l) => l.startsWith("data:")).map((l) => l.slice(5).trimStart()).join("\n");
+  if (!data) return;  // a comment (keep-alive)
+  const event = JSON.parse(data);
+  if (event.object_id !== view.objectId || event.seq <= view.lastSeq) return;
+  view.lastSeq = event.seq;
+  view.queue = view.queue.then(() => logEvent(event)).catch((err) => console.error(err));
+  scheduleRefresh();
 }
 
 // Who changed the object between two perceptions: the robot (a feedback came in, with its outcome) or a human
@@ -432,7 +469,11 @@ async function submit(form, action) {
 function setupOperator() {
   const token = $("token");
   token.value = localStorage.getItem(TOKEN_KEY) || "";
-  token.addEventListener("change", () => localStorage.setItem(TOKEN_KEY, token.value.trim()));
+  token.addEventListener("change", () => {
+    localStorage.setItem(TOKEN_KEY, token.value.trim());
+    $("error").textContent = "";
+    if (view.objectId) { if (view.stream) view.stream.abort(); connect(); } else loadObjects();
+  });
   $("goal-kind").addEventListener("change", fillGoalInputs);
   $("goal-reset").addEventListener("click", () => { view.draft = null; fillGoalInputs(); draw(); });
   $("goal-inputs").addEventListener("input", () => {
