@@ -137,12 +137,23 @@ def kb_service(out_dir: Path, token: str, startup_timeout_s: float = 90.0) -> It
                 proc.wait()
 
 
+def serve_until_interrupted(url: str) -> None:
+    """Keep the service (and its console) up until Ctrl-C, so a person can look at the episode."""
+    print(f"[demo] the service stays up for the console at {url}/ ; Ctrl-C stops it", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        print("[demo] stopping the service", flush=True)
+
+
 def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir: Path, gui: bool,
                 perception: str, max_steps: int, seed: int) -> dict:
     from planhrc.robot_sim.worker import run_worker
 
     with KBClient(kb_url, token=token) as kb:
         obj = kb.create_object(scenario.name, len(scenario.initial_deg), scenario.orientations, scenario.formulation)
+        print(f"[demo] watch {scenario.name} live: {kb_url}/?object={obj['id']}", flush=True)
         spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg)
         summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
                              token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
@@ -179,7 +190,7 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
 
 def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str | None = None,
              token: str | None = None, episodes: int = 1, perception: str = "camera", max_steps: int = 40,
-             seed: int = 0) -> dict:
+             seed: int = 0, keep_serving: bool = False) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     if scenario_name == "random":
         scenarios = [random_scenario(seed + i) for i in range(episodes)]
@@ -199,23 +210,30 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
                   f"in {result['time_to_goal_s']:.1f} s, {len(result['actions'])} actions, "
                   f"{result['replans']} re-plans, {result['resumes']} resumes", flush=True)
 
+    def summarize() -> dict:
+        summary = {
+            "scenario": scenario_name,
+            "episodes": len(results),
+            "reached_goal": sum(r["reached_goal"] for r in results),
+            "reached_goal_without_human_assist": sum(r["reached_goal"] and not r["human_assists"] for r in results),
+            "perception": perception,
+            "wall_s": round(time.perf_counter() - started, 3),
+        "results": results,
+        }
+        (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+        return summary
+
     if kb_url is None:
         token = token or secrets.token_urlsafe(16)
         with kb_service(out_dir, token) as url:
+            print(f"[demo] console: {url}/  (bearer token for goals and perceptions: {token})", flush=True)
             run_all(url, token)
-    else:
-        run_all(kb_url, token or os.environ.get("PLANHRC_TOKEN"))
-    summary = {
-        "scenario": scenario_name,
-        "episodes": len(results),
-        "reached_goal": sum(r["reached_goal"] for r in results),
-        "reached_goal_without_human_assist": sum(r["reached_goal"] and not r["human_assists"] for r in results),
-        "perception": perception,
-        "wall_s": round(time.perf_counter() - started, 3),
-        "results": results,
-    }
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
-    return summary
+            summary = summarize()
+            if keep_serving:
+                serve_until_interrupted(url)
+        return summary
+    run_all(kb_url, token or os.environ.get("PLANHRC_TOKEN"))
+    return summarize()
 
 
 def add_demo_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -231,13 +249,15 @@ def add_demo_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="camera: ArUco markers in rendered images; fallback: simulator poses + Gaussian noise")
     p.add_argument("--max-steps", type=int, default=40)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--keep-serving", action="store_true",
+                   help="leave the started service (and its console at /) up after the episodes, until Ctrl-C")
     p.set_defaults(func=run_demo_cli)
 
 
 def run_demo_cli(args: argparse.Namespace) -> int:
     try:
         summary = run_demo(args.scenario, Path(args.out), args.gui, args.kb, args.token, args.episodes,
-                           args.perception, args.max_steps, args.seed)
+                           args.perception, args.max_steps, args.seed, keep_serving=args.keep_serving)
     except (SimError, ProtocolError) as exc:
         print(f"planhrc demo: {exc}", file=sys.stderr)
         return 1
