@@ -35,6 +35,7 @@ from typing import Iterable, Sequence
 
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
+from planhrc.plots import plot_times
 from planhrc.planner.registry import available_planners, get_planner
 from planhrc.planner.result import PlanStatus
 from planhrc.planner.validate import validate_plan
@@ -194,35 +195,8 @@ def write_results(rows: Sequence[Row], summary: list[dict], out_dir: Path, extra
         for r in rows:
             writer.writerow(asdict(r))
     written.append(p)
-    written += box_plots(rows, out_dir)
+    written += plot_times(rows, out_dir)
     return written
-
-
-def box_plots(rows: Sequence[Row], out_dir: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    paths = []
-    for formulation, planner in sorted({(r.formulation, r.planner) for r in rows}):
-        sel = [r for r in rows if r.formulation == formulation and r.planner == planner and r.status == "solved"]
-        labels = sorted({r.label for r in sel}, key=lambda s: tuple(int(x) for x in s.split("-")))
-        if not labels:
-            continue
-        fig, ax = plt.subplots(figsize=(max(8, len(labels) * 0.18), 4))
-        ax.boxplot([[r.seconds for r in sel if r.label == lab] for lab in labels], tick_labels=labels)
-        ax.set_yscale("log")
-        ax.set_xlabel("links-orientations")
-        ax.set_ylabel("solution time (s)")
-        ax.set_title(f"{formulation} formulation, {planner}: {len(sel)} solved")
-        ax.tick_params(axis="x", labelrotation=90, labelsize=6)
-        fig.tight_layout()
-        path = out_dir / f"times-{formulation}-{planner}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        paths.append(path)
-    return paths
 
 
 def machine_info() -> dict:
