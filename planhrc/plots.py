@@ -116,8 +116,8 @@ def _figure(plt, runs: Sequence[Run], formulation: str, planner: str, limit: flo
     if limit:
         ax.axhline(limit, color="#c62828", linestyle="--", linewidth=1)
         ax.text(-0.5, limit * 1.08, f"time limit {limit:.3g} s", color="#c62828", va="bottom", ha="left", fontsize=9)
-    ax.set_yscale("log")
     ax.set_ylim(low, high)
+    ax.set_yscale("log")
     ax.set_xticks(range(len(links)), [str(n) for n in links], fontsize=10)
     ax.set_xlim(-0.6, len(links) - 0.4)
     for i in range(len(links) - 1):

@@ -18,7 +18,7 @@ import logging
 import re
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -29,8 +29,10 @@ from pybullet_utils.bullet_client import BulletClient
 from planhrc.robot_sim.human import (HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action, get_scenario,
                              goal_differences)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
+from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
+                                       draw_configurations, step_caption, write_movie)
 from planhrc.robot_sim.protocol import KBClient, ProtocolError
-from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene, direction
+from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene
 from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
 
 log = logging.getLogger(__name__)
@@ -86,7 +88,8 @@ class _Run:
 
     records: list[StepRecord] = field(default_factory=list)
     frames: list[np.ndarray] = field(default_factory=list)  # one per perception (saved as PNG)
-    movie: list[np.ndarray] = field(default_factory=list)  # perceptions plus one frame half-way through each action
+    # perceptions plus one frame half-way through each action: (step, "perceived" or "moving", frame)
+    movie: list[tuple[int, str, np.ndarray]] = field(default_factory=list)
     configurations: list[tuple[float, ...]] = field(default_factory=list)
     base_points: list[tuple[float, float]] = field(default_factory=list)
     labels: list[str] = field(default_factory=list)
@@ -207,7 +210,7 @@ def run_worker(
             out_dir=str(out),
             wall_s=time.perf_counter() - start,
         )
-        _save(out, summary, run, spec)
+        _save(out, summary, run, spec, goal_link_orientations_deg)
         return summary
     finally:
         if scene is not None:
@@ -241,7 +244,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, co
         frame = seen.frame if seen.frame is not None or not record_frames else camera.render()
         if frame is not None:
             run.frames.append(frame)
-            run.movie.append(frame)
+            run.movie.append((step, "perceived", frame))
         _, theta = scene.configuration()
         run.configurations.append(tuple(round(v, 3) for v in theta))
         run.base_points.append(scene.base_point())
@@ -277,7 +280,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, co
 
         def interrupt(done: int, total: int) -> bool:
             if done == total // 2 and record_motion:
-                run.movie.append(camera.render())  # the arms at work
+                run.movie.append((step, "moving", camera.render()))  # the arms at work
             if during_events and done >= total / 2:
                 while during_events:
                     index, event = during_events.pop(0)
@@ -317,59 +320,57 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, co
 
 
 # -- records ---------------------------------------------------------------------------------------------
-def _save(out: Path, summary: WorkerSummary, run: _Run, spec: SceneSpec) -> None:
+def _save(out: Path, summary: WorkerSummary, run: _Run, spec: SceneSpec,
+          goal_deg: Sequence[float] | None = None) -> None:
     from PIL import Image
 
     data = asdict(summary)
     data["decisions"] = list(summary.decisions)
     data["outcomes"] = list(summary.outcomes)
     (out / "summary.json").write_text(json.dumps(data, indent=2, default=str))
+    steps = picture_steps(run.records, run.configurations, run.base_points)
+    by_step = {s.step: s for s in steps}
+    markers = [detect_markers(frame) for frame in run.frames]
+    if len(markers) == len(steps):  # what the pictures draw on each frame is what they report
+        steps = [replace(s, markers_seen=len(m)) for s, m in zip(steps, markers)]
+        by_step = {s.step: s for s in steps}
     for i, frame in enumerate(run.frames):
-        Image.fromarray(frame).save(out / f"frame_{i:03d}.png")
-    images = [Image.fromarray(f).resize((f.shape[1] // 2, f.shape[0] // 2)) for f in run.movie]
-    if images:
-        images[0].save(out / "run.gif", save_all=True, append_images=images[1:], duration=800, loop=0)
-    if run.configurations:
-        draw_configurations(out / "configurations.png", run.configurations, run.base_points, spec.link_length_m, run.labels)
+        lines = step_caption(steps[i], spec.n_links) if i < len(steps) else [f"perception {i + 1}"]
+        Image.fromarray(caption_frame(frame, lines, markers=markers[i])).save(out / f"frame_{i:03d}.png")
+    movie, perceived = [], 0
+    for step, kind, frame in run.movie:
+        s = by_step.get(step)
+        if kind == "perceived":
+            lines = step_caption(s, spec.n_links) if s else [f"step {step}"]
+            seen = markers[perceived] if perceived < len(markers) else None
+            perceived += 1
+        else:
+            lines = [f"step {step}   robot at work", f"{s.action if s else 'action'}", ""]
+            seen = None
+        movie.append(caption_frame(frame, lines, width=480, markers=seen))
+    write_movie(out / "run.gif", movie)
+    if steps:
+        draw_configurations(out / "configurations.png", steps, spec.link_length_m, goal_deg,
+                            title=f"{summary.object_id}, scenario {summary.scenario}: {summary.stop_reason}")
 
 
-def draw_configurations(
-    path: Path,
-    configurations: Sequence[Sequence[float]],
-    base_points: Sequence[Sequence[float]],
-    link_length_m: float,
-    labels: Sequence[str] = (),
-) -> None:
-    """Small top views of each configuration: the robot's forward axis (+x) up, its right (-y) to the right."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n = len(configurations)
-    cols = min(n, 6)
-    rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(2.0 * cols, 2.0 * rows), squeeze=False)
-    for ax in axes.ravel():
-        ax.axis("off")
-    for i, (theta, base) in enumerate(zip(configurations, base_points)):
-        points = [np.asarray(base, dtype=float)]
-        for t in theta:
-            points.append(points[-1] + link_length_m * direction(t))
-        xs = [-p[1] for p in points]  # robot's right to the right of the drawing
-        ys = [p[0] for p in points]  # forward up
-        ax = axes.ravel()[i]
-        ax.plot(xs, ys, "-", color="tab:blue", linewidth=3)
-        ax.plot(xs[1:-1], ys[1:-1], "o", color="black", markersize=3)
-        ax.plot(xs[0], ys[0], "s", color="tab:red", markersize=4)
-        ax.set_aspect("equal")
-        span = link_length_m * len(theta)
-        ax.set_xlim(xs[0] - span, xs[0] + span)
-        ax.set_ylim(ys[0] - span, ys[0] + span)
-        ax.set_title(labels[i] if i < len(labels) else str(i + 1), fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+def picture_steps(records: Sequence[StepRecord], configurations: Sequence[Sequence[float]],
+                  base_points: Sequence[Sequence[float]]) -> list[PictureStep]:
+    """The pictures' view of each decision: who changed the object since the previous one and what followed."""
+    out = []
+    previous: StepRecord | None = None
+    for record, theta, base in zip(records, configurations, base_points):
+        human = list(record.human_before)
+        if previous is not None:
+            human = list(previous.human_during) + ([previous.human_assist] if previous.human_assist else []) + human
+        actor = "start" if previous is None and not human else actor_between(
+            previous.outcome if previous else None, human)
+        out.append(PictureStep(
+            step=record.step, decision=record.decision, configuration_deg=tuple(theta),
+            base_xy=(float(base[0]), float(base[1])), actor=actor, action=describe_action(record.action),
+            outcome=record.outcome, human=tuple(human)))
+        previous = record
+    return out
 
 
 # -- command line ----------------------------------------------------------------------------------------
