@@ -3,7 +3,7 @@
 `get_planner(name)` builds a backend from the `PLANNERS` registry; `plan_with_fallback` runs the one
 fallback chain every caller uses; `plan_files` reads PDDL files;
 `validate_plan` checks a plan with VAL; `ground_task` is the low-latency re-planning API of the
-in-process planner for the rotation domain family.
+in-process planner (parse -> ground -> recognise -> solve; see `planner.inproc`).
 """
 from .base import Planner
 from .chain import plan_with_fallback

@@ -157,7 +157,7 @@ def test_init_with_two_orientations_for_a_joint_is_an_error():
     task = ground_task(DOMAINS["relative"], problem)
     bad = set(task.init) | {("hasorientation", f"deg_{(init[0] + 90) % 360}", "obj1_j1")}
     result = task.solve(bad, task.goal)
-    assert result.status is PlanStatus.ERROR and "more than one orientation" in result.message
+    assert result.status is PlanStatus.ERROR and "more than one value" in result.message
 
 
 def test_changed_static_facts_are_refused():
@@ -186,10 +186,10 @@ def test_unwrapped_orientation_order_is_refused():
         ground_task(DOMAINS["relative"], problem)
 
 
-def test_non_decomposable_axes_give_error():
-    """An affected set that skips a joint mixes coordinates under every transform: refuse, never guess."""
+def test_an_affected_set_that_skips_a_joint_is_solved_through_a_basis():
+    """Turning l1 about j1 moves j1, j2 and j4 but not j3: no difference transform separates the actions, but
+    their effects form a basis of Z_K^4, so each action moves one basis coordinate and the plan is optimal."""
     obj, init, goal, problem = make_case("absolute", 4, 4, seed=5, goal_fraction=1.0)
-    # turning l1 about j1 now moves j1, j2 and j4 but not j3
     problem = problem.replace("(affected obj1_j3 obj1_l1 obj1_j1)", "")
     problem = problem.replace("(affected obj1_j3 obj1_l2 obj1_j2)", "")
     task = ground_task(DOMAINS["absolute"], problem)
@@ -197,8 +197,47 @@ def test_non_decomposable_axes_give_error():
     target = {("hasorientation", f"deg_{(values[j] + (90 if j == 1 else 0)) % 360}", obj.joint(j))
               for j in obj.joint_indices}
     result = task.solve(task.init, target)
+    assert result.status is PlanStatus.SOLVED and result.optimal is True and "basis" in result.message
+    text = get_problem(obj, obj.configuration_atoms(init), target, "skips").replace(
+        "(affected obj1_j3 obj1_l1 obj1_j1)", "").replace("(affected obj1_j3 obj1_l2 obj1_j2)", "")
+    assert validate_plan(DOMAINS["absolute"], text, result.plan).valid
+
+
+TWISTS = """
+(define (domain twists)
+  (:requirements :strips :typing :negative-preconditions)
+  (:types dial notch)
+  (:predicates (at ?n - notch ?d - dial) (next ?a ?b - notch) (first ?d - dial) (second ?d - dial) (third ?d - dial))
+  (:action twist_same
+    :parameters (?x ?y ?z - dial ?x1 ?x2 ?y1 ?y2 ?z1 ?z2 - notch)
+    :precondition (and (first ?x) (second ?y) (third ?z) (at ?x1 ?x) (next ?x1 ?x2) (at ?y1 ?y) (next ?y1 ?y2)
+                       (at ?z1 ?z) (next ?z1 ?z2))
+    :effect (and (not (at ?x1 ?x)) (at ?x2 ?x) (not (at ?y1 ?y)) (at ?y2 ?y) (not (at ?z1 ?z)) (at ?z2 ?z)))
+  (:action twist_opposite
+    :parameters (?x ?y ?z - dial ?x1 ?x2 ?y1 ?y2 ?z1 ?z2 - notch)
+    :precondition (and (first ?x) (second ?y) (third ?z) (at ?x1 ?x) (next ?x1 ?x2) (at ?y1 ?y) (next ?y2 ?y1)
+                       (at ?z1 ?z) (next ?z1 ?z2))
+    :effect (and (not (at ?x1 ?x)) (at ?x2 ?x) (not (at ?y1 ?y)) (at ?y2 ?y) (not (at ?z1 ?z)) (at ?z2 ?z)))
+  (:action turn_third
+    :parameters (?z - dial ?z1 ?z2 - notch)
+    :precondition (and (third ?z) (at ?z1 ?z) (next ?z1 ?z2))
+    :effect (and (not (at ?z1 ?z)) (at ?z2 ?z))))
+"""
+
+
+def test_a_task_no_method_separates_is_refused_not_guessed():
+    """Effects (1,1,1), (1,-1,1), (0,0,1) over Z_4: not a basis (determinant -2), no transform separates them.
+    The goal (2,0,2) is reachable (twist_same + twist_opposite), but the planner cannot prove a length and
+    says so instead of guessing."""
+    notches = " ".join(f"n{i}" for i in range(4))
+    problem = f"""(define (problem t) (:domain twists)
+      (:objects a b c - dial {notches} - notch)
+      (:init (first a) (second b) (third c) (at n0 a) (at n0 b) (at n0 c)
+             (next n0 n1) (next n1 n2) (next n2 n3) (next n3 n0))
+      (:goal (and (at n2 a) (at n0 b) (at n2 c))))"""
+    result = InprocPlanner().solve(TWISTS, problem, 5.0)
     assert result.status is PlanStatus.ERROR and result.plan == ()
-    assert "decomposes" in result.message
+    assert "refusing to guess" in result.message
 
 
 @pytest.mark.parametrize("text", ["", "(define (domain x)", "(define (problem x) (:domain y))", "hello"])

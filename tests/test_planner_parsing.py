@@ -5,7 +5,7 @@ import pytest
 
 from planhrc.model import make_object
 from planhrc.planner.errors import PlannerError
-from planhrc.planner.inproc import recognise_schema
+from planhrc.planner.inproc import ground_task
 from planhrc.planner.pddl import parse_domain, parse_problem
 from planhrc.planner.plan_file import parse_plan_text, read_best_plan
 from planhrc.translator.problem import get_problem
@@ -23,16 +23,23 @@ def test_parse_golden_problem():
                             ("hasorientation", "deg_90", "obj1_j2")}
 
 
-@pytest.mark.parametrize("name,guarded,cascade", [("relative", False, 0), ("absolute", True, 1),
-                                                  ("absolute-paper", False, 1)])
-def test_golden_domains_are_recognised(name, guarded, cascade):
-    domain = parse_domain((DATA / f"domain-{name}.pddl").read_text())
-    schemas = {a.name: recognise_schema(a) for a in domain.actions}
-    cw, acw = schemas["rotateclockwise"], schemas["rotateanticlockwise"]
-    assert (cw.direction, acw.direction) == (1, -1)
-    assert cw.roles == ("l1", "l2", "j", "o1", "o2")
-    assert cw.guarded is guarded and acw.guarded is guarded
-    assert (cw.cascade, acw.cascade) == (cascade, -cascade)
+@pytest.mark.parametrize("name", ["relative", "absolute", "absolute-paper"])
+def test_golden_domains_ground_to_fixed_vectors(name):
+    """Each ground action (up to its orientation arguments) adds a fixed step vector to the joints."""
+    formulation = "relative" if name == "relative" else "absolute"
+    task = ground_task((DATA / f"domain-{name}.pddl").read_text(),
+                       (DATA / f"problem-{formulation}-3x4.pddl").read_text())
+    joints = ("obj1_j1", "obj1_j2") + (("obj1_j3",) if formulation == "absolute" else ())
+    assert task.joints == joints and task.cycle == ("deg_0", "deg_90", "deg_180", "deg_270")
+    vectors = {(a.action, dict(a.binding)["?l1"], dict(a.binding)["?j1"]): {task.names[v]: s for v, s in a.effect}
+               for a in task.axes}
+    turn_l1 = {"relative": {"obj1_j1": 1}, "absolute": {"obj1_j1": 1, "obj1_j2": 1, "obj1_j3": 1},
+               "absolute-paper": {"obj1_j1": 1, "obj1_j2": 1, "obj1_j3": 1}}[name]
+    assert vectors[("rotateclockwise", "obj1_l1", "obj1_j1")] == turn_l1
+    assert vectors[("rotateanticlockwise", "obj1_l1", "obj1_j1")] == {j: 3 for j in turn_l1}  # -1 mod 4
+    # the guard (affected ?j1 ?l1 ?j1) removes turning the table link l0; the paper's schema keeps it
+    assert (("rotateclockwise", "obj1_l0", "obj1_j1") in vectors) is (name == "absolute-paper")
+    assert all(len(a.values) == 2 for a in task.axes)  # ?o1 pinned, ?o2 one step on
 
 
 def test_parser_is_case_insensitive_and_ignores_comments():
