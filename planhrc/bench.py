@@ -33,10 +33,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
+from planhrc.cli_args import int_list, name_list, positive_float, positive_int, writable_dir
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
 from planhrc.plots import plot_times
-from planhrc.planner.registry import available_planners, get_planner
+from planhrc.planner.registry import PLANNERS, available_planners, get_planner
 from planhrc.planner.result import PlanStatus
 from planhrc.planner.validate import validate_plan
 from planhrc.translator.domain import get_domain
@@ -265,33 +266,39 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
 def add_bench_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("bench", help="the paper's planning grid and re-planning latency",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--planners", default="inproc,fd-lama", help="comma separated planner names")
-    p.add_argument("--formulations", default="relative,absolute")
-    p.add_argument("--links", default="4-20", help="range A-B or list")
-    p.add_argument("--orientations", default="4,6,8,10,12")
-    p.add_argument("--instances", type=int, default=INSTANCES, help="random instances per cell")
-    p.add_argument("--timeout", type=float, default=10.0, metavar="S", help="per planner call")
+    p.add_argument("--planners", type=name_list(list(PLANNERS)), default="inproc,fd-lama",
+                   help="comma separated planner names")
+    p.add_argument("--formulations", type=name_list([f.value for f in Formulation]), default="relative,absolute")
+    p.add_argument("--links", type=int_list(2), default="4-20", help="range A-B or list")
+    p.add_argument("--orientations", type=orientation_list, default="4,6,8,10,12", help="range A-B or list")
+    p.add_argument("--instances", type=positive_int, default=INSTANCES, help="random instances per cell")
+    p.add_argument("--timeout", type=positive_float, default=10.0, metavar="S", help="per planner call")
     p.add_argument("--no-validate", action="store_true")
     p.add_argument("--replan", action="store_true", help="also measure the re-planning loop on 20 x 12")
     p.add_argument("--replan-only", action="store_true", help="only measure the re-planning loop")
-    p.add_argument("--replan-runs", type=int, default=30, help="re-plans measured per formulation (median)")
-    p.add_argument("--out", default="bench-results", help="output folder")
+    p.add_argument("--replan-runs", type=positive_int, default=30, help="re-plans measured per formulation (median)")
+    p.add_argument("--out", type=writable_dir, default="bench-results", help="output folder")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_bench)
 
 
-def _int_list(text: str) -> list[int]:
-    if "-" in text and "," not in text:
-        a, b = text.split("-")
-        return list(range(int(a), int(b) + 1))
-    return [int(x) for x in text.split(",") if x.strip()]
+def orientation_list(text: str) -> list[int]:
+    """Orientation counts K: each divides 360 and is at least 2."""
+    values = int_list(2, 360)(text)
+    bad = [k for k in values if 360 % k]
+    if bad:
+        raise argparse.ArgumentTypeError(f"360 must be divisible by each K, not by {', '.join(map(str, bad))}")
+    return values
 
 
 def run_bench(args: argparse.Namespace) -> int:
     out_dir = Path(args.out)
-    formulations = [f.strip() for f in args.formulations.split(",") if f.strip()]
-    for f in formulations:
-        Formulation(f)
+    formulations, planners = args.formulations, args.planners
+    usable = set(available_planners())
+    missing = [p for p in planners if p not in usable]
+    if missing and not args.replan_only:
+        print(f"planhrc bench: --planners: not available here: {', '.join(missing)}", file=sys.stderr)
+        return 2
     extra: dict = {}
     if args.replan or args.replan_only:
         extra["replan"] = [measure_replan(f, runs=args.replan_runs) for f in formulations]
@@ -301,13 +308,7 @@ def run_bench(args: argparse.Namespace) -> int:
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / "replan.json").write_text(json.dumps({"machine": machine_info(), **extra}, indent=2))
         return 0
-    planners = [p.strip() for p in args.planners.split(",") if p.strip()]
-    usable = set(available_planners())
-    missing = [p for p in planners if p not in usable]
-    if missing:
-        print(f"planhrc bench: planners not available here: {', '.join(missing)}", file=sys.stderr)
-        return 2
-    instances = make_instances(_int_list(args.links), _int_list(args.orientations), args.instances)
+    instances = make_instances(args.links, args.orientations, args.instances)
     rows = run_grid(planners, formulations, instances, args.timeout, not args.no_validate, not args.no_progress)
     summary = summarise(rows)
     paths = write_results(rows, summary, out_dir, extra)

@@ -1,63 +1,239 @@
 """`planhrc` command line: one sub-command per job, each registered by the module that owns it.
 
 Modules are imported only when their command runs, so a quick command does not pay for the simulator.
+A user's mistake (a bad argument or `PLANHRC_*` setting, a missing file, a refused request) ends in one line
+on stderr and a non-zero exit, never a traceback; Ctrl-C and SIGTERM end in one line and exit 130 / 143 after
+every child process has been stopped (the commands' `finally` blocks run).
 """
 from __future__ import annotations
 
 import argparse
 import importlib
 import logging
+import os
+import signal
 import sys
-from typing import Callable
+import threading
+from contextlib import ExitStack, contextmanager, nullcontext
+from typing import Callable, Iterator
 
-# command -> (module, name of its `add_*_parser(subparsers)` function)
-COMMANDS: dict[str, tuple[str, str]] = {
-    "ontology": ("planhrc.kb.check", "add_ontology_parser"),
-    "plan": ("planhrc.planner.cli", "add_plan_parser"),
-    "solve": ("planhrc.solve", "add_solve_parser"),
-    "bench": ("planhrc.bench", "add_bench_parser"),
-    "serve": ("planhrc.kb_service.cli", "add_serve_parser"),
-    "worker": ("planhrc.robot_sim.worker", "add_worker_parser"),
-    "demo": ("planhrc.robot_sim.demo", "add_demo_parser"),
-    "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser"),
-    "service-bench": ("planhrc.service_bench", "add_service_bench_parser"),
+from planhrc.cli_args import OneLineParser
+
+# command -> (module, name of its `add_*_parser(subparsers)` function, one-line help)
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "ontology": ("planhrc.kb.check", "add_ontology_parser", "check the ontology with a DL reasoner"),
+    "plan": ("planhrc.planner.cli", "add_plan_parser", "plan for a PDDL domain and problem"),
+    "solve": ("planhrc.solve", "add_solve_parser", "solve one problem end to end through the ontology"),
+    "bench": ("planhrc.bench", "add_bench_parser", "the paper's planning grid and re-planning latency"),
+    "serve": ("planhrc.kb_service.cli", "add_serve_parser", "run the knowledge-base HTTP service"),
+    "worker": ("planhrc.robot_sim.worker", "add_worker_parser", "run the simulated Baxter worker"),
+    "demo": ("planhrc.robot_sim.demo", "add_demo_parser", "KB service + Baxter worker: a scenario to the end"),
+    "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser", "what the simulated cell measures"),
+    "service-bench": ("planhrc.service_bench", "add_service_bench_parser",
+                      "the KB service measured with a long history, over HTTP"),
 }
+
+# Commands that load native libraries printing to file descriptor 1 (PyBullet): their fd 1 is diverted so that
+# only the command's own output reaches stdout.
+NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench"})
+
+# Modules of the optional `sim` extra: a command that needs a missing one says what to install.
+SIM_EXTRA_MODULES = frozenset({"pybullet", "pybullet_utils", "cv2", "example_robot_data", "PIL", "matplotlib"})
+
+# Error roots of the packages: raised for input the user can fix, reported in one line. Looked up only among
+# modules already imported (a module that was never imported cannot have raised).
+USER_ERRORS: tuple[tuple[str, str], ...] = (
+    ("planhrc.model", "ModelError"),
+    ("planhrc.transition", "TransitionError"),
+    ("planhrc.kb.errors", "KBError"),
+    ("planhrc.kb_service.errors", "KBError"),
+    ("planhrc.translator.errors", "TranslationError"),
+    ("planhrc.planner.errors", "PlannerError"),
+    ("planhrc.robot_sim.protocol", "ProtocolError"),
+    ("planhrc.robot_sim.scene", "SimError"),
+)
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 128 + signal.SIGINT  # 130
+EXIT_TERMINATED = 128 + signal.SIGTERM  # 143
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: unwinds the stack like KeyboardInterrupt, so cleanup code runs."""
+
+
+def version() -> str:
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("planhrc")
+    except PackageNotFoundError:  # a source tree that is not installed
+        from planhrc import __version__
+
+        return __version__
 
 
 def build_parser(argv: list[str]) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="planhrc", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="planhrc", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log at DEBUG level")
+    parser.add_argument("--version", action="version", version=f"planhrc {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    wanted = next((a for a in argv if a in COMMANDS), None)
-    for name, (module, func) in COMMANDS.items():
-        if wanted is not None and name != wanted:
-            sub.add_parser(name, help=f"see `planhrc {name} --help`")
+    wanted = wanted_command(argv)
+    for name, (module, func, help_text) in COMMANDS.items():
+        if name != wanted:  # only the command that runs is imported
+            sub.add_parser(name, help=help_text)
             continue
-        try:
-            add: Callable = getattr(importlib.import_module(module), func)
-        except (ImportError, AttributeError) as exc:  # a part that cannot load must not hide the others
-            p = sub.add_parser(name, help=f"unavailable: {exc}")
-            p.set_defaults(func=lambda args, exc=exc: _unavailable(exc))
-            continue
+        add: Callable = getattr(importlib.import_module(module), func)
         add(sub)
     return parser
 
 
-def _unavailable(exc: Exception) -> int:
-    print(f"planhrc: this command cannot run here: {exc}", file=sys.stderr)
-    return 2
+def wanted_command(argv: list[str]) -> str | None:
+    return next((a for a in argv if a in COMMANDS), None)
+
+
+def missing_dependency(exc: ImportError) -> str:
+    """One line: what to install for a command whose module cannot be imported."""
+    top = (exc.name or "").split(".")[0]
+    if top in SIM_EXTRA_MODULES:
+        return f"needs the simulator extra (missing module {top}): pip install 'planhrc[sim]'"
+    return f"cannot load ({exc})"
+
+
+@contextmanager
+def fd_silenced(fd: int) -> Iterator[None]:
+    """Discard what native code writes to `fd` for the duration (PyBullet's banner on import)."""
+    saved = os.dup(fd)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, fd)
+    os.close(null)
+    try:
+        yield
+    finally:
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
+def _unavailable(name: str, exc: ImportError) -> int:
+    print(f"planhrc {name}: {missing_dependency(exc)}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+@contextmanager
+def native_stdout_diverted(verbose: bool) -> Iterator[None]:
+    """Point file descriptor 1 at stderr (with --verbose) or /dev/null, and Python's `sys.stdout` at the
+    original stdout, for the duration: native libraries that printf (PyBullet) cannot mix into the command's
+    output. Restored afterwards (the command may run inside a test process)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    target = os.dup(2) if verbose else os.open(os.devnull, os.O_WRONLY)
+    os.dup2(target, 1)
+    os.close(target)
+    python_stdout = sys.stdout
+    sys.stdout = open(os.dup(saved), "w", buffering=1, encoding=python_stdout.encoding or "utf-8",
+                      errors="backslashreplace")
+    try:
+        yield
+    finally:
+        try:
+            sys.stdout.close()
+        except OSError:  # the reader went away (`| head`)
+            pass
+        sys.stdout = python_stdout
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _on_signal(signum: int, frame) -> None:
+    # later signals are ignored so that the cleanup started by the first one can finish (it is time-bounded)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    if signum == signal.SIGTERM:
+        raise Terminated()
+    raise KeyboardInterrupt()
+
+
+def install_signal_handlers() -> dict[int, object]:
+    """SIGINT and SIGTERM unwind the stack (KeyboardInterrupt / Terminated); returns the previous handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {signum: signal.signal(signum, _on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
+
+
+def restore_signal_handlers(previous: dict[int, object]) -> None:
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)
+
+
+def _user_error_types() -> tuple[type[BaseException], ...]:
+    types = [getattr(sys.modules[m], n) for m, n in USER_ERRORS if m in sys.modules and hasattr(sys.modules[m], n)]
+    return tuple(types)
+
+
+def settings_error_line(exc: Exception, cli_names: dict[str, str] | None = None) -> str:
+    """A pydantic ValidationError of the settings as one line naming the option or `PLANHRC_*` variable."""
+    cli_names = cli_names or {}
+    parts = []
+    for error in exc.errors():  # type: ignore[attr-defined]
+        field = str(error["loc"][0]) if error.get("loc") else "?"
+        name = cli_names.get(field, f"PLANHRC_{field.upper()}")
+        parts.append(f"{name}: {error['msg']}, got {error.get('input')!r}")
+    return "; ".join(parts)
+
+
+def _run(argv: list[str]) -> int:
+    parser = build_parser(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # a usage error (already reported in one line), --help or --version
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    return int(args.func(args) or 0)
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    func = getattr(args, "func", None)
-    if func is None:
-        parser.error(f"{args.command}: no handler")
-    return int(func(args) or 0)
+    wanted = wanted_command(argv)
+    name = f"planhrc {wanted}" if wanted else "planhrc"
+    verbose = "-v" in argv or "--verbose" in argv
+    previous = install_signal_handlers()
+    try:
+        with ExitStack() as stack:
+            if wanted in NATIVE_STDOUT_COMMANDS:
+                stack.enter_context(native_stdout_diverted(verbose))
+            if wanted is not None:
+                quiet = wanted in NATIVE_STDOUT_COMMANDS and not verbose
+                try:
+                    with fd_silenced(2) if quiet else nullcontext():
+                        importlib.import_module(COMMANDS[wanted][0])
+                except ImportError as exc:
+                    return _unavailable(wanted, exc)
+            return _run(argv)
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Terminated:
+        print(f"{name}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
+    except Exception as exc:
+        if type(exc).__name__ == "ValidationError" and type(exc).__module__.startswith("pydantic"):
+            print(f"{name}: {settings_error_line(exc)}", file=sys.stderr)
+            return EXIT_USAGE
+        if isinstance(exc, _user_error_types()):
+            print(f"{name}: {exc}", file=sys.stderr)
+            return 1
+        if isinstance(exc, OSError) and exc.filename is not None:
+            print(f"{name}: {exc.strerror or exc}: {exc.filename}", file=sys.stderr)
+            return 1
+        raise
+    finally:
+        restore_signal_handlers(previous)
+        try:
+            sys.stdout.flush()
+        except (OSError, ValueError):  # stdout closed by a reader that went away (`| head`)
+            pass
 
 
 if __name__ == "__main__":

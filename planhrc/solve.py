@@ -12,12 +12,14 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from planhrc.cli_args import int_in, positive_float, writable_file
 from planhrc.kb.errors import KBError
 from planhrc.kb.store import KnowledgeBase
 from planhrc.model import ArticulatedObject, ModelError, make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import Planning, PlanningConfig, merge_macro_steps
 from planhrc.planner.errors import PlannerError
+from planhrc.planner.registry import PLANNERS
 from planhrc.translator.errors import TranslationError
 
 ANY = {"*", "_", "-", "?"}
@@ -104,13 +106,13 @@ def add_solve_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("solve", help="solve one problem end to end through the ontology",
                               description=__doc__)
     p.add_argument("--formulation", choices=["relative", "absolute"], required=True)
-    p.add_argument("--orientations", type=int, required=True, metavar="K", help="allowed orientations (360 %% K == 0)")
+    p.add_argument("--orientations", type=int_in(2, 360), required=True, metavar="K", help="allowed orientations (360 %% K == 0)")
     p.add_argument("--init", required=True, help="degrees, comma separated (absolute: per link; relative: per joint)")
     p.add_argument("--goal", required=True, help="degrees, comma separated; '*' leaves a joint unconstrained")
-    p.add_argument("--planner", default="inproc")
-    p.add_argument("--timeout", type=float, default=5.0, metavar="S")
+    p.add_argument("--planner", default="inproc", choices=list(PLANNERS))
+    p.add_argument("--timeout", type=positive_float, default=5.0, metavar="S")
     p.add_argument("--no-validate", action="store_true", help="skip VAL (not recommended)")
-    p.add_argument("--db", default=None, help="SQLite store (default: in memory)")
+    p.add_argument("--db", type=writable_file, default=None, help="SQLite store (default: in memory)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run_solve)
 

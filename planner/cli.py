@@ -10,6 +10,8 @@ import json
 import sys
 from typing import Any
 
+from planhrc.cli_args import OneLineParser, existing_file, positive_float
+
 from .chain import DEFAULT_CHAIN, plan_with_fallback
 from .errors import PlannerError
 from .files import read_pddl
@@ -19,12 +21,12 @@ from .result import PlanResult, PlanStatus
 
 def add_plan_parser(subparsers: Any) -> argparse.ArgumentParser:
     parser = subparsers.add_parser("plan", help="plan for a PDDL domain and problem")
-    parser.add_argument("domain", help="PDDL domain file")
-    parser.add_argument("problem", help="PDDL problem file")
+    parser.add_argument("domain", type=existing_file, help="PDDL domain file")
+    parser.add_argument("problem", type=existing_file, help="PDDL problem file")
     parser.add_argument("--planner", default=DEFAULT_CHAIN[0], choices=list(PLANNERS),
                         help=f"first planner to try (default chain: {', '.join(DEFAULT_CHAIN)})")
     parser.add_argument("--no-fallback", action="store_true", help="run only --planner, no fallback")
-    parser.add_argument("--timeout", type=float, default=60.0, help="time limit in seconds")
+    parser.add_argument("--timeout", type=positive_float, default=60.0, help="time limit in seconds")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.set_defaults(func=run_plan)
     return parser
@@ -69,7 +71,7 @@ def result_json(result: PlanResult) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="planhrc")
+    parser = OneLineParser(prog="planhrc")
     add_plan_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
     return args.func(args)

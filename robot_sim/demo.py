@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import secrets
+import signal
 import socket
 import subprocess
 import sys
@@ -26,6 +27,7 @@ from typing import Iterator
 
 import numpy as np
 
+from planhrc.cli_args import http_url, non_negative_int, positive_int, writable_dir
 from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
 from planhrc.robot_sim.scene import SceneSpec, SimError, is_workable
 
@@ -112,7 +114,10 @@ def kb_service(out_dir: Path, token: str, startup_timeout_s: float = 90.0) -> It
     cmd = [sys.executable, "-m", "planhrc.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
            "--db", str(db)]
     with log_path.open("w") as log_file:
-        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, env=env)
+        # its own session: the demo alone decides when it stops (terminate, then kill the group); and it is told
+        # to stop should the demo die without cleaning up (killed, or a native library exiting the process)
+        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, env=env, start_new_session=True,
+                                preexec_fn=die_with_parent)
         url = f"http://127.0.0.1:{port}"
         try:
             deadline = time.monotonic() + startup_timeout_s
@@ -129,12 +134,31 @@ def kb_service(out_dir: Path, token: str, startup_timeout_s: float = 90.0) -> It
                         time.sleep(0.2)
             yield url
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            stop_process_group(proc)
+
+
+def die_with_parent() -> None:
+    """In a child before exec (Linux): receive SIGTERM when the parent dies. Elsewhere nothing."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def stop_process_group(proc: subprocess.Popen, grace_s: float = 15.0) -> None:
+    """SIGTERM to the child's process group, SIGKILL after `grace_s`; returns once the child is reaped."""
+    for sig, wait_s in ((signal.SIGTERM, grace_s), (signal.SIGKILL, None)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(timeout=wait_s)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+    proc.wait()
 
 
 def serve_until_interrupted(url: str) -> None:
@@ -240,21 +264,28 @@ def add_demo_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("demo", help="KB service + Baxter worker: one cooperation scenario to the end",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default="fig13", choices=sorted(DEMO_SCENARIOS) + ["random"])
-    p.add_argument("--gui", action="store_true", help="show the PyBullet window")
-    p.add_argument("--out", default="demo-out", help="output folder")
-    p.add_argument("--kb", default=None, metavar="URL", help="use a running KB service instead of starting one")
+    p.add_argument("--gui", action="store_true", help="show the PyBullet window (needs a display)")
+    p.add_argument("--out", type=writable_dir, default="demo-out", help="output folder")
+    p.add_argument("--kb", type=http_url, default=None, metavar="URL",
+                   help="use a running KB service instead of starting one")
     p.add_argument("--token", default=None, help="bearer token of the service given by --kb (or PLANHRC_TOKEN)")
-    p.add_argument("--episodes", type=int, default=1, help="episodes to run (random: a new goal and human each)")
+    p.add_argument("--episodes", type=positive_int, default=1,
+                   help="episodes to run (random: a new goal and human each)")
     p.add_argument("--perception", choices=["camera", "fallback"], default="camera",
                    help="camera: ArUco markers in rendered images; fallback: simulator poses + Gaussian noise")
-    p.add_argument("--max-steps", type=int, default=40)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-steps", type=positive_int, default=40)
+    p.add_argument("--seed", type=non_negative_int, default=0)
     p.add_argument("--keep-serving", action="store_true",
                    help="leave the started service (and its console at /) up after the episodes, until Ctrl-C")
     p.set_defaults(func=run_demo_cli)
 
 
 def run_demo_cli(args: argparse.Namespace) -> int:
+    from planhrc.robot_sim.worker import display_problem
+
+    if args.gui and (problem := display_problem()):
+        print(f"planhrc demo: --gui: {problem}", file=sys.stderr)
+        return 2
     try:
         summary = run_demo(args.scenario, Path(args.out), args.gui, args.kb, args.token, args.episodes,
                            args.perception, args.max_steps, args.seed, keep_serving=args.keep_serving)

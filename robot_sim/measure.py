@@ -17,6 +17,7 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from planhrc.cli_args import non_negative_int, positive_int, writable_file
 from planhrc.robot_sim.perception import CameraPerception, angle_difference_deg
 from planhrc.robot_sim.scene import SceneSpec, build_scene, is_workable, random_orientations
 from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
@@ -80,10 +81,10 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
 def add_sim_bench_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("sim-bench", help="marker error, perception time and rotation wall time in simulation",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--configurations", type=int, default=20)
-    p.add_argument("--rotations", type=int, default=20)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default=None, help="also write the numbers to this JSON file")
+    p.add_argument("--configurations", type=positive_int, default=20, help="random configurations perceived")
+    p.add_argument("--rotations", type=positive_int, default=20, help="rotation actions timed")
+    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--out", type=writable_file, default=None, help="also write the numbers to this JSON file")
     p.set_defaults(func=run_sim_bench)
 
 
@@ -92,5 +93,6 @@ def run_sim_bench(args: argparse.Namespace) -> int:
     text = json.dumps(result, indent=2)
     print(text)
     if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(text)
     return 0

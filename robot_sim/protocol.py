@@ -18,6 +18,11 @@ import httpx
 log = logging.getLogger(__name__)
 
 
+# Errors no retry can fix: the URL itself is wrong. Other transport errors and 5xx answers are retried; 4xx
+# answers are final too.
+FINAL_TRANSPORT_ERRORS = (httpx.UnsupportedProtocol, httpx.InvalidURL, httpx.LocalProtocolError)
+
+
 class ProtocolError(Exception):
     """The service refused a request (4xx) or stayed unreachable after every retry."""
 
@@ -99,7 +104,10 @@ class KBClient:
         for attempt in range(self.retry.attempts):
             try:
                 response = self._http.request(method, path, json=json, headers=headers)
-            except httpx.TransportError as exc:
+            except FINAL_TRANSPORT_ERRORS as exc:  # a bad URL stays bad: no retry
+                raise ProtocolError(f"{method} {path}: cannot send to {self._http.base_url} "
+                                    f"({type(exc).__name__}: {exc})") from None
+            except httpx.TransportError as exc:  # connection refused, reset, timeout: the service may come back
                 problem = f"{type(exc).__name__}: {exc}"
             else:
                 if response.status_code < 400:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import re
 import sys
 import time
@@ -26,6 +27,7 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
 from planhrc.robot_sim.human import (HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action, get_scenario,
                              goal_differences)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
@@ -374,46 +376,71 @@ def picture_steps(records: Sequence[StepRecord], configurations: Sequence[Sequen
 
 
 # -- command line ----------------------------------------------------------------------------------------
-def _floats(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(v) for v in text.split(","))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected comma-separated degrees, got {text!r}") from exc
+def display_problem() -> str | None:
+    """Why PyBullet's GUI cannot open here, or None. On Linux it needs an X display, and without one it ends the
+    whole process from native code (no cleanup), so the display is tried first, as PyBullet will."""
+    if not sys.platform.startswith("linux"):
+        return None
+    display = os.environ.get("DISPLAY")
+    if not display:
+        return "no display (DISPLAY is not set); run without --gui"
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("X11")
+    if name is None:
+        return "libX11 is not installed; run without --gui"
+    xlib = ctypes.CDLL(name)
+    xlib.XOpenDisplay.restype = ctypes.c_void_p
+    xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    handle = xlib.XOpenDisplay(display.encode())
+    if not handle:
+        return f"cannot connect to the X display {display!r}; run without --gui"
+    xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    xlib.XCloseDisplay(handle)
+    return None
 
 
 def add_worker_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = subparsers.add_parser("worker", help="run the simulated Baxter worker against the KB service",
                               description="Perceive, ask the KB service for actions and execute them in PyBullet.")
-    p.add_argument("--kb", required=True, help="base URL of the KB service, e.g. http://127.0.0.1:8000")
+    p.add_argument("--kb", type=http_url, required=True, help="base URL of the KB service, e.g. http://127.0.0.1:8000")
     p.add_argument("--object", required=True, dest="object_id", help="object id in the KB service")
     p.add_argument("--gui", action="store_true", help="show the PyBullet GUI")
     p.add_argument("--token", default=None, help="bearer token for the service's writes")
     p.add_argument("--perception", choices=("camera", "fallback"), default="camera")
     p.add_argument("--scenario", default="none", help="human scenario: none, fig13, fig14 or random:SEED:N")
-    p.add_argument("--out", default="worker-out", help="folder for frames, GIF, configurations.png, summary.json")
-    p.add_argument("--max-steps", type=int, default=30)
-    p.add_argument("--initial", type=_floats, default=None, help="initial link orientations, e.g. 90,90,90,90,90")
-    p.add_argument("--base", type=_floats, default=None, help="base point x,y of the object on the table (m)")
-    p.add_argument("--goal", type=_floats, default=None, help="goal link orientations to PUT before starting")
-    p.add_argument("--sigma", type=float, default=1.0, help="noise (deg) of the fallback perception")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=writable_dir, default="worker-out", help="folder for frames, GIF, configurations.png, summary.json")
+    p.add_argument("--max-steps", type=positive_int, default=30)
+    p.add_argument("--initial", type=float_tuple, default=None,
+                   help="initial link orientations, e.g. 90,90,90,90,90")
+    p.add_argument("--base", type=float_tuple, default=None, help="base point x,y of the object on the table (m)")
+    p.add_argument("--goal", type=float_tuple, default=None, help="goal link orientations to PUT before starting")
+    p.add_argument("--sigma", type=non_negative_float, default=1.0, help="noise (deg) of the fallback perception")
+    p.add_argument("--seed", type=non_negative_int, default=0)
     p.set_defaults(func=run_worker_cli)
     return p
 
 
 def run_worker_cli(args: argparse.Namespace) -> int:
+    if args.gui and (problem := display_problem()):
+        print(f"planhrc worker: --gui: {problem}", file=sys.stderr)
+        return 2
+    if args.base is not None and len(args.base) != 2:
+        print(f"planhrc worker: --base: expected x,y, got {len(args.base)} numbers", file=sys.stderr)
+        return 2
     spec = None
-    if args.initial is not None or args.base is not None:
-        with KBClient(args.kb, token=args.token) as kb:
-            obj = kb.read_object(args.object_id)
-        links = obj["links"]
-        kwargs: dict[str, Any] = {"n_links": len(links), "link_length_m": float(links[0]["length_m"])}
-        if args.initial is not None:
-            kwargs["initial_orientations_deg"] = args.initial
-        if args.base is not None:
-            kwargs["base_point_xy"] = tuple(args.base[:2])
-        spec = SceneSpec(**kwargs)
     try:
+        if args.initial is not None or args.base is not None:
+            with KBClient(args.kb, token=args.token) as kb:
+                obj = kb.read_object(args.object_id)
+            links = obj["links"]
+            kwargs: dict[str, Any] = {"n_links": len(links), "link_length_m": float(links[0]["length_m"])}
+            if args.initial is not None:
+                kwargs["initial_orientations_deg"] = args.initial
+            if args.base is not None:
+                kwargs["base_point_xy"] = tuple(args.base)
+            spec = SceneSpec(**kwargs)
         summary = run_worker(args.kb, args.object_id, spec, args.scenario, args.out, args.gui, args.max_steps,
                              args.token, args.perception, args.goal, args.sigma, args.seed)
     except (ProtocolError, SimError) as exc:

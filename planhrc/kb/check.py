@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from planhrc.cli_args import existing_file, int_in, positive_float, positive_int, tbox_file
 from planhrc.paths import default_tbox_path
 
 from .errors import KBError
@@ -58,12 +59,12 @@ def add_ontology_parser(subparsers: Any) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="ontology_command", required=True, metavar="SUBCOMMAND")
     check = sub.add_parser("check", help="consistency, classes and inferred facts of the TBox (and a stored ABox)")
     check.add_argument("--reasoner", choices=list(REASONERS), default="pellet")
-    check.add_argument("--db", default=None, help="SQLite knowledge base whose ABox to include")
-    check.add_argument("--tbox", default=str(default_tbox_path()), help="TBox file (default: the repository's)")
-    check.add_argument("--timeout", type=float, default=300.0, help="reasoner time limit in seconds")
+    check.add_argument("--db", type=existing_file, default=None, help="SQLite knowledge base whose ABox to include")
+    check.add_argument("--tbox", type=tbox_file, default=None, help="TBox file (default: the repository's)")
+    check.add_argument("--timeout", type=positive_float, default=300.0, help="reasoner time limit in seconds")
     bench = sub.add_parser("bench-subsumption", help="p50/p95 of one in-process subsumption check (20 links)")
-    bench.add_argument("--runs", type=int, default=10_000)
-    bench.add_argument("--links", type=int, default=20)
+    bench.add_argument("--runs", type=positive_int, default=10_000)
+    bench.add_argument("--links", type=int_in(2), default=20)
     parser.set_defaults(func=run_ontology)
     return parser
 
@@ -72,13 +73,13 @@ def run_ontology(args: argparse.Namespace) -> int:
     if args.ontology_command == "bench-subsumption":
         from .subsumption import bench_subsumption
 
-        b = bench_subsumption(runs=max(1, args.runs), links=args.links)
+        b = bench_subsumption(runs=args.runs, links=args.links)
         print(f"subsumption check, {args.links} links "
               f"({b.atoms_s1} atoms vs {b.atoms_s2}), {b.runs} runs: "
               f"p50 {b.p50_us:.2f} us, p95 {b.p95_us:.2f} us, mean {b.mean_us:.2f} us")
         return 0
     try:
-        result = check_ontology(args.tbox, args.db, args.reasoner, args.timeout)
+        result = check_ontology(args.tbox or default_tbox_path(), args.db, args.reasoner, args.timeout)
     except KBError as exc:
         print(f"planhrc ontology check: {exc}", file=sys.stderr)
         return 1

@@ -1,0 +1,248 @@
+"""Every `planhrc` command refuses a user's mistake in one line that names the argument, with no traceback,
+a non-zero exit and nothing created; the worker's client retries only what a retry can fix."""
+from __future__ import annotations
+
+import http.server
+import os
+import socket
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+
+REPO = Path(__file__).resolve().parents[1]
+NOT_OWL = str(REPO / "README.md")
+
+# (arguments, extra environment, text the one line must contain)
+CASES = [
+    # serve: options and PLANHRC_* settings
+    (["serve", "--port", "99999"], {}, "--port"),
+    (["serve", "--port", "http"], {}, "--port"),
+    (["serve"], {"PLANHRC_PORT": "abc"}, "PLANHRC_PORT"),
+    (["serve"], {"PLANHRC_PORT": "70000"}, "PLANHRC_PORT"),
+    (["serve"], {"PLANHRC_PLANNER_TIMEOUT_S": "-1"}, "PLANHRC_PLANNER_TIMEOUT_S"),
+    (["serve"], {"PLANHRC_LOG_LEVEL": "chatty"}, "PLANHRC_LOG_LEVEL"),
+    (["serve"], {"PLANHRC_PLANNER": "bogus"}, "PLANHRC_PLANNER"),
+    (["serve"], {"PLANHRC_FALLBACK_PLANNER": "bogus"}, "PLANHRC_FALLBACK_PLANNER"),
+    (["serve"], {"PLANHRC_TBOX_PATH": NOT_OWL}, "PLANHRC_TBOX_PATH"),
+    (["serve"], {"PLANHRC_DB_PATH": "/proc/nope/kb.sqlite3"}, "PLANHRC_DB_PATH"),
+    (["serve", "--tbox", NOT_OWL], {}, "--tbox"),
+    (["serve", "--tbox", "no-such.owl"], {}, "--tbox"),
+    (["serve", "--planner", "bogus"], {}, "--planner"),
+    (["serve", "--planner", "probe"], {"PLANHRC_PROBE": ""}, "--planner"),
+    (["serve", "--log-level", "chatty"], {}, "--log-level"),
+    (["serve", "--db", "/proc/nope/kb.sqlite3"], {}, "--db"),
+    # ontology
+    (["ontology", "check", "--tbox", NOT_OWL], {}, "--tbox"),
+    (["ontology", "check", "--db", "no-such.sqlite3"], {}, "--db"),
+    (["ontology", "check", "--timeout", "0"], {}, "--timeout"),
+    (["ontology", "check", "--reasoner", "oracle"], {}, "--reasoner"),
+    (["ontology", "bench-subsumption", "--links", "0"], {}, "--links"),
+    (["ontology", "bench-subsumption", "--runs", "-5"], {}, "--runs"),
+    (["ontology"], {}, "SUBCOMMAND"),
+    # plan and solve
+    (["plan", "no-such-domain.pddl", "no-such-problem.pddl"], {}, "domain"),
+    (["plan", NOT_OWL, NOT_OWL, "--timeout", "soon"], {}, "--timeout"),
+    (["solve", "--formulation", "absolute", "--orientations", "4", "--init", "0,0", "--goal", "0,0",
+      "--planner", "bogus"], {}, "--planner"),
+    (["solve", "--formulation", "absolute", "--orientations", "1", "--init", "0,0", "--goal", "0,0"], {},
+     "--orientations"),
+    (["solve", "--formulation", "absolute", "--orientations", "7", "--init", "0,0", "--goal", "0,0"], {},
+     "orientations"),
+    (["solve", "--formulation", "absolute", "--orientations", "4", "--init", "0,0", "--goal", "0,0",
+      "--timeout", "nan"], {}, "--timeout"),
+    # bench
+    (["bench", "--links", "30-x"], {}, "--links"),
+    (["bench", "--links", "9-4"], {}, "--links"),
+    (["bench", "--orientations", "7"], {}, "--orientations"),
+    (["bench", "--planners", "inproc,bogus"], {}, "--planners"),
+    (["bench", "--formulations", "sideways"], {}, "--formulations"),
+    (["bench", "--instances", "0"], {}, "--instances"),
+    (["bench", "--timeout", "-1"], {}, "--timeout"),
+    (["bench", "--out", "/proc/nope"], {}, "--out"),
+    # the simulator's commands
+    (["sim-bench", "--configurations", "0", "--rotations", "0"], {}, "--configurations"),
+    (["sim-bench", "--rotations", "-1"], {}, "--rotations"),
+    (["sim-bench", "--out", "/proc/nope/sim.json"], {}, "--out"),
+    (["demo", "--out", "/proc/nope"], {}, "--out"),
+    (["demo", "--episodes", "-2"], {}, "--episodes"),
+    (["demo", "--max-steps", "0"], {}, "--max-steps"),
+    (["demo", "--seed", "-1"], {}, "--seed"),
+    (["demo", "--kb", "not-a-url"], {}, "--kb"),
+    (["demo", "--scenario", "fig99"], {}, "--scenario"),
+    (["demo", "--gui"], {"DISPLAY": ""}, "--gui"),
+    (["worker", "--kb", "not-a-url", "--object", "o1"], {}, "--kb"),
+    (["worker", "--kb", "http://127.0.0.1:1", "--object", "o1", "--sigma", "-1"], {}, "--sigma"),
+    (["worker", "--kb", "http://127.0.0.1:1", "--object", "o1", "--base", "0.1,0.2,0.3"], {}, "--base"),
+    (["worker", "--kb", "http://127.0.0.1:1"], {}, "--object"),
+    # the command itself
+    ([], {}, "COMMAND"),
+    (["bogus"], {}, "COMMAND"),
+]
+
+
+def run_planhrc(args: list[str], cwd: Path, env: dict[str, str] | None = None, timeout: float = 60.0):
+    full_env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
+    full_env.update(env or {})
+    return subprocess.run([sys.executable, "-m", "planhrc.cli", *args], cwd=cwd, env=full_env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def tree(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")}
+
+
+@pytest.fixture
+def clean_env(monkeypatch, tmp_path):
+    for key in list(os.environ):
+        if key.startswith("PLANHRC_"):
+            monkeypatch.delenv(key)
+    monkeypatch.chdir(tmp_path)
+    import uvicorn
+
+    def must_not_start(*args, **kwargs):
+        raise AssertionError("the service started despite the mistake")
+
+    monkeypatch.setattr(uvicorn, "run", must_not_start)
+    return monkeypatch
+
+
+@pytest.mark.parametrize("args,env,name", CASES, ids=[" ".join(a) + (f" [{','.join(e)}]" if e else "")
+                                                     for a, e, _ in CASES])
+def test_a_mistake_is_refused_in_one_line_naming_it(clean_env, capfd, tmp_path, args, env, name):
+    """In-process (fast); the file descriptors are captured, so what native code prints is seen too."""
+    from planhrc.cli import main
+
+    for key, value in env.items():
+        clean_env.setenv(key, value)
+    before = tree(tmp_path)
+    code = main(list(args))
+    out, err = capfd.readouterr()
+    lines = err.strip().splitlines()
+    assert code != 0
+    assert len(lines) == 1, err
+    assert name in lines[0]
+    assert out == ""
+    assert tree(tmp_path) == before, "a refused command left something behind"
+
+
+# End to end in a fresh interpreter: the exit status, and no traceback from anything that escaped.
+PROCESS_CASES = [
+    (["serve", "--port", "99999"], {}, "--port"),
+    (["serve"], {"PLANHRC_PORT": "abc"}, "PLANHRC_PORT"),
+    (["bench", "--links", "30-x"], {}, "--links"),
+    (["sim-bench", "--configurations", "0", "--rotations", "0"], {}, "--configurations"),
+    (["demo", "--episodes", "-2"], {}, "--episodes"),
+    (["worker", "--kb", "not-a-url", "--object", "o1"], {}, "--kb"),
+]
+
+
+@pytest.mark.parametrize("args,env,name", PROCESS_CASES, ids=[" ".join(a) + (f" [{','.join(e)}]" if e else "")
+                                                             for a, e, _ in PROCESS_CASES])
+def test_a_mistake_ends_the_process_in_one_line(tmp_path, args, env, name):
+    before = tree(tmp_path)
+    result = run_planhrc(args, tmp_path, env)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr
+    assert len(lines) == 1 and name in lines[0], result.stderr
+    assert result.stdout == ""
+    assert tree(tmp_path) == before
+
+
+def test_a_busy_port_is_refused_before_the_service_starts(clean_env, capfd):
+    from planhrc.cli import main
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        code = main(["serve", "--port", str(port), "--db", ":memory:"])
+    err = capfd.readouterr().err.strip()
+    assert code == 2
+    assert "\n" not in err and "--port" in err and str(port) in err
+
+
+def test_version():
+    from importlib.metadata import version
+
+    result = run_planhrc(["--version"], REPO)
+    assert result.returncode == 0
+    assert result.stdout.strip() == f"planhrc {version('planhrc')}"
+
+
+def test_a_command_without_the_simulator_extra_says_what_to_install(tmp_path):
+    """PyBullet made unimportable (as in an install without `planhrc[sim]`)."""
+    code = ("import sys; sys.modules['pybullet'] = None; from planhrc.cli import main; "
+            "sys.exit(main(['demo', '--episodes', '2']))")
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "planhrc[sim]" in lines[0] and "pybullet" in lines[0]
+
+
+# -- the worker's client: retry what may pass, not what cannot -------------------------------------------------
+class _Counting(http.server.BaseHTTPRequestHandler):
+    status = 200
+    hits = 0
+
+    def do_GET(self):
+        type(self).hits += 1
+        body = b'{"detail": "x"}'
+        self.send_response(self.status)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args):
+        pass
+
+
+@pytest.fixture
+def answering():
+    handler = type("Handler", (_Counting,), {"hits": 0})
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield handler, f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+    thread.join()
+
+
+def _client(url: str, sleeps: list[float]) -> KBClient:
+    return KBClient(url, retry=RetryPolicy(attempts=4), sleep=sleeps.append, timeout_s=5)
+
+
+@pytest.mark.parametrize("status,retried", [(503, True), (500, True), (404, False), (401, False), (422, False)])
+def test_5xx_is_retried_and_4xx_is_final(answering, status, retried):
+    handler, url = answering
+    handler.status = status
+    sleeps: list[float] = []
+    with _client(url, sleeps) as kb, pytest.raises(ProtocolError):
+        kb.health()
+    assert handler.hits == (4 if retried else 1)
+    assert len(sleeps) == (3 if retried else 0)
+
+
+def test_connection_refused_is_retried():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        url = f"http://127.0.0.1:{s.getsockname()[1]}"  # bound, not listening: refused
+        sleeps: list[float] = []
+        with _client(url, sleeps) as kb, pytest.raises(ProtocolError, match="gave up after 4"):
+            kb.health()
+    assert len(sleeps) == 3
+
+
+@pytest.mark.parametrize("url", ["not-a-url", "ftp://127.0.0.1:8000"])
+def test_a_bad_url_is_final(url):
+    sleeps: list[float] = []
+    with _client(url, sleeps) as kb, pytest.raises(ProtocolError, match="cannot send"):
+        kb.health()
+    assert sleeps == []
