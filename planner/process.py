@@ -38,7 +38,10 @@ class ProcessOutcome:
 
 
 def run_limited(cmd: list[str], cwd: str, timeout_s: float, env: dict[str, str] | None = None) -> ProcessOutcome:
-    """Run `cmd`; at `timeout_s` kill its whole process group (the planner and everything it started)."""
+    """Run `cmd`; at `timeout_s` kill its whole process group (the planner and everything it started).
+
+    The group is killed too when the caller is interrupted (Ctrl-C, SIGTERM turned into an exception): it runs
+    in its own session, so nothing else would stop it."""
     proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
@@ -46,9 +49,17 @@ def run_limited(cmd: list[str], cwd: str, timeout_s: float, env: dict[str, str] 
         return ProcessOutcome(proc.returncode, out, err)
     except subprocess.TimeoutExpired:
         log.debug("killing process group %d after %.3f s", proc.pid, timeout_s)
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+        _kill_group(proc.pid)
         out, err = proc.communicate()
         return ProcessOutcome(None, out, err)
+    except BaseException:
+        _kill_group(proc.pid)
+        proc.wait()
+        raise
+
+
+def _kill_group(pgid: int) -> None:
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
