@@ -38,7 +38,7 @@ CASES = [
     (["serve", "--db", "/proc/nope/kb.sqlite3"], {}, "--db"),
     # ontology
     (["ontology", "check", "--tbox", NOT_OWL], {}, "--tbox"),
-    (["ontology", "check", "--db", "no-such.sqlite3"], {}, "--db"),
+    (["ontology", "check", "--db", "no-such.sqlite3"], {}, "db: no such file"),
     (["ontology", "check", "--timeout", "0"], {}, "--timeout"),
     (["ontology", "check", "--reasoner", "oracle"], {}, "--reasoner"),
     (["ontology", "bench-subsumption", "--links", "0"], {}, "--links"),

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from planhrc.cli_args import existing_file, int_in, positive_float, positive_int, tbox_file
+from planhrc.cli_args import int_in, positive_float, positive_int, tbox_file
 from planhrc.paths import default_tbox_path
 
 from .errors import KBError
@@ -59,7 +59,7 @@ def add_ontology_parser(subparsers: Any) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="ontology_command", required=True, metavar="SUBCOMMAND")
     check = sub.add_parser("check", help="consistency, classes and inferred facts of the TBox (and a stored ABox)")
     check.add_argument("--reasoner", choices=list(REASONERS), default="pellet")
-    check.add_argument("--db", type=existing_file, default=None, help="SQLite knowledge base whose ABox to include")
+    check.add_argument("--db", default=None, help="SQLite knowledge base whose ABox to include")
     check.add_argument("--tbox", type=tbox_file, default=None, help="TBox file (default: the repository's)")
     check.add_argument("--timeout", type=positive_float, default=300.0, help="reasoner time limit in seconds")
     bench = sub.add_parser("bench-subsumption", help="p50/p95 of one in-process subsumption check (20 links)")
