@@ -305,22 +305,57 @@ def test_with_protected_reads_the_token_field_opens_the_page(browser, tmp_path):
             page.dispatch_event("#token", "change")
             page.wait_for_selector("#log li.goal_set")
             page.wait_for_selector(f"#objects button[data-object-id={oid}]")
-            assert page.locator("#plan-meta").inner_text() == "none yet"
+            page.wait_for_function("document.getElementById('plan-meta').textContent === 'none yet'")
+            assert page.locator("#drawing .goal-layer .link").count() == 3
         finally:
             page.close()
 
 
-@pytest.mark.skipif(os.environ.get("PLANHRC_CONSOLE_SCREENSHOTS") != "1", reason="set PLANHRC_CONSOLE_SCREENSHOTS=1 to refresh docs/")
+def take_next_action(client: httpx.Client, oid: str) -> dict:
+    """What a worker does (never the console): take the next action for execution."""
+    r = client.post(f"/objects/{oid}/next-action")
+    if r.status_code == 405:  # the service before next-action became a POST
+        r = client.get(f"/objects/{oid}/next-action")
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def links_from_joints(values: dict[str, int], oid: str, n: int, first: float = 0.0) -> list[float]:
+    """Link orientations of a relative state: l1 where it was, then each joint's angle added."""
+    out = [first]
+    for k in range(1, n):
+        out.append((out[-1] + values[f"{oid}_j{k}"]) % 360)
+    return out
+
+
+@pytest.mark.skipif(os.environ.get("PLANHRC_CONSOLE_SCREENSHOTS") != "1",
+                    reason="set PLANHRC_CONSOLE_SCREENSHOTS=1 to refresh docs/")
 def test_screenshots_for_the_readme(cell):
-    page, client, oid = cell["page"], cell["client"], cell["oid"]
-    page.click("#goal-reset")
-    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
-    before = page.locator("#log li").count()
-    client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [2.1, 1.2, 358.7, 88.4]})
-    page.wait_for_function(f"document.querySelectorAll('#log li').length >= {before + 2}")
-    page.evaluate("document.getElementById('error').textContent = ''")
-    page.wait_for_timeout(500)
-    page.screenshot(path=str(REPO / "docs" / "console.png"), full_page=True)
-    page.locator("#plan li").first.click()
-    page.screenshot(path=str(REPO / "docs" / "console-expected-step.png"), full_page=True)
-    page.locator("#plan li").first.click()
+    """An episode played over HTTP as a worker and a person would: a plan, one robot action done, a human
+    move, the next action under way; the page is photographed at desktop width."""
+    client = cell["client"]
+    body = {"name": "cable", "links": 6, "orientations": 4, "formulation": "relative"}
+    oid = client.post("/objects", json=body).json()["id"]
+    assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 180, 180, 90, 90]}).status_code == 200
+    assert client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0.8, 1.1, 359.2, 0.4, 1.9, 0.0]}).status_code == 200
+    action = take_next_action(client, oid)
+    client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"})
+    plan = client.get(f"/objects/{oid}/plan").json()
+    after = plan["expected_states"][action["last_step"]]["joint_values_deg"]
+    seen = links_from_joints(after, oid, 6)
+    client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [v + 0.7 for v in seen]})
+    seen[5] = (seen[5] + 90) % 360  # a person turns the last link
+    client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [v - 0.6 for v in seen]})
+    take_next_action(client, oid)
+    page = open_page(cell["browser"], f"{cell['base']}/?object={oid}", [], bypass_csp=True)
+    try:
+        page.fill("#token", TOKEN)
+        page.wait_for_selector("#log li.dispatched")
+        page.wait_for_selector("#drawing .expected-layer .link")
+        page.wait_for_timeout(500)
+        page.screenshot(path=str(REPO / "docs" / "console.png"), full_page=True)
+        page.locator("#plan li").last.click()
+        page.wait_for_timeout(200)
+        page.screenshot(path=str(REPO / "docs" / "console-expected-step.png"), full_page=True)
+    finally:
+        page.close()

@@ -79,17 +79,13 @@ function linkAngles(obj, state, reference) {
   return out.map(norm);
 }
 
-// Joint positions in drawing units: the whole chain fits a circle of RADIUS around the first joint.
-const RADIUS = 190;
-
+// Joint positions in metres on the page's axes: x to the robot's right, y down (the robot's forward axis is up).
 function chainPoints(obj, angles) {
-  const total = obj.links.reduce((sum, l) => sum + l.length_m, 0);
-  const scale = RADIUS / total;
   const pts = [[0, 0]];
   obj.links.forEach((link, k) => {
     const [x, y] = pts[k];
     const a = (angles[k] * Math.PI) / 180;  // clockwise from the robot's forward axis (up on the page)
-    pts.push([x + scale * link.length_m * Math.sin(a), y - scale * link.length_m * Math.cos(a)]);
+    pts.push([x + link.length_m * Math.sin(a), y - link.length_m * Math.cos(a)]);
   });
   return pts;
 }
@@ -131,15 +127,22 @@ function draw() {
   root.replaceChildren();
   const obj = view.obj;
   if (!obj) return;
-  const r = RADIUS + 20;
-  root.setAttribute("viewBox", `${-r} ${-r} ${2 * r} ${2 * r}`);
-  svg("line", { x1: 0, y1: r - 8, x2: 0, y2: -r + 8, class: "axis" }, root);
-  svg("text", { x: 4, y: -r + 16, class: "axis-label" }, root, "robot forward (0°)");
-  svg("circle", { cx: 0, cy: 0, r: 7, class: "base" }, root);
-
   const perceived = perceivedAngles();
   const goal = goalAngles();
   const expected = linkAngles(obj, expectedState(), snappedAngles());
+  // Fit what is drawn (every chain and the base) to the drawing, in screen pixels, with room for the labels.
+  const W = root.clientWidth || 600, H = root.clientHeight || 420;
+  root.setAttribute("viewBox", `0 0 ${W} ${H}`);
+  const all = [perceived, goal, expected].filter(Boolean).flatMap((a) => chainPoints(obj, a)).concat([[0, 0]]);
+  const xs = all.map((p) => p[0]), ys = all.map((p) => p[1]);
+  const minX = Math.min(...xs), maxX = Math.max(...xs), minY = Math.min(...ys), maxY = Math.max(...ys);
+  const scale = Math.min((W - 170) / Math.max(maxX - minX, 1e-6), (H - 90) / Math.max(maxY - minY, 1e-6),
+                         (0.45 * H) / obj.links.reduce((sum, l) => sum + l.length_m, 0) * 2);
+  const ox = W / 2 - scale * (minX + maxX) / 2, oy = H / 2 - scale * (minY + maxY) / 2;
+  const screen = (angles) => chainPoints(obj, angles).map(([x, y]) => [ox + scale * x, oy + scale * y]);
+  svg("line", { x1: ox, y1: H - 4, x2: ox, y2: 4, class: "axis" }, root);
+  svg("text", { x: ox + 4, y: 16, class: "axis-label" }, root, "robot forward (0°)");
+  svg("circle", { cx: ox, cy: oy, r: 7, class: "base" }, root);
   const layers = [
     [goal, "goal" + (view.draft ? " draft" : ""), 16],
     [expected, "expected", 11],
@@ -147,7 +150,7 @@ function draw() {
   ];
   for (const [angles, cls, width] of layers) {
     if (!angles) continue;
-    const pts = chainPoints(obj, angles);
+    const pts = screen(angles);
     const g = svg("g", { class: cls.split(" ")[0] + "-layer" }, root);
     angles.forEach((a, k) => {
       // a bar (not a line: a vertical line has an empty box and cannot be hit), rotated from the page's x axis
