@@ -288,6 +288,35 @@ def test_the_log_reconnects_after_a_service_restart(browser, tmp_path):
         page.close()
 
 
+def test_a_partial_goal_by_joint_angles_leaves_the_empty_joint_free(cell):
+    page, client, oid = cell["page"], cell["client"], cell["oid"]
+    page.select_option("#goal-kind", "joint_angles_deg")
+    for k, value in enumerate(["90", "", "270"]):
+        page.fill(f"#goal-inputs input[name=goal-{k}]", value)
+    page.click("#goal-submit")
+    page.wait_for_function("document.getElementById('notice').textContent.startsWith('goal ')")
+    goal_id = client.get(f"/objects/{oid}").json()["goal_state_id"]
+    assert client.get(f"/states/{goal_id}").json()["joint_values_deg"] == {f"{oid}_j1": 90, f"{oid}_j3": 270}
+    page.select_option("#goal-kind", "link_orientations_deg")
+
+
+def test_a_failed_robot_action_is_shown_with_its_reason(cell):
+    page, client, oid = cell["page"], cell["client"], cell["oid"]
+    decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0, 90]}).json()
+    assert decision["decision"] == "replan", decision
+    action = take_next_action(client, oid)
+    r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback",
+                    json={"outcome": "failed", "message": "gripper lost the link"})
+    assert r.status_code == 200, r.text
+    failure = page.locator("#log li.feedback.failure").first
+    failure.wait_for(timeout=2000)
+    assert "gripper lost the link" in failure.inner_text()
+    assert f"robot: a_{action['step']} failed" in failure.locator(".actor").inner_text()
+    # the plan is still drawn: the failed step stays the current one, nothing is ticked
+    page.wait_for_selector("#plan li.current")
+    assert page.locator("#plan li.done").count() == action["step"] - 1
+
+
 def test_with_protected_reads_the_token_field_opens_the_page(browser, tmp_path):
     """Reads need the (read-only) token too: the page says so, and works once the token is typed."""
     with serve(tmp_path / "kb.sqlite3", None, TOKEN, "--protect-reads", "--read-token", "look") as base:
