@@ -168,10 +168,19 @@ def test_console_shows_the_object_its_plan_and_its_drawing(cell):
     first = plan["steps"][0]
     assert f"joint j{first['joint_index']}" in steps.nth(0).inner_text()
     assert f"turn l{first['turned_link_index']}" in steps.nth(0).inner_text()
-    # The expected state after step 1 is viewable: the table row follows the plan's s^e_2.
+    # The expected state after each step is viewable, step by step.
     steps.nth(0).click()
     assert page.locator("#angles").inner_text().count("expected after a_1") == 1
-    steps.nth(0).click()
+    assert "viewing" in steps.nth(0).get_attribute("class")
+    page.click("#step-next")
+    last = min(2, len(plan["steps"]))
+    assert f"expected after a_{last}" in page.locator("#angles").inner_text()
+    expected = plan["expected_states"][last]["joint_values_deg"]
+    row = page.locator("#angles tr").nth(3).locator("td").all_inner_texts()[1:]
+    angles = [float(t.rstrip("°")) for t in row]
+    assert [(angles[k + 1] - angles[k]) % 360 for k in range(3)] == [expected[f"{oid}_j{k + 1}"] for k in range(3)]
+    page.click("#step-live")
+    assert page.locator("#plan li.viewing").count() == 0
     assert cell["outside"] == []
 
 

@@ -216,7 +216,7 @@ function drawPlan() {
     if (done) li.classList.add("done");
     if (following && ex.next_step === s.step && status !== "goal_reached") li.classList.add("current");
     if (view.viewStep === s.step) li.classList.add("viewing");
-    li.addEventListener("click", () => { view.viewStep = view.viewStep === s.step ? null : s.step; drawPlan(); draw(); });
+    li.addEventListener("click", () => viewStep(view.viewStep === s.step ? null : s.step));
     list.appendChild(li);
   }
   $("expected-label").textContent = view.viewStep !== null ? `expected after a_${view.viewStep}` : "expected after the next action";
@@ -469,6 +469,21 @@ async function submit(form, action) {
   }
 }
 
+function viewStep(step) {
+  view.viewStep = step;
+  drawPlan();
+  draw();
+}
+
+function setupPlanSteps() {
+  const n = () => (view.plan ? view.plan.steps.length : 0);
+  const current = () => (view.viewStep !== null ? view.viewStep
+    : (view.obj && view.obj.execution.next_step) || 1);
+  $("step-prev").addEventListener("click", () => { if (n()) viewStep(Math.max(1, current() - (view.viewStep === null ? 0 : 1))); });
+  $("step-next").addEventListener("click", () => { if (n()) viewStep(Math.min(n(), current() + (view.viewStep === null ? 0 : 1))); });
+  $("step-live").addEventListener("click", () => viewStep(null));
+}
+
 function setupOperator() {
   const token = $("token");
   token.value = localStorage.getItem(TOKEN_KEY) || "";
@@ -506,5 +521,6 @@ function setupOperator() {
 }
 
 setupOperator();
+setupPlanSteps();
 loadObjects();
 setInterval(() => { if (!view.objectId) loadObjects(); }, 2000);  // objects created while nobody is selected
