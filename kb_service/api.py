@@ -167,22 +167,13 @@ def read_problem(problem_id: str, orch: Orch) -> dict[str, Any]:
 @router.get("/objects/{object_id}/pddl/domain", response_class=PlainTextResponse, tags=["pddl"])
 def read_pddl_domain(object_id: str, orch: Orch) -> PlainTextResponse:
     """The PDDL domain of the object's formulation, written from the TBox."""
-    from planhrc.translator import get_domain
-
-    obj = orch.kb.get_object(object_id)
-    return PlainTextResponse(get_domain(orch.settings.tbox_path, obj.formulation.value))
+    return PlainTextResponse(orch.pddl_task(object_id).domain)
 
 
 @router.get("/objects/{object_id}/pddl/problem", response_class=PlainTextResponse, tags=["pddl"])
 def read_pddl_problem(object_id: str, orch: Orch) -> PlainTextResponse:
     """The PDDL problem of the object's latest Problem (initial state and goal from the ABox)."""
-    from planhrc.translator.translate import translate
-
-    orch.kb.get_object(object_id)
-    problem = orch.kb.latest_problem(object_id)
-    if problem is None:
-        raise NotFoundError(f"problem: object {object_id} has no problem yet (set a goal and send a perception)")
-    return PlainTextResponse(translate(orch.kb, problem.id, orch.settings.tbox_path).problem)
+    return PlainTextResponse(orch.pddl_task(object_id, with_problem=True).problem)
 
 
 @router.get("/ontology", tags=["records"],

@@ -27,19 +27,22 @@ import threading
 from dataclasses import dataclass, replace
 from typing import Any, Sequence
 
+from planhrc import pipeline
 from planhrc.cooperation import Decision, PlanView, decide
-from planhrc.kb.errors import ConflictError, ValidationError
+from planhrc.kb.errors import ConflictError, NotFoundError, ValidationError
 from planhrc.kb.records import Execution, StoredAction, StoredPlan, StoredState
-from planhrc.model import ArticulatedObject, make_object, snap_angle
-from planhrc.pipeline import (PlanOutcome, Planning, action_motion, config_from_settings, make_plan,
-                              merge_macro_steps)
+from planhrc.kb.store import KnowledgeBase
+from planhrc.model import ArticulatedObject, Formulation, ModelError, State, make_object, perceive
+from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps
+from planhrc.settings import Settings
+from planhrc.translator import PddlTask, domain_text, read_domain_model, translate
+from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, PlanningStatus, one_of
 
 from .locks import ObjectLocks
 
 log = logging.getLogger(__name__)
 
-IDLE, READY, DISPATCHED, GOAL_REACHED, NO_PLAN = "idle", "ready", "dispatched", "goal_reached", "no_plan"
-DECISION_KINDS = ("goal_reached", "continue", "resume", "replan", "no_plan")
+IDLE, READY, DISPATCHED = ExecutionStatus.IDLE, ExecutionStatus.READY, ExecutionStatus.DISPATCHED
 
 
 @dataclass
@@ -49,18 +52,18 @@ class _ObjectMemo:
     seq: int = 0
     goal_state_id: str | None = None
     perceived_state_id: str | None = None
-    last_outcome: str | None = None
+    last_outcome: ActionOutcome | None = None
 
 
 class Orchestrator:
     """Runs the cooperation loop of every object against one knowledge base."""
 
-    def __init__(self, kb: Any, settings: Any, locks: ObjectLocks | None = None,
-                 planning: Planning | None = None) -> None:
+    def __init__(self, kb: KnowledgeBase, settings: Settings, locks: ObjectLocks | None = None) -> None:
         self.kb = kb
         self.settings = settings
+        self.planning = config_from_settings(settings)
+        self.merge_macro_steps = settings.merge_macro_steps
         self.locks = locks or ObjectLocks()
-        self.planning = planning or Planning(config_from_settings(settings))
         self._views: dict[str, tuple[StoredPlan, PlanView]] = {}
         self._memos: dict[str, _ObjectMemo] = {}
         self._guard = threading.Lock()
@@ -71,7 +74,7 @@ class Orchestrator:
         make_object("probe", formulation, links, orientations, name)  # ModelError before an id is taken
         object_id = self.kb.new_object_id()
         obj = make_object(object_id, formulation, links, orientations, name)
-        with self.locks.hold(object_id):
+        with self.locks.hold(object_id), self.kb.transaction():
             self.kb.create_object(obj)
             self.kb.add_event(object_id, "object_created", f"object {object_id} created",
                               {"formulation": obj.formulation.value, "links": obj.n_links,
@@ -88,89 +91,111 @@ class Orchestrator:
             obj = self.kb.get_object(object_id)
             atoms = _goal_atoms(obj, link_orientations_deg, joint_angles_deg)
             memo = self._memo(object_id)
-            goal = self.kb.add_state(object_id, "goal", atoms)
-            problem = None
-            if memo.perceived_state_id is not None:
-                problem = self.kb.add_problem(object_id, memo.perceived_state_id, goal.id)
-            # The old plan was made for another goal: the next perception decides anew.
-            self.kb.set_execution(object_id, Execution(None, None, IDLE, None))
-            self.kb.add_event(object_id, "goal_set",
-                              "goal set; the next perception plans towards it",
-                              {"goal_state_id": goal.id, "problem_id": problem.id if problem else None})
+            with self.kb.transaction():
+                goal = self.kb.add_state(object_id, "goal", atoms)
+                problem = None
+                if memo.perceived_state_id is not None:
+                    problem = self.kb.add_problem(object_id, memo.perceived_state_id, goal.id)
+                # The old plan was made for another goal: the next perception decides anew.
+                self.kb.set_execution(object_id, Execution(None, None, IDLE, None))
+                self.kb.add_event(object_id, "goal_set",
+                                  "goal set; the next perception plans towards it",
+                                  {"goal_state_id": goal.id, "problem_id": problem.id if problem else None})
             return {"goal_state_id": goal.id, "problem_id": problem.id if problem else None}
 
     # -- perception ---------------------------------------------------------------------------------------
     def handle_perception(self, object_id: str, link_orientations_deg: Sequence[float],
                           idempotency_key: str | None = None) -> dict[str, Any]:
+        """Decide on one perception and store all it leads to in one write: the perceived state and, after a
+        re-plan, its problem, plan and expected states, then the execution, the decision's event and the
+        idempotent response. A refused or failed write stores none of it."""
         with self.locks.hold(object_id):
             obj = self.kb.get_object(object_id)
             fingerprint = _fingerprint({"perception": list(link_orientations_deg)})
-            replay = self._recall(object_id, idempotency_key, fingerprint)
-            if replay is not None:
-                return replay
-            joint_values = _perceived_joint_values(obj, link_orientations_deg)
-            perceived = self.kb.add_state(object_id, "perceived", obj.state(joint_values),
-                                          link_orientations_deg=tuple(float(v) for v in link_orientations_deg))
-            answer = self._decide_and_act(obj, perceived)
-            self._remember(object_id, idempotency_key, fingerprint, answer)
+            recalled = self._recall(object_id, idempotency_key, fingerprint)
+            if recalled is not None:
+                return recalled
+            try:
+                perception = perceive(obj, link_orientations_deg)  # validated and snapped once, here
+            except ModelError as exc:
+                raise ValidationError(str(exc)) from None
+            memo = self._memo(object_id)
+            execution = self.kb.get_execution(object_id)
+            goal = self.kb.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
+            plan, view = self._plan_view(execution.plan_id)
+            decision = None
+            outcome = None
+            if goal is not None:
+                decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
+                if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
+                    outcome = self._run_pipeline(obj, perception.atoms, goal.atoms)
+            new_view = None
+            with self.kb.transaction():
+                perceived = self.kb.add_perception(perception)
+                extra: dict[str, Any] = {}
+                if goal is None or decision is None:
+                    answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
+                                     "no goal is set: PUT /objects/{id}/goal first")
+                else:
+                    extra["goal_state_id"] = goal.id
+                    if outcome is None:
+                        answer = self._follow(obj, perceived, execution, plan, decision)
+                    else:
+                        answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra)
+                self._log_decision(object_id, answer, extra)
+                self._remember(object_id, idempotency_key, fingerprint, answer)
+            if new_view is not None:
+                with self._guard:
+                    self._views[new_view[0].id] = new_view
             return answer
 
-    def _decide_and_act(self, obj: ArticulatedObject, perceived: StoredState) -> dict[str, Any]:
-        object_id = obj.ident
-        memo = self._memo(object_id)
-        execution = self.kb.get_execution(object_id)
-        if memo.goal_state_id is None:
-            answer = _answer("no_plan", None, perceived.id, None, None,
-                             "no goal is set: PUT /objects/{id}/goal first")
-            self._log_decision(object_id, answer, {})
-            return answer
-
-        goal = self.kb.get_state(memo.goal_state_id)
-        plan, view = self._plan_view(execution.plan_id)
-        decision = decide(perceived.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
-        extra: dict[str, Any] = {"goal_state_id": goal.id}
-
-        if decision.kind == "goal_reached":
-            self.kb.set_execution(object_id, Execution(execution.plan_id, None, GOAL_REACHED,
-                                                       execution.dispatched_action_id))
-            answer = _answer("goal_reached", execution.plan_id, perceived.id, None,
-                             decision.matched_expected_step, decision.reason)
-        elif decision.kind in ("continue", "resume"):
-            assert plan is not None and decision.next_step is not None
-            action = plan.actions[decision.next_step - 1]
-            still_dispatched = execution.status == DISPATCHED and execution.dispatched_action_id == action.id
-            self.kb.set_execution(object_id, Execution(plan.id, decision.next_step,
-                                                       DISPATCHED if still_dispatched else READY,
-                                                       execution.dispatched_action_id))
-            answer = _answer(decision.kind, plan.id, perceived.id, self._action_public(obj, plan, action),
-                             decision.matched_expected_step, decision.reason)
-        else:
-            answer = self._replan(obj, perceived, goal, execution, decision, extra)
-        self._log_decision(object_id, answer, extra)
-        return answer
-
-    def _replan(self, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, execution: Execution,
-                decision: Decision, extra: dict[str, Any]) -> dict[str, Any]:
+    def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State) -> PlanOutcome:
         try:
-            outcome = make_plan(self.kb, obj.ident, perceived.id, goal.id, self.settings, planning=self.planning)
+            return pipeline.plan(obj, init, goal, self.planning)
         except Exception as exc:  # a crashing stage must not leave the perception without a decision
             log.exception("planning failed for %s", obj.ident)
-            outcome = PlanOutcome("error", None, f"{type(exc).__name__}: {exc}")
-        extra.update({"planning_status": outcome.status, "problem_id": outcome.problem_id,
+            return PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", self.planning.planner)
+
+    def _follow(self, obj: ArticulatedObject, perceived: StoredState, execution: Execution,
+                plan: StoredPlan | None, decision: Decision) -> dict[str, Any]:
+        """Goal reached, continue or resume: the execution moves within the current plan."""
+        if decision.kind == DecisionKind.GOAL_REACHED:
+            self.kb.set_execution(obj.ident, Execution(execution.plan_id, None, ExecutionStatus.GOAL_REACHED,
+                                                       execution.dispatched_action_id))
+            return _answer(DecisionKind.GOAL_REACHED, execution.plan_id, perceived.id, None,
+                           decision.matched_expected_step, decision.reason)
+        assert plan is not None and decision.next_step is not None
+        action = plan.actions[decision.next_step - 1]
+        still_dispatched = execution.status == DISPATCHED and execution.dispatched_action_id == action.id
+        self.kb.set_execution(obj.ident, Execution(plan.id, decision.next_step,
+                                                   DISPATCHED if still_dispatched else READY,
+                                                   execution.dispatched_action_id))
+        return _answer(DecisionKind(decision.kind), plan.id, perceived.id, self._action_public(obj, plan, action),
+                       decision.matched_expected_step, decision.reason)
+
+    def _adopt(self, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
+               outcome: PlanOutcome, extra: dict[str, Any]
+               ) -> tuple[dict[str, Any], tuple[StoredPlan, PlanView] | None]:
+        """Store the re-planning's problem and, when solved, its plan with expected states; move the execution."""
+        problem = self.kb.add_problem(obj.ident, perceived.id, goal.id)
+        extra.update({"planning_status": outcome.status, "problem_id": problem.id,
                       "timings": {k: round(v, 6) for k, v in outcome.timings.items()}})
-        if outcome.status == "solved" and outcome.plan is not None and outcome.plan.actions:
-            plan = outcome.plan
+        if outcome.solved and outcome.actions:
+            plan = self.kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states)
             self.kb.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
+            view = PlanView(expected_states=outcome.expected_states,
+                            preconditions=tuple(a.pre for a in outcome.actions))
             reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions"
-            return _answer("replan", plan.id, perceived.id, self._action_public(obj, plan, plan.actions[0]),
-                           decision.matched_expected_step, reason)
-        if outcome.status == "solved":  # the perceived state already satisfies the goal
-            self.kb.set_execution(obj.ident, Execution(None, None, GOAL_REACHED, None))
-            return _answer("goal_reached", None, perceived.id, None, None, outcome.message)
-        self.kb.set_execution(obj.ident, Execution(None, None, NO_PLAN, None))
+            return _answer(DecisionKind.REPLAN, plan.id, perceived.id,
+                           self._action_public(obj, plan, plan.actions[0]),
+                           decision.matched_expected_step, reason), (plan, view)
+        if outcome.solved:  # the perceived state already satisfies the goal
+            self.kb.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
+            return _answer(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message), None
+        self.kb.set_execution(obj.ident, Execution(None, None, ExecutionStatus.NO_PLAN, None))
         reason = (f"{decision.reason}; planning {outcome.status}: {outcome.message}; "
                   "a human must bring the object to a workable configuration")
-        return _answer("no_plan", None, perceived.id, None, decision.matched_expected_step, reason)
+        return _answer(DecisionKind.NO_PLAN, None, perceived.id, None, decision.matched_expected_step, reason), None
 
     def _log_decision(self, object_id: str, answer: dict[str, Any], extra: dict[str, Any]) -> None:
         action = answer["next_action"]
@@ -183,6 +208,19 @@ class Orchestrator:
             **extra,
         }
         self.kb.add_event(object_id, answer["decision"], answer["reason"], data)
+
+    # -- PDDL -------------------------------------------------------------------------------------------------
+    def pddl_task(self, object_id: str, with_problem: bool = False) -> PddlTask:
+        """The PDDL of the object's latest Problem as the planner saw it (`with_problem`), or only its domain."""
+        obj = self.kb.get_object(object_id)
+        model = read_domain_model(self.planning.tbox_path, obj.formulation.value)
+        if not with_problem:
+            return PddlTask(domain_text(model, False, obj.formulation is Formulation.ABSOLUTE), "", "")
+        problem = self.kb.latest_problem(object_id)
+        if problem is None:
+            raise NotFoundError(f"problem: object {object_id} has no problem yet (set a goal and send a perception)")
+        init, goal = self.kb.get_state(problem.init_state_id), self.kb.get_state(problem.goal_state_id)
+        return translate(obj, init.atoms, goal.atoms, model, pipeline.problem_name(obj))
 
     # -- dispatch and feedback -------------------------------------------------------------------------------
     def next_action(self, object_id: str) -> dict[str, Any] | None:
@@ -198,21 +236,23 @@ class Orchestrator:
             action = plan.actions[execution.next_step - 1]
             if execution.status == DISPATCHED and execution.dispatched_action_id == action.id:
                 return self._action_public(obj, plan, action)
-            self.kb.set_execution(object_id, Execution(plan.id, execution.next_step, DISPATCHED, action.id))
-            self.kb.add_event(object_id, "dispatched", f"a_{action.step} ({action.spec.name}) dispatched",
-                              {"plan_id": plan.id, "action_id": action.id, "step": action.step})
+            with self.kb.transaction():
+                self.kb.set_execution(object_id, Execution(plan.id, execution.next_step, DISPATCHED, action.id))
+                self.kb.add_event(object_id, "dispatched", f"a_{action.step} ({action.spec.name}) dispatched",
+                                  {"plan_id": plan.id, "action_id": action.id, "step": action.step})
             return self._action_public(obj, plan, action)
 
     def handle_feedback(self, object_id: str, action_id: str, outcome: str, message: str = "",
                         idempotency_key: str | None = None) -> dict[str, Any]:
-        if outcome not in ("succeeded", "failed", "partial"):
-            raise ValidationError(f"outcome: must be succeeded, failed or partial, got {outcome!r}")
+        if outcome not in set(ActionOutcome):
+            raise ValidationError(f"outcome: must be {one_of(ActionOutcome)}, got {outcome!r}")
+        outcome = ActionOutcome(outcome)
         with self.locks.hold(object_id):
             self.kb.get_object(object_id)
             fingerprint = _fingerprint({"feedback": [action_id, outcome, message]})
-            replay = self._recall(object_id, idempotency_key, fingerprint)
-            if replay is not None:
-                return replay
+            recalled = self._recall(object_id, idempotency_key, fingerprint)
+            if recalled is not None:
+                return recalled
             action = self.kb.get_action(action_id)
             execution = self.kb.get_execution(object_id)
             if execution.dispatched_action_id != action_id:
@@ -224,21 +264,22 @@ class Orchestrator:
                 accepted = "current"
                 plan, _ = self._plan_view(execution.plan_id)
                 last = self._last_step(self.kb.get_object(object_id), plan, action) if plan else action.step
-                next_step = last + 1 if outcome == "succeeded" else action.step
+                next_step = last + 1 if outcome == ActionOutcome.SUCCEEDED else action.step
                 new = Execution(execution.plan_id, next_step, READY, None)
                 reason = f"a_{action.step} {outcome}" + (
-                    ": the next perception checks s^e_{}".format(next_step) if outcome == "succeeded"
+                    ": the next perception checks s^e_{}".format(next_step) if outcome == ActionOutcome.SUCCEEDED
                     else ": the next perception decides whether to retry, resume or re-plan")
             else:
                 accepted = "late"
                 new = replace(execution, dispatched_action_id=None)
                 reason = f"a_{action.step} {outcome}, reported after a perception had already moved the execution"
-            self.kb.set_execution(object_id, new)
-            self.kb.add_event(object_id, "feedback", reason + (f" ({message})" if message else ""),
-                              {"action_id": action_id, "step": action.step, "outcome": outcome,
-                               "accepted": accepted})
             answer = {"action_id": action_id, "accepted": accepted, "execution": execution_public(new)}
-            self._remember(object_id, idempotency_key, fingerprint, answer)
+            with self.kb.transaction():
+                self.kb.set_execution(object_id, new)
+                self.kb.add_event(object_id, "feedback", reason + (f" ({message})" if message else ""),
+                                  {"action_id": action_id, "step": action.step, "outcome": outcome,
+                                   "accepted": accepted})
+                self._remember(object_id, idempotency_key, fingerprint, answer)
             return answer
 
     # -- helpers --------------------------------------------------------------------------------------------
@@ -267,15 +308,16 @@ class Orchestrator:
             if event.kind == "goal_set":
                 memo.goal_state_id = event.data.get("goal_state_id")
             elif event.kind == "feedback":
-                memo.last_outcome = event.data.get("outcome")
-            elif event.kind in DECISION_KINDS:
+                outcome = event.data.get("outcome")
+                memo.last_outcome = ActionOutcome(outcome) if outcome else None
+            elif event.kind in set(DecisionKind):
                 memo.perceived_state_id = event.data.get("perceived_state_id") or memo.perceived_state_id
                 memo.last_outcome = None  # a feedback informs only the next decision
         return memo
 
     def _last_step(self, obj: ArticulatedObject, plan: StoredPlan, action: StoredAction) -> int:
         """Last plan step of the motion that starts with `action` (itself unless macro steps are merged)."""
-        if not getattr(self.settings, "merge_macro_steps", False):
+        if not self.merge_macro_steps:
             return action.step
         rest = [a for a in plan.actions if a.step >= action.step]
         return merge_macro_steps(obj, rest)[0].last_step
@@ -309,7 +351,7 @@ def execution_public(execution: Execution) -> dict[str, Any]:
             "dispatched_action_id": execution.dispatched_action_id}
 
 
-def _answer(kind: str, plan_id: str | None, perceived_state_id: str, next_action: dict[str, Any] | None,
+def _answer(kind: DecisionKind, plan_id: str | None, perceived_state_id: str, next_action: dict[str, Any] | None,
             matched: int | None, reason: str) -> dict[str, Any]:
     return {"decision": kind, "plan_id": plan_id, "perceived_state_id": perceived_state_id,
             "next_action": next_action, "matched_expected_step": matched, "reason": reason}
@@ -323,15 +365,6 @@ def _check_finite(values: Sequence[float | None], field: str) -> None:
     for i, v in enumerate(values):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
             raise ValidationError(f"{field}[{i}]: must be a finite number, got {v!r}")
-
-
-def _perceived_joint_values(obj: ArticulatedObject, link_orientations_deg: Sequence[float]) -> tuple[int, ...]:
-    field = "link_orientations_deg"
-    if len(link_orientations_deg) != obj.n_links:
-        raise ValidationError(f"{field}: expected {obj.n_links} values (one per link), got {len(link_orientations_deg)}")
-    _check_finite(link_orientations_deg, field)
-    snapped = [snap_angle(float(v), obj.orientations) for v in link_orientations_deg]
-    return obj.joint_values_from_links(snapped)
 
 
 def _allowed(obj: ArticulatedObject, values: Sequence[float | None], field: str) -> list[int | None]:

@@ -19,12 +19,13 @@ The function only decides; storing states, planning and dispatching belong to th
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 from planhrc.model import State, is_subsumed
+from planhrc.vocabulary import ActionOutcome, DecisionKind
 
-DecisionKind = Literal["goal_reached", "continue", "resume", "replan", "no_plan"]
-Outcome = Literal["succeeded", "failed", "partial"]
+
+class CooperationError(ValueError):
+    """A plan view that does not describe a plan (the message names the field)."""
 
 
 @dataclass(frozen=True)
@@ -36,7 +37,7 @@ class PlanView:
 
     def __post_init__(self) -> None:
         if len(self.expected_states) != len(self.preconditions) + 1:
-            raise ValueError(
+            raise CooperationError(
                 f"expected_states: a plan of {len(self.preconditions)} actions needs "
                 f"{len(self.preconditions) + 1} expected states, got {len(self.expected_states)}"
             )
@@ -66,7 +67,7 @@ def decide(
     goal: State,
     plan: PlanView | None,
     next_step: int | None,
-    last_outcome: Outcome | None = None,
+    last_outcome: ActionOutcome | None = None,
 ) -> Decision:
     """Apply the cooperation model to one perceived state.
 
@@ -76,24 +77,24 @@ def decide(
     (or none) ``pre(a_k)`` is too (its second case).
     """
     if is_subsumed(perceived, goal):
-        return Decision("goal_reached", None, None, "the perceived state is subsumed by the goal state")
+        return Decision(DecisionKind.GOAL_REACHED, None, None, "the perceived state is subsumed by the goal state")
     if plan is None:
-        return Decision("no_plan", None, None, "there is no plan to follow: plan from the perceived state")
+        return Decision(DecisionKind.NO_PLAN, None, None, "there is no plan to follow: plan from the perceived state")
 
     n = plan.n_actions
     after = _after(last_outcome)
     if next_step is not None and 1 <= next_step <= n:
         if is_subsumed(perceived, plan.expected_states[next_step - 1]):
-            verb = "retry" if last_outcome in ("failed", "partial") else "execute"
+            verb = "retry" if last_outcome in (ActionOutcome.FAILED, ActionOutcome.PARTIAL) else "execute"
             return Decision(
-                "continue",
+                DecisionKind.CONTINUE,
                 next_step,
                 next_step,
                 f"{after}the perceived state is subsumed by the expected state s^e_{next_step}: {verb} a_{next_step}",
             )
-        if last_outcome not in ("failed", "partial") and is_subsumed(perceived, plan.preconditions[next_step - 1]):
+        if last_outcome not in (ActionOutcome.FAILED, ActionOutcome.PARTIAL) and is_subsumed(perceived, plan.preconditions[next_step - 1]):
             return Decision(
-                "continue",
+                DecisionKind.CONTINUE,
                 next_step,
                 None,
                 f"{after}the perceived state differs from s^e_{next_step} but satisfies pre(a_{next_step}): "
@@ -106,14 +107,14 @@ def decide(
         if i == n + 1:
             # A valid plan's last state satisfies the goal, which was checked above: the plan is stale.
             return Decision(
-                "replan",
+                DecisionKind.REPLAN,
                 None,
                 i,
                 f"{after}the perceived state matches the plan's final state s^e_{i}, which does not satisfy "
                 "the goal: re-plan",
             )
         return Decision(
-            "resume",
+            DecisionKind.RESUME,
             i,
             i,
             f"{after}the perceived state is subsumed by the expected state s^e_{i}"
@@ -121,7 +122,7 @@ def decide(
         )
 
     return Decision(
-        "replan",
+        DecisionKind.REPLAN,
         None,
         None,
         f"{after}the perceived state is subsumed by no expected state of the plan"
@@ -129,7 +130,7 @@ def decide(
     )
 
 
-def _after(last_outcome: str | None) -> str:
+def _after(last_outcome: ActionOutcome | None) -> str:
     return "" if last_outcome is None else f"last feedback {last_outcome}; "
 
 

@@ -283,3 +283,104 @@ def is_subsumed(s1: State | frozenset, s2: State | frozenset) -> bool:
 
 def format_atom(atom: Atom) -> str:
     return "(" + " ".join(atom) + ")"
+
+
+# -- the TBox's action schemas, as values (read from the TBox by the translator) ----------------------------
+@dataclass(frozen=True)
+class Literal:
+    """A literal of an action schema: predicate and PDDL variables, possibly negated."""
+
+    predicate: str  # PDDL predicate name or "="
+    args: tuple[str, ...]  # PDDL variable names in PDDL argument order
+    negated: bool = False
+
+    def pddl(self) -> str:
+        core = f"({self.predicate} {' '.join(self.args)})"
+        return f"(not {core})" if self.negated else core
+
+
+@dataclass(frozen=True)
+class ConditionalEffect:
+    variables: tuple[tuple[str, str], ...]  # (name, type)
+    when: tuple[Literal, ...]
+    effects: tuple[Literal, ...]
+
+
+@dataclass(frozen=True)
+class ActionSchemaSpec:
+    name: str
+    parameters: tuple[tuple[str, str], ...]
+    precondition: tuple[Literal, ...]
+    effects: tuple[Literal, ...]
+    conditional_effects: tuple[ConditionalEffect, ...]
+
+
+@dataclass(frozen=True)
+class PredicateSpec:
+    name: str
+    parameters: str  # e.g. "?o - orientation ?j - joint"
+
+
+@dataclass(frozen=True)
+class DomainModelSpec:
+    """The DomainModel of one formulation as the TBox describes it."""
+
+    name: str
+    requirements: str
+    types: str
+    predicates: tuple[PredicateSpec, ...]
+    actions: tuple[ActionSchemaSpec, ...]
+
+
+# -- ground actions -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CondEffect:
+    """A ground conditional effect: when `when` holds, delete `eff_neg` and add `eff_pos`."""
+
+    when: frozenset[Atom]
+    eff_neg: frozenset[Atom]
+    eff_pos: frozenset[Atom]
+
+
+@dataclass(frozen=True)
+class ActionSpec:
+    """A ground action: PDDL name, arguments, pre, eff-, eff+ and conditional effects."""
+
+    name: str
+    params: tuple[str, ...]
+    pre: frozenset[Atom]
+    eff_neg: frozenset[Atom]
+    eff_pos: frozenset[Atom]
+    cond_eff: tuple[CondEffect, ...] = ()
+
+
+# -- perceptions ------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Perception:
+    """One perception of an object, validated and snapped once, where it enters (`perceive`).
+
+    `raw_deg` are the observed link orientations as reported, `snapped_deg` the nearest allowed orientation of
+    each link, `joint_values` what the formulation's joints carry and `atoms` the complete perceived state."""
+
+    object_id: str
+    raw_deg: tuple[float, ...]
+    snapped_deg: tuple[int, ...]
+    joint_values: tuple[int, ...]
+    atoms: State
+
+
+def perceive(obj: ArticulatedObject, link_orientations_deg: object,
+             field: str = "link_orientations_deg") -> Perception:
+    """Validate observed link orientations (one finite number per link) and snap them to allowed values."""
+    if isinstance(link_orientations_deg, (str, bytes)) or not isinstance(link_orientations_deg, Sequence):
+        raise ModelError(f"{field}: expected a sequence of numbers")
+    if len(link_orientations_deg) != obj.n_links:
+        raise ModelError(f"{field}: expected {obj.n_links} values (one per link), got {len(link_orientations_deg)}")
+    raw: list[float] = []
+    for i, v in enumerate(link_orientations_deg):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ModelError(f"{field}[{i}]: must be a finite number, got {v!r}")
+        raw.append(float(v))
+    snapped = tuple(snap_angle(v, obj.orientations) for v in raw)
+    joint_values = obj.joint_values_from_links(snapped)
+    return Perception(obj.ident, tuple(raw), snapped, joint_values, obj.state(joint_values))

@@ -1,170 +1,147 @@
-"""The planning pipeline, one stage after another:
+"""The planning pipeline, one stage after another, from values to a value:
 
-    Problem in the ABox -> translate (TBox -> domain, ABox -> problem) -> plan -> validate (VAL)
-      -> expected states (replay with the paper's transition equations) -> plan + expected States in the ABox
+    object, initial and goal states -> translate (TBox domain model -> PDDL domain, states -> PDDL problem)
+      -> plan (a planner of the registry, then the fallback) -> validate (VAL)
+      -> expected states (replay with the paper's transition equations) -> `PlanOutcome`
 
-`Planning` owns what lives across calls: the settings and, for the in-process planner, one grounded task
-per object, so a re-plan from a new perceived state does not parse or ground again.
+`plan(...)` reads nothing from and writes nothing to the knowledge base: the caller (the service's orchestrator,
+`planhrc solve`) stores what it returns, in one write. Planners are reached only through the registry.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import logging
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Mapping, Protocol, Sequence
 
-from planhrc.kb.records import StoredAction, StoredPlan
-from planhrc.model import ArticulatedObject, Formulation, State, is_subsumed
-from planhrc.transition import TransitionError, parse_step, replay
-from planhrc.planner.errors import PlannerError
-from planhrc.planner.inproc import GroundTask, ground_task
+from planhrc.model import ActionSpec, ArticulatedObject, Formulation, State, is_subsumed
 from planhrc.planner.registry import get_planner
-from planhrc.planner.result import PlanResult, PlanStatus
+from planhrc.planner.result import PlanResult
 from planhrc.planner.validate import validate_plan
+from planhrc.settings import Settings
+from planhrc.transition import TransitionError, parse_step, replay
 from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
-
-if TYPE_CHECKING:  # the store is only a type here: the stage works on any object with its read methods
-    from planhrc.kb.store import KnowledgeBase
+from planhrc.vocabulary import PlanningStatus, PlanStatus
 
 log = logging.getLogger(__name__)
-
-SOLVED, UNSOLVABLE, TIMEOUT, ERROR, INVALID = "solved", "unsolvable", "timeout", "error", "invalid"
-
-
-@dataclass(frozen=True)
-class PlanOutcome:
-    """What one planning request produced. `plan` is stored (with its expected states) only when solved."""
-
-    status: str
-    plan: StoredPlan | None
-    message: str
-    timings: dict[str, float] = field(default_factory=dict)
-    planner: str = ""
-    optimal: bool | None = None
-    problem_id: str | None = None
 
 
 @dataclass(frozen=True)
 class PlanningConfig:
+    """How plans are made; built from the settings (`config_from_settings`), which hold every default."""
+
     tbox_path: Path
-    planner: str = "inproc"
-    timeout_s: float = 5.0
-    validate: bool = True
-    fallback_planner: str | None = "fd-lama"  # used when the in-process planner cannot take the task
+    planner: str
+    timeout_s: float
+    validate: bool
+    fallback_planner: str | None
 
 
-def config_from_settings(settings: Any) -> PlanningConfig:
+def config_from_settings(settings: Settings) -> PlanningConfig:
     return PlanningConfig(
         tbox_path=Path(settings.tbox_path),
-        planner=getattr(settings, "planner", "inproc"),
-        timeout_s=float(getattr(settings, "planner_timeout_s", 5.0)),
-        validate=bool(getattr(settings, "validate_plans", True)),
-        fallback_planner=getattr(settings, "fallback_planner", "fd-lama") or None,
+        planner=settings.planner,
+        timeout_s=float(settings.planner_timeout_s),
+        validate=bool(settings.validate_plans),
+        fallback_planner=settings.fallback_planner or None,
     )
 
 
-class Planning:
-    """Runs the pipeline; keeps one grounded in-process task per object (keyed by its PDDL objects)."""
+@dataclass(frozen=True)
+class PlanOutcome:
+    """What one run of the pipeline produced.
 
-    def __init__(self, config: PlanningConfig) -> None:
-        self.config = config
-        self._ground: dict[str, tuple[str, GroundTask]] = {}
-        self._lock = threading.Lock()
+    When solved, `actions` are the ground actions a_1 .. a_N and `expected_states` the states s^e_1 .. s^e_{N+1}
+    (s^e_1 is the initial state); both are empty when the initial state already satisfies the goal or when
+    nothing was solved. `task` is the PDDL the planner saw (None when no planner ran)."""
 
-    def _grounded(self, task: PddlTask) -> GroundTask:
-        # The grounded task depends on the domain and the problem's objects and static facts, not on init/goal.
-        key = task.object_id
-        signature = task.domain + "\n" + _static_part(task.problem)
-        with self._lock:
-            cached = self._ground.get(key)
-            if cached is not None and cached[0] == signature:
-                return cached[1]
-        grounded = ground_task(task.domain, task.problem)
-        with self._lock:
-            self._ground[key] = (signature, grounded)
-        return grounded
+    status: PlanningStatus
+    message: str
+    planner: str
+    optimal: bool | None = None
+    actions: tuple[ActionSpec, ...] = ()
+    expected_states: tuple[State, ...] = ()
+    timings: Mapping[str, float] = field(default_factory=dict)
+    task: PddlTask | None = None
 
-    def run_planner(self, task: PddlTask, init: State, goal: State) -> PlanResult:
-        if self.config.planner != "inproc":
-            return get_planner(self.config.planner).solve(task.domain, task.problem, self.config.timeout_s)
-        start = time.perf_counter()
-        try:
-            result = self._grounded(task).solve(init, goal)
-        except PlannerError as exc:  # the task is outside the rotation family the in-process planner knows
-            result = PlanResult(PlanStatus.ERROR, (), 0.0, "inproc", str(exc))
-        if result.status is PlanStatus.ERROR and self.config.fallback_planner:
-            log.warning("in-process planner cannot take %s (%s); using %s", task.problem_id, result.message,
-                        self.config.fallback_planner)
-            remaining = max(0.1, self.config.timeout_s - (time.perf_counter() - start))
-            return get_planner(self.config.fallback_planner).solve(task.domain, task.problem, remaining)
-        return PlanResult(result.status, result.plan, time.perf_counter() - start, result.planner,
-                          result.message, result.optimal)
+    @property
+    def solved(self) -> bool:
+        return self.status is PlanningStatus.SOLVED
 
-    def make_plan(self, kb: KnowledgeBase, object_id: str, init_state_id: str, goal_state_id: str) -> PlanOutcome:
-        """Store a Problem (init, goal), plan it, validate the plan and store it with its expected states."""
-        timings: dict[str, float] = {}
-        t0 = time.perf_counter()
-        init = kb.get_state(init_state_id)
-        goal = kb.get_state(goal_state_id)
-        problem = kb.add_problem(object_id, init_state_id, goal_state_id)
-        if is_subsumed(init.atoms, goal.atoms):
-            return PlanOutcome(SOLVED, None, "the initial state already satisfies the goal", timings,
-                               self.config.planner, True, problem.id)
-        task = translate(kb, problem.id, self.config.tbox_path)
-        timings["translate"] = time.perf_counter() - t0
 
+def problem_name(obj: ArticulatedObject) -> str:
+    """The name of an object's PDDL problem (the same for every re-plan, so the text depends on states only)."""
+    return f"{obj.ident}-task"
+
+
+def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig) -> PlanOutcome:
+    """Translate, plan, validate and replay one task; returns a value and stores nothing."""
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if is_subsumed(init, goal):
+        return PlanOutcome(PlanningStatus.SOLVED, "the initial state already satisfies the goal", config.planner,
+                           True, timings=timings)
+    model = read_domain_model(config.tbox_path, obj.formulation.value)
+    task = translate(obj, init, goal, model, problem_name(obj))
+    timings["translate"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    result = run_planners(task, config)
+    timings["plan"] = time.perf_counter() - t
+    if not result.solved:
+        status = PlanningStatus(result.status.value)
+        return PlanOutcome(status, result.message or result.status.value, result.planner, None,
+                           timings=timings, task=task)
+
+    if config.validate:
         t = time.perf_counter()
-        result = self.run_planner(task, init.atoms, goal.atoms)
-        timings["plan"] = time.perf_counter() - t
-        if not result.solved:
-            status = {PlanStatus.UNSOLVABLE: UNSOLVABLE, PlanStatus.TIMEOUT: TIMEOUT}.get(result.status, ERROR)
-            return PlanOutcome(status, None, result.message or result.status.value, timings, result.planner,
-                               None, problem.id)
+        check = validate_plan(task.validation_domain, task.problem, result.plan)
+        timings["validate"] = time.perf_counter() - t
+        if not check.valid:
+            log.warning("plan of %s rejected by VAL: %s", result.planner, check.reason)
+            return PlanOutcome(PlanningStatus.INVALID, f"VAL rejected the plan: {check.reason}", result.planner,
+                               timings=timings, task=task)
 
-        if self.config.validate:
-            t = time.perf_counter()
-            check = validate_plan(task.validation_domain, task.problem, result.plan)
-            timings["validate"] = time.perf_counter() - t
-            if not check.valid:
-                log.warning("plan of %s rejected by VAL: %s", result.planner, check.reason)
-                return PlanOutcome(INVALID, None, f"VAL rejected the plan: {check.reason}", timings,
-                                   result.planner, None, problem.id)
-
-        t = time.perf_counter()
-        domain = read_domain_model(self.config.tbox_path, kb.get_object(object_id).formulation.value)
-        try:
-            actions, states = replay(domain, init.atoms, result.plan)
-        except TransitionError as exc:
-            return PlanOutcome(INVALID, None, f"plan does not replay: {exc}", timings, result.planner, None,
-                               problem.id)
-        if not is_subsumed(states[-1], goal.atoms):
-            return PlanOutcome(INVALID, None, "the last expected state is not subsumed by the goal", timings,
-                               result.planner, None, problem.id)
-        timings["expected_states"] = time.perf_counter() - t
-
-        t = time.perf_counter()
-        stored = kb.add_plan(problem.id, result.planner, actions, states)
-        timings["store"] = time.perf_counter() - t
-        timings["total"] = time.perf_counter() - t0
-        return PlanOutcome(SOLVED, stored, result.message, timings, result.planner, result.optimal, problem.id)
+    t = time.perf_counter()
+    try:
+        actions, states = replay(model, init, result.plan)
+    except TransitionError as exc:
+        return PlanOutcome(PlanningStatus.INVALID, f"plan does not replay: {exc}", result.planner,
+                           timings=timings, task=task)
+    if not is_subsumed(states[-1], goal):
+        return PlanOutcome(PlanningStatus.INVALID, "the last expected state is not subsumed by the goal",
+                           result.planner, timings=timings, task=task)
+    timings["expected_states"] = time.perf_counter() - t
+    timings["pipeline"] = time.perf_counter() - t0
+    return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
+                       tuple(states), timings, task)
 
 
-def _static_part(problem_text: str) -> str:
-    """The problem text without its hasorientation facts and goal: what grounding depends on."""
-    lines = [ln for ln in problem_text.splitlines() if "(hasorientation" not in ln and "(problem " not in ln]
-    return "\n".join(lines)
+def run_planners(task: PddlTask, config: PlanningConfig) -> PlanResult:
+    """The configured planner, then the fallback planner when the first cannot take the task (status error)."""
+    start = time.perf_counter()
+    result = get_planner(config.planner).solve(task.domain, task.problem, config.timeout_s)
+    if result.status is PlanStatus.ERROR and config.fallback_planner and config.fallback_planner != config.planner:
+        log.warning("%s cannot take the task (%s); using %s", config.planner, result.message,
+                    config.fallback_planner)
+        remaining = max(0.1, config.timeout_s - (time.perf_counter() - start))
+        return get_planner(config.fallback_planner).solve(task.domain, task.problem, remaining)
+    return result
 
 
-def make_plan(kb: KnowledgeBase, object_id: str, init_state_id: str, goal_state_id: str, settings: Any,
-              planning: Planning | None = None) -> PlanOutcome:
-    """One-shot form of `Planning.make_plan` (pass `planning` to reuse grounded tasks across calls)."""
-    planning = planning or Planning(config_from_settings(settings))
-    return planning.make_plan(kb, object_id, init_state_id, goal_state_id)
+class PlanStep(Protocol):
+    """A stored plan step: its id, 1-based position and ground action (e.g. the store's `StoredAction`)."""
+
+    @property
+    def id(self) -> str: ...
+
+    @property
+    def step(self) -> int: ...
+
+    @property
+    def spec(self) -> ActionSpec: ...
 
 
 # -- what an action means for the robot -----------------------------------------------------------------------
@@ -172,15 +149,17 @@ def _index(name: str) -> int:
     return int(name.rsplit("_", 1)[1][1:])
 
 
-def action_motion(obj: ArticulatedObject, action: StoredAction | Sequence[str] | str) -> dict[str, int]:
+def action_motion(obj: ArticulatedObject, action: PlanStep | ActionSpec | Sequence[str] | str) -> dict[str, int]:
     """Which link turns, which is held (0 = the table), about which joint and by how many degrees
     (+ clockwise seen from above) for one plan step."""
-    if isinstance(action, StoredAction):
-        name, params = action.spec.name, action.spec.params
+    if isinstance(action, ActionSpec):
+        name, params = action.name, action.params
     elif isinstance(action, str):
         name, params = parse_step(action)
-    else:
+    elif isinstance(action, Sequence):
         name, params = action[0], tuple(action[1:])
+    else:
+        name, params = action.spec.name, action.spec.params
     turned, held, joint = _index(params[0]), _index(params[1]), _index(params[2])
     sign = 1 if name == "rotateclockwise" else -1
     delta = sign * obj.step
@@ -209,7 +188,7 @@ class MacroStep:
         return self.last_step + 1
 
 
-def merge_macro_steps(obj: ArticulatedObject, actions: Sequence[StoredAction]) -> tuple[MacroStep, ...]:
+def merge_macro_steps(obj: ArticulatedObject, actions: Sequence[PlanStep]) -> tuple[MacroStep, ...]:
     """The paper's consolidation: e.g. two 45° steps of one joint become one 90° step."""
     merged: list[MacroStep] = []
     for action in sorted(actions, key=lambda a: a.step):

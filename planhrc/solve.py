@@ -9,15 +9,15 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, replace
+from typing import Any
 
 from planhrc.cli_args import int_in, positive_float, writable_file
 from planhrc.kb.errors import KBError
 from planhrc.kb.store import KnowledgeBase
 from planhrc.model import ArticulatedObject, ModelError, make_object
-from planhrc.paths import default_tbox_path
-from planhrc.pipeline import Planning, PlanningConfig, merge_macro_steps
+from planhrc.pipeline import PlanningConfig, config_from_settings, merge_macro_steps, plan
+from planhrc.settings import get_settings
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS
 from planhrc.translator.errors import TranslationError
@@ -31,9 +31,6 @@ class SolveRequest:
     orientations: int
     init: tuple[int, ...]
     goal: tuple[int | None, ...]  # None = unconstrained (partial goal)
-    planner: str = "inproc"
-    timeout_s: float = 5.0
-    validate: bool = True
     link_length_m: float = 0.155
 
 
@@ -59,45 +56,49 @@ def object_for(request: SolveRequest, ident: str) -> ArticulatedObject:
     return make_object(ident, request.formulation, [request.link_length_m] * n_links, request.orientations)
 
 
-def solve(request: SolveRequest, kb: KnowledgeBase, tbox_path: Path) -> dict:
-    """Run the whole pipeline for one request; returns the JSON-ready report."""
+def solve(request: SolveRequest, kb: KnowledgeBase, config: PlanningConfig) -> dict[str, Any]:
+    """Run the whole pipeline for one request and store its states, problem and plan; returns the JSON-ready
+    report."""
     t0 = time.perf_counter()
     ident = kb.new_object_id()
     obj = object_for(request, ident)
     init_atoms = obj.state(obj.check_joint_values(request.init, field="init"))
     goal_atoms = obj.partial_configuration_atoms(request.goal, field="goal")
-    kb.create_object(obj)
-    init_state = kb.add_state(ident, "initial", init_atoms)
-    goal_state = kb.add_state(ident, "goal", goal_atoms)
-    timings = {"ontology_write": time.perf_counter() - t0}
-    planning = Planning(PlanningConfig(tbox_path, request.planner, request.timeout_s, request.validate))
-    outcome = planning.make_plan(kb, ident, init_state.id, goal_state.id)
+    timings = {"model": time.perf_counter() - t0}
+    outcome = plan(obj, init_atoms, goal_atoms, config)
     timings.update(outcome.timings)
+    t = time.perf_counter()
+    with kb.transaction():
+        kb.create_object(obj)
+        init_state = kb.add_state(ident, "initial", init_atoms)
+        goal_state = kb.add_state(ident, "goal", goal_atoms)
+        problem = kb.add_problem(ident, init_state.id, goal_state.id)
+        stored = (kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states)
+                  if outcome.solved and outcome.actions else None)
+    timings["store"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
-    report: dict = {
-        "status": outcome.status,
+    report: dict[str, Any] = {
+        "status": outcome.status.value,
         "planner": outcome.planner,
         "optimal": outcome.optimal,
         "message": outcome.message,
         "object_id": ident,
-        "problem_id": outcome.problem_id,
-        "plan_id": outcome.plan.id if outcome.plan else None,
-        "plan": [],
+        "problem_id": problem.id,
+        "plan_id": stored.id if stored else None,
+        "plan": ["(" + " ".join((a.name,) + a.params) + ")" for a in outcome.actions],
         "expected_states": [],
         "macro_steps": [],
         "timings_s": {k: round(v, 6) for k, v in timings.items()},
     }
-    if outcome.plan is not None:
-        plan = outcome.plan
-        report["plan"] = ["(" + " ".join((a.spec.name,) + a.spec.params) + ")" for a in plan.actions]
-        for sid in plan.expected_state_ids:
-            values = obj.joint_values_of(kb.get_state(sid).atoms)
+    if stored is not None:
+        for atoms in outcome.expected_states:
+            values = obj.joint_values_of(atoms)
             report["expected_states"].append([values[k] for k in obj.joint_indices])
         report["macro_steps"] = [
             {"steps": [m.first_step, m.last_step], "joint_index": m.joint_index,
              "turned_link_index": m.turned_link_index, "held_link_index": m.held_link_index,
              "delta_deg": m.delta_deg}
-            for m in merge_macro_steps(obj, plan.actions)
+            for m in merge_macro_steps(obj, stored.actions)
         ]
     return report
 
@@ -109,8 +110,10 @@ def add_solve_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--orientations", type=int_in(2, 360), required=True, metavar="K", help="allowed orientations (360 %% K == 0)")
     p.add_argument("--init", required=True, help="degrees, comma separated (absolute: per link; relative: per joint)")
     p.add_argument("--goal", required=True, help="degrees, comma separated; '*' leaves a joint unconstrained")
-    p.add_argument("--planner", default="inproc", choices=list(PLANNERS))
-    p.add_argument("--timeout", type=positive_float, default=5.0, metavar="S")
+    p.add_argument("--planner", default=None, choices=list(PLANNERS),
+                   help="planner backend (default: the settings' planner)")
+    p.add_argument("--timeout", type=positive_float, default=None, metavar="S",
+                   help="time limit of one planner call (default: the settings' planner_timeout_s)")
     p.add_argument("--no-validate", action="store_true", help="skip VAL (not recommended)")
     p.add_argument("--db", type=writable_file, default=None, help="SQLite store (default: in memory)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -124,12 +127,13 @@ def run_solve(args: argparse.Namespace) -> int:
             orientations=args.orientations,
             init=tuple(v for v in parse_angles(args.init, "init") if v is not None),
             goal=parse_angles(args.goal, "goal", allow_any=True),
-            planner=args.planner,
-            timeout_s=args.timeout,
-            validate=not args.no_validate,
         )
-        with KnowledgeBase(args.db, default_tbox_path()) as kb:
-            report = solve(request, kb, default_tbox_path())
+        config = config_from_settings(get_settings())
+        config = replace(config, planner=args.planner or config.planner,
+                         timeout_s=config.timeout_s if args.timeout is None else args.timeout,
+                         validate=config.validate and not args.no_validate)
+        with KnowledgeBase(args.db, config.tbox_path) as kb:
+            report = solve(request, kb, config)
     except (ModelError, KBError, TranslationError, PlannerError) as exc:
         print(f"planhrc solve: {exc}", file=sys.stderr)
         return 2

@@ -9,9 +9,7 @@ from __future__ import annotations
 
 from typing import Iterator, Mapping, Sequence
 
-from planhrc.kb.records import ActionSpec, CondEffect
-from planhrc.model import Atom, State
-from planhrc.translator.domain import ActionSchemaSpec, DomainModelSpec, Literal
+from planhrc.model import ActionSchemaSpec, ActionSpec, Atom, CondEffect, DomainModelSpec, Literal, State
 
 
 class TransitionError(Exception):

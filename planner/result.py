@@ -2,14 +2,8 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
 
-
-class PlanStatus(str, Enum):
-    SOLVED = "solved"
-    UNSOLVABLE = "unsolvable"
-    TIMEOUT = "timeout"
-    ERROR = "error"
+from planhrc.vocabulary import PlanStatus
 
 
 @dataclass(frozen=True)

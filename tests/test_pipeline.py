@@ -1,78 +1,77 @@
 """The planning pipeline end to end through the ontology, and `planhrc solve`."""
 import json
+from dataclasses import replace
 
 import pytest
 
+from planhrc import pipeline
 from planhrc.cli import main
 from planhrc.kb.store import KnowledgeBase
 from planhrc.model import is_subsumed, make_object
 from planhrc.paths import default_tbox_path
-from planhrc.pipeline import Planning, PlanningConfig
+from planhrc.pipeline import config_from_settings, plan
 from planhrc.planner.result import PlanResult, PlanStatus
+from planhrc.settings import make_settings
 from tests.scenarios import SCENARIOS
 
 
 @pytest.fixture
-def kb():
-    with KnowledgeBase(None, default_tbox_path()) as kb:
-        yield kb
+def config():
+    return config_from_settings(make_settings())
 
 
-def _setup(kb, formulation, links, k, init_links, goal_links):
-    oid = kb.new_object_id()
-    obj = make_object(oid, formulation, links, k)
-    kb.create_object(obj)
-    init = kb.add_state(oid, "initial", obj.state(obj.joint_values_from_links(init_links)))
-    goal = kb.add_state(oid, "goal", obj.configuration_atoms(obj.joint_values_from_links(goal_links)))
+def _setup(formulation, links, k, init_links, goal_links, ident="obj1"):
+    obj = make_object(ident, formulation, links, k)
+    init = obj.state(obj.joint_values_from_links(init_links))
+    goal = obj.configuration_atoms(obj.joint_values_from_links(goal_links))
     return obj, init, goal
 
 
 @pytest.mark.parametrize("formulation", ["relative", "absolute"])
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
-def test_plan_is_stored_with_expected_states(kb, formulation, name):
+def test_plan_returns_a_value_with_expected_states(config, formulation, name):
     sc = SCENARIOS[name]
-    obj, init, goal = _setup(kb, formulation, sc.links, sc.orientations, sc.init_links_deg, sc.goal_links_deg)
-    planning = Planning(PlanningConfig(default_tbox_path()))
-    outcome = planning.make_plan(kb, obj.ident, init.id, goal.id)
+    obj, init, goal = _setup(formulation, sc.links, sc.orientations, sc.init_links_deg, sc.goal_links_deg)
+    outcome = plan(obj, init, goal, config)
     expected_length = sc.optimal_relative if formulation == "relative" else sc.optimal_absolute
+    assert outcome.solved, outcome.message
     if expected_length == 0:
-        assert outcome.status == "solved" and outcome.plan is None  # nothing to do
+        assert outcome.actions == () and outcome.task is None  # nothing to do, no planner ran
         return
-    assert outcome.status == "solved", outcome.message
-    plan = kb.get_plan(outcome.plan.id)
-    assert len(plan.actions) == expected_length and outcome.optimal
-    states = [kb.get_state(s).atoms for s in plan.expected_state_ids]
-    assert states[0] == init.atoms  # s^e_1 is the current state
-    assert is_subsumed(states[-1], goal.atoms)  # s^e_N+1 is subsumed by the goal
-    assert not any(is_subsumed(s, goal.atoms) for s in states[:-1])  # an optimal plan reaches it only at the end
-    assert kb.get_problem(outcome.problem_id).init_state_id == init.id
-    assert set(outcome.timings) >= {"translate", "plan", "validate", "expected_states", "store"}
+    assert len(outcome.actions) == expected_length and outcome.optimal
+    states = outcome.expected_states
+    assert len(states) == len(outcome.actions) + 1
+    assert states[0] == init  # s^e_1 is the current state
+    assert is_subsumed(states[-1], goal)  # s^e_N+1 is subsumed by the goal
+    assert not any(is_subsumed(s, goal) for s in states[:-1])  # an optimal plan reaches it only at the end
+    assert set(outcome.timings) >= {"translate", "plan", "validate", "expected_states"}
 
 
-def test_a_plan_val_rejects_is_never_stored(kb, monkeypatch):
-    obj, init, goal = _setup(kb, "relative", 3, 4, (0, 0, 0), (0, 90, 0))
-    planning = Planning(PlanningConfig(default_tbox_path()))
-    wrong = ("(rotateanticlockwise o_l2 o_l1 o_j1 deg_0 deg_270)",)  # names another object: VAL refuses it
-    wrong = tuple(step.replace("o_", f"{obj.ident}_") for step in wrong)
-    monkeypatch.setattr(planning, "run_planner",
-                        lambda task, i, g: PlanResult(PlanStatus.SOLVED, wrong, 0.0, "stub"))
-    before = kb.triple_count()
-    outcome = planning.make_plan(kb, obj.ident, init.id, goal.id)
+def test_the_value_is_stored_in_one_write_and_reads_back_equal(config, tmp_path):
+    sc = SCENARIOS[sorted(SCENARIOS)[0]]
+    db = str(tmp_path / "kb.sqlite3")
+    with KnowledgeBase(db, default_tbox_path()) as kb:
+        ident = kb.new_object_id()
+        obj, init, goal = _setup("absolute", sc.links, sc.orientations, sc.init_links_deg, (90,) * sc.links, ident)
+        outcome = plan(obj, init, goal, config)
+        with kb.transaction():
+            kb.create_object(obj)
+            problem = kb.add_problem(ident, kb.add_state(ident, "initial", init).id,
+                                     kb.add_state(ident, "goal", goal).id)
+            stored = kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states)
+    with KnowledgeBase(db, default_tbox_path()) as kb:  # read back from the database, not from a cache
+        again = kb.get_plan(stored.id)
+        assert tuple(a.spec for a in again.actions) == outcome.actions
+        assert tuple(kb.get_state(s).atoms for s in again.expected_state_ids) == outcome.expected_states
+
+
+def test_a_plan_val_rejects_is_refused(config, monkeypatch):
+    obj, init, goal = _setup("relative", 3, 4, (0, 0, 0), (0, 90, 0))
+    wrong = ("(rotateanticlockwise obj2_l2 obj2_l1 obj2_j1 deg_0 deg_270)",)  # names another object: VAL refuses
+    monkeypatch.setattr(pipeline, "run_planners", lambda task, cfg: PlanResult(PlanStatus.SOLVED, wrong, 0.0, "stub"))
+    outcome = plan(obj, init, goal, config)
     assert outcome.status == "invalid" and "VAL" in outcome.message
-    assert outcome.plan is None and kb.latest_plan(obj.ident) is None
-    assert kb.triple_count() - before < 50  # only the Problem individual was added
-
-
-def test_replanning_reuses_the_grounded_task(kb):
-    obj, init, goal = _setup(kb, "absolute", 6, 8, (0,) * 6, (45, 90, 0, 315, 0, 45))
-    planning = Planning(PlanningConfig(default_tbox_path()))
-    first = planning.make_plan(kb, obj.ident, init.id, goal.id)
-    grounded = planning._ground[obj.ident][1]
-    perceived = kb.add_state(obj.ident, "perceived", obj.state((90, 90, 0, 0, 0, 0)),
-                             link_orientations_deg=(90, 90, 0, 0, 0, 0))
-    second = planning.make_plan(kb, obj.ident, perceived.id, goal.id)
-    assert first.status == second.status == "solved"
-    assert planning._ground[obj.ident][1] is grounded
+    assert outcome.actions == () and outcome.expected_states == ()
 
 
 def test_solve_command_json(capsys):
@@ -107,18 +106,16 @@ def test_solve_command_refuses_bad_input(capsys, args, message):
     assert message in capsys.readouterr().err
 
 
-def test_a_task_the_in_process_planner_refuses_goes_to_the_fallback_planner(kb, monkeypatch):
-    """Isolates the fallback: grounding is made to refuse the task; Fast Downward (real) then plans it."""
-    import planhrc.pipeline as pipeline
-    from planhrc.planner.errors import PlannerError
+def test_a_task_the_in_process_planner_refuses_goes_to_the_fallback_planner(config, monkeypatch):
+    """Isolates the fallback: the in-process planner is made to refuse the task; Fast Downward (real) plans it."""
+    from planhrc.planner.inproc import InprocPlanner
 
-    def refuse(domain, problem):
-        raise PlannerError("domain: not a member of the rotation family")
+    def refuse(self, domain, problem, timeout_s):
+        return PlanResult(PlanStatus.ERROR, (), 0.0, "inproc", "domain: not a member of the rotation family")
 
-    monkeypatch.setattr(pipeline, "ground_task", refuse)
-    obj, init, goal = _setup(kb, "relative", 4, 4, (0, 0, 0, 0), (0, 90, 90, 0))
-    outcome = Planning(PlanningConfig(default_tbox_path())).make_plan(kb, obj.ident, init.id, goal.id)
-    assert outcome.status == "solved" and outcome.planner == "fd-lama"
-    assert len(outcome.plan.actions) == 2
-    none = Planning(PlanningConfig(default_tbox_path(), fallback_planner=None))
-    assert none.make_plan(kb, obj.ident, init.id, goal.id).status == "error"
+    monkeypatch.setattr(InprocPlanner, "solve", refuse)
+    obj, init, goal = _setup("relative", 4, 4, (0, 0, 0, 0), (0, 90, 90, 0))
+    outcome = plan(obj, init, goal, config)
+    assert outcome.solved and outcome.planner == "fd-lama"
+    assert len(outcome.actions) == 2
+    assert plan(obj, init, goal, replace(config, fallback_planner=None)).status == "error"

@@ -333,11 +333,11 @@ def test_perception_while_dispatched_and_late_feedback(client):
 
 
 def test_unsolvable_or_failed_planning_answers_no_plan(client, monkeypatch):
-    import planhrc.kb_service.orchestrator as orchestrator
-    from planhrc.pipeline import PlanOutcome
+    from planhrc import pipeline
+    from planhrc.vocabulary import PlanningStatus
 
-    monkeypatch.setattr(orchestrator, "make_plan",
-                        lambda *a, **k: PlanOutcome("unsolvable", None, "no plan exists"))
+    monkeypatch.setattr(pipeline, "plan",
+                        lambda *a, **k: pipeline.PlanOutcome(PlanningStatus.UNSOLVABLE, "no plan exists", "stub"))
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
     answer = perceive(client, oid, [0, 0, 0, 0])
@@ -517,3 +517,28 @@ def test_macro_step_covers_consecutive_steps_and_checks_the_state_after_it(macro
     assert r.json()["execution"]["next_step"] == 3
     answer = perceive(client, oid, noisy(links))
     assert answer["decision"] == "goal_reached"
+
+
+# -- one write per perception ------------------------------------------------------------------------------------
+def test_a_perception_is_stored_all_or_nothing(client, monkeypatch):
+    """The re-planning perception's perceived state, problem, plan, expected states, execution and event are one
+    write: when its last part fails, none of it is stored, and the same perception then succeeds."""
+    oid = new_object(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
+    kb = client.app.state.kb
+    before = (kb_size(client, oid), kb.get_execution(oid), len(kb.list_events(oid)))
+    real_add_event = kb.add_event
+
+    def fail_on_decision(object_id, kind, reason, data):
+        real_add_event(object_id, kind, reason, data)
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(kb, "add_event", fail_on_decision)
+    with pytest.raises(RuntimeError, match="disk full"):
+        perceive(client, oid, [0, 0, 0, 0])
+    assert (kb_size(client, oid), kb.get_execution(oid), len(kb.list_events(oid))) == before
+    assert kb.latest_plan(oid) is None
+    monkeypatch.undo()
+    answer = perceive(client, oid, [0, 0, 0, 0])
+    assert answer["decision"] == "replan" and kb.get_plan(answer["plan_id"]).actions
+    assert client.get(f"/states/{answer['perceived_state_id']}").status_code == 200

@@ -1,12 +1,11 @@
-"""Translator: TBox -> PDDL domain, problem writer, symbol table; checked by independent tools."""
+"""Translator: TBox -> PDDL domain, problem writer, the pure `translate`; checked by independent tools."""
 from pathlib import Path
 
 import pytest
 
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
-from planhrc.translator import SymbolError, SymbolTable, TranslationError, get_domain, get_problem
-from planhrc.translator.translate import symbols_for
+from planhrc.translator import TranslationError, get_domain, get_problem, read_domain_model, translate
 
 DATA = Path(__file__).parent / "data"
 
@@ -48,19 +47,18 @@ def test_problem_refuses_foreign_names_and_non_orientation_goals():
         get_problem(obj, obj.state([0, 0]), set(), "p")
 
 
-def test_symbol_table_round_trip_and_typed_errors():
-    obj = make_object("obj3", "absolute", 3, 4)
-    table = symbols_for(obj)
-    iri = table.to_iri("obj3_l2")
-    assert iri.endswith("#obj3_l2")
-    assert table.to_pddl(iri) == "obj3_l2"
-    assert table.to_pddl(table.to_iri("deg_90")) == "deg_90"
-    with pytest.raises(SymbolError):
-        table.to_iri("obj4_l1")
-    with pytest.raises(SymbolError):
-        table.to_pddl("http://example.org/#nothing")
-    with pytest.raises(SymbolError, match="same PDDL name"):
-        SymbolTable.from_names(["A", "a"])
+@pytest.mark.parametrize("formulation", ["relative", "absolute"])
+def test_translate_is_a_function_of_values(formulation):
+    """Object, states and the TBox's domain model in, PDDL text out: the same values give the same text."""
+    obj = make_object("obj3", formulation, 5, 8)
+    model = read_domain_model(default_tbox_path(), formulation)
+    init, goal = obj.state([45] * obj.n_joints), obj.configuration_atoms([90] * obj.n_joints)
+    task = translate(obj, init, goal, model, "obj3-task")
+    assert task == translate(obj, frozenset(sorted(init)), frozenset(goal), model, "obj3-task")
+    assert task.domain == get_domain(default_tbox_path(), formulation)
+    assert task.validation_domain == get_domain(default_tbox_path(), formulation, paper_exact=True)
+    assert task.problem == get_problem(obj, init, goal, "obj3-task")
+    assert "(hasorientation deg_45 obj3_j2)" in task.problem and "(hasorientation deg_90 obj3_j2)" in task.problem
 
 
 @pytest.mark.parametrize("formulation", ["relative", "absolute"])

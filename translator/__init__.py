@@ -1,7 +1,12 @@
-"""Translator: TBox -> PDDL domain, ABox -> PDDL problem (relative and absolute formulations)."""
-from .domain import get_domain, read_domain_model
-from .errors import SymbolError, TranslationError
-from .problem import get_problem
-from .symbols import SymbolTable
+"""Translator: TBox -> PDDL domain, object and states -> PDDL problem (relative and absolute formulations).
 
-__all__ = ["get_domain", "read_domain_model", "get_problem", "SymbolTable", "TranslationError", "SymbolError"]
+A pure function of values: `translate(obj, init, goal, read_domain_model(tbox, formulation), name)` returns the
+PDDL texts; nothing here reads or writes the knowledge base.
+"""
+from .domain import domain_text, get_domain, read_domain_model
+from .errors import TranslationError
+from .problem import get_problem
+from .translate import PddlTask, translate
+
+__all__ = ["PddlTask", "TranslationError", "domain_text", "get_domain",
+           "get_problem", "read_domain_model", "translate"]

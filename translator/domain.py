@@ -9,7 +9,6 @@ every list is ordered by the `position` the TBox gives it.
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import TextIO
@@ -17,51 +16,14 @@ from typing import TextIO
 from rdflib import Graph, Namespace, URIRef
 from rdflib.namespace import OWL, RDF
 
+from planhrc.model import ActionSchemaSpec, ConditionalEffect, DomainModelSpec, Literal, PredicateSpec
+
 from .errors import TranslationError
 
+__all__ = ["ActionSchemaSpec", "ConditionalEffect", "DomainModelSpec", "Literal", "PredicateSpec", "get_domain",
+           "domain_text", "read_domain_model", "write_domain"]
+
 PLAN = Namespace("http://planhrc.org/ontology/planhrc.owl#")
-
-
-@dataclass(frozen=True)
-class Literal:
-    predicate: str  # PDDL predicate name or "="
-    args: tuple[str, ...]  # PDDL variable names in PDDL argument order
-    negated: bool = False
-
-    def pddl(self) -> str:
-        core = f"({self.predicate} {' '.join(self.args)})"
-        return f"(not {core})" if self.negated else core
-
-
-@dataclass(frozen=True)
-class ConditionalEffect:
-    variables: tuple[tuple[str, str], ...]  # (name, type)
-    when: tuple[Literal, ...]
-    effects: tuple[Literal, ...]
-
-
-@dataclass(frozen=True)
-class ActionSchemaSpec:
-    name: str
-    parameters: tuple[tuple[str, str], ...]
-    precondition: tuple[Literal, ...]
-    effects: tuple[Literal, ...]
-    conditional_effects: tuple[ConditionalEffect, ...]
-
-
-@dataclass(frozen=True)
-class PredicateSpec:
-    name: str
-    parameters: str  # e.g. "?o - orientation ?j - joint"
-
-
-@dataclass(frozen=True)
-class DomainModelSpec:
-    name: str
-    requirements: str
-    types: str
-    predicates: tuple[PredicateSpec, ...]
-    actions: tuple[ActionSchemaSpec, ...]
 
 
 class _TBox:
@@ -219,8 +181,14 @@ def _is_guard(lit: Literal) -> bool:
 
 def get_domain(tbox_path: Path | str, formulation: str, paper_exact: bool = False) -> str:
     """The PDDL domain of a formulation; `paper_exact` gives the paper's absolute schema (no guard)."""
-    spec = read_domain_model(tbox_path, formulation)
+    return domain_text(read_domain_model(tbox_path, formulation), paper_exact, formulation == "absolute")
+
+
+@lru_cache(maxsize=16)
+def domain_text(model: DomainModelSpec, paper_exact: bool = False, absolute: bool = False) -> str:
+    """The PDDL domain of a domain model; `paper_exact` drops the guard the paper's figures lack, and names the
+    absolute domain `…-paper`. Pure, so each model's text is written once."""
     buf = io.StringIO()
-    name = f"{spec.name}-paper" if paper_exact and formulation == "absolute" else None
-    write_domain(buf, spec, name=name, drop_guard=paper_exact)
+    name = f"{model.name}-paper" if paper_exact and absolute else None
+    write_domain(buf, model, name=name, drop_guard=paper_exact)
     return buf.getvalue()

@@ -1,50 +1,29 @@
-"""ABox -> PDDL task: the translator's entry function."""
+"""The translator's entry function: values in (the object, the initial and goal atoms, the domain model read from
+the TBox), PDDL text out. It never touches the knowledge base."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from dataclasses import dataclass
-from pathlib import Path
 
-from planhrc.model import ArticulatedObject
+from planhrc.model import ArticulatedObject, DomainModelSpec, Formulation, State
 
-from .domain import get_domain
+from .domain import domain_text
 from .problem import get_problem
-from .symbols import SymbolTable
-
-
-if TYPE_CHECKING:
-    from planhrc.kb.store import KnowledgeBase
 
 
 @dataclass(frozen=True)
 class PddlTask:
     """PDDL texts of one problem: the planning domain, the paper's exact domain (for validation) and the problem."""
 
-    object_id: str
-    problem_id: str
     domain: str
     validation_domain: str
     problem: str
-    symbols: SymbolTable
 
 
-def symbols_for(obj: ArticulatedObject) -> SymbolTable:
-    return SymbolTable.from_names(obj.all_links + obj.joints + obj.orientation_names)
-
-
-def translate(kb: KnowledgeBase, problem_id: str, tbox_path: Path | str) -> PddlTask:
-    """Write the PDDL domain (from the TBox) and problem (from the ABox: init and goal states) of a Problem."""
-    problem = kb.get_problem(problem_id)
-    obj = kb.get_object(problem.object_id)
-    init = kb.get_state(problem.init_state_id)
-    goal = kb.get_state(problem.goal_state_id)
-    form = obj.formulation.value
+def translate(obj: ArticulatedObject, init: State, goal: State, model: DomainModelSpec,
+              problem_name: str) -> PddlTask:
+    """Write the PDDL domain (from the TBox's domain model of the object's formulation) and the problem."""
     return PddlTask(
-        object_id=obj.ident,
-        problem_id=problem_id,
-        domain=get_domain(tbox_path, form),
-        validation_domain=get_domain(tbox_path, form, paper_exact=True),
-        problem=get_problem(obj, init.atoms, goal.atoms, f"{obj.ident}-{problem_id}"),
-        symbols=symbols_for(obj),
+        domain=domain_text(model, paper_exact=False, absolute=obj.formulation is Formulation.ABSOLUTE),
+        validation_domain=domain_text(model, paper_exact=True, absolute=obj.formulation is Formulation.ABSOLUTE),
+        problem=get_problem(obj, init, goal, problem_name),
     )

@@ -4,7 +4,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from planhrc.model import Atom
+from planhrc.model import ActionSpec, Atom, CondEffect
+from planhrc.vocabulary import ExecutionStatus
+
+__all__ = ["STATE_KINDS", "ActionSpec", "CondEffect", "Execution", "StoredAction", "StoredEvent", "StoredPlan",
+           "StoredProblem", "StoredState"]
 
 STATE_KINDS = ("perceived", "expected", "goal", "initial")
 
@@ -26,27 +30,6 @@ class StoredProblem:
     init_state_id: str
     goal_state_id: str
     created_at: float
-
-
-@dataclass(frozen=True)
-class CondEffect:
-    """A ground conditional effect: when `when` holds, delete `eff_neg` and add `eff_pos`."""
-
-    when: frozenset[Atom]
-    eff_neg: frozenset[Atom]
-    eff_pos: frozenset[Atom]
-
-
-@dataclass(frozen=True)
-class ActionSpec:
-    """A ground action to store: PDDL name, arguments, pre, eff-, eff+ and conditional effects."""
-
-    name: str
-    params: tuple[str, ...]
-    pre: frozenset[Atom]
-    eff_neg: frozenset[Atom]
-    eff_pos: frozenset[Atom]
-    cond_eff: tuple[CondEffect, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -83,5 +66,5 @@ class Execution:
 
     plan_id: str | None
     next_step: int | None  # 1-based step of the next action to dispatch, None when no plan / done
-    status: str  # "idle" | "ready" | "dispatched" | "goal_reached" | "no_plan"
+    status: ExecutionStatus
     dispatched_action_id: str | None = None

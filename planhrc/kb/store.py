@@ -24,8 +24,9 @@ import re
 import sqlite3
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
 from owlready2 import World
 from owlready2.base import owl_named_individual, owl_ontology, rdf_type
@@ -39,10 +40,13 @@ from planhrc.model import (
     Atom,
     Formulation,
     ModelError,
+    Perception,
     format_atom,
     orientation_name,
-    snap_angle,
+    perceive,
 )
+
+from planhrc.vocabulary import ExecutionStatus, one_of
 
 from .errors import ConflictError, KBError, NotFoundError, ValidationError
 from .records import (
@@ -58,6 +62,7 @@ from .records import (
 )
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 TBOX_IRI = "http://planhrc.org/ontology/planhrc.owl#"
 ABOX_IRI = "http://planhrc.org/abox#"
@@ -70,7 +75,6 @@ STATE_CLASSES = {
 }
 COMPLETE_KINDS = frozenset({"perceived", "expected", "initial"})
 ACTION_CLASSES = {"rotateclockwise": "RotateClockwise", "rotateanticlockwise": "RotateAntiClockwise"}
-EXECUTION_STATUSES = ("idle", "ready", "dispatched", "goal_reached", "no_plan")
 
 # PDDL predicate -> (OWL class, PDDL argument types, OWL property of each PDDL argument, IRI tag).
 # The property order matches the TBox annotation pddlArgumentOrder (a test checks it).
@@ -124,6 +128,7 @@ class _ObjectInfo:
 
     def __init__(self, obj: ArticulatedObject):
         self.obj = obj
+        self.joints = obj.joints
         self.types: dict[str, str] = {}
         for name in obj.all_links:
             self.types[name] = "link"
@@ -199,6 +204,7 @@ class KnowledgeBase:
         except Exception:
             self._world.close()
             raise
+        self._depth = 0
         self._iri_sid: dict[str, int] = {}
         self._sid_name: dict[int, str] = {}
         self._objects: dict[str, _ObjectInfo] = {}
@@ -339,8 +345,11 @@ class KnowledgeBase:
     def _commit(self) -> None:
         self._world.save()
 
-    def _write(self, fill) -> Any:
-        """Run `fill()` (which adds triples / side-table rows) in one transaction; roll back on any error."""
+    def _write(self, fill: Callable[[], T]) -> T:
+        """Run `fill()` (which adds triples / side-table rows) in one transaction; roll back on any error.
+        Inside `transaction()` it only adds to the open transaction, which commits or rolls back as a whole."""
+        if self._depth:
+            return fill()
         try:
             result = fill()
             self._commit()
@@ -350,10 +359,40 @@ class KnowledgeBase:
             self._forget_uncommitted()
             raise
 
+    @contextmanager
+    def transaction(self) -> Iterator[None]:
+        """Every write inside the block is one transaction: all of them commit together at the end, or, when
+        anything in the block raises (a refused write included), none does and the store is as before."""
+        with self._lock:
+            self._check_open()
+            if self._depth:
+                self._depth += 1
+                try:
+                    yield
+                finally:
+                    self._depth -= 1
+                return
+            self._depth = 1
+            try:
+                yield
+                self._commit()
+            except BaseException:
+                self._db.rollback()
+                self._forget_uncommitted()
+                raise
+            finally:
+                self._depth = 0
+
     def _forget_uncommitted(self) -> None:
-        # Storids handed out in a rolled-back transaction are invalid: drop the name caches.
+        # Storids handed out in a rolled-back transaction are invalid, and records cached during it were never
+        # stored: drop every cache (they refill from the database on demand).
         self._iri_sid.clear()
         self._sid_name.clear()
+        self._objects.clear()
+        self._states.clear()
+        self._problems.clear()
+        self._plans.clear()
+        self._actions.clear()
 
     def _check_open(self) -> None:
         if self._closed:
@@ -541,7 +580,7 @@ class KnowledgeBase:
             elif atom not in info.static:
                 raise ValidationError(f"{field}: atom {format_atom(atom)} is not a fact of object {info.obj.ident!r}")
         if kind in COMPLETE_KINDS:
-            missing = [j for j in info.obj.joints if j not in by_joint]
+            missing = [j for j in info.joints if j not in by_joint]
             if missing:
                 raise ValidationError(
                     f"{field}: a {kind} state is complete but has no orientation for joint(s) {', '.join(missing)}"
@@ -550,40 +589,30 @@ class KnowledgeBase:
 
     def _check_observation(
         self, info: _ObjectInfo, kind: str, by_joint: dict[str, Atom], values: Any
-    ) -> tuple[tuple[float, ...], tuple[int, ...]] | None:
+    ) -> Perception | None:
         if values is None:
             return None
         obj = info.obj
         field = "link_orientations_deg"
         if kind != "perceived":
             raise ValidationError(f"{field}: only perceived states carry observed link orientations, not {kind!r}")
-        if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
-            raise ValidationError(f"{field}: expected a sequence of numbers")
-        if len(values) != obj.n_links:
-            raise ValidationError(f"{field}: expected {obj.n_links} values (one per link), got {len(values)}")
-        raw: list[float] = []
-        for i, v in enumerate(values):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValidationError(f"{field}[{i}]: must be a finite number, got {v!r}")
-            raw.append(float(v))
-        snapped = tuple(snap_angle(v, obj.orientations) for v in raw)
         try:
-            expected = obj.joint_values_from_links(snapped)
+            perception = perceive(obj, values, field)
         except ModelError as exc:
             raise ValidationError(str(exc)) from None
-        for k, deg in zip(obj.joint_indices, expected):
+        for k, deg in zip(obj.joint_indices, perception.joint_values):
             atom = by_joint.get(obj.joint(k))
             if atom is not None and atom[1] != orientation_name(deg):
                 raise ValidationError(
                     f"{field}: the observation gives {orientation_name(deg)} for joint {obj.joint(k)}, "
                     f"but atoms say {format_atom(atom)}"
                 )
-        return tuple(raw), snapped
+        return perception
 
     # -- states -----------------------------------------------------------------------------------------
     def _add_state_triples(
         self, b: _Batch, info: _ObjectInfo, kind: str, atoms: frozenset[Atom],
-        observation: tuple[tuple[float, ...], tuple[int, ...]] | None, step: int | None, created_at: float,
+        observation: Perception | None, step: int | None, created_at: float,
     ) -> str:
         obj = info.obj
         state_id = f"{obj.ident}_state_{self._next_counter(obj.ident + ':state')}"
@@ -606,8 +635,7 @@ class KnowledgeBase:
                 pred = info.static_fragment[atom]
             b.rel(s, "madeof", pred)
         if observation is not None:
-            raw, snapped = observation
-            for k, (value, deg) in enumerate(zip(raw, snapped), start=1):
+            for k, (value, deg) in enumerate(zip(observation.raw_deg, observation.snapped_deg), start=1):
                 p = b.individual(f"{state_id}_lo_l{k}", "LinkOrientation")
                 b.rel(p, "arg1", obj.link(k))
                 b.rel(p, "arg2", orientation_name(deg))
@@ -641,8 +669,31 @@ class KnowledgeBase:
             state_id = self._write(fill)
             record = StoredState(
                 id=state_id, object_id=info.obj.ident, kind=kind, atoms=atoms, created_at=created,
-                link_orientations_deg=observation[0] if observation else None,
+                link_orientations_deg=observation.raw_deg if observation else None,
             )
+            self._states[state_id] = record
+            return record
+
+    def add_perception(self, perception: Perception) -> StoredState:
+        """Store a perceived state from a perception validated and snapped where it entered (`model.perceive`)."""
+        with self._lock:
+            self._check_open()
+            if not isinstance(perception, Perception):
+                raise ValidationError(f"perception: expected a Perception, got {type(perception).__name__}")
+            info = self._info(perception.object_id, "perception.object_id")
+            if len(perception.snapped_deg) != info.obj.n_links or len(perception.raw_deg) != info.obj.n_links:
+                raise ValidationError(f"perception: expected {info.obj.n_links} link orientations")
+            created = time.time()
+
+            def fill() -> str:
+                b = _Batch(self)
+                state_id = self._add_state_triples(b, info, "perceived", perception.atoms, perception, None, created)
+                self._flush(b)
+                return state_id
+
+            state_id = self._write(fill)
+            record = StoredState(id=state_id, object_id=info.obj.ident, kind="perceived", atoms=perception.atoms,
+                                 created_at=created, link_orientations_deg=perception.raw_deg)
             self._states[state_id] = record
             return record
 
@@ -1030,8 +1081,9 @@ class KnowledgeBase:
                 (ident,),
             ).fetchone()
             if row is None:
-                return Execution(plan_id=None, next_step=None, status="idle")
-            return Execution(*row)
+                return Execution(plan_id=None, next_step=None, status=ExecutionStatus.IDLE)
+            plan_id, next_step, status, dispatched = row
+            return Execution(plan_id, next_step, ExecutionStatus(status), dispatched)
 
     def set_execution(self, object_id: str, execution: Execution) -> None:
         with self._lock:
@@ -1039,9 +1091,9 @@ class KnowledgeBase:
             ident = self._info(object_id, "object_id").obj.ident
             if not isinstance(execution, Execution):
                 raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
-            if execution.status not in EXECUTION_STATUSES:
+            if execution.status not in set(ExecutionStatus):
                 raise ValidationError(
-                    f"execution.status: must be one of {', '.join(EXECUTION_STATUSES)}, got {execution.status!r}"
+                    f"execution.status: must be {one_of(ExecutionStatus)}, got {execution.status!r}"
                 )
             plan = None
             if execution.plan_id is not None:

@@ -1,0 +1,60 @@
+"""The words every layer shares, each defined once: `str` enums, so they compare equal to their values, serialise
+as plain JSON strings and appear as enums in the service's OpenAPI schemas.
+
+* `DecisionKind`: what the cooperation model decides after a perception;
+* `ExecutionStatus`: where the execution of an object's plan stands;
+* `ActionOutcome`: what a worker reports about an action it executed;
+* `PlanStatus`: what one planner call returned (the planner package uses this very enum);
+* `PlanningStatus`: what one run of the planning pipeline produced (a planner status, or `invalid` when VAL or
+  the replay refused the plan).
+"""
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class DecisionKind(StrEnum):
+    GOAL_REACHED = "goal_reached"
+    CONTINUE = "continue"
+    RESUME = "resume"
+    REPLAN = "replan"
+    NO_PLAN = "no_plan"
+
+
+class ExecutionStatus(StrEnum):
+    IDLE = "idle"
+    READY = "ready"
+    DISPATCHED = "dispatched"
+    GOAL_REACHED = "goal_reached"
+    NO_PLAN = "no_plan"
+
+
+class ActionOutcome(StrEnum):
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    PARTIAL = "partial"
+
+
+class PlanStatus(StrEnum):
+    """The status of one planner call: "unsolvable" and "timeout" are results, not exceptions."""
+
+    SOLVED = "solved"
+    UNSOLVABLE = "unsolvable"
+    TIMEOUT = "timeout"
+    ERROR = "error"
+
+
+class PlanningStatus(StrEnum):
+    """The status of one pipeline run: the planner's, or `invalid` when the plan failed VAL or the replay."""
+
+    SOLVED = "solved"
+    UNSOLVABLE = "unsolvable"
+    TIMEOUT = "timeout"
+    ERROR = "error"
+    INVALID = "invalid"
+
+
+def one_of(enum: type[StrEnum]) -> str:
+    """The allowed values of an enum for an error message: `a, b or c`."""
+    values = [member.value for member in enum]
+    return ", ".join(values[:-1]) + " or " + values[-1] if len(values) > 1 else values[0]
