@@ -16,14 +16,14 @@ from pathlib import Path
 from typing import Mapping, Protocol, Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, Formulation, State, is_subsumed
-from planhrc.planner.registry import get_planner
-from planhrc.planner.result import PlanResult
+from planhrc.planner.chain import plan_with_fallback
+from planhrc.planner.result import PlannerAttempt, PlanResult
 from planhrc.planner.validate import validate_plan
 from planhrc.settings import Settings
 from planhrc.transition import TransitionError, parse_step, replay
 from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
-from planhrc.vocabulary import PlanningStatus, PlanStatus
+from planhrc.vocabulary import PlanningStatus
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +65,7 @@ class PlanOutcome:
     expected_states: tuple[State, ...] = ()
     timings: Mapping[str, float] = field(default_factory=dict)
     task: PddlTask | None = None
+    attempts: tuple[PlannerAttempt, ...] = ()
 
     @property
     def solved(self) -> bool:
@@ -93,7 +94,7 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
     if not result.solved:
         status = PlanningStatus(result.status.value)
         return PlanOutcome(status, result.message or result.status.value, result.planner, None,
-                           timings=timings, task=task)
+                           timings=timings, task=task, attempts=result.attempts)
 
     if config.validate:
         t = time.perf_counter()
@@ -116,19 +117,18 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
     timings["expected_states"] = time.perf_counter() - t
     timings["pipeline"] = time.perf_counter() - t0
     return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
-                       tuple(states), timings, task)
+                       tuple(states), timings, task, result.attempts)
 
 
 def run_planners(task: PddlTask, config: PlanningConfig) -> PlanResult:
-    """The configured planner, then the fallback planner when the first cannot take the task (status error)."""
-    start = time.perf_counter()
-    result = get_planner(config.planner).solve(task.domain, task.problem, config.timeout_s)
-    if result.status is PlanStatus.ERROR and config.fallback_planner and config.fallback_planner != config.planner:
-        log.warning("%s cannot take the task (%s); using %s", config.planner, result.message,
-                    config.fallback_planner)
-        remaining = max(0.1, config.timeout_s - (time.perf_counter() - start))
-        return get_planner(config.fallback_planner).solve(task.domain, task.problem, remaining)
-    return result
+    """The configured planner, then the fallback planner when the first cannot answer (the planner package's
+    one fallback chain)."""
+    return plan_with_fallback(task.domain, task.problem, planner_chain(config), config.timeout_s)
+
+
+def planner_chain(config: PlanningConfig) -> tuple[str, ...]:
+    """The planners tried in order: the configured one, then the fallback (when set and different)."""
+    return tuple(dict.fromkeys(name for name in (config.planner, config.fallback_planner) if name))
 
 
 class PlanStep(Protocol):
