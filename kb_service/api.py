@@ -14,7 +14,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
 
 import planhrc
-from planhrc.kb.errors import ConflictError, NotFoundError, ValidationError
+from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
 from planhrc.model import HAS_ORIENTATION, ArticulatedObject, format_atom
 from planhrc.pipeline import action_motion
 from planhrc.translator.errors import TranslationError

@@ -21,7 +21,7 @@ log = logging.getLogger(__name__)
 
 def open_knowledge_base(settings: Settings):
     """Open the store named by the settings (':memory:' or None: a throwaway in-memory store)."""
-    from planhrc.kb.store import KnowledgeBase
+    from planhrc.kb_service.store import KnowledgeBase
 
     path = None if settings.db_path in (None, "", ":memory:") else settings.db_path
     return KnowledgeBase(path, settings.tbox_path)

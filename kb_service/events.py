@@ -12,7 +12,7 @@ from typing import Any, AsyncIterator, Awaitable, Callable, Sequence
 
 import anyio
 
-from planhrc.kb.records import StoredEvent
+from planhrc.kb_service.store.records import StoredEvent
 
 
 def event_public(event: StoredEvent) -> dict[str, Any]:

@@ -29,9 +29,9 @@ from typing import Any, Sequence
 
 from planhrc import pipeline
 from planhrc.cooperation import Decision, PlanView, decide
-from planhrc.kb.errors import ConflictError, NotFoundError, ValidationError
-from planhrc.kb.records import Execution, StoredAction, StoredPlan, StoredState
-from planhrc.kb.store import KnowledgeBase
+from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
+from planhrc.kb_service.store.records import Execution, StoredAction, StoredPlan, StoredState
+from planhrc.kb_service.store import KnowledgeBase
 from planhrc.model import ArticulatedObject, Formulation, ModelError, State, make_object, perceive
 from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps
 from planhrc.settings import Settings

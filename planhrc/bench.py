@@ -218,7 +218,7 @@ def machine_info() -> dict:
 def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10,
                    fd_runs: int = 10, seed: int = 7) -> dict:
     """Median time from a new perceived state to a validated plan with expected states stored."""
-    from planhrc.kb.store import KnowledgeBase
+    from planhrc.kb_service.store import KnowledgeBase
     from planhrc.pipeline import config_from_settings, plan
     from planhrc.settings import make_settings
 

@@ -21,9 +21,9 @@ from planhrc.cli_args import OneLineParser
 
 # command -> (module, name of its `add_*_parser(subparsers)` function, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
-    "ontology": ("planhrc.kb.check", "add_ontology_parser", "check the ontology with a DL reasoner"),
+    "ontology": ("planhrc.kb_service.check", "add_ontology_parser", "check the ontology with a DL reasoner"),
     "plan": ("planhrc.planner.cli", "add_plan_parser", "plan for a PDDL domain and problem"),
-    "solve": ("planhrc.solve", "add_solve_parser", "solve one problem end to end through the ontology"),
+    "solve": ("planhrc.kb_service.solve", "add_solve_parser", "solve one problem end to end through the ontology"),
     "bench": ("planhrc.bench", "add_bench_parser", "the paper's planning grid and re-planning latency"),
     "serve": ("planhrc.kb_service.cli", "add_serve_parser", "run the knowledge-base HTTP service"),
     "worker": ("planhrc.robot_sim.worker", "add_worker_parser", "run the simulated Baxter worker"),
@@ -45,7 +45,7 @@ SIM_EXTRA_MODULES = frozenset({"pybullet", "pybullet_utils", "cv2", "example_rob
 USER_ERRORS: tuple[tuple[str, str], ...] = (
     ("planhrc.model", "ModelError"),
     ("planhrc.transition", "TransitionError"),
-    ("planhrc.kb.errors", "KBError"),
+    ("planhrc.kb_service.store.errors", "KBError"),
     ("planhrc.kb_service.errors", "KBError"),
     ("planhrc.translator.errors", "TranslationError"),
     ("planhrc.planner.errors", "PlannerError"),

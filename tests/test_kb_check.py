@@ -5,8 +5,8 @@ import argparse
 
 import pytest
 
-from planhrc.kb.check import add_ontology_parser, check_ontology
-from planhrc.kb.store import KnowledgeBase
+from planhrc.kb_service.check import add_ontology_parser, check_ontology
+from planhrc.kb_service.store import KnowledgeBase
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 

@@ -6,15 +6,15 @@ import random
 import pytest
 from owlready2 import World
 
-from planhrc.kb.errors import ReasonerError
-from planhrc.kb.reasoner import (
+from planhrc.kb_service.store.errors import ReasonerError
+from planhrc.kb_service.reasoner import (
     REASONERS,
     derive_chain_facts,
     derive_relative_orientations,
     run_reasoner,
 )
-from planhrc.kb.store import TBOX_IRI, KnowledgeBase
-from planhrc.kb.subsumption import describe_state, dl_subsumption, subsumes_fast
+from planhrc.kb_service.store import TBOX_IRI, KnowledgeBase
+from planhrc.kb_service.subsumption import describe_state, dl_subsumption, subsumes_fast
 from planhrc.model import is_subsumed, make_object, relative_from_absolute, snap_angle
 from planhrc.paths import default_tbox_path
 
@@ -117,8 +117,8 @@ def test_swrl_derives_relative_orientations_of_a_perceived_state():
 @pytest.mark.reasoner
 def test_swrl_completes_the_madeof_links_of_a_compact_state():
     """A complete state lists only its configuration; Pellet derives its madeof links to the static facts."""
-    from planhrc.kb.reasoner import _pairs, reason_in_place
-    from planhrc.kb.store import atom_fragment
+    from planhrc.kb_service.reasoner import _pairs, reason_in_place
+    from planhrc.kb_service.store import atom_fragment
 
     with KnowledgeBase(None, TBOX) as kb:
         obj = make_object("obj1", "absolute", 3, 4)

@@ -1,7 +1,7 @@
 """Named knowledge-base scenarios shared by the other tests/test_kb_*.py modules (no tests here)."""
 from __future__ import annotations
 
-from planhrc.kb.records import ActionSpec, CondEffect
+from planhrc.kb_service.store.records import ActionSpec, CondEffect
 from planhrc.model import (
     AFFECTED,
     CONNECTED,

@@ -9,9 +9,9 @@ import pytest
 import rdflib
 from rdflib.compare import isomorphic
 
-from planhrc.kb.errors import ConflictError, NotFoundError, ValidationError
-from planhrc.kb.records import ActionSpec, Execution
-from planhrc.kb.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase
+from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
+from planhrc.kb_service.store.records import ActionSpec, Execution
+from planhrc.kb_service.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase
 from planhrc.model import make_object, snap_angle
 from planhrc.paths import default_tbox_path
 

@@ -6,7 +6,7 @@ import pytest
 
 from planhrc import pipeline
 from planhrc.cli import main
-from planhrc.kb.store import KnowledgeBase
+from planhrc.kb_service.store import KnowledgeBase
 from planhrc.model import is_subsumed, make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import config_from_settings, plan

@@ -4,7 +4,7 @@ import pytest
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import action_motion, merge_macro_steps
-from planhrc.kb.records import ActionSpec, StoredAction
+from planhrc.kb_service.store.records import ActionSpec, StoredAction
 from planhrc.transition import TransitionError, apply, replay
 from planhrc.translator.domain import read_domain_model
 

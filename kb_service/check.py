@@ -10,7 +10,7 @@ from typing import Any
 from planhrc.cli_args import int_in, positive_float, positive_int, tbox_file
 from planhrc.paths import default_tbox_path
 
-from .errors import KBError
+from .store.errors import KBError
 from .reasoner import REASONERS, ReasonerReport, run_reasoner
 
 

@@ -29,9 +29,10 @@ from owlready2 import AllDifferent, And, Not, OneOf, Thing, World
 from planhrc.model import HAS_ORIENTATION, Atom, State, is_subsumed, make_object
 from planhrc.paths import default_tbox_path
 
-from .errors import ReasonerError
 from .reasoner import _configure_java, drop_builtin_rules, reason_in_place
 from .store import ABOX_IRI, PREDICATES, TBOX_IRI
+from .store.errors import ReasonerError
+from .store.owl import pellet_command
 
 log = logging.getLogger(__name__)
 
@@ -199,9 +200,8 @@ def _pellet_unsatisfiable(world: World, timeout_s: float) -> set[str]:
     with tempfile.TemporaryDirectory(prefix="planhrc-dl-") as tmp:
         path = Path(tmp) / "batch.owl"
         world.save(str(path), format="rdfxml")
-        command = [owlready2.JAVA_EXE, f"-Xmx{owlready2.reasoning.JAVA_MEMORY}M", "-cp",
-                   owlready2.reasoning._PELLET_CLASSPATH, "pellet.Pellet", "unsat", "-v", "--loader", "OWLAPIv3",
-                   "--ignore-imports", str(path)]
+        command = pellet_command(owlready2.JAVA_EXE) + ["unsat", "-v", "--loader", "OWLAPIv3", "--ignore-imports",
+                                                        str(path)]
         try:
             proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
         except subprocess.TimeoutExpired:

@@ -24,8 +24,9 @@ from owlready2.rule import BuiltinAtom
 
 from planhrc.model import AFFECTED, Atom
 
-from .errors import ReasonerError
 from .store import ABOX_IRI, TBOX_IRI, KnowledgeBase
+from .store.errors import ReasonerError
+from .store.owl import facts_in, iri_pairs, reasoner_subprocess_kwargs
 
 log = logging.getLogger(__name__)
 
@@ -95,11 +96,7 @@ def drop_builtin_rules(world: World) -> int:
 
 
 def _count_inferred(world: World) -> int:
-    onto = world.get_ontology(INFERENCES_IRI)
-    c = onto.graph.c
-    db = world.graph.db
-    return (db.execute("SELECT COUNT(*) FROM objs WHERE c=?", (c,)).fetchone()[0]
-            + db.execute("SELECT COUNT(*) FROM datas WHERE c=?", (c,)).fetchone()[0])
+    return facts_in(world, INFERENCES_IRI)
 
 
 def reason_in_place(world: World, name: str, timeout_s: float) -> tuple[bool, float]:
@@ -108,7 +105,7 @@ def reason_in_place(world: World, name: str, timeout_s: float) -> tuple[bool, fl
     if run is None:
         raise ReasonerError(f"reasoner: must be one of {', '.join(REASONERS)}, got {name!r}")
     _configure_java()
-    kwargs = owlready2.reasoning._subprocess_kargs
+    kwargs = reasoner_subprocess_kwargs()
     with _RUN_LOCK:
         kwargs["timeout"] = float(timeout_s)
         t0 = time.perf_counter()
@@ -163,14 +160,9 @@ def _object_copy(kb: KnowledgeBase, object_id: str) -> KnowledgeBase:
 
 def _pairs(world: World, prop: str) -> list[tuple[str, str]]:
     """(subject, object) names of every `prop` triple of ABox individuals, told or inferred."""
-    db = world.graph.db
-    p = world.graph._abbreviate(TBOX_IRI + prop, False)
-    if p is None:
-        return []
-    q = ("SELECT rs.iri, ro.iri FROM objs t JOIN resources rs ON rs.storid = t.s "
-         "JOIN resources ro ON ro.storid = t.o WHERE t.p = ?")
     n = len(ABOX_IRI)
-    return [(s[n:], o[n:]) for s, o in db.execute(q, (p,)) if s.startswith(ABOX_IRI) and o.startswith(ABOX_IRI)]
+    return [(s[n:], o[n:]) for s, o in iri_pairs(world, TBOX_IRI + prop)
+            if s.startswith(ABOX_IRI) and o.startswith(ABOX_IRI)]
 
 
 def derive_chain_facts(kb: KnowledgeBase, object_id: str, timeout_s: float = 120.0) -> frozenset[Atom]:

@@ -1,4 +1,4 @@
-"""The persistent knowledge base: the planHRC TBox plus an ABox of objects, states, problems and plans.
+"""The ABox of the knowledge base: objects, states, problems and plans, over the planHRC TBox.
 
 The ontology lives in an owlready2 `World` backed by SQLite. The TBox file is loaded into the world once; every
 ABox individual goes into the ontology `http://planhrc.org/abox#` with a readable IRI whose fragment is the PDDL
@@ -10,26 +10,20 @@ predicate individuals it is `madeof`, so a new state costs its `madeof` links, n
 Writes go straight into owlready2's quad tables (`objs`, `datas`) in one SQLite transaction, after the whole
 input has been validated; a write either commits completely or not at all. Nothing here loads ABox individuals
 as owlready2 Python objects, so owlready2's entity cache never goes stale. Records read back are cached (they
-are immutable). What is not ontology knowledge (events, the execution cursor, idempotent responses, id
-counters) is kept in small side tables of the same SQLite database and committed in the same transaction.
+are immutable). Every table access goes through the owlready2 adapter (`owl.QuadStore`). What is not ontology
+knowledge (events, the execution cursor, idempotent responses) has its own module (`events`, `execution`,
+`responses`); `knowledge_base.KnowledgeBase` puts them together, in the same SQLite database and transactions.
 """
 from __future__ import annotations
 
 import hashlib
-import io
-import json
 import logging
-import math
 import re
-import sqlite3
 import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
-
-from owlready2 import World
-from owlready2.base import owl_named_individual, owl_ontology, rdf_type
 
 from planhrc.model import (
     AFFECTED,
@@ -46,16 +40,13 @@ from planhrc.model import (
     perceive,
 )
 
-from planhrc.vocabulary import ExecutionStatus, one_of
-
 from .errors import ConflictError, KBError, NotFoundError, ValidationError
+from .owl import NAMED_INDIVIDUAL, RDF_TYPE, QuadStore, World
 from .records import (
     STATE_KINDS,
     ActionSpec,
     CondEffect,
-    Execution,
     StoredAction,
-    StoredEvent,
     StoredPlan,
     StoredProblem,
     StoredState,
@@ -95,15 +86,9 @@ _TBOX_TERMS = (
     "plannerName position staticFactOf includesStaticFacts"
 ).split()
 
-_SIDE_TABLES = (
+_TABLES = (
     "CREATE TABLE IF NOT EXISTS planhrc_meta (key TEXT PRIMARY KEY, value TEXT)",
     "CREATE TABLE IF NOT EXISTS planhrc_counter (name TEXT PRIMARY KEY, value INTEGER)",
-    "CREATE TABLE IF NOT EXISTS planhrc_event (object_id TEXT, seq INTEGER, kind TEXT, reason TEXT, data TEXT,"
-    " created_at REAL, PRIMARY KEY (object_id, seq))",
-    "CREATE TABLE IF NOT EXISTS planhrc_execution (object_id TEXT PRIMARY KEY, plan_id TEXT, next_step INTEGER,"
-    " status TEXT, dispatched_action_id TEXT)",
-    "CREATE TABLE IF NOT EXISTS planhrc_response (object_id TEXT, key TEXT, response TEXT,"
-    " PRIMARY KEY (object_id, key))",
 )
 
 _ID_SUFFIX = re.compile(r"_(\d+)$")
@@ -149,7 +134,7 @@ class _ObjectInfo:
 class _Batch:
     """Triples collected during a write, flushed in one go."""
 
-    def __init__(self, kb: "KnowledgeBase"):
+    def __init__(self, kb: "Abox"):
         self.kb = kb
         self.new_iris: list[str] = []
         self.objs: list[tuple[str | int, int, str | int]] = []
@@ -158,9 +143,9 @@ class _Batch:
 
     def individual(self, name: str, *classes: str) -> str:
         self.new_iris.append(name)
-        self.objs.append((name, rdf_type, owl_named_individual))
+        self.objs.append((name, RDF_TYPE, NAMED_INDIVIDUAL))
         for cls in classes:
-            self.objs.append((name, rdf_type, self.kb._t[cls]))
+            self.objs.append((name, RDF_TYPE, self.kb._t[cls]))
         return name
 
     def rel(self, s: str, prop: str, o: str | int) -> None:
@@ -170,7 +155,7 @@ class _Batch:
         self.datas.append((s, self.kb._t[prop], value))
 
 
-class KnowledgeBase:
+class Abox:
     """TBox + ABox in one owlready2 World on SQLite; every method is thread safe (one RLock)."""
 
     def __init__(self, path: str | None, tbox_path: Path | str):
@@ -179,30 +164,19 @@ class KnowledgeBase:
         self._tbox_path = Path(tbox_path)
         if not self._tbox_path.is_file():
             raise KBError(f"tbox_path: no such file {self._tbox_path}")
-        self._world = World(filename=str(path)) if path else World()
-        self._db: sqlite3.Connection = self._world.graph.db
+        self._q = QuadStore(path)
         self._closed = False
         try:
             if path:
-                # WAL + synchronous=NORMAL: a commit does not wait for fsync (durable across process crashes,
-                # the last commits may be lost on power loss); the plain journal costs ~13 ms per write.
-                self._db.commit()
-                self._db.execute("PRAGMA journal_mode=WAL")
-                self._db.execute("PRAGMA synchronous=NORMAL")
-            for sql in _SIDE_TABLES:
-                self._db.execute(sql)
+                self._q.use_wal()
+            for sql in _TABLES:
+                self._q.execute(sql)
             self._load_tbox()
-            self._abox = self._world.get_ontology(ABOX_IRI)
-            self._c = self._abox.graph.c
-            abox_sid = self._storid(ABOX_IRI.rstrip("#"))
-            if not self._world.graph.execute(
-                "SELECT 1 FROM objs WHERE s=? AND p=? AND o=? LIMIT 1", (abox_sid, rdf_type, owl_ontology)
-            ).fetchone():
-                self._db.execute("INSERT INTO objs VALUES (?,?,?,?)", (self._c, abox_sid, rdf_type, owl_ontology))
-            self._t = {term: self._storid(TBOX_IRI + term) for term in _TBOX_TERMS}
-            self._world.save()
+            self._c = self._q.context(ABOX_IRI)
+            self._t = {term: self._q.storid(TBOX_IRI + term) for term in _TBOX_TERMS}
+            self._q.commit()
         except Exception:
-            self._world.close()
+            self._q.world.close()
             raise
         self._depth = 0
         self._iri_sid: dict[str, int] = {}
@@ -217,18 +191,17 @@ class KnowledgeBase:
     def _load_tbox(self) -> None:
         data = self._tbox_path.read_bytes()
         digest = hashlib.sha256(data).hexdigest()
-        row = self._db.execute("SELECT value FROM planhrc_meta WHERE key='tbox_sha256'").fetchone()
-        onto = self._world.get_ontology(TBOX_IRI)
+        row = self._q.execute("SELECT value FROM planhrc_meta WHERE key='tbox_sha256'").fetchone()
         if row is None or row[0] != digest:
             if row is not None:
                 log.warning("TBox %s changed since this database was written: reloading it", self._tbox_path)
-            onto.load(fileobj=io.BytesIO(data), reload=row is not None)
-            self._db.execute("INSERT OR REPLACE INTO planhrc_meta VALUES ('tbox_sha256', ?)", (digest,))
+            self._q.load_ontology(TBOX_IRI, data, reload=row is not None)
+            self._q.execute("INSERT OR REPLACE INTO planhrc_meta VALUES ('tbox_sha256', ?)", (digest,))
 
     @property
     def world(self) -> World:
         """The owlready2 world (read it under `lock`; reasoners work on copies)."""
-        return self._world
+        return self._q.world
 
     @property
     def lock(self) -> threading.RLock:
@@ -242,24 +215,20 @@ class KnowledgeBase:
         with self._lock:
             if not self._closed:
                 self._closed = True
-                self._world.save()
-                self._world.close()
+                self._q.close()
 
-    def __enter__(self) -> "KnowledgeBase":
+    def __enter__(self) -> "Abox":
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
     # -- low level --------------------------------------------------------------------------------------
-    def _storid(self, iri: str, create: bool = True) -> int | None:
-        return self._world.graph._abbreviate(iri, create)
-
     def _sid(self, name: str) -> int | None:
         """Storid of an existing ABox individual, or None."""
         sid = self._iri_sid.get(name)
         if sid is None:
-            sid = self._storid(ABOX_IRI + name, False)
+            sid = self._q.storid(ABOX_IRI + name, False) or None
             if sid is not None:
                 self._iri_sid[name] = sid
                 self._sid_name[sid] = name
@@ -268,54 +237,37 @@ class KnowledgeBase:
     def _names(self, sids: Iterable[int]) -> None:
         """Fill the storid -> name cache for these storids in one query."""
         missing = [s for s in set(sids) if s not in self._sid_name]
-        for i in range(0, len(missing), 500):
-            chunk = missing[i:i + 500]
-            q = "SELECT storid, iri FROM resources WHERE storid IN (%s)" % ",".join("?" * len(chunk))
-            for sid, iri in self._db.execute(q, chunk):
+        for sid, iri in self._q.iris(missing).items():
                 name = iri[len(ABOX_IRI):] if iri.startswith(ABOX_IRI) else iri
                 self._sid_name[sid] = name
                 self._iri_sid.setdefault(name, sid)
 
     def _is_a(self, sid: int, cls: str) -> bool:
-        return self._db.execute(
-            "SELECT 1 FROM objs WHERE s=? AND p=? AND o=? LIMIT 1", (sid, rdf_type, self._t[cls])
-        ).fetchone() is not None
+        return self._q.has(sid, RDF_TYPE, self._t[cls])
 
     def _types(self, sid: int) -> set[int]:
-        return {o for (o,) in self._db.execute("SELECT o FROM objs WHERE s=? AND p=?", (sid, rdf_type))}
+        return set(self._q.objects(sid, RDF_TYPE))
 
     def _obj1(self, sid: int, prop: str) -> int | None:
-        row = self._db.execute("SELECT o FROM objs WHERE s=? AND p=? LIMIT 1", (sid, self._t[prop])).fetchone()
-        return row[0] if row else None
+        return self._q.object(sid, self._t[prop])
 
     def _objn(self, sid: int, prop: str) -> list[int]:
-        return [o for (o,) in self._db.execute("SELECT o FROM objs WHERE s=? AND p=?", (sid, self._t[prop]))]
+        return self._q.objects(sid, self._t[prop])
 
     def _data1(self, sid: int, prop: str) -> Any:
-        row = self._db.execute("SELECT o, d FROM datas WHERE s=? AND p=? LIMIT 1", (sid, self._t[prop])).fetchone()
-        if row is None:
-            return None
-        return self._world._to_python(row[0], row[1])
+        return self._q.data(sid, self._t[prop])
 
     def _next_counter(self, name: str) -> int:
-        row = self._db.execute("SELECT value FROM planhrc_counter WHERE name=?", (name,)).fetchone()
+        row = self._q.execute("SELECT value FROM planhrc_counter WHERE name=?", (name,)).fetchone()
         value = (row[0] if row else 0) + 1
-        self._db.execute("INSERT OR REPLACE INTO planhrc_counter VALUES (?, ?)", (name, value))
+        self._q.execute("INSERT OR REPLACE INTO planhrc_counter VALUES (?, ?)", (name, value))
         return value
 
     def _flush(self, batch: _Batch) -> None:
         """Allocate storids for the new individuals and insert every triple (inside the open transaction)."""
-        graph = self._world.graph
         names = batch.new_iris
         if names:
-            n = len(names)
-            graph.execute("UPDATE store SET current_resource=current_resource+?", (n,))
-            last = graph.execute("SELECT current_resource FROM store").fetchone()[0]
-            first = last - n + 1
-            rows = [(first + i, ABOX_IRI + name) for i, name in enumerate(names)]
-            self._db.executemany("INSERT INTO resources VALUES (?,?)", rows)
-            for sid, iri in rows:
-                name = iri[len(ABOX_IRI):]
+            for sid, name in zip(self._q.allocate([ABOX_IRI + name for name in names]), names):
                 self._iri_sid[name] = sid
                 self._sid_name[sid] = name
 
@@ -332,18 +284,11 @@ class KnowledgeBase:
                 raise KBError(f"internal: individual {x!r} was neither stored nor created")
             return sid
 
-        c = self._c
-        self._db.executemany(
-            "INSERT INTO objs VALUES (?,?,?,?)", [(c, resolve(s), p, resolve(o)) for s, p, o in batch.objs]
-        )
-        rows = []
-        for s, p, value in batch.datas:
-            o, d = self._world._to_rdf(value)
-            rows.append((c, resolve(s), p, o, d))
-        self._db.executemany("INSERT INTO datas VALUES (?,?,?,?,?)", rows)
+        self._q.insert_objs(self._c, [(resolve(s), p, resolve(o)) for s, p, o in batch.objs])
+        self._q.insert_datas(self._c, [(resolve(s), p, value) for s, p, value in batch.datas])
 
     def _commit(self) -> None:
-        self._world.save()
+        self._q.commit()
 
     def _write(self, fill: Callable[[], T]) -> T:
         """Run `fill()` (which adds triples / side-table rows) in one transaction; roll back on any error.
@@ -355,7 +300,7 @@ class KnowledgeBase:
             self._commit()
             return result
         except BaseException:
-            self._db.rollback()
+            self._q.rollback()
             self._forget_uncommitted()
             raise
 
@@ -377,7 +322,7 @@ class KnowledgeBase:
                 yield
                 self._commit()
             except BaseException:
-                self._db.rollback()
+                self._q.rollback()
                 self._forget_uncommitted()
                 raise
             finally:
@@ -519,9 +464,7 @@ class KnowledgeBase:
     def list_objects(self) -> tuple[ArticulatedObject, ...]:
         with self._lock:
             self._check_open()
-            sids = [s for (s,) in self._db.execute(
-                "SELECT s FROM objs WHERE c=? AND p=? AND o=?", (self._c, rdf_type, self._t["ArticulatedObject"])
-            )]
+            sids = self._q.subjects(RDF_TYPE, self._t["ArticulatedObject"], self._c)
             self._names(sids)
             idents = sorted((self._sid_name[s] for s in sids), key=_natural_key)
             return tuple(self._info(i).obj for i in idents)
@@ -707,16 +650,12 @@ class KnowledgeBase:
         kinds: dict[int, str] = {}
         args: dict[int, dict[str, int]] = {}
         sids = list(dict.fromkeys(pred_sids))
-        for i in range(0, len(sids), 400):
-            chunk = sids[i:i + 400]
-            marks = ",".join("?" * len(chunk))
-            q = f"SELECT s, p, o FROM objs WHERE s IN ({marks}) AND p IN (?,?,?,?)"
-            for s, p, o in self._db.execute(q, chunk + [rdf_type] + list(props)):
-                if p == rdf_type:
-                    if o in class_of:
-                        kinds[s] = class_of[o]
-                else:
-                    args.setdefault(s, {})[props[p]] = o
+        for s, p, o in self._q.triples_of(sids, [RDF_TYPE, *props]):
+            if p == RDF_TYPE:
+                if o in class_of:
+                    kinds[s] = class_of[o]
+            else:
+                args.setdefault(s, {})[props[p]] = o
         self._names(o for d in args.values() for o in d.values())
         for s in sids:
             pddl = kinds.get(s)
@@ -823,8 +762,7 @@ class KnowledgeBase:
     def _latest(self, object_id: str, cls: str) -> str | None:
         info = self._info(object_id)
         obj_sid = self._sid(info.obj.ident)
-        q = ("SELECT a.s FROM objs a JOIN objs t ON t.s = a.s WHERE a.p=? AND a.o=? AND t.p=? AND t.o=?")
-        sids = [s for (s,) in self._db.execute(q, (self._t["aboutObject"], obj_sid, rdf_type, self._t[cls]))]
+        sids = self._q.subjects_typed(self._t["aboutObject"], obj_sid, self._t[cls]) if obj_sid else []
         if not sids:
             return None
         self._names(sids)
@@ -1033,156 +971,10 @@ class KnowledgeBase:
             pid = self._latest(object_id, "Plan")
             return self.get_plan(pid) if pid else None
 
-    # -- events, execution, idempotent responses (side tables) ------------------------------------------
-    def add_event(self, object_id: str, kind: str, reason: str, data: dict) -> StoredEvent:
-        with self._lock:
-            self._check_open()
-            info = self._info(object_id, "object_id")
-            if not isinstance(kind, str) or not kind:
-                raise ValidationError("kind: must be a non-empty string")
-            if not isinstance(reason, str):
-                raise ValidationError("reason: must be a string")
-            data = {} if data is None else data
-            if not isinstance(data, dict):
-                raise ValidationError(f"data: expected a dict, got {type(data).__name__}")
-            try:
-                text = json.dumps(data, sort_keys=True, allow_nan=False)
-            except (TypeError, ValueError) as exc:
-                raise ValidationError(f"data: not JSON-serialisable ({exc})") from None
-            created = time.time()
-            ident = info.obj.ident
-
-            def fill() -> int:
-                row = self._db.execute("SELECT MAX(seq) FROM planhrc_event WHERE object_id=?", (ident,)).fetchone()
-                seq = (row[0] or 0) + 1
-                self._db.execute("INSERT INTO planhrc_event VALUES (?,?,?,?,?,?)",
-                                 (ident, seq, kind, reason, text, created))
-                return seq
-
-            seq = self._write(fill)
-            return StoredEvent(seq, ident, kind, reason, json.loads(text), created)
-
-    def list_events(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
-        with self._lock:
-            self._check_open()
-            ident = self._info(object_id).obj.ident
-            rows = self._db.execute(
-                "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id=? AND seq>? "
-                "ORDER BY seq", (ident, int(after_seq)),
-            ).fetchall()
-            return tuple(StoredEvent(s, ident, k, r, json.loads(d), c) for s, k, r, d, c in rows)
-
-    def get_execution(self, object_id: str) -> Execution:
-        with self._lock:
-            self._check_open()
-            ident = self._info(object_id).obj.ident
-            row = self._db.execute(
-                "SELECT plan_id, next_step, status, dispatched_action_id FROM planhrc_execution WHERE object_id=?",
-                (ident,),
-            ).fetchone()
-            if row is None:
-                return Execution(plan_id=None, next_step=None, status=ExecutionStatus.IDLE)
-            plan_id, next_step, status, dispatched = row
-            return Execution(plan_id, next_step, ExecutionStatus(status), dispatched)
-
-    def set_execution(self, object_id: str, execution: Execution) -> None:
-        with self._lock:
-            self._check_open()
-            ident = self._info(object_id, "object_id").obj.ident
-            if not isinstance(execution, Execution):
-                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
-            if execution.status not in set(ExecutionStatus):
-                raise ValidationError(
-                    f"execution.status: must be {one_of(ExecutionStatus)}, got {execution.status!r}"
-                )
-            plan = None
-            if execution.plan_id is not None:
-                try:
-                    plan = self.get_plan(execution.plan_id)
-                except NotFoundError:
-                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
-                if plan.object_id != ident:
-                    raise ValidationError(f"execution.plan_id: plan {plan.id!r} belongs to object {plan.object_id!r}")
-            if execution.next_step is not None:
-                if isinstance(execution.next_step, bool) or not isinstance(execution.next_step, int):
-                    raise ValidationError("execution.next_step: must be an integer or None")
-                if plan is None:
-                    raise ValidationError("execution.next_step: needs a plan_id")
-                if not 1 <= execution.next_step <= len(plan.actions) + 1:
-                    raise ValidationError(
-                        f"execution.next_step: must be in 1..{len(plan.actions) + 1}, got {execution.next_step}"
-                    )
-            if execution.dispatched_action_id is not None:
-                if plan is None or execution.dispatched_action_id not in {a.id for a in plan.actions}:
-                    raise ValidationError(
-                        f"execution.dispatched_action_id: {execution.dispatched_action_id!r} is no action of plan "
-                        f"{execution.plan_id!r}"
-                    )
-
-            def fill() -> None:
-                self._db.execute(
-                    "INSERT OR REPLACE INTO planhrc_execution VALUES (?,?,?,?,?)",
-                    (ident, execution.plan_id, execution.next_step, execution.status, execution.dispatched_action_id),
-                )
-
-            self._write(fill)
-
-    def recall_response(self, object_id: str, key: str) -> dict | None:
-        """The response remembered under an idempotency key, or None (the object need not exist)."""
-        with self._lock:
-            self._check_open()
-            row = self._db.execute(
-                "SELECT response FROM planhrc_response WHERE object_id=? AND key=?", (str(object_id), str(key))
-            ).fetchone()
-            return json.loads(row[0]) if row else None
-
-    def remember_response(self, object_id: str, key: str, response: dict) -> None:
-        """Remember the response to an idempotent request; the first response stored under a key wins."""
-        with self._lock:
-            self._check_open()
-            if not isinstance(key, str) or not key:
-                raise ValidationError("key: must be a non-empty string")
-            if not isinstance(response, dict):
-                raise ValidationError(f"response: expected a dict, got {type(response).__name__}")
-            try:
-                text = json.dumps(response, sort_keys=True, allow_nan=False)
-            except (TypeError, ValueError) as exc:
-                raise ValidationError(f"response: not JSON-serialisable ({exc})") from None
-
-            def fill() -> None:
-                self._db.execute("INSERT OR IGNORE INTO planhrc_response VALUES (?,?,?)", (str(object_id), key, text))
-
-            self._write(fill)
-
-    # -- whole-ontology views -----------------------------------------------------------------------------
-    def ntriples(self) -> bytes:
-        """TBox + ABox as N-Triples (what the reasoners and `export` read)."""
-        with self._lock:
-            self._check_open()
-            buf = io.BytesIO()
-            self._world.save(buf, format="ntriples")
-            return buf.getvalue()
-
-    def export(self, fmt: str = "xml") -> bytes:
-        """TBox + ABox serialised by rdflib as RDF/XML (`xml`) or Turtle (`turtle`)."""
-        import rdflib
-
-        if fmt not in ("xml", "turtle"):
-            raise ValidationError(f"fmt: must be 'xml' or 'turtle', got {fmt!r}")
-        graph = rdflib.Graph()
-        graph.parse(data=self.ntriples(), format="nt")
-        graph.bind("planhrc", TBOX_IRI)
-        graph.bind("abox", ABOX_IRI)
-        graph.bind("owl", "http://www.w3.org/2002/07/owl#")
-        out = graph.serialize(format=fmt)
-        return out.encode("utf-8") if isinstance(out, str) else out
-
     def triple_count(self) -> int:
         with self._lock:
             self._check_open()
-            a = self._db.execute("SELECT COUNT(*) FROM objs").fetchone()[0]
-            b = self._db.execute("SELECT COUNT(*) FROM datas").fetchone()[0]
-            return a + b
+            return self._q.count()
 
 
 def _natural_key(name: str) -> tuple[str, int]:

@@ -1,0 +1,54 @@
+"""The event log: every decision with its reason, goals, dispatches and feedback of an object, append-only.
+
+One side table of the knowledge base's database, written inside the knowledge base's transactions."""
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from .errors import ValidationError
+from .owl import QuadStore
+from .records import StoredEvent
+
+SCHEMA = ("CREATE TABLE IF NOT EXISTS planhrc_event (object_id TEXT, seq INTEGER, kind TEXT, reason TEXT, data TEXT,"
+          " created_at REAL, PRIMARY KEY (object_id, seq))")
+
+
+class EventLog:
+    """Append and read an object's events (the caller checks that the object exists)."""
+
+    def __init__(self, quads: QuadStore) -> None:
+        self.quads = quads
+        quads.execute(SCHEMA)
+
+    @staticmethod
+    def check(kind: Any, reason: Any, data: Any) -> str:
+        """Validate an event; returns its data as JSON text."""
+        if not isinstance(kind, str) or not kind:
+            raise ValidationError("kind: must be a non-empty string")
+        if not isinstance(reason, str):
+            raise ValidationError("reason: must be a string")
+        data = {} if data is None else data
+        if not isinstance(data, dict):
+            raise ValidationError(f"data: expected a dict, got {type(data).__name__}")
+        try:
+            return json.dumps(data, sort_keys=True, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise ValidationError(f"data: not JSON-serialisable ({exc})") from None
+
+    def append(self, object_id: str, kind: str, reason: str, text: str) -> StoredEvent:
+        """Write a checked event (inside the open transaction)."""
+        created = time.time()
+        row = self.quads.execute("SELECT MAX(seq) FROM planhrc_event WHERE object_id=?", (object_id,)).fetchone()
+        seq = (row[0] or 0) + 1
+        self.quads.execute("INSERT INTO planhrc_event VALUES (?,?,?,?,?,?)",
+                           (object_id, seq, kind, reason, text, created))
+        return StoredEvent(seq, object_id, kind, reason, json.loads(text), created)
+
+    def after(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
+        rows = self.quads.execute(
+            "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id=? AND seq>? ORDER BY seq",
+            (object_id, int(after_seq)),
+        ).fetchall()
+        return tuple(StoredEvent(s, object_id, k, r, json.loads(d), c) for s, k, r, d, c in rows)

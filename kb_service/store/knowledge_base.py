@@ -1,0 +1,92 @@
+"""The knowledge base the service owns: the ABox (`abox`) with the event log (`events`), the execution cursor
+(`execution`) and idempotent responses (`responses`) in the same SQLite database, and the RDF export (`export`).
+
+Each part validates its input completely before anything is written; every write is one transaction, and
+`transaction()` makes several writes one (all of them commit, or none does).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from .abox import ABOX_IRI, TBOX_IRI, Abox
+from .errors import NotFoundError, ValidationError
+from .events import EventLog
+from .execution import ExecutionCursor
+from .export import export_rdf
+from .records import Execution, StoredEvent
+from .responses import ResponseMemory
+
+
+class KnowledgeBase(Abox):
+    """TBox + ABox in one owlready2 World on SQLite, with the service's side tables; thread safe (one RLock)."""
+
+    def __init__(self, path: str | None, tbox_path: Any) -> None:
+        super().__init__(path, tbox_path)
+        try:
+            self._events = EventLog(self._q)
+            self._execution = ExecutionCursor(self._q)
+            self._responses = ResponseMemory(self._q)
+            self._q.commit()
+        except Exception:
+            self.close()
+            raise
+
+    # -- events -------------------------------------------------------------------------------------------
+    def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
+        with self._lock:
+            self._check_open()
+            ident = self._info(object_id, "object_id").obj.ident
+            text = self._events.check(kind, reason, data)
+            return self._write(lambda: self._events.append(ident, kind, reason, text))
+
+    def list_events(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
+        with self._lock:
+            self._check_open()
+            return self._events.after(self._info(object_id).obj.ident, after_seq)
+
+    # -- execution ----------------------------------------------------------------------------------------
+    def get_execution(self, object_id: str) -> Execution:
+        with self._lock:
+            self._check_open()
+            return self._execution.read(self._info(object_id).obj.ident)
+
+    def set_execution(self, object_id: str, execution: Execution) -> None:
+        with self._lock:
+            self._check_open()
+            ident = self._info(object_id, "object_id").obj.ident
+            if not isinstance(execution, Execution):
+                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
+            plan = None
+            if execution.plan_id is not None:
+                try:
+                    plan = self.get_plan(execution.plan_id)
+                except NotFoundError:
+                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
+            self._execution.check(ident, execution, plan)
+            self._write(lambda: self._execution.write(ident, execution))
+
+    # -- idempotent responses -----------------------------------------------------------------------------
+    def recall_response(self, object_id: str, key: str) -> dict[str, Any] | None:
+        """The response remembered under an idempotency key, or None (the object need not exist)."""
+        with self._lock:
+            self._check_open()
+            return self._responses.recall(object_id, key)
+
+    def remember_response(self, object_id: str, key: str, response: dict[str, Any]) -> None:
+        """Remember the response to an idempotent request; the first response stored under a key wins."""
+        with self._lock:
+            self._check_open()
+            text = self._responses.check(key, response)
+            self._write(lambda: self._responses.remember(object_id, key, text))
+
+    # -- whole-ontology views -----------------------------------------------------------------------------
+    def ntriples(self) -> bytes:
+        """TBox + ABox as N-Triples (what the reasoners and `export` read)."""
+        with self._lock:
+            self._check_open()
+            return self._q.ntriples()
+
+    def export(self, fmt: str = "xml") -> bytes:
+        """TBox + ABox serialised by rdflib as RDF/XML (`xml`) or Turtle (`turtle`)."""
+        return export_rdf(self.ntriples(), fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
+                                                 "owl": "http://www.w3.org/2002/07/owl#"})

@@ -1,0 +1,245 @@
+"""The one module that touches owlready2's internals.
+
+The knowledge base writes owlready2's quad tables directly (one SQLite transaction per write, no Python object
+per individual), and the reasoners pass a time limit through owlready2's subprocess settings. Everything that
+relies on how owlready2 works inside — its SQLite connection, the tables `resources`, `objs`, `datas` and
+`store`, storids (`_abbreviate`), literal encoding (`_to_rdf`, `_to_python`), the graph context of an ontology
+(`graph.c`) and the reasoners' `_subprocess_kargs` and `_PELLET_CLASSPATH` — is here, behind plain methods.
+`check_internals()` verifies each of these assumptions against the installed owlready2 and raises
+`OwlInternalsError` naming the one that broke; a test runs it, so an owlready2 upgrade that changes them fails
+loudly instead of corrupting a store.
+"""
+from __future__ import annotations
+
+import io
+import sqlite3
+from typing import Any, Iterable, Sequence
+
+import owlready2
+from owlready2 import World
+from owlready2.base import owl_named_individual, owl_ontology, rdf_type
+
+from .errors import KBError
+
+RDF_TYPE: int = rdf_type
+NAMED_INDIVIDUAL: int = owl_named_individual
+ONTOLOGY: int = owl_ontology
+
+# The columns of owlready2's tables this adapter writes positionally (`INSERT ... VALUES`), exactly and in order.
+TABLES: dict[str, tuple[str, ...]] = {
+    "resources": ("storid", "iri"),
+    "objs": ("c", "s", "p", "o"),
+    "datas": ("c", "s", "p", "o", "d"),
+}
+STORE_COUNTER = "current_resource"  # column of the one-row table `store`: the last storid handed out
+
+
+class OwlInternalsError(KBError):
+    """The installed owlready2 no longer works the way this adapter relies on (the message says what changed)."""
+
+
+class QuadStore:
+    """An owlready2 World on SQLite (or in memory), read and written through its quad tables."""
+
+    def __init__(self, path: str | None) -> None:
+        self.world = World(filename=str(path)) if path else World()
+        self.db: sqlite3.Connection = self.world.graph.db
+
+    # -- SQL on the same connection (the store's own side tables live in this database too) ------------------
+    def execute(self, sql: str, params: Sequence[Any] = ()) -> sqlite3.Cursor:
+        return self.db.execute(sql, params)
+
+    def use_wal(self) -> None:
+        """WAL + synchronous=NORMAL: a commit does not wait for fsync (durable across process crashes, the last
+        commits may be lost on power loss); the plain journal costs ~13 ms per write."""
+        self.db.commit()
+        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db.execute("PRAGMA synchronous=NORMAL")
+
+    def commit(self) -> None:
+        self.world.save()
+
+    def rollback(self) -> None:
+        self.db.rollback()
+
+    def close(self) -> None:
+        self.world.save()
+        self.world.close()
+
+    # -- ontologies --------------------------------------------------------------------------------------------
+    def load_ontology(self, iri: str, data: bytes, reload: bool) -> None:
+        self.world.get_ontology(iri).load(fileobj=io.BytesIO(data), reload=reload)
+
+    def context(self, ontology_iri: str) -> int:
+        """The graph context (`c` column) of an ontology, which is declared as an owl:Ontology if it is new."""
+        onto = self.world.get_ontology(ontology_iri)
+        c: int = onto.graph.c
+        sid = self.storid(ontology_iri.rstrip("#"))
+        if not self.has(sid, RDF_TYPE, ONTOLOGY):
+            self.db.execute("INSERT INTO objs VALUES (?,?,?,?)", (c, sid, RDF_TYPE, ONTOLOGY))
+        return c
+
+    def ntriples(self) -> bytes:
+        buf = io.BytesIO()
+        self.world.save(buf, format="ntriples")
+        return buf.getvalue()
+
+    # -- storids -----------------------------------------------------------------------------------------------
+    def storid(self, iri: str, create: bool = True) -> int:
+        """The storid of an IRI, created when `create` (else 0 when the IRI is unknown)."""
+        sid = self.world.graph._abbreviate(iri, create)
+        return int(sid) if sid else 0
+
+    def iris(self, storids: Iterable[int]) -> dict[int, str]:
+        """storid -> IRI for these storids, read in a few queries."""
+        out: dict[int, str] = {}
+        sids = list(storids)
+        for i in range(0, len(sids), 500):
+            chunk = sids[i:i + 500]
+            q = "SELECT storid, iri FROM resources WHERE storid IN (%s)" % ",".join("?" * len(chunk))
+            out.update(self.db.execute(q, chunk))
+        return out
+
+    def allocate(self, iris: Sequence[str]) -> list[int]:
+        """New storids for new IRIs, in order (inside the open transaction)."""
+        if not iris:
+            return []
+        n = len(iris)
+        self.db.execute("UPDATE store SET current_resource=current_resource+?", (n,))
+        last = self.db.execute("SELECT current_resource FROM store").fetchone()[0]
+        first = last - n + 1
+        rows = [(first + i, iri) for i, iri in enumerate(iris)]
+        self.db.executemany("INSERT INTO resources VALUES (?,?)", rows)
+        return [sid for sid, _ in rows]
+
+    # -- triples -----------------------------------------------------------------------------------------------
+    def insert_objs(self, c: int, rows: Iterable[tuple[int, int, int]]) -> None:
+        self.db.executemany("INSERT INTO objs VALUES (?,?,?,?)", [(c, s, p, o) for s, p, o in rows])
+
+    def insert_datas(self, c: int, rows: Iterable[tuple[int, int, Any]]) -> None:
+        encoded = []
+        for s, p, value in rows:
+            o, d = self.world._to_rdf(value)
+            encoded.append((c, s, p, o, d))
+        self.db.executemany("INSERT INTO datas VALUES (?,?,?,?,?)", encoded)
+
+    def has(self, s: int, p: int, o: int) -> bool:
+        return self.db.execute("SELECT 1 FROM objs WHERE s=? AND p=? AND o=? LIMIT 1", (s, p, o)).fetchone() is not None
+
+    def objects(self, s: int, p: int) -> list[int]:
+        return [o for (o,) in self.db.execute("SELECT o FROM objs WHERE s=? AND p=?", (s, p))]
+
+    def object(self, s: int, p: int) -> int | None:
+        row = self.db.execute("SELECT o FROM objs WHERE s=? AND p=? LIMIT 1", (s, p)).fetchone()
+        return row[0] if row else None
+
+    def subjects(self, p: int, o: int, c: int | None = None) -> list[int]:
+        if c is None:
+            return [s for (s,) in self.db.execute("SELECT s FROM objs WHERE p=? AND o=?", (p, o))]
+        return [s for (s,) in self.db.execute("SELECT s FROM objs WHERE c=? AND p=? AND o=?", (c, p, o))]
+
+    def subjects_typed(self, p: int, o: int, cls: int) -> list[int]:
+        """Subjects s with (s p o) and (s rdf:type cls)."""
+        q = "SELECT a.s FROM objs a JOIN objs t ON t.s = a.s WHERE a.p=? AND a.o=? AND t.p=? AND t.o=?"
+        return [s for (s,) in self.db.execute(q, (p, o, RDF_TYPE, cls))]
+
+    def triples_of(self, subjects: Sequence[int], predicates: Sequence[int]) -> list[tuple[int, int, int]]:
+        """(s, p, o) of the given subjects and predicates, in a few queries."""
+        out: list[tuple[int, int, int]] = []
+        preds = list(predicates)
+        for i in range(0, len(subjects), 400):
+            chunk = list(subjects[i:i + 400])
+            q = (f"SELECT s, p, o FROM objs WHERE s IN ({','.join('?' * len(chunk))}) "
+                 f"AND p IN ({','.join('?' * len(preds))})")
+            out.extend(self.db.execute(q, chunk + preds))
+        return out
+
+    def data(self, s: int, p: int) -> Any:
+        row = self.db.execute("SELECT o, d FROM datas WHERE s=? AND p=? LIMIT 1", (s, p)).fetchone()
+        if row is None:
+            return None
+        return self.world._to_python(row[0], row[1])
+
+    def count(self) -> int:
+        a = self.db.execute("SELECT COUNT(*) FROM objs").fetchone()[0]
+        b = self.db.execute("SELECT COUNT(*) FROM datas").fetchone()[0]
+        return int(a + b)
+
+
+# -- reasoners ---------------------------------------------------------------------------------------------------
+def reasoner_subprocess_kwargs() -> dict[str, Any]:
+    """The dict owlready2 passes to `subprocess` for every reasoner call (a time limit is set there)."""
+    kwargs: dict[str, Any] = owlready2.reasoning._subprocess_kargs
+    return kwargs
+
+
+def pellet_command(java: str) -> list[str]:
+    """`java -Xmx… -cp <owlready2's Pellet> pellet.Pellet`: Pellet as owlready2 ships it."""
+    return [java, f"-Xmx{owlready2.reasoning.JAVA_MEMORY}M", "-cp", owlready2.reasoning._PELLET_CLASSPATH,
+            "pellet.Pellet"]
+
+
+def facts_in(world: World, ontology_iri: str) -> int:
+    """How many triples the ontology `ontology_iri` of `world` holds (what a reasoner inferred, e.g.)."""
+    c = world.get_ontology(ontology_iri).graph.c
+    db = world.graph.db
+    return int(db.execute("SELECT COUNT(*) FROM objs WHERE c=?", (c,)).fetchone()[0]
+               + db.execute("SELECT COUNT(*) FROM datas WHERE c=?", (c,)).fetchone()[0])
+
+
+# -- what the adapter relies on ----------------------------------------------------------------------------------
+def check_internals() -> None:
+    """Verify every owlready2 internal this module relies on; raise OwlInternalsError naming what changed."""
+    def need(ok: bool, what: str) -> None:
+        if not ok:
+            raise OwlInternalsError(f"owlready2 {getattr(owlready2, 'VERSION', '?')}: {what}")
+
+    for name, value in (("rdf_type", rdf_type), ("owl_named_individual", owl_named_individual),
+                        ("owl_ontology", owl_ontology)):
+        need(isinstance(value, int), f"owlready2.base.{name} is no longer an integer storid")
+    world = World()
+    try:
+        need(isinstance(getattr(world.graph, "db", None), sqlite3.Connection),
+             "World.graph.db is no longer the sqlite3 connection")
+        for table, columns in TABLES.items():
+            got = tuple(row[1] for row in world.graph.db.execute(f"PRAGMA table_info({table})"))
+            need(got == columns, f"table {table} has columns {got}, expected exactly {columns}")
+        got = tuple(row[1] for row in world.graph.db.execute("PRAGMA table_info(store)"))
+        need(STORE_COUNTER in got, f"table store has no column {STORE_COUNTER} (columns {got})")
+        need(callable(getattr(world.graph, "_abbreviate", None)), "World.graph._abbreviate is gone")
+        need(callable(getattr(world, "_to_rdf", None)) and callable(getattr(world, "_to_python", None)),
+             "World._to_rdf / World._to_python are gone")
+        for value in (7, 0.25, "text", True):
+            o, d = world._to_rdf(value)
+            back = world._to_python(o, d)
+            need(back == value and type(back) is type(value), f"_to_rdf/_to_python no longer round-trip {value!r}")
+        need(isinstance(getattr(owlready2.reasoning, "_subprocess_kargs", None), dict),
+             "owlready2.reasoning._subprocess_kargs is no longer a dict")
+        need(isinstance(getattr(owlready2.reasoning, "_PELLET_CLASSPATH", None), str),
+             "owlready2.reasoning._PELLET_CLASSPATH is gone")
+        # Individuals written through the tables are what owlready2's own API then reads.
+        store = QuadStore.__new__(QuadStore)
+        store.world, store.db = world, world.graph.db
+        onto_iri = "http://planhrc.org/check#"
+        c = store.context(onto_iri)
+        cls_sid = store.storid("http://www.w3.org/2002/07/owl#Thing")
+        prop = store.storid(onto_iri + "value")
+        (sid,) = store.allocate([onto_iri + "probe"])
+        store.insert_objs(c, [(sid, RDF_TYPE, NAMED_INDIVIDUAL), (sid, RDF_TYPE, cls_sid)])
+        store.insert_datas(c, [(sid, prop, 42)])
+        need(store.storid(onto_iri + "probe", create=False) == sid, "_abbreviate does not find an allocated IRI")
+        need(store.data(sid, prop) == 42, "a literal written to datas does not read back")
+        entity = world[onto_iri + "probe"]
+        need(entity is not None and entity.storid == sid, "owlready2 does not see an individual written to objs")
+    finally:
+        world.close()
+
+
+def iri_pairs(world: World, property_iri: str) -> list[tuple[str, str]]:
+    """(subject IRI, object IRI) of every triple of `world` with the property `property_iri`, told or inferred."""
+    p = world.graph._abbreviate(property_iri, False)
+    if not p:
+        return []
+    q = ("SELECT rs.iri, ro.iri FROM objs t JOIN resources rs ON rs.storid = t.s "
+         "JOIN resources ro ON ro.storid = t.o WHERE t.p = ?")
+    return [(s, o) for s, o in world.graph.db.execute(q, (p,))]

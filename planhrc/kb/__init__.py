@@ -1,1 +1,0 @@
-"""The knowledge base: the planHRC ontology (TBox file + persistent ABox), reasoners and subsumption."""
