@@ -14,14 +14,12 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
 
 import planhrc
-from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
-from planhrc.model import HAS_ORIENTATION, ArticulatedObject, format_atom
-from planhrc.pipeline import action_motion
 from planhrc.translator.errors import TranslationError
 
 from .auth import AuthError, check_bearer
-from .events import event_public, stream_events
-from .orchestrator import Orchestrator, execution_public
+from .events import stream_events
+from .orchestrator import Orchestrator
+from .store import ConflictError, NotFoundError, ValidationError
 from .schemas import (
     DecisionPublic,
     ErrorPublic,
@@ -49,6 +47,8 @@ ERRORS: dict[int | str, dict[str, Any]] = {
     422: {"model": ErrorPublic, "description": "Bad input; the message names the field."},
 }
 RDF_TYPES = {"application/rdf+xml": "xml", "text/turtle": "turtle"}
+NEXT_ACTION_MOVED = ("GET /objects/{object_id}/next-action was removed (a GET must not change state): take the next "
+                     "action with POST /objects/{object_id}/actions/next")
 
 router = APIRouter(responses={404: ERRORS[404], 422: ERRORS[422]})
 
@@ -75,19 +75,19 @@ def create_object(body: ObjectCreate, orch: Orch) -> dict[str, Any]:
     """Create an articulated object in the ABox."""
     links = body.links if isinstance(body.links, int) else [link.length_m for link in body.links]
     obj = orch.create_object(body.name, links, body.orientations, body.formulation)
-    return _object_public(orch, obj)
+    return orch.describe_object(obj.ident)
 
 
 @router.get("/objects", response_model=list[ObjectPublic], tags=["objects"])
 def list_objects(orch: Orch) -> list[dict[str, Any]]:
     """Every stored object."""
-    return [_object_public(orch, obj) for obj in orch.kb.list_objects()]
+    return orch.list_objects()
 
 
 @router.get("/objects/{object_id}", response_model=ObjectPublic, tags=["objects"])
 def read_object(object_id: str, orch: Orch) -> dict[str, Any]:
     """One object with its goal and execution state."""
-    return _object_public(orch, orch.kb.get_object(object_id))
+    return orch.describe_object(object_id)
 
 
 @router.put("/objects/{object_id}/goal", response_model=GoalPublic, dependencies=Writer,
@@ -113,13 +113,21 @@ def create_perception(
     return orch.handle_perception(object_id, body.link_orientations_deg, idempotency_key)
 
 
-@router.get("/objects/{object_id}/next-action", response_model=NextActionPublic | None, dependencies=Writer,
-            responses=WRITE_ERRORS, tags=["cooperation"])
-def read_next_action(object_id: str, orch: Orch) -> dict[str, Any] | None:
-    """For workers: the action to execute now, marked dispatched (asking again returns the same action);
-    null when there is none (no plan, goal reached, or the last action is done and a perception is due).
-    It changes the execution, so it needs the bearer token when one is configured."""
-    return orch.next_action(object_id)
+@router.post("/objects/{object_id}/actions/next", response_model=NextActionPublic | None, dependencies=Writer,
+             responses=WRITE_ERRORS, tags=["cooperation"])
+def take_next_action(object_id: str, orch: Orch) -> dict[str, Any] | None:
+    """For workers: take the action to execute now, which is marked dispatched (taking it again returns the same
+    action); null when there is none (no plan, goal reached, or the last action is done and a perception is due).
+    It changes the execution, so it is a POST and needs the bearer token when one is configured."""
+    return orch.take_next_action(object_id)
+
+
+@router.get("/objects/{object_id}/next-action", status_code=410, response_model=ErrorPublic,
+            responses={410: {"model": ErrorPublic, "description": "Moved to POST /objects/{id}/actions/next."}},
+            tags=["cooperation"], deprecated=True)
+def read_next_action_gone(object_id: str) -> JSONResponse:
+    """Removed: a GET must not change state. Take the next action with `POST /objects/{id}/actions/next`."""
+    return JSONResponse({"detail": NEXT_ACTION_MOVED.format(object_id=object_id)}, status_code=410)
 
 
 @router.post("/objects/{object_id}/actions/{action_id}/feedback", response_model=FeedbackPublic,
@@ -139,29 +147,22 @@ def create_feedback(
 @router.get("/objects/{object_id}/plan", response_model=PlanPublic, tags=["records"])
 def read_object_plan(object_id: str, orch: Orch) -> dict[str, Any]:
     """The plan being followed (or, when none is, the latest one), with its expected states."""
-    orch.kb.get_object(object_id)
-    execution = orch.kb.get_execution(object_id)
-    plan = orch.kb.get_plan(execution.plan_id) if execution.plan_id else orch.kb.latest_plan(object_id)
-    if plan is None:
-        raise NotFoundError(f"plan: object {object_id} has no plan yet")
-    return _plan_public(orch, plan)
+    return orch.current_plan(object_id)
 
 
 @router.get("/plans/{plan_id}", response_model=PlanPublic, tags=["records"])
 def read_plan(plan_id: str, orch: Orch) -> dict[str, Any]:
-    return _plan_public(orch, orch.kb.get_plan(plan_id))
+    return orch.describe_plan(plan_id)
 
 
 @router.get("/states/{state_id}", response_model=StatePublic, tags=["records"])
 def read_state(state_id: str, orch: Orch) -> dict[str, Any]:
-    return _state_public(orch.kb.get_state(state_id))
+    return orch.describe_state(state_id)
 
 
 @router.get("/problems/{problem_id}", response_model=ProblemPublic, tags=["records"])
 def read_problem(problem_id: str, orch: Orch) -> dict[str, Any]:
-    p = orch.kb.get_problem(problem_id)
-    return {"id": p.id, "object_id": p.object_id, "init_state_id": p.init_state_id,
-            "goal_state_id": p.goal_state_id, "created_at": p.created_at}
+    return orch.describe_problem(problem_id)
 
 
 @router.get("/objects/{object_id}/pddl/domain", response_class=PlainTextResponse, tags=["pddl"])
@@ -182,15 +183,14 @@ def read_pddl_problem(object_id: str, orch: Orch) -> PlainTextResponse:
 def read_ontology(orch: Orch, accept: Annotated[str | None, Header()] = None) -> Response:
     """TBox and ABox as RDF/XML (default) or Turtle (`Accept: text/turtle`)."""
     media = _rdf_media_type(accept)
-    return Response(orch.kb.export(RDF_TYPES[media]), media_type=media)
+    return Response(orch.export_ontology(RDF_TYPES[media]), media_type=media)
 
 
 # -- events ---------------------------------------------------------------------------------------------
 @router.get("/objects/{object_id}/events", response_model=list[EventPublic], tags=["events"])
 def list_events(object_id: str, orch: Orch, after_seq: Annotated[int, Query(ge=0)] = 0) -> list[dict[str, Any]]:
     """The object's log, oldest first: every decision with its reason, goals, dispatches and feedback."""
-    orch.kb.get_object(object_id)
-    return [event_public(e) for e in orch.kb.list_events(object_id, after_seq=after_seq)]
+    return orch.list_events(object_id, after_seq)
 
 
 @router.get("/objects/{object_id}/events/stream", tags=["events"],
@@ -205,10 +205,10 @@ def stream_object_events(
     last_event_id: Annotated[str | None, Header()] = None,
 ) -> StreamingResponse:
     """Every new event of the object, live, as Server-Sent Events."""
-    orch.kb.get_object(object_id)
+    orch.events_after(object_id, after_seq)  # an unknown object is a 404 before the stream starts
     if last_event_id and last_event_id.isdigit():
         after_seq = max(after_seq, int(last_event_id))
-    frames = stream_events(lambda seq: orch.kb.list_events(object_id, after_seq=seq), request.is_disconnected,
+    frames = stream_events(lambda seq: orch.events_after(object_id, seq), request.is_disconnected,
                            after_seq=after_seq, max_events=max_events, timeout_s=timeout_s)
     return StreamingResponse(frames, media_type="text/event-stream",
                              headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
@@ -216,8 +216,8 @@ def stream_object_events(
 
 @router.get("/health", response_model=HealthPublic, tags=["service"])
 def read_health(request: Request, orch: Orch) -> dict[str, Any]:
-    return {"status": "ok", "version": planhrc.__version__, "objects": len(orch.kb.list_objects()),
-            "triples": orch.kb.triple_count(), "auth": bool(request.app.state.settings.token)}
+    return {"status": "ok", "version": planhrc.__version__, **orch.health(),
+            "auth": bool(request.app.state.settings.token)}
 
 
 # -- errors ---------------------------------------------------------------------------------------------
@@ -271,46 +271,3 @@ def _rdf_media_type(accept: str | None) -> str:
             if media in RDF_TYPES:
                 return media
     return "application/rdf+xml"
-
-
-def _object_public(orch: Orchestrator, obj: ArticulatedObject) -> dict[str, Any]:
-    with orch.locks.hold(obj.ident):
-        execution = orch.kb.get_execution(obj.ident)
-        goal_state_id = orch.goal_state_id(obj.ident)
-    return {
-        "id": obj.ident, "name": obj.name, "formulation": obj.formulation.value, "orientations": obj.orientations,
-        "step_deg": obj.step,
-        "links": [{"name": name, "length_m": length} for name, length in zip(obj.links, obj.link_lengths_m)],
-        "joints": list(obj.joints), "goal_state_id": goal_state_id, "execution": execution_public(execution),
-    }
-
-
-def _atoms_public(atoms) -> list[str]:
-    return [format_atom(a) for a in sorted(atoms)]
-
-
-def _state_public(state) -> dict[str, Any]:
-    joints = {a[2]: int(a[1].split("_", 1)[1]) for a in state.atoms if a[0] == HAS_ORIENTATION and len(a) == 3}
-    return {"id": state.id, "object_id": state.object_id, "kind": state.kind, "atoms": _atoms_public(state.atoms),
-            "joint_values_deg": dict(sorted(joints.items())),
-            "link_orientations_deg": list(state.link_orientations_deg) if state.link_orientations_deg else None,
-            "created_at": state.created_at}
-
-
-def _plan_public(orch: Orchestrator, plan) -> dict[str, Any]:
-    obj = orch.kb.get_object(plan.object_id)
-    steps = []
-    for a in sorted(plan.actions, key=lambda a: a.step):
-        motion = action_motion(obj, a)
-        steps.append({
-            "id": a.id, "step": a.step, "name": a.spec.name, "params": list(a.spec.params),
-            "pre": _atoms_public(a.spec.pre), "eff_neg": _atoms_public(a.spec.eff_neg),
-            "eff_pos": _atoms_public(a.spec.eff_pos),
-            "cond_eff": [{"when": _atoms_public(c.when), "eff_neg": _atoms_public(c.eff_neg),
-                          "eff_pos": _atoms_public(c.eff_pos)} for c in a.spec.cond_eff],
-            **{key: motion[key] for key in ("joint_index", "turned_link_index", "held_link_index", "delta_deg")},
-        })
-    return {"id": plan.id, "object_id": plan.object_id, "problem_id": plan.problem_id, "planner": plan.planner,
-            "steps": steps, "expected_state_ids": list(plan.expected_state_ids),
-            "expected_states": [_state_public(orch.kb.get_state(sid)) for sid in plan.expected_state_ids],
-            "created_at": plan.created_at}

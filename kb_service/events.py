@@ -8,16 +8,12 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any, AsyncIterator, Awaitable, Callable, Sequence
+from typing import AsyncIterator, Awaitable, Callable, Sequence
 
 import anyio
 
-from planhrc.kb_service.store.records import StoredEvent
-
-
-def event_public(event: StoredEvent) -> dict[str, Any]:
-    return {"seq": event.seq, "object_id": event.object_id, "kind": event.kind, "reason": event.reason,
-            "data": dict(event.data), "created_at": event.created_at}
+from .public import event_public
+from .store import StoredEvent
 
 
 def format_sse(event: StoredEvent) -> str:

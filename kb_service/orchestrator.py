@@ -29,9 +29,8 @@ from typing import Any, Sequence
 
 from planhrc import pipeline
 from planhrc.cooperation import Decision, PlanView, decide
-from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
-from planhrc.kb_service.store.records import Execution, StoredAction, StoredPlan, StoredState
-from planhrc.kb_service.store import KnowledgeBase
+from .store import (ConflictError, Execution, KnowledgeBase, NotFoundError, StoredAction, StoredEvent, StoredPlan,
+                    StoredState, ValidationError)
 from planhrc.model import ArticulatedObject, Formulation, ModelError, State, make_object, perceive
 from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps
 from planhrc.settings import Settings
@@ -39,6 +38,8 @@ from planhrc.translator import PddlTask, domain_text, read_domain_model, transla
 from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, PlanningStatus, one_of
 
 from .locks import ObjectLocks
+from .public import (event_public, execution_public, object_public, plan_public, problem_public,
+                     state_public)
 
 log = logging.getLogger(__name__)
 
@@ -209,6 +210,54 @@ class Orchestrator:
         }
         self.kb.add_event(object_id, answer["decision"], answer["reason"], data)
 
+    # -- reads: the records as response bodies ------------------------------------------------------------
+    def list_objects(self) -> list[dict[str, Any]]:
+        return [self.describe_object(obj.ident) for obj in self.kb.list_objects()]
+
+    def describe_object(self, object_id: str) -> dict[str, Any]:
+        """One object with its goal and execution state."""
+        obj = self.kb.get_object(object_id)
+        with self.locks.hold(obj.ident):
+            execution = self.kb.get_execution(obj.ident)
+            goal_state_id = self.goal_state_id(obj.ident)
+        return object_public(obj, execution, goal_state_id)
+
+    def current_plan(self, object_id: str) -> dict[str, Any]:
+        """The plan being followed (or, when none is, the latest one), with its expected states."""
+        self.kb.get_object(object_id)
+        execution = self.kb.get_execution(object_id)
+        plan = self.kb.get_plan(execution.plan_id) if execution.plan_id else self.kb.latest_plan(object_id)
+        if plan is None:
+            raise NotFoundError(f"plan: object {object_id} has no plan yet")
+        return self._plan_public(plan)
+
+    def describe_plan(self, plan_id: str) -> dict[str, Any]:
+        return self._plan_public(self.kb.get_plan(plan_id))
+
+    def describe_state(self, state_id: str) -> dict[str, Any]:
+        return state_public(self.kb.get_state(state_id))
+
+    def describe_problem(self, problem_id: str) -> dict[str, Any]:
+        return problem_public(self.kb.get_problem(problem_id))
+
+    def list_events(self, object_id: str, after_seq: int = 0) -> list[dict[str, Any]]:
+        """The object's log, oldest first."""
+        return [event_public(e) for e in self.events_after(object_id, after_seq)]
+
+    def events_after(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
+        return self.kb.list_events(object_id, after_seq=after_seq)
+
+    def export_ontology(self, fmt: str) -> bytes:
+        """TBox and ABox as RDF/XML (`xml`) or Turtle (`turtle`)."""
+        return self.kb.export(fmt)
+
+    def health(self) -> dict[str, Any]:
+        return {"objects": len(self.kb.list_objects()), "triples": self.kb.triple_count()}
+
+    def _plan_public(self, plan: StoredPlan) -> dict[str, Any]:
+        obj = self.kb.get_object(plan.object_id)
+        return plan_public(obj, plan, [self.kb.get_state(sid) for sid in plan.expected_state_ids])
+
     # -- PDDL -------------------------------------------------------------------------------------------------
     def pddl_task(self, object_id: str, with_problem: bool = False) -> PddlTask:
         """The PDDL of the object's latest Problem as the planner saw it (`with_problem`), or only its domain."""
@@ -223,8 +272,9 @@ class Orchestrator:
         return translate(obj, init.atoms, goal.atoms, model, pipeline.problem_name(obj))
 
     # -- dispatch and feedback -------------------------------------------------------------------------------
-    def next_action(self, object_id: str) -> dict[str, Any] | None:
-        """The action to execute now, marked dispatched; None when there is none (no plan, done, goal)."""
+    def take_next_action(self, object_id: str) -> dict[str, Any] | None:
+        """The action to execute now, marked dispatched (taking it again returns the same action); None when
+        there is none (no plan, done, goal)."""
         with self.locks.hold(object_id):
             obj = self.kb.get_object(object_id)
             execution = self.kb.get_execution(object_id)
@@ -344,11 +394,6 @@ class Orchestrator:
     def _remember(self, object_id: str, key: str | None, fingerprint: str, answer: dict[str, Any]) -> None:
         if key:
             self.kb.remember_response(object_id, key, {"fingerprint": fingerprint, "response": answer})
-
-
-def execution_public(execution: Execution) -> dict[str, Any]:
-    return {"plan_id": execution.plan_id, "next_step": execution.next_step, "status": execution.status,
-            "dispatched_action_id": execution.dispatched_action_id}
 
 
 def _answer(kind: DecisionKind, plan_id: str | None, perceived_state_id: str, next_action: dict[str, Any] | None,

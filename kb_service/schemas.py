@@ -9,6 +9,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from planhrc.model import Formulation
+from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus
+
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 
 
@@ -38,7 +41,7 @@ class ObjectCreate(BaseModel):
     orientations: int = Field(
         ge=2, le=360, description="K, the number of allowed orientations; 360 must be divisible by K.", examples=[4, 8]
     )
-    formulation: Literal["relative", "absolute"] = Field(
+    formulation: Formulation = Field(
         description="Planning formulation: joints carry relative angles, or absolute link orientations.",
         examples=["relative"],
     )
@@ -54,16 +57,16 @@ class LinkPublic(BaseModel):
 class ExecutionPublic(BaseModel):
     model_config = _config(
         "Where the cooperation model stands for one object.",
-        {"plan_id": "plan3", "next_step": 2, "status": "dispatched", "dispatched_action_id": "plan3_a2"},
+        {"plan_id": "obj1_plan_1", "next_step": 2, "status": "dispatched", "dispatched_action_id": "obj1_plan_1_a2"},
     )
 
-    plan_id: str | None = Field(description="Plan being followed, if any.", examples=["plan3"])
+    plan_id: str | None = Field(description="Plan being followed, if any.", examples=["obj1_plan_1"])
     next_step: int | None = Field(description="1-based step of the next action to execute.", examples=[2])
-    status: str = Field(
+    status: ExecutionStatus = Field(
         description="idle, ready, dispatched, goal_reached or no_plan.", examples=["ready", "dispatched"]
     )
     dispatched_action_id: str | None = Field(
-        description="Action handed to a worker whose feedback is still accepted.", examples=["plan3_a2"]
+        description="Action handed to a worker whose feedback is still accepted.", examples=["obj1_plan_1_a2"]
     )
 
 
@@ -80,12 +83,12 @@ class ObjectPublic(BaseModel):
 
     id: str = Field(description="Identifier of the object (also the prefix of its individuals).", examples=["obj1"])
     name: str = Field(description="Human-readable name.", examples=["rod"])
-    formulation: str = Field(description="relative or absolute.", examples=["relative"])
+    formulation: Formulation = Field(description="relative or absolute.", examples=["relative"])
     orientations: int = Field(description="K, the number of allowed orientations.", examples=[4])
     step_deg: int = Field(description="360 / K: the angle of one planned rotation.", examples=[90])
     links: list[LinkPublic] = Field(description="Links l1..lN in chain order.", examples=[[{"name": "obj1_l1", "length_m": 0.155}]])
     joints: list[str] = Field(description="Joints that carry orientations, in order.", examples=[["obj1_j1"]])
-    goal_state_id: str | None = Field(description="Current goal state, if one was set.", examples=["st7"])
+    goal_state_id: str | None = Field(description="Current goal state, if one was set.", examples=["obj1_state_1"])
     execution: ExecutionPublic = Field(
         description="Execution state of the cooperation model.",
         examples=[{"plan_id": None, "next_step": None, "status": "idle", "dispatched_action_id": None}],
@@ -122,13 +125,13 @@ class GoalUpdate(BaseModel):
 class GoalPublic(BaseModel):
     model_config = _config(
         "The stored goal and, when a perceived state already exists, the problem from it to the goal.",
-        {"goal_state_id": "st7", "problem_id": "pb2"},
+        {"goal_state_id": "obj1_state_1", "problem_id": "obj1_problem_1"},
     )
 
-    goal_state_id: str = Field(description="The stored goal State.", examples=["st7"])
+    goal_state_id: str = Field(description="The stored goal State.", examples=["obj1_state_1"])
     problem_id: str | None = Field(
         description="Problem (latest perceived state -> goal); null until the first perception arrives.",
-        examples=["pb2", None],
+        examples=["obj1_problem_1", None],
     )
 
 
@@ -149,13 +152,13 @@ class NextActionPublic(BaseModel):
     model_config = _config(
         "The action to execute next and the motion it means.",
         {
-            "id": "plan3_a2", "name": "rotateclockwise", "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"],
-            "step": 2, "last_step": 2, "plan_id": "plan3", "joint_index": 1, "turned_link_index": 2, "held_link_index": 1,
+            "id": "obj1_plan_1_a2", "name": "rotateclockwise", "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"],
+            "step": 2, "last_step": 2, "plan_id": "obj1_plan_1", "joint_index": 1, "turned_link_index": 2, "held_link_index": 1,
             "delta_deg": 90, "macro_steps": 1,
         },
     )
 
-    id: str = Field(description="Identifier of the action (for feedback).", examples=["plan3_a2"])
+    id: str = Field(description="Identifier of the action (for feedback).", examples=["obj1_plan_1_a2"])
     name: str = Field(description="PDDL action name.", examples=["rotateclockwise"])
     params: list[str] = Field(description="PDDL arguments: turned link, held link, joint, from, to.",
                               examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"]])
@@ -163,7 +166,7 @@ class NextActionPublic(BaseModel):
     last_step: int = Field(description="Last plan step this motion covers: consecutive steps of one joint in one "
                            "direction are merged into one macro step; feedback 'succeeded' moves the execution to "
                            "last_step + 1.", examples=[2])
-    plan_id: str = Field(description="Plan the action belongs to.", examples=["plan3"])
+    plan_id: str = Field(description="Plan the action belongs to.", examples=["obj1_plan_1"])
     joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])
     turned_link_index: int = Field(description="Index of the link that turns (with every link beyond it).", examples=[2])
     held_link_index: int = Field(description="Index of the link held still (0 = the table).", examples=[1])
@@ -171,14 +174,11 @@ class NextActionPublic(BaseModel):
     macro_steps: int = Field(description="Number of planned steps this motion stands for.", examples=[1])
 
 
-DecisionKind = Literal["goal_reached", "continue", "resume", "replan", "no_plan"]
-
-
 class DecisionPublic(BaseModel):
     model_config = _config(
         "What the cooperation model decided for a perception.",
         {
-            "decision": "continue", "plan_id": "plan3", "perceived_state_id": "st9", "next_action": None,
+            "decision": "continue", "plan_id": "obj1_plan_1", "perceived_state_id": "obj1_state_2", "next_action": None,
             "matched_expected_step": 2, "reason": "the perceived state is subsumed by the expected state s^e_2: execute a_2",
         },
     )
@@ -188,8 +188,8 @@ class DecisionPublic(BaseModel):
         "state), replan (a new plan was made) or no_plan (no goal, or no plan could be found).",
         examples=["continue", "resume"],
     )
-    plan_id: str | None = Field(description="Plan being followed after the decision.", examples=["plan3"])
-    perceived_state_id: str | None = Field(description="The stored perceived State.", examples=["st9"])
+    plan_id: str | None = Field(description="Plan being followed after the decision.", examples=["obj1_plan_1"])
+    perceived_state_id: str | None = Field(description="The stored perceived State.", examples=["obj1_state_2"])
     next_action: NextActionPublic | None = Field(
         description="Action to execute next, if any (not yet dispatched).", examples=[None]
     )
@@ -202,7 +202,7 @@ class DecisionPublic(BaseModel):
 class FeedbackCreate(BaseModel):
     model_config = _config("A worker's report on a dispatched action.", {"outcome": "succeeded"})
 
-    outcome: Literal["succeeded", "failed", "partial"] = Field(
+    outcome: ActionOutcome = Field(
         description="succeeded, failed (nothing moved) or partial (moved, but not the whole step).",
         examples=["succeeded", "failed"],
     )
@@ -213,18 +213,18 @@ class FeedbackCreate(BaseModel):
 class FeedbackPublic(BaseModel):
     model_config = _config(
         "The execution after a feedback.",
-        {"action_id": "plan3_a2", "accepted": "current",
-         "execution": {"plan_id": "plan3", "next_step": 3, "status": "ready", "dispatched_action_id": None}},
+        {"action_id": "obj1_plan_1_a2", "accepted": "current",
+         "execution": {"plan_id": "obj1_plan_1", "next_step": 3, "status": "ready", "dispatched_action_id": None}},
     )
 
-    action_id: str = Field(description="The action the feedback was about.", examples=["plan3_a2"])
+    action_id: str = Field(description="The action the feedback was about.", examples=["obj1_plan_1_a2"])
     accepted: Literal["current", "late"] = Field(
         description="current: it moved the execution on; late: a perception had already moved it, the feedback "
         "is only recorded.", examples=["current"],
     )
     execution: ExecutionPublic = Field(
         description="Execution state after the feedback.",
-        examples=[{"plan_id": "plan3", "next_step": 3, "status": "ready", "dispatched_action_id": None}],
+        examples=[{"plan_id": "obj1_plan_1", "next_step": 3, "status": "ready", "dispatched_action_id": None}],
     )
 
 
@@ -232,11 +232,11 @@ class FeedbackPublic(BaseModel):
 class StatePublic(BaseModel):
     model_config = _config(
         "A stored State: its ground atoms (PDDL syntax) and, for perceived states, the raw observation.",
-        {"id": "st9", "object_id": "obj1", "kind": "perceived", "atoms": ["(hasorientation deg_90 obj1_j1)"],
+        {"id": "obj1_state_2", "object_id": "obj1", "kind": "perceived", "atoms": ["(hasorientation deg_90 obj1_j1)"],
          "joint_values_deg": {"obj1_j1": 90}, "link_orientations_deg": [1.7, 88.9], "created_at": 1.7e9},
     )
 
-    id: str = Field(description="Identifier of the state.", examples=["st9"])
+    id: str = Field(description="Identifier of the state.", examples=["obj1_state_2"])
     object_id: str = Field(description="Object the state describes.", examples=["obj1"])
     kind: str = Field(description="perceived, expected, goal or initial.", examples=["perceived"])
     atoms: list[str] = Field(description="Ground atoms, sorted.", examples=[["(hasorientation deg_90 obj1_j1)"]])
@@ -250,27 +250,27 @@ class StatePublic(BaseModel):
 class ProblemPublic(BaseModel):
     model_config = _config(
         "A stored Problem: from an initial state to a goal state.",
-        {"id": "pb2", "object_id": "obj1", "init_state_id": "st9", "goal_state_id": "st7", "created_at": 1.7e9},
+        {"id": "obj1_problem_1", "object_id": "obj1", "init_state_id": "obj1_state_2", "goal_state_id": "obj1_state_1", "created_at": 1.7e9},
     )
 
-    id: str = Field(description="Identifier of the problem.", examples=["pb2"])
+    id: str = Field(description="Identifier of the problem.", examples=["obj1_problem_1"])
     object_id: str = Field(description="Object of the problem.", examples=["obj1"])
-    init_state_id: str = Field(description="Initial State.", examples=["st9"])
-    goal_state_id: str = Field(description="Goal State.", examples=["st7"])
+    init_state_id: str = Field(description="Initial State.", examples=["obj1_state_2"])
+    goal_state_id: str = Field(description="Goal State.", examples=["obj1_state_1"])
     created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
 
 
 class PlanStepPublic(BaseModel):
     model_config = _config(
         "One action of a plan with its ground preconditions and effects.",
-        {"id": "plan3_a1", "step": 1, "name": "rotateclockwise",
+        {"id": "obj1_plan_1_a1", "step": 1, "name": "rotateclockwise",
          "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_0", "deg_90"],
          "pre": ["(hasorientation deg_0 obj1_j1)"], "eff_neg": ["(hasorientation deg_0 obj1_j1)"],
          "eff_pos": ["(hasorientation deg_90 obj1_j1)"], "cond_eff": [], "joint_index": 1, "turned_link_index": 2,
          "held_link_index": 1, "delta_deg": 90},
     )
 
-    id: str = Field(description="Identifier of the action.", examples=["plan3_a1"])
+    id: str = Field(description="Identifier of the action.", examples=["obj1_plan_1_a1"])
     step: int = Field(description="1-based position in the plan.", examples=[1])
     name: str = Field(description="PDDL action name.", examples=["rotateclockwise"])
     params: list[str] = Field(description="PDDL arguments.", examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_0", "deg_90"]])
@@ -290,16 +290,16 @@ class PlanStepPublic(BaseModel):
 class PlanPublic(BaseModel):
     model_config = _config(
         "A stored plan: its actions a_1..a_N and expected states s^e_1..s^e_{N+1}.",
-        {"id": "plan3", "object_id": "obj1", "problem_id": "pb2", "planner": "inproc", "steps": [],
-         "expected_state_ids": ["st10"], "expected_states": [], "created_at": 1.7e9},
+        {"id": "obj1_plan_1", "object_id": "obj1", "problem_id": "obj1_problem_1", "planner": "inproc", "steps": [],
+         "expected_state_ids": ["obj1_state_3"], "expected_states": [], "created_at": 1.7e9},
     )
 
-    id: str = Field(description="Identifier of the plan.", examples=["plan3"])
+    id: str = Field(description="Identifier of the plan.", examples=["obj1_plan_1"])
     object_id: str = Field(description="Object of the plan.", examples=["obj1"])
-    problem_id: str = Field(description="Problem the plan solves.", examples=["pb2"])
+    problem_id: str = Field(description="Problem the plan solves.", examples=["obj1_problem_1"])
     planner: str = Field(description="Planner that found it.", examples=["inproc"])
     steps: list[PlanStepPublic] = Field(description="Actions in order.", examples=[[]])
-    expected_state_ids: list[str] = Field(description="Ids of s^e_1..s^e_{N+1}.", examples=[["st10", "st11"]])
+    expected_state_ids: list[str] = Field(description="Ids of s^e_1..s^e_{N+1}.", examples=[["obj1_state_3", "obj1_state_4"]])
     expected_states: list[StatePublic] = Field(description="The expected states themselves.", examples=[[]])
     created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
 
@@ -308,7 +308,7 @@ class EventPublic(BaseModel):
     model_config = _config(
         "One entry of an object's log: a decision with its reason, a goal, a dispatch or a feedback.",
         {"seq": 4, "object_id": "obj1", "kind": "continue", "reason": "the perceived state is subsumed by s^e_2",
-         "data": {"perceived_state_id": "st9", "next_step": 2}, "created_at": 1.7e9},
+         "data": {"perceived_state_id": "obj1_state_2", "next_step": 2}, "created_at": 1.7e9},
     )
 
     seq: int = Field(description="Position in the log (increasing).", examples=[4])

@@ -31,7 +31,7 @@ from planhrc.paths import default_tbox_path
 
 from .reasoner import _configure_java, drop_builtin_rules, reason_in_place
 from .store import ABOX_IRI, PREDICATES, TBOX_IRI
-from .store.errors import ReasonerError
+from .store.errors import ReasonerError, ValidationError
 from .store.owl import pellet_command
 
 log = logging.getLogger(__name__)
@@ -46,10 +46,10 @@ def _owl_args(atom: Atom) -> list[tuple[str, str]]:
     """(property, individual name) of an atom, in OWL argument order (hasorientation (o, j) -> arg1 j, arg2 o)."""
     spec = PREDICATES.get(atom[0])
     if spec is None:
-        raise ValueError(f"atom {atom!r}: unknown predicate {atom[0]!r}")
+        raise ValidationError(f"atom {atom!r}: unknown predicate {atom[0]!r}")
     _, _, props, _ = spec
     if len(atom) - 1 != len(props):
-        raise ValueError(f"atom {atom!r}: {atom[0]} takes {len(props)} arguments")
+        raise ValidationError(f"atom {atom!r}: {atom[0]} takes {len(props)} arguments")
     return sorted(zip(props, atom[1:]))
 
 
@@ -86,7 +86,7 @@ def _individual_types(pairs: Sequence[tuple[frozenset, frozenset]]) -> dict[str,
             _, arg_types, _, _ = PREDICATES[atom[0]]
             for name, typ in zip(atom[1:], arg_types):
                 if types.setdefault(name, typ) != typ:
-                    raise ValueError(f"atoms: {name!r} is used both as a {types[name]} and as a {typ}")
+                    raise ValidationError(f"atoms: {name!r} is used both as a {types[name]} and as a {typ}")
     return types
 
 
@@ -149,7 +149,7 @@ def dl_subsumption(
     classifies them and S_i ⊑ G_i is read from the inferred hierarchy. Exact but quadratic: small batches only.
     """
     if method not in METHODS:
-        raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+        raise ValidationError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
     if method == "unsat" and reasoner != "pellet":
         raise ReasonerError(f"method 'unsat' runs Pellet only, not {reasoner!r}; use method='classify'")
     pairs = [(frozenset(a), frozenset(b)) for a, b in pairs]

@@ -49,7 +49,7 @@ USER_ERRORS: tuple[tuple[str, str], ...] = (
     ("planhrc.kb_service.errors", "KBError"),
     ("planhrc.translator.errors", "TranslationError"),
     ("planhrc.planner.errors", "PlannerError"),
-    ("planhrc.robot_sim.protocol", "ProtocolError"),
+    ("planhrc.client", "ProtocolError"),
     ("planhrc.robot_sim.scene", "SimError"),
 )
 

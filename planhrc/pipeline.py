@@ -19,7 +19,7 @@ from planhrc.model import ActionSpec, ArticulatedObject, Formulation, State, is_
 from planhrc.planner.chain import plan_with_fallback
 from planhrc.planner.result import PlannerAttempt, PlanResult
 from planhrc.planner.validate import validate_plan
-from planhrc.settings import Settings
+from planhrc.settings import Settings, get_settings
 from planhrc.transition import TransitionError, parse_step, replay
 from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
@@ -77,8 +77,10 @@ def problem_name(obj: ArticulatedObject) -> str:
     return f"{obj.ident}-task"
 
 
-def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig) -> PlanOutcome:
-    """Translate, plan, validate and replay one task; returns a value and stores nothing."""
+def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig | None = None) -> PlanOutcome:
+    """Translate, plan, validate and replay one task; returns a value and stores nothing. Without `config`, the
+    settings (`PLANHRC_*` environment variables and their defaults) say how."""
+    config = config or config_from_settings(get_settings())
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     if is_subsumed(init, goal):

@@ -28,7 +28,7 @@ from typing import Iterator
 import numpy as np
 
 from planhrc.cli_args import http_url, non_negative_int, positive_int, writable_dir
-from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+from planhrc.client import KBClient, ProtocolError, RetryPolicy
 from planhrc.robot_sim.scene import SceneSpec, SimError, is_workable
 
 log = logging.getLogger(__name__)

@@ -7,7 +7,7 @@ The worker asks for that action (which dispatches it), runs the rotation skill â
 
 Everything is recorded in `out_dir`: `summary.json` (decisions, actions, outcomes, timings), one camera frame
 per perception (`frame_NNN.png`), `run.gif`, and `configurations.png` (top views of each successive
-configuration, like the paper's Figs 10-12). The worker owns its PyBullet client; only `robot_sim.protocol`
+configuration, like the paper's Figs 10-12). The worker owns its PyBullet client; only `planhrc.client`
 talks HTTP.
 """
 from __future__ import annotations
@@ -31,9 +31,9 @@ from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_nega
 from planhrc.robot_sim.human import (HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action, get_scenario,
                              goal_differences)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
+from planhrc.client import KBClient, ProtocolError
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
-from planhrc.robot_sim.protocol import KBClient, ProtocolError
 from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene
 from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
 

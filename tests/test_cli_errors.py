@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+from planhrc.client import KBClient, ProtocolError, RetryPolicy
 
 REPO = Path(__file__).resolve().parents[1]
 NOT_OWL = str(REPO / "README.md")

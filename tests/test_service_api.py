@@ -6,6 +6,7 @@ next_action's motion to the link orientations, as a worker would.
 from __future__ import annotations
 
 import json
+import re
 import warnings
 
 import pytest
@@ -96,7 +97,7 @@ def drive_to_goal(client, oid, links, formulation, max_steps=40) -> tuple[list[f
         answers.append(answer)
         if answer["decision"] == "goal_reached":
             return links, answers
-        action = client.get(f"/objects/{oid}/next-action").json()
+        action = client.post(f"/objects/{oid}/actions/next").json()
         assert action is not None and action["id"] == answer["next_action"]["id"]
         links = move(links, action)
         r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"})
@@ -134,7 +135,7 @@ def test_unknown_object_is_404(client):
     assert client.get("/objects/nope").status_code == 404
     assert client.put("/objects/nope/goal", json={"joint_angles_deg": [0]}).status_code == 404
     assert client.post("/objects/nope/perceptions", json={"link_orientations_deg": [0, 0]}).status_code == 404
-    assert client.get("/objects/nope/next-action").status_code == 404
+    assert client.post("/objects/nope/actions/next").status_code == 404
     assert client.get("/objects/nope/events").status_code == 404
     assert client.get("/states/nope").status_code == 404
     assert client.get("/plans/nope").status_code == 404
@@ -231,7 +232,7 @@ def test_nominal_episode_reaches_the_goal(client, formulation, k, goal):
     if formulation == "absolute":
         assert [v % 360 for v in links] == goal
     assert client.get(f"/objects/{oid}").json()["execution"]["status"] == "goal_reached"
-    assert client.get(f"/objects/{oid}/next-action").json() is None
+    assert client.post(f"/objects/{oid}/actions/next").json() is None
     kinds = [e["kind"] for e in client.get(f"/objects/{oid}/events").json()]
     assert kinds[-1] == "goal_reached" and kinds.count("continue") == len(plan["steps"]) - 1
 
@@ -263,7 +264,7 @@ def test_human_skipping_ahead_resumes_from_a_later_expected_state(client):
     assert answer["plan_id"] == first["plan_id"]
     assert answer["matched_expected_step"] == 3
     assert answer["next_action"]["step"] == 3
-    assert client.get(f"/objects/{oid}/next-action").json()["step"] == 3
+    assert client.post(f"/objects/{oid}/actions/next").json()["step"] == 3
 
 
 def test_disturbance_forces_a_replan(client):
@@ -284,7 +285,7 @@ def test_failed_action_is_retried_when_nothing_moved(client):
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
     perceive(client, oid, [0, 0, 0, 0])
-    action = client.get(f"/objects/{oid}/next-action").json()
+    action = client.post(f"/objects/{oid}/actions/next").json()
     r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "failed"})
     assert r.json()["execution"] == {"plan_id": action["plan_id"], "next_step": 1, "status": "ready",
                                      "dispatched_action_id": None}
@@ -301,7 +302,7 @@ def test_feedback_for_a_non_current_or_unknown_action(client):
     first = plan["steps"][0]["id"]
     # nothing dispatched yet
     assert client.post(f"/objects/{oid}/actions/{first}/feedback", json={"outcome": "succeeded"}).status_code == 409
-    client.get(f"/objects/{oid}/next-action")
+    client.post(f"/objects/{oid}/actions/next")
     before = kb_size(client, oid)
     r = client.post(f"/objects/{oid}/actions/{plan['steps'][1]['id']}/feedback", json={"outcome": "succeeded"})
     assert r.status_code == 409 and "action_id" in r.json()["detail"]
@@ -317,7 +318,7 @@ def test_perception_while_dispatched_and_late_feedback(client):
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 180, 180, 0]})
     perceive(client, oid, [0, 0, 0, 0])
-    action = client.get(f"/objects/{oid}/next-action").json()
+    action = client.post(f"/objects/{oid}/actions/next").json()
     # the same configuration perceived while the action runs: it stays dispatched
     assert perceive(client, oid, [0, 0, 0, 0])["decision"] == "continue"
     assert client.get(f"/objects/{oid}").json()["execution"]["status"] == "dispatched"
@@ -329,7 +330,7 @@ def test_perception_while_dispatched_and_late_feedback(client):
     assert r.status_code == 200 and r.json()["accepted"] == "late"
     # the perception already moved on; the feedback does not move it again
     assert r.json()["execution"]["next_step"] == after_motion
-    assert client.get(f"/objects/{oid}/next-action").json()["step"] == after_motion
+    assert client.post(f"/objects/{oid}/actions/next").json()["step"] == after_motion
 
 
 def test_unsolvable_or_failed_planning_answers_no_plan(client, monkeypatch):
@@ -342,7 +343,7 @@ def test_unsolvable_or_failed_planning_answers_no_plan(client, monkeypatch):
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
     answer = perceive(client, oid, [0, 0, 0, 0])
     assert answer["decision"] == "no_plan" and "unsolvable" in answer["reason"]
-    assert client.get(f"/objects/{oid}/next-action").json() is None
+    assert client.post(f"/objects/{oid}/actions/next").json() is None
     assert client.get(f"/objects/{oid}").json()["execution"]["status"] == "no_plan"
 
 
@@ -365,7 +366,7 @@ def test_idempotent_feedback(client):
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
     perceive(client, oid, [0, 0, 0, 0])
-    action = client.get(f"/objects/{oid}/next-action").json()
+    action = client.post(f"/objects/{oid}/actions/next").json()
     url = f"/objects/{oid}/actions/{action['id']}/feedback"
     one = client.post(url, json={"outcome": "succeeded"}, headers={"Idempotency-Key": "f-1"})
     two = client.post(url, json={"outcome": "succeeded"}, headers={"Idempotency-Key": "f-1"})
@@ -386,7 +387,7 @@ def test_token_guards_every_write_and_leaves_reads_open(auth_client):
     r = c.put(f"/objects/{oid}/goal", json={"joint_angles_deg": [90, 0]})
     assert r.status_code == 401 and r.headers["www-authenticate"] == "Bearer"
     assert c.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0]}).status_code == 401
-    assert c.get(f"/objects/{oid}/next-action").status_code == 401
+    assert c.post(f"/objects/{oid}/actions/next").status_code == 401
     assert c.post(f"/objects/{oid}/actions/x/feedback", json={"outcome": "failed"}).status_code == 401
     assert kb_size(c, oid) == before
     assert c.put(f"/objects/{oid}/goal", json={"joint_angles_deg": [90, 0]}, headers=good).status_code == 200
@@ -464,7 +465,7 @@ def test_partial_action_snaps_back_or_forward(client, turned_fraction, decision,
     oid = new_object(client, orientations=8)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 90]})
     perceive(client, oid, [0, 0, 0, 0])
-    action = client.get(f"/objects/{oid}/next-action").json()
+    action = client.post(f"/objects/{oid}/actions/next").json()
     part = dict(action, delta_deg=action["delta_deg"] * turned_fraction)
     links = move([0, 0, 0, 0], part)
     r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "partial"})
@@ -478,9 +479,9 @@ def test_next_action_is_dispatched_once(client):
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
     perceive(client, oid, [0, 0, 0, 0])
-    one = client.get(f"/objects/{oid}/next-action").json()
+    one = client.post(f"/objects/{oid}/actions/next").json()
     events = kb_size(client, oid)
-    two = client.get(f"/objects/{oid}/next-action").json()
+    two = client.post(f"/objects/{oid}/actions/next").json()
     assert one == two and kb_size(client, oid) == events
     assert client.get(f"/objects/{oid}").json()["execution"]["dispatched_action_id"] == one["id"]
 
@@ -508,7 +509,7 @@ def test_macro_step_covers_consecutive_steps_and_checks_the_state_after_it(macro
     oid = new_object(client, links=3, orientations=8)  # relative: 2 joints, 45 degree steps
     client.put(f"/objects/{oid}/goal", json={"joint_angles_deg": [90, 0]})
     first = perceive(client, oid, [0, 0, 0])
-    action = client.get(f"/objects/{oid}/next-action").json()
+    action = client.post(f"/objects/{oid}/actions/next").json()
     assert first["decision"] == "replan"
     assert (action["step"], action["last_step"], action["macro_steps"]) == (1, 2, 2)
     assert abs(action["delta_deg"]) == 90  # two 45 degree steps as one 90 degree motion
@@ -542,3 +543,35 @@ def test_a_perception_is_stored_all_or_nothing(client, monkeypatch):
     answer = perceive(client, oid, [0, 0, 0, 0])
     assert answer["decision"] == "replan" and kb.get_plan(answer["plan_id"]).actions
     assert client.get(f"/states/{answer['perceived_state_id']}").status_code == 200
+
+
+# -- HTTP semantics -----------------------------------------------------------------------------------------------
+def test_the_old_get_of_the_next_action_is_gone_and_changes_nothing(client):
+    oid = new_object(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
+    perceive(client, oid, [0, 0, 0, 0])
+    before = client.get(f"/objects/{oid}").json()["execution"]
+    r = client.get(f"/objects/{oid}/next-action")
+    assert r.status_code == 410 and f"POST /objects/{oid}/actions/next" in r.json()["detail"]
+    assert client.get(f"/objects/{oid}").json()["execution"] == before == {**before, "status": "ready"}
+    assert client.post(f"/objects/{oid}/actions/next").json()["step"] == 1
+    assert client.get(f"/objects/{oid}").json()["execution"]["status"] == "dispatched"
+
+
+def test_openapi_examples_use_ids_the_store_really_produces(client):
+    """Every id in the schemas' examples names a record that the first object's first episode stores."""
+    oid = new_object(client)
+    assert oid == "obj1"
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
+    assert perceive(client, oid, [0, 0, 0, 0])["plan_id"] == "obj1_plan_1"
+    text = json.dumps(client.get("/openapi.json").json())
+    ids = set(re.findall(r'"(obj\d+_(?:state|problem|plan)_\d+(?:_a\d+)?)"', text))
+    assert {"obj1_state_1", "obj1_problem_1", "obj1_plan_1", "obj1_plan_1_a2"} <= ids
+    routes = {"state": "/states/{}", "problem": "/problems/{}", "plan": "/plans/{}"}
+    for ident in sorted(ids):
+        kind = re.match(r"obj\d+_(state|problem|plan)", ident).group(1)
+        if re.search(r"_a\d+$", ident):
+            plan_id, step = ident.rsplit("_a", 1)
+            assert ident in [s["id"] for s in client.get(f"/plans/{plan_id}").json()["steps"]]
+            continue
+        assert client.get(routes[kind].format(ident)).status_code == 200, ident

@@ -101,14 +101,14 @@ def test_whole_episode_then_restart_on_the_same_database(tmp_path):
         assert len(plan["steps"]) == 4
 
         # 2. nominal: the robot executes a_1
-        action = c.get(f"/objects/{oid}/next-action").json()
+        action = c.post(f"/objects/{oid}/actions/next").json()
         links = move(links, action)
         assert c.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"}).status_code == 200
         answer = perceive(c, oid, noisy(links))
         assert (answer["decision"], answer["matched_expected_step"]) == ("continue", 2)
 
         # 3. a failed action: nothing moved, the same configuration is perceived -> retry a_2
-        action = c.get(f"/objects/{oid}/next-action").json()
+        action = c.post(f"/objects/{oid}/actions/next").json()
         assert action["step"] == 2
         assert c.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "failed"}).status_code == 200
         answer = perceive(c, oid, noisy(links))
@@ -222,7 +222,7 @@ def test_token_from_the_environment_and_live_events(tmp_path):
         listener.start()
         time.sleep(0.5)  # the stream is open before the events happen
         perceive(c, oid, [0, 0, 0])
-        c.get(f"/objects/{oid}/next-action")
+        c.post(f"/objects/{oid}/actions/next")
         listener.join(timeout=30)
         anonymous.close()
         assert received == ["replan", "dispatched"]

@@ -29,7 +29,7 @@ def service_url():
 
 @pytest.mark.parametrize("formulation", ["relative", "absolute"])
 def test_fig14_run_reaches_the_goal_through_the_service(service_url, tmp_path, formulation):
-    from planhrc.robot_sim.protocol import KBClient
+    from planhrc.client import KBClient
     from planhrc.robot_sim.worker import run_worker
 
     with KBClient(service_url, token="tok") as kb:
@@ -52,7 +52,7 @@ def test_worker_survives_a_restart_of_the_service_and_no_perception_counts_twice
     from pathlib import Path
 
     from planhrc.robot_sim.demo import free_port
-    from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+    from planhrc.client import KBClient, ProtocolError, RetryPolicy
     from planhrc.robot_sim.worker import run_worker
 
     repo = Path(__file__).resolve().parent.parent

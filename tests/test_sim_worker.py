@@ -47,8 +47,6 @@ class GreedyKB:
                     self._reply(200, {"id": "o1", "formulation": "relative", "orientations": 8, "step_deg": STEP,
                                       "links": [{"name": f"o1_l{i}", "length_m": 0.155} for i in range(1, 6)],
                                       "goal_state_id": None})
-                elif self.path == "/objects/o1/next-action":
-                    self._reply(200, kb.pending)
                 else:
                     self._reply(404, {"detail": "unknown"})
 
@@ -61,6 +59,8 @@ class GreedyKB:
                 kb.log.append(("POST", self.path, dict(self.headers), body))
                 if self.path.endswith("/perceptions"):
                     self._reply(200, kb.decide(body["link_orientations_deg"]))
+                elif self.path == "/objects/o1/actions/next":
+                    self._reply(200, kb.pending)
                 else:
                     self._reply(200, {"action_id": self.path.split("/")[-2], "accepted": "current"})
 

@@ -1,5 +1,16 @@
-"""The worker's only link to the knowledge-base service: a small HTTP client (httpx).
+"""The public HTTP client of the knowledge-base service (httpx): what the Baxter worker uses, and what anyone
+embedding planhrc uses to drive the service from another process.
 
+    from planhrc.client import KBClient
+
+    with KBClient("http://127.0.0.1:8000", token="T") as kb:
+        oid = kb.create_object("rod", links=4, orientations=4, formulation="relative")["id"]
+        kb.set_goal(oid, link_orientations_deg=[0, 90, 90, 180])
+        decision = kb.post_perception(oid, [0, 0, 0, 0])      # decision.decision: replan, continue, ...
+        action = kb.next_action(oid)                          # marks it dispatched; None when there is none
+        kb.post_feedback(oid, action["id"], "succeeded")
+
+It imports only the bottom layer (`planhrc.vocabulary`) and httpx, never the service's code.
 Connection errors and 5xx answers are retried with exponential backoff (the service may be restarting).
 Every perception and every feedback carries an ``Idempotency-Key`` (uuid4) that stays the same across the
 retries of that one request, so a request that reached the service before the connection dropped is not
@@ -15,6 +26,8 @@ from typing import Any, Callable, Sequence
 
 import httpx
 
+from planhrc.vocabulary import ActionOutcome, DecisionKind
+
 log = logging.getLogger(__name__)
 
 
@@ -24,7 +37,8 @@ FINAL_TRANSPORT_ERRORS = (httpx.UnsupportedProtocol, httpx.InvalidURL, httpx.Loc
 
 
 class ProtocolError(Exception):
-    """The service refused a request (4xx) or stayed unreachable after every retry."""
+    """Root of the client's errors: the service refused a request (4xx, `status` says which) or stayed
+    unreachable after every retry."""
 
     def __init__(self, message: str, status: int | None = None) -> None:
         super().__init__(message)
@@ -50,7 +64,7 @@ class RetryPolicy:
 class Decision:
     """The service's answer to a perception (unknown keys are kept in `raw`)."""
 
-    decision: str
+    decision: DecisionKind
     plan_id: str | None
     next_action: dict[str, Any] | None
     matched_expected_step: int | None
@@ -61,8 +75,12 @@ class Decision:
     def from_json(cls, data: dict[str, Any]) -> "Decision":
         if "decision" not in data:
             raise ProtocolError("decision: missing from the service's answer")
+        try:
+            kind = DecisionKind(data["decision"])
+        except ValueError:
+            raise ProtocolError(f"decision: unknown kind {data['decision']!r} in the service's answer") from None
         return cls(
-            decision=str(data["decision"]),
+            decision=kind,
             plan_id=data.get("plan_id"),
             next_action=data.get("next_action"),
             matched_expected_step=data.get("matched_expected_step"),
@@ -94,7 +112,7 @@ class KBClient:
     def __enter__(self) -> "KBClient":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # -- transport with retries ------------------------------------------------------------------------------
@@ -141,15 +159,16 @@ class KBClient:
         return Decision.from_json(self._request("POST", f"/objects/{object_id}/perceptions", body, key))
 
     def next_action(self, object_id: str) -> dict[str, Any] | None:
-        """The action to execute now (the service marks it dispatched), or None."""
-        data = self._request("GET", f"/objects/{object_id}/next-action")
-        if isinstance(data, dict) and "next_action" in data and "turned_link_index" not in data:
-            return data["next_action"]  # the wrapped form {"decision": ..., "next_action": ...}
+        """Take the action to execute now (`POST /objects/{id}/actions/next`: the service marks it dispatched;
+        asking again returns the same action), or None when there is none."""
+        data: dict[str, Any] | None = self._request("POST", f"/objects/{object_id}/actions/next")
         return data
 
-    def post_feedback(self, object_id: str, action_id: str, outcome: str, message: str = "") -> dict[str, Any]:
+    def post_feedback(self, object_id: str, action_id: str, outcome: ActionOutcome | str,
+                      message: str = "") -> dict[str, Any]:
+        """Report the outcome of the dispatched action: succeeded, failed or partial."""
         key = str(uuid.uuid4())
-        body: dict[str, Any] = {"outcome": outcome}
+        body: dict[str, Any] = {"outcome": str(outcome)}
         if message:
             body["message"] = message
         return self._request("POST", f"/objects/{object_id}/actions/{action_id}/feedback", body, key)

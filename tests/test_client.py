@@ -5,7 +5,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 
-from planhrc.robot_sim.protocol import KBClient, ProtocolError, RetryPolicy
+from planhrc.client import KBClient, ProtocolError, RetryPolicy
 
 pytestmark = pytest.mark.sim
 

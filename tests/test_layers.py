@@ -1,0 +1,113 @@
+"""Imports run one way: every module's imports (function-level ones included) point to its own layer or below.
+
+    0 model        planhrc.model, .vocabulary, .transition, .cooperation, .paths, .settings, .geometry, ontology
+    0.5 client     planhrc.client (layer 0 and httpx only)
+    1 translator   planhrc.translator
+    2 planner      planhrc.planner
+    3 pipeline     planhrc.pipeline, planhrc.solve
+    4 service      planhrc.kb_service (HTTP, service layer, the knowledge-base store, reasoners)
+    5 top          planhrc (the lazy facade), planhrc.cli, .bench, .plots, .service_bench, planhrc.robot_sim
+
+`planhrc.robot_sim` may import only layer 0 and the client. A module missing from `LAYERS` fails the test, so a
+new module is placed on purpose.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+# folder of the repository -> its import name (the package-dir mapping of pyproject.toml)
+PACKAGES = {"planhrc": "planhrc", "kb_service": "planhrc.kb_service", "translator": "planhrc.translator",
+            "planner": "planhrc.planner", "robot_sim": "planhrc.robot_sim", "ontology": "planhrc.ontology"}
+
+# Longest prefix wins.
+LAYERS: dict[str, float] = {
+    "planhrc.model": 0, "planhrc.vocabulary": 0, "planhrc.transition": 0, "planhrc.cooperation": 0,
+    "planhrc.paths": 0, "planhrc.settings": 0, "planhrc.geometry": 0, "planhrc.ontology": 0,
+    "planhrc.client": 0.5,
+    "planhrc.translator": 1,
+    "planhrc.planner": 2,
+    "planhrc.pipeline": 3, "planhrc.solve": 3,
+    "planhrc.kb_service": 4,
+    "planhrc": 5, "planhrc.cli": 5, "planhrc.bench": 5, "planhrc.plots": 5, "planhrc.service_bench": 5,
+    "planhrc.robot_sim": 5,
+}
+# Besides its own package, robot_sim reaches only these layers (the service only over HTTP).
+ROBOT_SIM_MAY_IMPORT = {0, 0.5}
+
+
+def layer_of(module: str) -> float | None:
+    best = None
+    for prefix in LAYERS:
+        if (module == prefix or module.startswith(prefix + ".")) and (best is None or len(prefix) > len(best)):
+            best = prefix
+    return None if best is None else LAYERS[best]
+
+
+def modules() -> dict[str, Path]:
+    out = {}
+    for folder, package in PACKAGES.items():
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            parts = path.relative_to(ROOT / folder).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join((package,) + parts)] = path
+    return out
+
+
+def imports_of(module: str, source: str, is_package: bool = False) -> set[str]:
+    """Every planhrc module `module` imports, at the top or inside functions (TYPE_CHECKING blocks included).
+    The package `planhrc` itself is left out (its facade is lazy); a name taken from it is not."""
+    found = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")
+                base = base[: len(base) - node.level + (1 if is_package else 0)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            found.add(target)
+            found.update(f"{target}.{alias.name}" for alias in node.names)  # `from pkg import module`
+    return {name for name in found if name.startswith("planhrc.")}
+
+
+ALL = modules()
+
+
+def test_every_module_has_a_layer():
+    assert [m for m in ALL if layer_of(m) is None] == []
+
+
+@pytest.mark.parametrize("module", sorted(ALL))
+def test_no_import_points_up(module):
+    own = layer_of(module)
+    upward = []
+    path = ALL[module]
+    for target in sorted(imports_of(module, path.read_text(), path.name == "__init__.py")):
+        if target not in ALL and target.rsplit(".", 1)[0] in ALL:
+            continue  # `from pkg.module import name`: the module itself is checked
+        layer = layer_of(target)
+        if layer is None or own is None:
+            continue
+        if module.startswith("planhrc.robot_sim"):
+            if not target.startswith("planhrc.robot_sim") and layer not in ROBOT_SIM_MAY_IMPORT:
+                upward.append(f"{target} (layer {layer}; the worker reaches the service only over HTTP)")
+        elif layer > own:
+            upward.append(f"{target} (layer {layer} above {own})")
+    assert upward == [], f"{module} imports upward: {upward}"
+
+
+def test_the_walk_sees_function_level_and_relative_imports():
+    """The checker itself: an import inside a function counts, relative imports resolve, facade names count."""
+    source = "from .locks import ObjectLocks\ndef f():\n    from planhrc.kb_service import app\n"
+    found = imports_of("planhrc.kb_service.orchestrator", source)
+    assert {"planhrc.kb_service.locks", "planhrc.kb_service.app"} <= found
+    assert imports_of("planhrc.translator", "from .domain import x\n", is_package=True) >= {"planhrc.translator.domain"}
+    assert layer_of("planhrc.kb_service.app") > layer_of("planhrc.model")
+    assert layer_of(next(iter(imports_of("planhrc.model", "from planhrc import plan\n")))) == 5
