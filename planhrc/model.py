@@ -1,6 +1,6 @@
 """Immutable values shared by every stage: articulated objects, ground atoms and states.
 
-Conventions (see CONVENTIONS.md of the project): orientations are integer degrees in [0, 360), clockwise
+Conventions (see CONVENTIONS.md): orientations are integer degrees in [0, 360), clockwise
 seen from above; K allowed orientations are {0, step, 2*step, ...} with step = 360 / K.
 
 * Relative formulation: links l1..lN, joints j1..j(N-1); jK joins lK and lK+1 and carries the angle of
@@ -17,6 +17,7 @@ A ground atom is a PDDL-style tuple ``(predicate, arg, ...)`` with lower-case na
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from enum import Enum
 from typing import Iterable, Sequence
@@ -279,6 +280,15 @@ def make_object(
 def is_subsumed(s1: State | frozenset, s2: State | frozenset) -> bool:
     """D(s1) ⊑ D(s2): every atom that s2 asserts is asserted by s1 (s2 may be partial)."""
     return s2 <= s1
+
+
+_DIGITS = re.compile(r"(\d+)")
+
+
+def natural_key(name: str) -> tuple[tuple[int, int | str], ...]:
+    """Sort key that orders the numbers inside names by value: `obj1_l2` before `obj1_l10`, `deg_30` before
+    `deg_120`. The one natural sort of the project."""
+    return tuple((0, int(part)) if part.isdigit() else (1, part) for part in _DIGITS.split(name) if part)
 
 
 def format_atom(atom: Atom) -> str:

@@ -33,6 +33,8 @@ from typing import Any, Callable, Iterator
 
 import httpx
 
+from planhrc.stats import percentile
+
 TOKEN = "service-bench-token"
 READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
 
@@ -41,16 +43,6 @@ READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
 class Server:
     base: str
     pid: int
-
-
-def percentile(values: list[float], q: float) -> float:
-    """The q-quantile (0..1) by linear interpolation; NaN for no values."""
-    if not values:
-        return float("nan")
-    ordered = sorted(values)
-    k = (len(ordered) - 1) * q
-    lo, hi = int(k), min(int(k) + 1, len(ordered) - 1)
-    return ordered[lo] + (ordered[hi] - ordered[lo]) * (k - lo)
 
 
 def rss_mb(pid: int) -> float:

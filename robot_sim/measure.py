@@ -20,12 +20,8 @@ from pybullet_utils.bullet_client import BulletClient
 from planhrc.cli_args import non_negative_int, positive_int, writable_file
 from planhrc.robot_sim.perception import CameraPerception, angle_difference_deg
 from planhrc.robot_sim.scene import SceneSpec, build_scene, is_workable, random_orientations
+from planhrc.stats import percentile
 from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
-
-
-def _percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
 
 
 def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dict:
@@ -68,7 +64,7 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
         scene.close()
         client.disconnect()
     return {
-        "marker_error_deg": {"links": len(errors), "mean": statistics.fmean(errors), "p95": _percentile(errors, 0.95),
+        "marker_error_deg": {"links": len(errors), "mean": statistics.fmean(errors), "p95": percentile(errors, 0.95),
                              "max": max(errors), "missed_markers": missed},
         "perception_s": {"median": statistics.median(frame_s), "max": max(frame_s)},
         "rotation_action_s": {"median": statistics.median(rotation_s), "max": max(rotation_s),

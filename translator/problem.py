@@ -8,7 +8,7 @@ from __future__ import annotations
 import io
 from typing import Iterable, TextIO
 
-from planhrc.model import HAS_ORIENTATION, ArticulatedObject, Atom, Formulation, format_atom
+from planhrc.model import HAS_ORIENTATION, ArticulatedObject, Atom, Formulation, format_atom, natural_key
 
 from .errors import TranslationError
 
@@ -44,7 +44,7 @@ def write_problem(
     out.write(f"  (:domain {domain_name or DOMAIN_NAMES[obj.formulation]})\n")
     out.write("  (:objects\n")
     for type_name in ("link", "joint", "orientation"):
-        names = sorted(objects[type_name], key=_natural_key)
+        names = sorted(objects[type_name], key=natural_key)
         out.write(f"    {' '.join(names)} - {type_name}\n")
     out.write("  )\n")
     out.write("  (:init\n")
@@ -64,12 +64,5 @@ def get_problem(obj: ArticulatedObject, init: Iterable[Atom], goal: Iterable[Ato
     return buf.getvalue()
 
 
-def _natural_key(name: str) -> tuple:
-    head, _, tail = name.rpartition("_")
-    digits = "".join(ch for ch in tail if ch.isdigit())
-    prefix = tail.rstrip("0123456789")
-    return (head, prefix, int(digits) if digits else -1, name)
-
-
-def _atom_key(atom: Atom) -> tuple:
-    return (atom[0],) + tuple(_natural_key(a) for a in atom[1:])
+def _atom_key(atom: Atom) -> tuple[object, ...]:
+    return (atom[0],) + tuple(natural_key(a) for a in atom[1:])

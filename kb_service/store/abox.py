@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import re
 import threading
 import time
 from contextlib import contextmanager
@@ -36,6 +35,7 @@ from planhrc.model import (
     ModelError,
     Perception,
     format_atom,
+    natural_key,
     orientation_name,
     perceive,
 )
@@ -91,7 +91,6 @@ _TABLES = (
     "CREATE TABLE IF NOT EXISTS planhrc_counter (name TEXT PRIMARY KEY, value INTEGER)",
 )
 
-_ID_SUFFIX = re.compile(r"_(\d+)$")
 
 
 def _short(obj: ArticulatedObject, name: str) -> str:
@@ -466,7 +465,7 @@ class Abox:
             self._check_open()
             sids = self._q.subjects(RDF_TYPE, self._t["ArticulatedObject"], self._c)
             self._names(sids)
-            idents = sorted((self._sid_name[s] for s in sids), key=_natural_key)
+            idents = sorted((self._sid_name[s] for s in sids), key=natural_key)
             return tuple(self._info(i).obj for i in idents)
 
     # -- validation helpers -----------------------------------------------------------------------------
@@ -766,7 +765,7 @@ class Abox:
         if not sids:
             return None
         self._names(sids)
-        return max((self._sid_name[s] for s in sids), key=_natural_key)
+        return max((self._sid_name[s] for s in sids), key=natural_key)
 
     def latest_problem(self, object_id: str) -> StoredProblem | None:
         with self._lock:
@@ -975,8 +974,3 @@ class Abox:
         with self._lock:
             self._check_open()
             return self._q.count()
-
-
-def _natural_key(name: str) -> tuple[str, int]:
-    m = _ID_SUFFIX.search(name)
-    return (name[: m.start()], int(m.group(1))) if m else (name, -1)
