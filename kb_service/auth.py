@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import hmac
 
+from .store.errors import KBError
 
-class AuthError(Exception):
+
+class AuthError(KBError):
     """The request changes something and does not carry the configured bearer token."""
 
 

@@ -26,6 +26,7 @@ from typing import Any, Callable, Sequence
 
 import httpx
 
+from planhrc.errors import PlanhrcError
 from planhrc.vocabulary import ActionOutcome, DecisionKind
 
 log = logging.getLogger(__name__)
@@ -36,7 +37,7 @@ log = logging.getLogger(__name__)
 FINAL_TRANSPORT_ERRORS = (httpx.UnsupportedProtocol, httpx.InvalidURL, httpx.LocalProtocolError)
 
 
-class ProtocolError(Exception):
+class ProtocolError(PlanhrcError):
     """Root of the client's errors: the service refused a request (4xx, `status` says which) or stayed
     unreachable after every retry."""
 

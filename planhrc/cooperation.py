@@ -20,11 +20,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from planhrc.errors import PlanhrcError
 from planhrc.model import State, is_subsumed
 from planhrc.vocabulary import ActionOutcome, DecisionKind
 
 
-class CooperationError(ValueError):
+class CooperationError(PlanhrcError, ValueError):
     """A plan view that does not describe a plan (the message names the field)."""
 
 

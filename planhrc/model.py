@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Iterable, Sequence
 
+from planhrc.errors import PlanhrcError
+
 Atom = tuple[str, ...]
 State = frozenset[Atom]
 
@@ -31,7 +33,7 @@ ORIENTATION_ORD = "orientationord"
 AFFECTED = "affected"
 
 
-class ModelError(Exception):
+class ModelError(PlanhrcError):
     """Invalid object description or configuration; the message names the offending field."""
 
 

@@ -5,8 +5,10 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+from planhrc.errors import PlanhrcError
 
-class DataFileError(FileNotFoundError):
+
+class DataFileError(PlanhrcError, FileNotFoundError):
     """A data file that should ship with the package is not there (a broken install)."""
 
 

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from typing import Iterator, Mapping, Sequence
 
+from planhrc.errors import PlanhrcError
 from planhrc.model import ActionSchemaSpec, ActionSpec, Atom, CondEffect, DomainModelSpec, Literal, State
 
 
-class TransitionError(Exception):
+class TransitionError(PlanhrcError):
     """A plan step does not match a schema or is not applicable in the state it is applied to."""
 
 
