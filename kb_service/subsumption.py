@@ -63,18 +63,6 @@ def describe_state(atoms: Iterable[Atom]) -> str:
     return " and ".join(parts) if parts else "owl:Thing"
 
 
-def state_class_expression(atoms: Iterable[Atom], tbox, individuals: dict[str, Thing]):
-    """D(s) as an owlready2 class construct over the TBox `tbox` and the named `individuals`."""
-    conjuncts = []
-    for atom in sorted(atoms):
-        cls = getattr(tbox, PREDICATES[atom[0]][0])
-        restrictions = [getattr(tbox, prop).some(OneOf([individuals[name]])) for prop, name in _owl_args(atom)]
-        conjuncts.append(tbox.madeof.some(And([cls] + restrictions)))
-    if not conjuncts:
-        return Thing
-    return conjuncts[0] if len(conjuncts) == 1 else And(conjuncts)
-
-
 _TYPE_CLASS = {"link": "Link", "joint": "Joint", "orientation": "Orientation"}
 METHODS = ("unsat", "classify")
 

@@ -15,10 +15,6 @@ from .errors import TranslationError
 DOMAIN_NAMES = {Formulation.RELATIVE: "planhrc-relative", Formulation.ABSOLUTE: "planhrc-absolute"}
 
 
-def _degrees(name: str) -> int:
-    return int(name.split("_", 1)[1])
-
-
 def write_problem(
     out: TextIO,
     obj: ArticulatedObject,
