@@ -93,7 +93,7 @@ def run_serve(args: argparse.Namespace) -> int:
     import uvicorn
     from pydantic import ValidationError
 
-    from planhrc.cli import settings_error_line
+    from planhrc.cli_args import settings_error_line
     from planhrc.settings import make_settings
 
     from .app import create_app

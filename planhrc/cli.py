@@ -17,7 +17,7 @@ import threading
 from contextlib import ExitStack, contextmanager, nullcontext
 from typing import Callable, Iterator
 
-from planhrc.cli_args import OneLineParser
+from planhrc.cli_args import OneLineParser, settings_error_line
 
 # command -> (module, name of its `add_*_parser(subparsers)` function, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -169,17 +169,6 @@ def restore_signal_handlers(previous: dict[int, object]) -> None:
 def _user_error_types() -> tuple[type[BaseException], ...]:
     types = [getattr(sys.modules[m], n) for m, n in USER_ERRORS if m in sys.modules and hasattr(sys.modules[m], n)]
     return tuple(types)
-
-
-def settings_error_line(exc: Exception, cli_names: dict[str, str] | None = None) -> str:
-    """A pydantic ValidationError of the settings as one line naming the option or `PLANHRC_*` variable."""
-    cli_names = cli_names or {}
-    parts = []
-    for error in exc.errors():  # type: ignore[attr-defined]
-        field = str(error["loc"][0]) if error.get("loc") else "?"
-        name = cli_names.get(field, f"PLANHRC_{field.upper()}")
-        parts.append(f"{name}: {error['msg']}, got {error.get('input')!r}")
-    return "; ".join(parts)
 
 
 def _run(argv: list[str]) -> int:

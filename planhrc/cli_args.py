@@ -206,3 +206,14 @@ def float_tuple(text: str) -> tuple[float, ...]:
     if not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
     return values
+
+
+def settings_error_line(exc: Exception, cli_names: dict[str, str] | None = None) -> str:
+    """A pydantic ValidationError of the settings as one line naming the option or `PLANHRC_*` variable."""
+    cli_names = cli_names or {}
+    parts = []
+    for error in exc.errors():  # type: ignore[attr-defined]
+        field = str(error["loc"][0]) if error.get("loc") else "?"
+        name = cli_names.get(field, f"PLANHRC_{field.upper()}")
+        parts.append(f"{name}: {error['msg']}, got {error.get('input')!r}")
+    return "; ".join(parts)
