@@ -130,21 +130,34 @@ class Orchestrator:
                 decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
                 if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
                     outcome = self._run_pipeline(obj, perception.atoms, goal.atoms)
+            # VAL checks a new plan while the store writes it; the write commits only once VAL has accepted it.
+            checked = self.planning.validate and outcome is not None and outcome.solved and bool(outcome.actions)
+            validation = _Validation(outcome) if checked and outcome is not None else None
             new_view = None
-            with self.kb.transaction():
-                perceived = self.kb.add_perception(perception)
-                extra: dict[str, Any] = {}
-                if goal is None or decision is None:
-                    answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
-                                     "no goal is set: PUT /objects/{id}/goal first")
-                else:
-                    extra["goal_state_id"] = goal.id
-                    if outcome is None:
-                        answer = self._follow(obj, perceived, execution, plan, decision)
+            try:
+                with self.kb.transaction():
+                    perceived = self.kb.add_perception(perception)
+                    extra: dict[str, Any] = {}
+                    if goal is None or decision is None:
+                        answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
+                                         "no goal is set: PUT /objects/{id}/goal first")
                     else:
-                        answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra)
-                self._log_decision(object_id, answer, extra)
-                self._remember(object_id, idempotency_key, fingerprint, answer)
+                        extra["goal_state_id"] = goal.id
+                        if outcome is None:
+                            answer = self._follow(obj, perceived, execution, plan, decision)
+                        else:
+                            answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra,
+                                                           validation)
+                    self._log_decision(object_id, answer, extra)
+                    self._remember(object_id, idempotency_key, fingerprint, answer)
+            except _Refused as refused:  # VAL refused the new plan: the same perception, without it
+                assert goal is not None and decision is not None
+                with self.kb.transaction():
+                    perceived = self.kb.add_perception(perception)
+                    extra = {"goal_state_id": goal.id}
+                    answer, new_view = self._adopt(obj, perceived, goal, decision, refused.outcome, extra, None)
+                    self._log_decision(object_id, answer, extra)
+                    self._remember(object_id, idempotency_key, fingerprint, answer)
             if new_view is not None:
                 with self._guard:
                     self._views[new_view[0].id] = new_view
@@ -152,7 +165,7 @@ class Orchestrator:
 
     def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State) -> PlanOutcome:
         try:
-            return pipeline.plan(obj, init, goal, self.planning)
+            return pipeline.plan(obj, init, goal, self.planning, defer_validation=True)
         except Exception as exc:  # a crashing stage must not leave the perception without a decision
             log.exception("planning failed for %s", obj.ident)
             return PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", self.planning.planner)
@@ -175,15 +188,22 @@ class Orchestrator:
                        decision.matched_expected_step, decision.reason)
 
     def _adopt(self, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
-               outcome: PlanOutcome, extra: dict[str, Any]
+               outcome: PlanOutcome, extra: dict[str, Any], validation: _Validation | None
                ) -> tuple[dict[str, Any], tuple[StoredPlan, PlanView] | None]:
-        """Store the re-planning's problem and, when solved, its plan with expected states; move the execution."""
+        """Store the re-planning's problem and, when solved, its plan with expected states; move the execution.
+        A plan still being checked (`validation`) is kept only if VAL accepts it; else `_Refused` is raised, which
+        rolls the write back."""
         problem = self.kb.add_problem(obj.ident, perceived.id, goal.id)
+        if outcome.solved and outcome.actions:
+            plan = self.kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states)
+            if validation is not None:
+                outcome = validation.result()
+                if not outcome.validated:
+                    raise _Refused(outcome)
+            self.kb.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
         extra.update({"planning_status": outcome.status, "problem_id": problem.id,
                       "timings": {k: round(v, 6) for k, v in outcome.timings.items()}})
         if outcome.solved and outcome.actions:
-            plan = self.kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states)
-            self.kb.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
             view = PlanView(expected_states=outcome.expected_states,
                             preconditions=tuple(a.pre for a in outcome.actions))
             reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions"
@@ -441,3 +461,34 @@ def _goal_atoms(obj: ArticulatedObject, link_orientations_deg: Sequence[float] |
         return obj.configuration_atoms(values)
     assert joint_angles_deg is not None
     return obj.partial_configuration_atoms(joint_angles_deg, field="joint_angles_deg")
+
+
+class _Refused(Exception):
+    """VAL refused a plan while the store was writing it (carries the invalid outcome)."""
+
+    def __init__(self, outcome: PlanOutcome) -> None:
+        super().__init__(outcome.message)
+        self.outcome = outcome
+
+
+class _Validation:
+    """`pipeline.validate(outcome)` running in a thread (VAL is a separate process) while the store writes."""
+
+    def __init__(self, outcome: PlanOutcome) -> None:
+        self._outcome = outcome
+        self._checked: PlanOutcome | None = None
+        self._thread = threading.Thread(target=self._run, name="planhrc-val", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            self._checked = pipeline.validate(self._outcome)
+        except Exception as exc:  # VAL could not run: the plan is not accepted
+            log.exception("VAL failed on a plan of %s", self._outcome.planner)
+            self._checked = PlanOutcome(PlanningStatus.ERROR, f"VAL could not run: {type(exc).__name__}: {exc}",
+                                        self._outcome.planner, timings=self._outcome.timings)
+
+    def result(self) -> PlanOutcome:
+        self._thread.join()
+        assert self._checked is not None
+        return self._checked

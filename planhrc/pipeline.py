@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping, Protocol, Sequence
 
@@ -66,6 +66,8 @@ class PlanOutcome:
     timings: Mapping[str, float] = field(default_factory=dict)
     task: PddlTask | None = None
     attempts: tuple[PlannerAttempt, ...] = ()
+    steps: tuple[str, ...] = ()  # the planner's plan as VAL reads it, one "(action arg ...)" per step
+    validated: bool = False  # VAL accepted the plan
 
     @property
     def solved(self) -> bool:
@@ -77,9 +79,13 @@ def problem_name(obj: ArticulatedObject) -> str:
     return f"{obj.ident}-task"
 
 
-def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig | None = None) -> PlanOutcome:
+def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig | None = None, *,
+         defer_validation: bool = False) -> PlanOutcome:
     """Translate, plan, validate and replay one task; returns a value and stores nothing. Without `config`, the
-    settings (`PLANHRC_*` environment variables and their defaults) say how."""
+    settings (`PLANHRC_*` environment variables and their defaults) say how.
+
+    `defer_validation` leaves VAL to the caller, who runs `validate(outcome)` (e.g. while it stores the plan) and
+    must not use the plan before VAL accepted it (`validated`)."""
     config = config or config_from_settings(get_settings())
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -98,7 +104,7 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
         return PlanOutcome(status, result.message or result.status.value, result.planner, None,
                            timings=timings, task=task, attempts=result.attempts)
 
-    if config.validate:
+    if config.validate and not defer_validation:
         t = time.perf_counter()
         check = validate_plan(task.validation_domain, task.problem, result.plan)
         timings["validate"] = time.perf_counter() - t
@@ -119,7 +125,23 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
     timings["expected_states"] = time.perf_counter() - t
     timings["pipeline"] = time.perf_counter() - t0
     return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
-                       tuple(states), timings, task, result.attempts)
+                       tuple(states), timings, task, result.attempts, tuple(result.plan),
+                       validated=config.validate and not defer_validation)
+
+
+def validate(outcome: PlanOutcome) -> PlanOutcome:
+    """VAL on the plan of an outcome made with `defer_validation`: the outcome, now `validated`, or an invalid
+    outcome saying why VAL refused it. Outcomes without a plan to check come back unchanged."""
+    if not outcome.solved or not outcome.actions or outcome.validated or outcome.task is None:
+        return outcome
+    t = time.perf_counter()
+    check = validate_plan(outcome.task.validation_domain, outcome.task.problem, outcome.steps)
+    timings = {**outcome.timings, "validate": time.perf_counter() - t}
+    if check.valid:
+        return replace(outcome, validated=True, timings=timings)
+    log.warning("plan of %s rejected by VAL: %s", outcome.planner, check.reason)
+    return PlanOutcome(PlanningStatus.INVALID, f"VAL rejected the plan: {check.reason}", outcome.planner,
+                       timings=timings, task=outcome.task, attempts=outcome.attempts)
 
 
 def run_planners(task: PddlTask, config: PlanningConfig) -> PlanResult:

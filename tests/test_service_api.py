@@ -575,3 +575,24 @@ def test_openapi_examples_use_ids_the_store_really_produces(client):
             assert ident in [s["id"] for s in client.get(f"/plans/{plan_id}").json()["steps"]]
             continue
         assert client.get(routes[kind].format(ident)).status_code == 200, ident
+
+
+def test_a_plan_val_refuses_is_never_stored_or_dispatched(client, monkeypatch):
+    """VAL runs while the store writes the new plan; when it refuses, the write is rolled back and the perception
+    is stored alone, answered no_plan. (VAL is made to refuse: the unit under test is the orchestrator.)"""
+    from planhrc import pipeline
+    from planhrc.planner.validate import ValidationResult
+
+    monkeypatch.setattr(pipeline, "validate_plan", lambda *a, **k: ValidationResult(False, "stub refusal", 0.0))
+    oid = new_object(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
+    answer = perceive(client, oid, [0, 0, 0, 0])
+    assert answer["decision"] == "no_plan" and "VAL rejected the plan: stub refusal" in answer["reason"]
+    assert client.get(f"/objects/{oid}/plan").status_code == 404
+    assert client.post(f"/objects/{oid}/actions/next").json() is None
+    assert client.get(f"/states/{answer['perceived_state_id']}").json()["kind"] == "perceived"
+    events = client.get(f"/objects/{oid}/events").json()
+    assert events[-1]["kind"] == "no_plan" and events[-1]["data"]["planning_status"] == "invalid"
+    monkeypatch.undo()
+    again = perceive(client, oid, [0, 0, 0, 0])
+    assert again["decision"] == "replan" and client.get(f"/plans/{again['plan_id']}").status_code == 200
