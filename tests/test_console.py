@@ -351,9 +351,7 @@ def test_with_protected_reads_the_token_field_opens_the_page(browser, tmp_path):
 
 def take_next_action(client: httpx.Client, oid: str) -> dict:
     """What a worker does (never the console): take the next action for execution."""
-    r = client.post(f"/objects/{oid}/next-action")
-    if r.status_code == 405:  # the service before next-action became a POST
-        r = client.get(f"/objects/{oid}/next-action")
+    r = client.post(f"/objects/{oid}/actions/next")
     assert r.status_code == 200, r.text
     return r.json()
 
