@@ -65,7 +65,7 @@ def require_writer(request: Request, authorization: Annotated[str | None, Header
 
 Orch = Annotated[Orchestrator, Depends(get_orchestrator)]
 Writer = [Depends(require_writer)]
-WRITE_ERRORS = {401: ERRORS[401], 409: ERRORS[409]}
+WRITE_ERRORS: dict[int | str, dict[str, Any]] = {401: ERRORS[401], 409: ERRORS[409]}
 
 
 # -- objects ------------------------------------------------------------------------------------------------
@@ -240,7 +240,8 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RequestValidationError, _request_validation_error)
 
 
-async def _request_validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+async def _request_validation_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)  # registered for that type only
     errors = exc.errors()
     messages = [f"{_field_path(e.get('loc', ()))}: {e.get('msg', 'invalid')}" for e in errors]
     return JSONResponse({"detail": "; ".join(messages) or "invalid request",

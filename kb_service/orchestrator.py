@@ -457,7 +457,7 @@ def _goal_atoms(obj: ArticulatedObject, link_orientations_deg: Sequence[float] |
         _check_finite(link_orientations_deg, field)
         if any(v is None for v in link_orientations_deg):
             raise ValidationError(f"{field}: every link needs an orientation")
-        values = obj.joint_values_from_links([int(v) for v in _allowed(obj, link_orientations_deg, field)])
+        values = obj.joint_values_from_links([int(v) for v in _allowed(obj, link_orientations_deg, field) if v is not None])
         return obj.configuration_atoms(values)
     assert joint_angles_deg is not None
     return obj.partial_configuration_atoms(joint_angles_deg, field="joint_angles_deg")

@@ -96,7 +96,7 @@ class _Describer:
         self.block_classes: dict[frozenset, Any] = {}
 
     def _named(self, prefix: str, n: int, expr):
-        cls = type(f"{prefix}_{n}", (Thing,), {"namespace": self.abox})
+        cls: Any = type(f"{prefix}_{n}", (Thing,), {"namespace": self.abox})
         cls.equivalent_to.append(expr)
         return cls
 
@@ -157,16 +157,16 @@ def dl_subsumption(
                 AllDifferent(list(individuals.values()))
             describer = _Describer(world, tbox, abox, individuals)
             if method == "classify":
-                classes = []
+                classes: list[tuple[Any, Any]] = []
                 for i, (s1, s2) in enumerate(pairs):
-                    s_cls = type(f"S_{i}", (Thing,), {"namespace": abox})
-                    g_cls = type(f"G_{i}", (Thing,), {"namespace": abox})
+                    s_cls: Any = type(f"S_{i}", (Thing,), {"namespace": abox})
+                    g_cls: Any = type(f"G_{i}", (Thing,), {"namespace": abox})
                     s_cls.equivalent_to.append(describer.describe(s1))
                     g_cls.equivalent_to.append(describer.describe(s2))
                     classes.append((s_cls, g_cls))
             else:
                 for i, (s1, s2) in enumerate(pairs):
-                    q_cls = type(f"Q_{i}", (Thing,), {"namespace": abox})
+                    q_cls: Any = type(f"Q_{i}", (Thing,), {"namespace": abox})
                     q_cls.is_a.append(And([describer.describe(s1), Not(describer.describe(s2))]))
         if method == "unsat":
             unsat = _pellet_unsatisfiable(world, timeout_s)

@@ -15,7 +15,7 @@ import signal
 import sys
 import threading
 from contextlib import ExitStack, contextmanager, nullcontext
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 from planhrc.cli_args import OneLineParser, settings_error_line
 
@@ -154,14 +154,14 @@ def _on_signal(signum: int, frame) -> None:
     raise KeyboardInterrupt()
 
 
-def install_signal_handlers() -> dict[int, object]:
+def install_signal_handlers() -> dict[int, Any]:
     """SIGINT and SIGTERM unwind the stack (KeyboardInterrupt / Terminated); returns the previous handlers."""
     if threading.current_thread() is not threading.main_thread():
         return {}
     return {signum: signal.signal(signum, _on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
 
 
-def restore_signal_handlers(previous: dict[int, object]) -> None:
+def restore_signal_handlers(previous: dict[int, Any]) -> None:
     for signum, handler in previous.items():
         signal.signal(signum, handler)
 

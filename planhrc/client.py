@@ -149,8 +149,9 @@ class KBClient:
                  joint_angles_deg: Sequence[float | None] | None = None) -> dict[str, Any]:
         if (link_orientations_deg is None) == (joint_angles_deg is None):
             raise ProtocolError("goal: give exactly one of link_orientations_deg and joint_angles_deg")
-        body = ({"link_orientations_deg": list(link_orientations_deg)} if link_orientations_deg is not None
-                else {"joint_angles_deg": list(joint_angles_deg)})
+        body: dict[str, list[float | None]] = (
+            {"link_orientations_deg": list(link_orientations_deg)} if link_orientations_deg is not None
+            else {"joint_angles_deg": list(joint_angles_deg or ())})
         return self._request("PUT", f"/objects/{object_id}/goal", body)
 
     def post_perception(self, object_id: str, link_orientations_deg: Sequence[float]) -> Decision:

@@ -185,7 +185,7 @@ class ArticulatedObject:
         return self.connected_atoms() | self.ord_atoms() | self.affected_atoms()
 
     # -- configurations --------------------------------------------------------------------------------
-    def check_joint_values(self, values: Sequence[int], field: str = "joint_angles_deg") -> tuple[int, ...]:
+    def check_joint_values(self, values: Sequence[int | float], field: str = "joint_angles_deg") -> tuple[int, ...]:
         if len(values) != self.n_joints:
             raise ModelError(f"{field}: expected {self.n_joints} values (one per joint), got {len(values)}")
         allowed = set(self.orientation_degrees)
@@ -279,7 +279,7 @@ def make_object(
     return ArticulatedObject(ident=ident, formulation=form, link_lengths_m=lengths, orientations=orientations, name=name)
 
 
-def is_subsumed(s1: State | frozenset, s2: State | frozenset) -> bool:
+def is_subsumed(s1: State, s2: State) -> bool:
     """D(s1) ⊑ D(s2): every atom that s2 asserts is asserted by s1 (s2 may be partial)."""
     return s2 <= s1
 

@@ -45,10 +45,10 @@ class Run:
 def run_from(record: Any) -> Run:
     """A `Run` from a bench `Row` or a CSV dict; PlotError names the field that is wrong."""
     get = record.get if isinstance(record, dict) else lambda key: getattr(record, key, None)
-    values = {}
+    values: dict[str, Any] = {}
     for field, kind in (("formulation", str), ("planner", str), ("links", int), ("orientations", int),
                         ("status", str), ("seconds", float)):
-        raw = get(field)
+        raw: Any = get(field)
         try:
             values[field] = kind(raw)
         except (TypeError, ValueError):

@@ -237,7 +237,7 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
                                "status": status if times[-1] != float("inf") else "timeout"}
             slowest = max(READ_ROUTES, key=lambda n: reads[n]["max_ms"])
             worst_health, _ = _health_worst_wait(server, lambda: _timed_get(client, _read_paths(obj, last_seq)[slowest]))
-            row = {"perceptions": checkpoint, "replan": summary_ms(lat), "reads": reads,
+            row: dict[str, Any] = {"perceptions": checkpoint, "replan": summary_ms(lat), "reads": reads,
                    "slowest_read": slowest, "health_worst_ms_during_slowest_read": round(worst_health * 1000, 2),
                    "rss_mb": round(rss_mb(server.pid), 1)}
             rows.append(row)

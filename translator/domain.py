@@ -11,9 +11,10 @@ from __future__ import annotations
 import io
 from functools import lru_cache
 from pathlib import Path
-from typing import TextIO
+from typing import TextIO, cast
 
 from rdflib import Graph, Namespace, URIRef
+from rdflib import Literal as RDFLiteral
 from rdflib.namespace import OWL, RDF
 
 from planhrc.model import ActionSchemaSpec, ConditionalEffect, DomainModelSpec, Literal, PredicateSpec
@@ -51,7 +52,7 @@ class _TBox:
         return int(self.one(node, PLAN.position))
 
     def ordered(self, node: URIRef, prop: URIRef) -> list[URIRef]:
-        return sorted(self.g.objects(node, prop), key=self.position)
+        return sorted((cast(URIRef, o) for o in self.g.objects(node, prop)), key=self.position)
 
     def variable(self, node: URIRef) -> tuple[str, str]:
         return self.one(node, PLAN.pddlName), self.one(node, PLAN.typeName)
@@ -62,7 +63,7 @@ class _TBox:
         for i in (1, 2, 3):
             v = self.g.value(node, PLAN[f"argVar{i}"])
             if v is not None:
-                owl_args[i] = self.one(v, PLAN.pddlName)
+                owl_args[i] = self.one(cast(URIRef, v), PLAN.pddlName)
         if pred == "=":
             order: tuple[int, ...] = (1, 2)
         else:
@@ -75,12 +76,14 @@ class _TBox:
             raise TranslationError(f"TBox: {node} lacks argument arg{exc.args[0]} of {pred}") from exc
         if negated is None:
             flag = self.g.value(node, PLAN.negated)
-            negated = bool(flag.toPython()) if flag is not None else False
+            negated = bool(flag.toPython()) if isinstance(flag, RDFLiteral) else False
         return Literal(pred, args, negated)
 
     def effects(self, node: URIRef, neg_prop: URIRef, pos_prop: URIRef) -> tuple[Literal, ...]:
-        items = [(self.position(n), self.literal(n, negated=True)) for n in self.g.objects(node, neg_prop)]
-        items += [(self.position(n), self.literal(n, negated=False)) for n in self.g.objects(node, pos_prop)]
+        negs = [cast(URIRef, n) for n in self.g.objects(node, neg_prop)]
+        poss = [cast(URIRef, n) for n in self.g.objects(node, pos_prop)]
+        items = [(self.position(n), self.literal(n, negated=True)) for n in negs]
+        items += [(self.position(n), self.literal(n, negated=False)) for n in poss]
         return tuple(lit for _, lit in sorted(items, key=lambda x: (x[0], x[1].negated is False)))
 
 

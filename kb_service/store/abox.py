@@ -22,7 +22,7 @@ import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
+from typing import Any, Callable, Iterable, Iterator, Self, Sequence, TypeVar
 
 from planhrc.model import (
     AFFECTED,
@@ -216,7 +216,7 @@ class Abox:
                 self._closed = True
                 self._q.close()
 
-    def __enter__(self) -> "Abox":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
