@@ -1,13 +1,21 @@
-"""The simulated work cell: Baxter, a table and a kinematic articulated object with ArUco markers.
+"""The simulated work cell: Baxter, a table and a physical articulated object with ArUco markers.
 
 Frames and angles (CONVENTIONS.md): the world's +x is the robot's forward axis, +y its left, +z up. A link's
 orientation theta is in degrees, clockwise seen from above, from +x; its direction on the table is
 (cos theta, -sin theta) and its PyBullet yaw is -radians(theta).
 
-The object is kinematic: its configuration (base point p1 and one orientation per link) is the source of
-truth, and each link body (a box plus a marker quad on top) is placed from it with
-``resetBasePositionAndOrientation``. Link lK runs from joint point pK to pK+1; joint point pK joins l(K-1) and
-lK, p1 joins l1 to the table (the absolute formulation's numbering).
+The object is a physical body: one PyBullet multibody whose base is l1 and whose links l2 .. lN hang on
+revolute joints about the vertical, each with friction (a velocity motor with a force limit) and damping; it
+lies on the table under gravity and moves only when the simulation is stepped (`Scene.step`) and something
+pushes it: the robot's grippers or the human's hands, through constraints made once they touch a link.
+`configuration()` and `link_orientations_deg()` measure the bodies' poses; `set_configuration` places the
+object (to set a scene up, never to carry out an action). Link lK runs from joint point pK to pK+1; pK joins
+l(K-1) and lK, p1 joins l1 to the table (the absolute formulation's numbering).
+
+The robot does not collide with anything (its arms are moved by position motors along planned paths); its
+grippers hold a link by a fixed constraint made when the fingers touch the link, and what the arms touch is
+checked with closest-point queries (`touching`). Markers are visual bodies that follow their links when the
+scene is rendered (`sync_markers`).
 
 The caller owns the ``BulletClient``; nothing here touches a global PyBullet connection.
 """
@@ -18,11 +26,13 @@ import math
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pybullet
 
+from planhrc.geometry import Cell, ObjectGeometry, RobotBody, Table, configuration_feasible
+from planhrc.geometry import Cell, ObjectGeometry, RobotBody, Table, configuration_feasible
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
@@ -34,6 +44,7 @@ HOME_POSE = {
     "left": (1.0, -0.9, -0.3, 1.6, 0.0, 0.9, 0.0),
     "right": (-1.0, -0.9, 0.3, 1.6, 0.0, 0.9, 0.0),
 }
+TIME_STEP_S = 1.0 / 120.0  # a coarse step keeps an action well under a second of wall time
 
 
 class SimError(Exception):
@@ -49,18 +60,25 @@ class SceneSpec:
     link_width_m: float = 0.03
     link_height_m: float = 0.015
     marker_size_m: float = 0.03
-    base_point_xy: tuple[float, float] = (0.6, 0.39)
+    base_point_xy: tuple[float, float] | None = None  # default: x = 0.6, the straight object centred on y = 0
     initial_orientations_deg: tuple[float, ...] | None = None  # default: every link at 90 (to the right)
     table_center_xy: tuple[float, float] = (0.6, 0.0)  # Baxter's grippers reach x ~ 0.35 .. 0.8 at table height
     table_size_xy: tuple[float, float] = (0.6, 1.3)
     table_top_z: float = -0.18
     load_robot: bool = True
+    link_mass_kg: float = 0.2
+    joint_friction_nm: float = 1.0  # stiff enough that the links beyond a turned one move with it (A1)
+    joint_damping: float = 0.05
+    unmarked_links: tuple[int, ...] = ()  # links whose marker is painted over (the camera cannot see them)
+    table_friction: float = 0.3  # Bullet multiplies the two bodies' coefficients: the links have 1.0
 
     def __post_init__(self) -> None:
         if self.n_links < 1:
             raise SimError(f"n_links: must be at least 1, got {self.n_links}")
         if self.n_links > 50:
             raise SimError(f"n_links: at most 50 markers exist in DICT_4X4_50, got {self.n_links}")
+        if any(not 1 <= k <= self.n_links for k in self.unmarked_links):
+            raise SimError(f"unmarked_links: links are numbered 1..{self.n_links}, got {self.unmarked_links}")
         if self.initial_orientations_deg is not None and len(self.initial_orientations_deg) != self.n_links:
             raise SimError(
                 f"initial_orientations_deg: expected {self.n_links} values, got {len(self.initial_orientations_deg)}"
@@ -71,6 +89,20 @@ class SceneSpec:
         if self.initial_orientations_deg is None:
             return (90.0,) * self.n_links
         return tuple(float(v) for v in self.initial_orientations_deg)
+
+    @property
+    def base_xy(self) -> tuple[float, float]:
+        if self.base_point_xy is not None:
+            return float(self.base_point_xy[0]), float(self.base_point_xy[1])
+        return 0.6, round(self.n_links * self.link_length_m / 2.0, 4)
+
+    def cell(self) -> Cell:
+        """The table and robot of this scene, for `planhrc.geometry`."""
+        return Cell(Table(self.table_center_xy, self.table_size_xy, self.table_top_z), RobotBody())
+
+    def geometry(self, base_point_xy: Sequence[float] | None = None) -> ObjectGeometry:
+        base = self.base_xy if base_point_xy is None else (float(base_point_xy[0]), float(base_point_xy[1]))
+        return ObjectGeometry((self.link_length_m,) * self.n_links, base, self.link_width_m)
 
 
 @dataclass(frozen=True)
@@ -130,14 +162,17 @@ class Scene:
         self.directory = Path(workdir.name)
         self.robot: int | None = None
         self.arms: dict[str, ArmInfo] = {}
+        self.head_pan: int | None = None
+        self.head_camera: int | None = None
         self.table: int = -1
-        self.link_bodies: list[int] = []
+        self.body: int = -1  # the object: its base is l1, its PyBullet link K-2 is lK
         self.marker_bodies: list[int] = []
         self.markers: list[MarkerAsset] = []
-        self._base = np.array(spec.base_point_xy, dtype=float)
-        self._theta = list(spec.orientations0)
+        self.time_s = 0.0  # the physics clock
+        self.gripped: set[int] = set()  # links a robot gripper holds now
+        self._tickers: list[Callable[["Scene"], None]] = []
 
-    # -- geometry of the object ----------------------------------------------------------------------
+    # -- the object, measured from its bodies ---------------------------------------------------------------
     @property
     def n_links(self) -> int:
         return self.spec.n_links
@@ -150,83 +185,116 @@ class Scene:
     def marker_z(self) -> float:
         return self.spec.table_top_z + self.spec.link_height_m + 0.001
 
-    def joint_points(self) -> list[np.ndarray]:
-        """p1 .. p(N+1) on the table (x, y)."""
-        points = [self._base.copy()]
-        for theta in self._theta:
-            points.append(points[-1] + self.spec.link_length_m * direction(theta))
-        return points
+    @staticmethod
+    def object_link_index(link: int) -> int:
+        """PyBullet's index of link `link` (1-based) in the object body (-1 = the base, l1)."""
+        return -1 if link == 1 else link - 2
 
-    def link_center(self, link: int) -> np.ndarray:
-        """Centre (x, y) of link `link` (1-based)."""
+    def link_pose(self, link: int) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+        """World position of link `link`'s centre (1-based) and its orientation quaternion."""
         self._check_link(link)
-        points = self.joint_points()
-        return (points[link - 1] + points[link]) / 2.0
-
-    def base_point(self) -> tuple[float, float]:
-        return float(self._base[0]), float(self._base[1])
-
-    def configuration(self) -> tuple[tuple[float, float], tuple[float, ...]]:
-        """The kinematic state: (base point, link orientations in degrees)."""
-        return self.base_point(), tuple(self._theta)
-
-    def set_configuration(self, orientations_deg: Sequence[float], base_point_xy: Sequence[float] | None = None) -> None:
-        if len(orientations_deg) != self.n_links:
-            raise SimError(f"orientations_deg: expected {self.n_links} values, got {len(orientations_deg)}")
-        self._theta = [float(v) % 360.0 for v in orientations_deg]
-        if base_point_xy is not None:
-            self._base = np.array([float(base_point_xy[0]), float(base_point_xy[1])])
-        self._place_bodies()
+        if link == 1:
+            position, quat = self.client.getBasePositionAndOrientation(self.body)
+        else:
+            state = self.client.getLinkState(self.body, link - 2, computeForwardKinematics=True)
+            position, quat = state[0], state[1]  # the inertial frame: the link's centre
+        return np.asarray(position, dtype=float), tuple(quat)
 
     def link_orientations_deg(self) -> tuple[float, ...]:
-        """Ground truth read back from the simulator's link bodies (degrees in [0, 360))."""
+        """Each link's orientation measured from its body (degrees in [0, 360))."""
         out = []
-        for body in self.link_bodies:
-            _, quat = self.client.getBasePositionAndOrientation(body)
-            yaw = self.client.getEulerFromQuaternion(quat)[2]
+        for link in range(1, self.n_links + 1):
+            yaw = self.client.getEulerFromQuaternion(self.link_pose(link)[1])[2]
             out.append((-math.degrees(yaw)) % 360.0)
         return tuple(out)
 
-    def rotate_at_joint(self, joint_k: int, delta_deg: float, turned: str = "downstream", fraction: float = 1.0) -> None:
-        """Turn one side of joint point pK by `delta_deg * fraction` (+ = clockwise seen from above).
+    def link_center(self, link: int) -> np.ndarray:
+        """Centre (x, y) of link `link` (1-based)."""
+        return self.link_pose(link)[0][:2]
 
-        ``downstream`` turns lK .. lN about pK (the base point stays); ``upstream`` turns l1 .. l(K-1) about pK,
-        which moves the base point. Every link beyond the turned one moves with it (inertial assumption A1).
-        """
-        if not 1 <= joint_k <= self.n_links:
-            raise SimError(f"joint_k: must be in 1..{self.n_links}, got {joint_k}")
-        delta = float(delta_deg) * float(fraction)
-        if turned == "downstream":
-            for i in range(joint_k - 1, self.n_links):
-                self._theta[i] = (self._theta[i] + delta) % 360.0
-        elif turned == "upstream":
-            if joint_k == 1:
-                raise SimError("turned: joint 1 joins l1 to the table; its upstream side cannot turn")
-            pivot = self.joint_points()[joint_k - 1]
-            self._base = rotate_point(self._base, pivot, delta)
-            for i in range(0, joint_k - 1):
-                self._theta[i] = (self._theta[i] + delta) % 360.0
+    def joint_points(self) -> list[np.ndarray]:
+        """p1 .. p(N+1) on the table (x, y), from the links' measured poses."""
+        theta = self.link_orientations_deg()
+        half = self.spec.link_length_m / 2.0
+        points = [self.link_center(1) - half * direction(theta[0])]
+        for k in range(1, self.n_links + 1):
+            points.append(self.link_center(k) + half * direction(theta[k - 1]))
+        return points
+
+    def base_point(self) -> tuple[float, float]:
+        p = self.joint_points()[0]
+        return float(p[0]), float(p[1])
+
+    def configuration(self) -> tuple[tuple[float, float], tuple[float, ...]]:
+        """The measured state: (base point, link orientations in degrees)."""
+        return self.base_point(), self.link_orientations_deg()
+
+    def off_table_links(self) -> tuple[int, ...]:
+        """Links beyond the table's edge or fallen below its top (measured)."""
+        base, theta = self.configuration()
+        result = configuration_feasible(self.spec.geometry(base), theta, self.spec.cell())
+        beyond = {r.link for r in result.reasons if r.code == "off_table"}
+        fallen = {k for k in range(1, self.n_links + 1) if self.link_pose(k)[0][2] < self.spec.table_top_z - 0.01}
+        return tuple(sorted(beyond | fallen))
+
+    def set_configuration(self, orientations_deg: Sequence[float], base_point_xy: Sequence[float] | None = None) -> None:
+        """Place the object at rest (to set a scene up, never to carry out an action): link orientations and
+        the base point p1 (default: where it is now)."""
+        if len(orientations_deg) != self.n_links:
+            raise SimError(f"orientations_deg: expected {self.n_links} values, got {len(orientations_deg)}")
+        theta = [float(v) % 360.0 for v in orientations_deg]
+        if base_point_xy is not None:
+            base = np.asarray(base_point_xy, dtype=float)
         else:
-            raise SimError(f"turned: must be 'downstream' or 'upstream', got {turned!r}")
-        self._place_bodies()
+            base = np.asarray(self.base_point())
+        c = self.client
+        centre = base + self.spec.link_length_m / 2.0 * direction(theta[0])
+        quat = c.getQuaternionFromEuler([0.0, 0.0, -math.radians(theta[0])])
+        c.resetBasePositionAndOrientation(self.body, [centre[0], centre[1], self.link_center_z], quat)
+        c.resetBaseVelocity(self.body, [0, 0, 0], [0, 0, 0])
+        for k in range(2, self.n_links + 1):
+            # PyBullet's joint angle turns counter-clockwise: minus the clockwise relative orientation
+            relative = (theta[k - 1] - theta[k - 2] + 180.0) % 360.0 - 180.0
+            c.resetJointState(self.body, k - 2, -math.radians(relative), 0.0)
+        self.sync_markers()
 
-    def rotate_link(self, turned_link: int, held_link: int, delta_deg: float, fraction: float = 1.0) -> None:
-        """Turn `turned_link` about its joint with `held_link` (0 = the table), as a plan action names it."""
-        joint_k, side = joint_between(turned_link, held_link, self.n_links)
-        self.rotate_at_joint(joint_k, delta_deg, side, fraction)
+    # -- the physics clock ----------------------------------------------------------------------------------
+    def add_ticker(self, ticker: Callable[["Scene"], None]) -> None:
+        """Call `ticker(scene)` before every physics step: whatever acts in parallel with the robot."""
+        self._tickers.append(ticker)
 
-    # -- bodies ------------------------------------------------------------------------------------------
+    def remove_ticker(self, ticker: Callable[["Scene"], None]) -> None:
+        if ticker in self._tickers:
+            self._tickers.remove(ticker)
+
+    def step(self, n: int = 1) -> None:
+        for _ in range(n):
+            for ticker in tuple(self._tickers):
+                ticker(self)
+            self.client.stepSimulation()
+            self.time_s += TIME_STEP_S
+
+    # -- contacts -------------------------------------------------------------------------------------------
+    def near(self, body: int, link: int, other: int, other_link: int | None = None, distance_m: float = 0.0) -> bool:
+        """Whether `body`'s `link` comes within `distance_m` of `other` (its `other_link`, or any part of it)."""
+        if other_link is None:
+            points = self.client.getClosestPoints(body, other, distance_m, linkIndexA=link)
+        else:
+            points = self.client.getClosestPoints(body, other, distance_m, linkIndexA=link, linkIndexB=other_link)
+        return bool(points)
+
+    # -- bodies ---------------------------------------------------------------------------------------------
     def _check_link(self, link: int) -> None:
         if not 1 <= link <= self.n_links:
             raise SimError(f"link: must be in 1..{self.n_links}, got {link}")
 
-    def _place_bodies(self) -> None:
-        points = self.joint_points()
-        for i, (body, marker) in enumerate(zip(self.link_bodies, self.marker_bodies)):
-            center = (points[i] + points[i + 1]) / 2.0
-            quat = self.client.getQuaternionFromEuler([0.0, 0.0, -math.radians(self._theta[i])])
-            self.client.resetBasePositionAndOrientation(body, [center[0], center[1], self.link_center_z], quat)
-            self.client.resetBasePositionAndOrientation(marker, [center[0], center[1], self.marker_z], quat)
+    def sync_markers(self) -> None:
+        """Put each marker quad on its link's top face (markers are painted on: they have no body of their own)."""
+        for k, marker in enumerate(self.marker_bodies, start=1):
+            position, quat = self.link_pose(k)
+            up = np.asarray(self.client.getMatrixFromQuaternion(quat)).reshape(3, 3)[:, 2]
+            top = position + up * (self.spec.link_height_m / 2.0 + 0.001)
+            self.client.resetBasePositionAndOrientation(marker, top.tolist(), quat)
 
     def close(self) -> None:
         """Remove the scene's temporary files (the caller disconnects its own client)."""
@@ -239,76 +307,35 @@ class Scene:
         self.close()
 
 
-def segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
-    """Smallest distance between two segments of the plane."""
-
-    def point_segment(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> float:
-        d = s1 - s0
-        t = float(np.clip(np.dot(p - s0, d) / max(float(np.dot(d, d)), 1e-12), 0.0, 1.0))
-        return float(np.linalg.norm(p - (s0 + t * d)))
-
-    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
-
-    if cross(a0, a1, b0) * cross(a0, a1, b1) < 0 and cross(b0, b1, a0) * cross(b0, b1, a1) < 0:
-        return 0.0
-    return min(point_segment(a0, b0, b1), point_segment(a1, b0, b1), point_segment(b0, a0, a1), point_segment(b1, a0, a1))
-
-
-def is_valid_configuration(
-    spec: SceneSpec,
-    orientations_deg: Sequence[float],
-    base_point_xy: Sequence[float] | None = None,
-    max_fold_deg: float = 150.0,
-    region: tuple[float, float, float, float] | None = None,
-) -> bool:
-    """No two links overlap, no joint folds beyond `max_fold_deg`, and every joint point lies in `region`
-    (x_min, x_max, y_min, y_max; default: the table shrunk by 5 cm)."""
-    base = np.array(base_point_xy if base_point_xy is not None else spec.base_point_xy, dtype=float)
-    points = [base]
-    for theta in orientations_deg:
-        points.append(points[-1] + spec.link_length_m * direction(theta))
-    if region is None:
-        cx, cy = spec.table_center_xy
-        hx, hy = spec.table_size_xy[0] / 2 - 0.05, spec.table_size_xy[1] / 2 - 0.05
-        region = (cx - hx, cx + hx, cy - hy, cy + hy)
-    if not all(region[0] <= p[0] <= region[1] and region[2] <= p[1] <= region[3] for p in points):
-        return False
-    for a, b in zip(orientations_deg, orientations_deg[1:]):
-        d = (b - a) % 360.0
-        if min(d, 360.0 - d) > max_fold_deg:
-            return False
-    n = len(orientations_deg)
-    for i in range(n):
-        for j in range(i + 2, n):
-            if segment_distance(points[i], points[i + 1], points[j], points[j + 1]) < 2 * spec.link_width_m:
-                return False
-    return True
-
-
-# Where Baxter's grippers reach on the table (x forward, y left), with a margin: measured by IK in this scene.
-REACH_REGION: tuple[float, float, float, float] = (0.40, 0.78, -0.55, 0.55)
-
-
-def is_workable(spec: SceneSpec, orientations_deg: Sequence[float],
-                base_point_xy: Sequence[float] | None = None) -> bool:
-    """A valid configuration whose every joint point lies where the robot can grasp the links."""
-    return is_valid_configuration(spec, orientations_deg, base_point_xy, region=REACH_REGION)
+def is_feasible(spec: SceneSpec, orientations_deg: Sequence[float], base_point_xy: Sequence[float] | None = None) -> bool:
+    """On the table, clear of the robot, within reach and not overlapping itself (`planhrc.geometry`)."""
+    return configuration_feasible(spec.geometry(base_point_xy), orientations_deg, spec.cell()).ok
 
 
 def random_orientations(
-    rng: np.random.Generator, spec: SceneSpec, step_deg: float | None = None, attempts: int = 10_000
+    rng: np.random.Generator, spec: SceneSpec, step_deg: float | None = None, attempts: int = 2_000,
+    base_point_xy: Sequence[float] | None = None,
 ) -> tuple[float, ...]:
-    """A random valid configuration about the spec's base point (continuous, or multiples of `step_deg`)."""
+    """A random feasible configuration about the base point (continuous, or multiples of `step_deg`), drawn
+    link by link: each link's angle uniformly among the values that keep the chain so far feasible; a dead end
+    starts again."""
+    geometry = spec.geometry(base_point_xy)
+    cell = spec.cell()
     for _ in range(attempts):
-        if step_deg:
-            values = rng.integers(0, int(round(360 / step_deg)), size=spec.n_links) * step_deg
-        else:
-            values = rng.uniform(0.0, 360.0, size=spec.n_links)
-        candidate = tuple(float(v) for v in values)
-        if is_valid_configuration(spec, candidate):
-            return candidate
-    raise SimError(f"random_orientations: no valid configuration found in {attempts} attempts")
+        chosen: list[float] = []
+        for k in range(spec.n_links):
+            if step_deg:
+                options = [float(v) * step_deg for v in range(int(round(360 / step_deg)))]
+            else:
+                options = [float(v) for v in rng.uniform(0.0, 360.0, size=24)]
+            partial = ObjectGeometry(geometry.link_lengths_m[: k + 1], geometry.base_point_xy, geometry.link_width_m)
+            good = [v for v in options if configuration_feasible(partial, chosen + [v], cell).ok]
+            if not good:
+                break
+            chosen.append(good[int(rng.integers(len(good)))])
+        if len(chosen) == spec.n_links:
+            return tuple(chosen)
+    raise SimError(f"random_orientations: no feasible configuration found in {attempts} attempts")
 
 
 def joint_between(turned_link: int, held_link: int, n_links: int) -> tuple[int, str]:
@@ -336,6 +363,11 @@ def _load_robot(scene: Scene) -> None:
         info = c.getJointInfo(robot, j)
         by_name[info[1].decode()] = (j, info[8], info[9])
         link_by_name[info[12].decode()] = j
+        # the arms follow planned paths through their motors; they push nothing (grasps are constraints)
+        c.setCollisionFilterGroupMask(robot, j, 0, 0)
+    c.setCollisionFilterGroupMask(robot, -1, 0, 0)
+    scene.head_pan = by_name["head_pan"][0]
+    scene.head_camera = link_by_name["head_camera_link"]
     for arm in ARMS:
         joints = [by_name[f"{arm}_{n}"] for n in ARM_JOINTS]
         prefix = arm[0]
@@ -353,13 +385,27 @@ def _load_robot(scene: Scene) -> None:
             shoulder_xy=(shoulder[0], shoulder[1]),
         )
         set_arm_joints(scene, arm, HOME_POSE[arm])
-        set_gripper(scene, arm, close=False)
+        hold_arm(scene, arm, HOME_POSE[arm])
+        drive_gripper(scene, arm, close=False)
+        for j, q in zip(scene.arms[arm].fingers, scene.arms[arm].finger_open):
+            c.resetJointState(robot, j, q)
+    c.setJointMotorControl2(robot, scene.head_pan, pybullet.POSITION_CONTROL, targetPosition=0.0, force=50.0)
 
 
 def set_arm_joints(scene: Scene, arm: str, positions: Sequence[float]) -> None:
+    """Put an arm's joints at `positions` at once: for planning (inverse kinematics) and building, not motion."""
     info = scene.arms[arm]
     for j, q in zip(info.joints, positions):
         scene.client.resetJointState(scene.robot, j, float(q))
+
+
+def hold_arm(scene: Scene, arm: str, positions: Sequence[float]) -> None:
+    """Drive an arm's joint motors towards `positions` (the physics steps move it, at most 10 rad/s)."""
+    info = scene.arms[arm]
+    for j, q in zip(info.joints, positions):
+        scene.client.setJointMotorControl2(scene.robot, j, pybullet.POSITION_CONTROL, targetPosition=float(q),
+                                           targetVelocity=0.0, force=400.0, positionGain=0.3, velocityGain=1.0,
+                                           maxVelocity=10.0)
 
 
 def arm_joints(scene: Scene, arm: str) -> tuple[float, ...]:
@@ -367,11 +413,12 @@ def arm_joints(scene: Scene, arm: str) -> tuple[float, ...]:
     return tuple(scene.client.getJointState(scene.robot, j)[0] for j in info.joints)
 
 
-def set_gripper(scene: Scene, arm: str, close: bool) -> None:
+def drive_gripper(scene: Scene, arm: str, close: bool) -> None:
+    """Drive the finger motors open or closed (the physics steps move them)."""
     info = scene.arms[arm]
     values = info.finger_closed if close else info.finger_open
-    for j, q in zip(info.fingers, values):
-        scene.client.resetJointState(scene.robot, j, q)
+    scene.client.setJointMotorControlArray(scene.robot, list(info.fingers), pybullet.POSITION_CONTROL,
+                                           targetPositions=list(values), forces=[40.0, 40.0])
 
 
 def _load_table(scene: Scene) -> None:
@@ -385,26 +432,53 @@ def _load_table(scene: Scene) -> None:
         baseVisualShapeIndex=visual,
         basePosition=[s.table_center_xy[0], s.table_center_xy[1], s.table_top_z - half[2]],
     )
+    c.changeDynamics(scene.table, -1, lateralFriction=s.table_friction)
 
 
 def _load_object(scene: Scene) -> None:
+    """The object as one multibody: l1 is the base, lK hangs on a revolute joint (vertical axis) at pK."""
     c, s = scene.client, scene.spec
     half = [s.link_length_m / 2, s.link_width_m / 2, s.link_height_m / 2]
+    n = s.n_links
+    colour = [0.65, 0.8, 0.95, 1]
+    # l1 is the base, its frame at its centre; lK's frame sits at its joint point pK, its shapes half a link on
+    offset = [[0.0, 0.0, 0.0]] + [[s.link_length_m / 2, 0.0, 0.0]] * (n - 1)
+    visual = [c.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=colour, visualFramePosition=o)
+              for o in offset]
+    collision = [c.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half, collisionFramePosition=o) for o in offset]
+    scene.body = c.createMultiBody(
+        baseMass=s.link_mass_kg,
+        baseCollisionShapeIndex=collision[0],
+        baseVisualShapeIndex=visual[0],
+        basePosition=[0.0, 0.0, scene.link_center_z],
+        linkMasses=[s.link_mass_kg] * (n - 1),
+        linkCollisionShapeIndices=collision[1:],
+        linkVisualShapeIndices=visual[1:],
+        linkPositions=[[s.link_length_m / 2, 0.0, 0.0]] + [[s.link_length_m, 0.0, 0.0]] * (n - 2),
+        linkOrientations=[[0, 0, 0, 1]] * (n - 1),
+        linkInertialFramePositions=offset[1:],
+        linkInertialFrameOrientations=[[0, 0, 0, 1]] * (n - 1),
+        linkParentIndices=list(range(n - 1)),  # 0 = the base; the parent of PyBullet link i is link i - 1
+        linkJointTypes=[pybullet.JOINT_REVOLUTE] * (n - 1),
+        linkJointAxis=[[0, 0, 1]] * (n - 1),
+    )
+    for link in range(-1, n - 1):
+        c.changeDynamics(scene.body, link, lateralFriction=1.0, linearDamping=0.04, angularDamping=0.04,
+                         jointDamping=s.joint_damping)
+    for j in range(n - 1):
+        # joint friction: a velocity motor at rest with a limited torque
+        c.setJointMotorControl2(scene.body, j, pybullet.VELOCITY_CONTROL, targetVelocity=0.0, force=s.joint_friction_nm)
     marker_dir = scene.directory / "markers"
-    for i in range(s.n_links):
-        visual = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=[0.65, 0.8, 0.95, 1])
-        collision = c.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
-        scene.link_bodies.append(
-            c.createMultiBody(baseMass=0, baseCollisionShapeIndex=collision, baseVisualShapeIndex=visual)
-        )
+    for i in range(n):
         asset = write_marker_asset(marker_dir, marker_id=i, size_m=s.marker_size_m)
         scene.markers.append(asset)
         mesh = c.createVisualShape(pybullet.GEOM_MESH, fileName=str(asset.obj_path), meshScale=[1, 1, 1])
         body = c.createMultiBody(baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=mesh)
         texture = c.loadTexture(str(asset.image_path))
-        c.changeVisualShape(body, -1, textureUniqueId=texture, rgbaColor=[1, 1, 1, 1])
+        visible = (i + 1) not in s.unmarked_links
+        c.changeVisualShape(body, -1, textureUniqueId=texture, rgbaColor=[1, 1, 1, 1 if visible else 0])
         scene.marker_bodies.append(body)
-    scene._place_bodies()
+    scene.set_configuration(s.orientations0, s.base_xy)
 
 
 def build_scene(client, spec: SceneSpec | None = None) -> Scene:
@@ -414,10 +488,12 @@ def build_scene(client, spec: SceneSpec | None = None) -> Scene:
     scene = Scene(client, spec, workdir)
     try:
         client.setGravity(0, 0, -9.81)
+        client.setPhysicsEngineParameter(fixedTimeStep=TIME_STEP_S, numSubSteps=1, numSolverIterations=150)
         if spec.load_robot:
             _load_robot(scene)
         _load_table(scene)
         _load_object(scene)
+        scene.step(10)  # the object settles on the table
     except Exception:
         workdir.cleanup()
         raise

@@ -1,4 +1,4 @@
-"""The simulated cell: Baxter loads, the object is kinematic and turns as the inertial assumption says."""
+"""The simulated cell: Baxter loads, the object is a physical body on the table, its pose is measured."""
 import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
@@ -30,11 +30,21 @@ def test_baxter_loads_with_15_revolute_joints_and_4_finger_joints(scene):
     assert set(scene.arms) == {"left", "right"}
 
 
-def test_set_configuration_is_read_back_from_the_bodies(scene):
+def test_the_object_is_one_body_of_links_with_mass_on_revolute_joints(scene):
+    c = scene.client
+    assert c.getNumJoints(scene.body) == 4
+    assert all(c.getJointInfo(scene.body, j)[2] == pybullet.JOINT_REVOLUTE for j in range(4))
+    assert all(c.getDynamicsInfo(scene.body, k)[0] == pytest.approx(0.2) for k in range(-1, 4))
+
+
+def test_set_configuration_is_read_back_from_the_bodies_and_stays_at_rest_under_gravity(scene):
     scene.set_configuration([0, 45, 90, 300, 359.5], base_point_xy=(0.5, 0.3))
     assert _close(scene.link_orientations_deg(), [0, 45, 90, 300, 359.5], 1e-3)
     p = scene.joint_points()
     assert p[1][0] == pytest.approx(0.5 + 0.155) and p[1][1] == pytest.approx(0.3)
+    scene.step(120)  # one second of physics: the object lies on the table and does not move by itself
+    assert _close(scene.link_orientations_deg(), [0, 45, 90, 300, 359.5], 0.2)
+    assert all(abs(scene.link_pose(k)[0][2] - scene.link_center_z) < 2e-3 for k in range(1, 6))
 
 
 def test_theta_90_points_to_the_robots_right(scene):
@@ -43,20 +53,15 @@ def test_theta_90_points_to_the_robots_right(scene):
     assert p[1][1] == pytest.approx(0.3 - 0.155)  # clockwise from +x seen from above -> towards -y
 
 
-def test_downstream_turn_moves_every_later_link(scene):
-    scene.set_configuration([90] * 5, base_point_xy=(0.5, 0.3))
-    scene.rotate_at_joint(3, 45, "downstream")
-    assert _close(scene.link_orientations_deg(), [90, 90, 135, 135, 135], 1e-3)
-    assert scene.base_point() == pytest.approx((0.5, 0.3))
+def test_links_past_the_far_edge_are_measured_off_the_table(scene):
+    scene.set_configuration([90, 90, 0, 0, 0], base_point_xy=(0.6, 0.39))
+    assert scene.off_table_links() == (4, 5)
 
 
-def test_upstream_turn_keeps_the_joint_point_and_moves_the_base(scene):
-    scene.set_configuration([90] * 5, base_point_xy=(0.5, 0.3))
-    pivot = scene.joint_points()[2].copy()
-    scene.rotate_link(turned_link=2, held_link=3, delta_deg=-30, fraction=0.5)
-    assert _close(scene.link_orientations_deg(), [75, 75, 90, 90, 90], 1e-3)
-    assert scene.joint_points()[2] == pytest.approx(pivot)
-    assert scene.base_point() != pytest.approx((0.5, 0.3))
+def test_the_default_object_is_centred_and_bad_specs_name_the_field():
+    assert SceneSpec(n_links=7).base_xy == (0.6, pytest.approx(7 * 0.155 / 2))
+    with pytest.raises(SimError, match="initial_orientations_deg"):
+        SceneSpec(n_links=3, initial_orientations_deg=(90.0, 90.0))
 
 
 def test_joint_between_refuses_links_that_are_not_neighbours():
