@@ -3,13 +3,15 @@
 * marker-based orientation error per link: random valid configurations, the head camera's ArUco estimate
   against the simulator's ground truth (mean, p95, max in degrees, missed markers);
 * camera perception time per frame (render + detection);
-* wall time of one rotation action (plan the arm motions + execute), in DIRECT mode.
+* wall time of one physical rotation action (plan the arm motions + execute them with the physics stepped),
+  in DIRECT mode, with its outcome judged from the world and the turn error (measured against commanded).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import statistics
+from collections import Counter
 import time
 from pathlib import Path
 
@@ -19,7 +21,8 @@ from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.cli_args import non_negative_int, positive_int, writable_file
 from planhrc.robot_sim.perception import CameraPerception, angle_difference_deg
-from planhrc.robot_sim.scene import SceneSpec, build_scene, is_workable, random_orientations
+from planhrc.geometry import sweep_feasible
+from planhrc.robot_sim.scene import SceneSpec, build_scene, random_orientations
 from planhrc.stats import percentile
 from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
 
@@ -33,33 +36,38 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
         camera = CameraPerception(client, scene)
         errors, frame_s, missed = [], [], 0
         for _ in range(configurations):
-            scene.set_configuration(random_orientations(rng, spec))
+            scene.set_configuration(random_orientations(rng, spec, base_point_xy=spec.base_xy), spec.base_xy)
+            scene.step(2)
             t = time.perf_counter()
             seen = camera.perceive()
             frame_s.append(time.perf_counter() - t)
-            truth = scene.link_orientations_deg()
+            truth = scene.link_orientations_deg()  # the simulator's measured pose, to judge the camera
             for est, true in zip(seen.link_orientations_deg, truth):
                 if est is None:
                     missed += 1
                 else:
                     errors.append(abs(angle_difference_deg(est, true)))
         robot = Robot(scene)
-        rotation_s, outcomes = [], []
-        scene.set_configuration(spec.orientations0)
+        rotation_s, outcomes, reasons, turn_errors = [], Counter(), Counter(), []
+        scene.set_configuration(spec.orientations0, spec.base_xy)
         while len(rotation_s) < rotations:
             link = int(rng.integers(2, spec.n_links + 1))
             delta = float(rng.choice([-90.0, -45.0, 45.0, 90.0]))
-            _, theta = scene.configuration()
-            trial = [t + delta if i >= link - 1 else t for i, t in enumerate(theta)]
-            if not is_workable(spec, trial):
+            base, theta = scene.configuration()
+            if not sweep_feasible(spec.geometry(base), theta, link, link - 1, delta, cell=spec.cell()).ok:
+                if rng.random() < 0.1:
+                    scene.set_configuration(spec.orientations0, spec.base_xy)
                 continue
             t = time.perf_counter()
-            outcome = perform_action(scene, robot, RotationAction(turned_link=link, held_link=link - 1,
-                                                                  delta_deg=delta))
+            result = perform_action(scene, robot, RotationAction(turned_link=link, held_link=link - 1,
+                                                                 delta_deg=delta))
             rotation_s.append(time.perf_counter() - t)
-            outcomes.append(outcome.value)
-            if outcome is not Outcome.SUCCEEDED:
-                scene.set_configuration(spec.orientations0)
+            outcomes[result.outcome.value] += 1
+            if result.reason is not None:
+                reasons[result.reason.value] += 1
+            turn_errors.append(abs(result.reached_deg - delta))
+            if result.outcome is not Outcome.SUCCEEDED:
+                scene.set_configuration(spec.orientations0, spec.base_xy)
     finally:
         scene.close()
         client.disconnect()
@@ -68,7 +76,10 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
                              "max": max(errors), "missed_markers": missed},
         "perception_s": {"median": statistics.median(frame_s), "max": max(frame_s)},
         "rotation_action_s": {"median": statistics.median(rotation_s), "max": max(rotation_s),
-                              "succeeded": outcomes.count("succeeded"), "of": len(outcomes)},
+                              "succeeded": outcomes.get("succeeded", 0), "of": len(rotation_s)},
+        "rotation_outcomes": dict(outcomes),
+        "rotation_failure_reasons": dict(reasons),
+        "turn_error_deg": {"median": statistics.median(turn_errors), "max": max(turn_errors)},
         "configurations": configurations,
         "seed": seed,
     }

@@ -1,8 +1,12 @@
 """Skills: a plan's rotation action becomes a command (a list of primitives) that the simulator executes.
 
-`rotate_skill` plans without moving anything visible: it solves inverse kinematics for every arm pose the
-action needs and returns ``None`` when one of them cannot be reached within tolerance. `execute` then plays
-the command: arms move by setting joint states (interpolated), the object turns kinematically about its joint.
+`rotate_skill` plans without moving anything: it solves inverse kinematics for every arm pose the action
+needs and returns an `Unreachable` (which link, by how much) when one of them cannot be reached. `execute`
+then plays the command physically, as the paper's three steps: the holding gripper closes on the link that
+stays, the turning gripper closes on the link that turns (a grasp holds by a constraint made only once the
+fingers touch the link), the turning arm follows the arc about the joint through its joint motors while the
+physics steps, and both let go. The outcome is judged from the world afterwards: the measured joint angle
+against the commanded one, what the arms touched on the way, grasps lost, links off the table.
 """
 from __future__ import annotations
 
@@ -14,17 +18,20 @@ from enum import Enum
 from typing import Any, Callable, Mapping, Sequence, Union
 
 import numpy as np
+import pybullet
 
+from planhrc.geometry import reach_shortfall
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
     Scene,
     SimError,
     arm_joints,
+    drive_gripper,
+    hold_arm,
     joint_between,
     rotate_point,
     set_arm_joints,
-    set_gripper,
 )
 
 log = logging.getLogger(__name__)
@@ -36,10 +43,22 @@ class Outcome(str, Enum):
     PARTIAL = "partial"
 
 
+class Reason(str, Enum):
+    """Why an action did not do what it was asked (machine-readable; the sentence says the rest)."""
+
+    UNREACHABLE = "unreachable"
+    COLLISION = "collision"
+    SLIP = "slip"
+    STALL = "stall"
+    GRASP_LOST = "grasp_lost"
+    LEFT_TABLE = "left_table"
+
+
 @dataclass(frozen=True)
 class RotationAction:
     """One plan action: turn `turned_link` about its joint with `held_link` (0 = the table) by `delta_deg`
-    (+ = clockwise seen from above). `joint_index` is the plan's joint number, kept for the record."""
+    (+ = clockwise seen from above). `joint_index` is the plan's joint number, kept for the record;
+    `macro_steps` says how many plan steps were merged into this one motion."""
 
     turned_link: int
     held_link: int
@@ -47,6 +66,7 @@ class RotationAction:
     joint_index: int | None = None
     action_id: str | None = None
     name: str = ""
+    macro_steps: int = 1
 
     @classmethod
     def from_api(cls, data: Mapping[str, Any]) -> "RotationAction":
@@ -59,36 +79,70 @@ class RotationAction:
                 joint_index=int(data["joint_index"]) if data.get("joint_index") is not None else None,
                 action_id=str(data["id"]) if data.get("id") is not None else None,
                 name=str(data.get("name", "")),
+                macro_steps=int(data.get("macro_steps") or 1),
             )
         except KeyError as exc:
             raise SimError(f"next_action.{exc.args[0]}: missing") from exc
         except (TypeError, ValueError) as exc:
             raise SimError(f"next_action: malformed ({exc})") from exc
 
+    def split(self) -> tuple["RotationAction", ...]:
+        """The macro step as its single steps (itself when it is one step)."""
+        if self.macro_steps <= 1:
+            return (self,)
+        one = self.delta_deg / self.macro_steps
+        return tuple(RotationAction(self.turned_link, self.held_link, one, self.joint_index, self.action_id,
+                                    self.name, 1) for _ in range(self.macro_steps))
+
+
+@dataclass(frozen=True)
+class ActionResult:
+    """What an action did, judged from the world: the outcome, why (None when it succeeded), a sentence,
+    and the turn measured after release against the commanded one (degrees, + = clockwise)."""
+
+    outcome: Outcome
+    reason: Reason | None
+    message: str
+    commanded_deg: float
+    reached_deg: float
+
+    @property
+    def value(self) -> str:
+        return self.outcome.value
+
 
 # -- primitives ------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class MoveArm:
+    """Drive `arm`'s joint motors to `joint_positions` (interpolated in joint space)."""
+
     arm: str
     joint_positions: tuple[float, ...]
 
 
 @dataclass(frozen=True)
-class Grip:
+class Grasp:
+    """Close `arm`'s fingers on `link`; the grasp holds once the fingers touch it."""
+
     arm: str
-    close: bool
+    link: int
 
 
 @dataclass(frozen=True)
-class RotateObject:
-    """Turn one side of joint point `joint` by `delta_deg` (see `Scene.rotate_at_joint`)."""
-
-    joint: int
-    delta_deg: float
-    turned: str = "downstream"
+class Release:
+    arm: str
 
 
-Primitive = Union[MoveArm, Grip, RotateObject]
+@dataclass(frozen=True)
+class Turn:
+    """One waypoint of the turning arm along the arc: `angle_deg` of the rotation done when it is reached."""
+
+    arm: str
+    joint_positions: tuple[float, ...]
+    angle_deg: float
+
+
+Primitive = Union[MoveArm, Grasp, Release, Turn]
 
 
 @dataclass(frozen=True)
@@ -97,10 +151,25 @@ class Command:
     joint: int
     turned: str
     delta_deg: float
+    turned_link: int
+    held_link: int
 
     @property
     def rotation_steps(self) -> int:
-        return sum(1 for p in self.primitives if isinstance(p, RotateObject))
+        return sum(1 for p in self.primitives if isinstance(p, Turn))
+
+
+@dataclass(frozen=True)
+class Unreachable:
+    """A command that cannot be planned: `link` cannot be reached by any arm, missing it by `miss_m`."""
+
+    link: int
+    miss_m: float
+    where: str
+
+    @property
+    def message(self) -> str:
+        return f"link {self.link} unreachable: {self.miss_m:.2f} m beyond reach ({self.where})"
 
 
 # -- the robot: inverse kinematics for Baxter's arms ---------------------------------------------------------
@@ -110,12 +179,13 @@ class Robot:
     def __init__(
         self,
         scene: Scene,
-        tolerance_m: float = 0.03,
+        tolerance_m: float = 0.015,
         step_deg: float = 5.0,
-        approach_height_m: float = 0.10,
-        grasp_height_m: float = 0.01,
-        interpolation_steps: int = 8,
+        approach_height_m: float = 0.08,
+        grasp_height_m: float = 0.005,
+        arc_steps: int = 8,
         realtime_s: float = 0.0,
+        success_tolerance_deg: float = 4.0,
     ) -> None:
         if scene.robot is None:
             raise SimError("scene: was built without the robot (load_robot=False)")
@@ -125,24 +195,36 @@ class Robot:
         self.step_deg = step_deg
         self.approach_height_m = approach_height_m
         self.grasp_height_m = grasp_height_m
-        self.interpolation_steps = interpolation_steps
+        self.arc_steps = arc_steps  # physics steps per waypoint of a turn: 5 deg in 8 steps of 1/120 s = 75 deg/s
         self.realtime_s = realtime_s
+        self.success_tolerance_deg = success_tolerance_deg
         c, body = self.client, scene.robot
         self._movable = [j for j in range(c.getNumJoints(body)) if c.getJointInfo(body, j)[2] != 4]  # 4 = fixed
         self._lower = [c.getJointInfo(body, j)[8] for j in self._movable]
         self._upper = [c.getJointInfo(body, j)[9] for j in self._movable]
         self._ranges = [u - lo for lo, u in zip(self._lower, self._upper)]
+        # the links of each arm that must touch nothing (everything from the shoulder to the wrist)
+        self.arm_links: dict[str, tuple[int, ...]] = {}
+        self.hand_links: dict[str, tuple[int, ...]] = {}
+        names = {j: c.getJointInfo(body, j)[12].decode() for j in range(c.getNumJoints(body))}
+        for arm in ARMS:
+            prefix = f"{arm}_"
+            hand = tuple(j for j, n in names.items()
+                         if n.startswith((f"{arm[0]}_gripper", f"{prefix}gripper", f"{prefix}hand")))
+            self.hand_links[arm] = hand
+            self.arm_links[arm] = tuple(j for j, n in names.items()
+                                        if n.startswith(prefix) and j not in hand and c.getCollisionShapeData(body, j))
 
     def end_effector_pose(self, arm: str) -> tuple[np.ndarray, tuple[float, ...]]:
         state = self.client.getLinkState(self.scene.robot, self.scene.arms[arm].end_effector, computeForwardKinematics=True)
         return np.array(state[4]), state[5]
 
-    def solve_ik(self, arm: str, position: Sequence[float], yaw: float, iterations: int = 6) -> tuple[float, ...] | None:
-        """Joint positions putting `arm`'s gripper at `position`, pointing down, turned by `yaw` (radians).
+    def solve_ik(self, arm: str, position: Sequence[float], yaw: float, iterations: int = 6
+                 ) -> tuple[tuple[float, ...] | None, float]:
+        """(joint positions putting `arm`'s gripper at `position`, pointing down, turned by `yaw` (radians), or
+        None when it misses by more than the tolerance or tilts; the miss in metres).
 
-        Leaves the arm at the solution (planning replays poses in order); returns None when the reached
-        position is farther than the tolerance or a joint would leave its limits.
-        """
+        Leaves the arm at the solution (planning replays poses in order)."""
         info = self.scene.arms[arm]
         c, body = self.client, self.scene.robot
         target = np.asarray(position, dtype=float)
@@ -151,16 +233,9 @@ class Robot:
         solution: tuple[float, ...] = arm_joints(self.scene, arm)
         for _ in range(iterations):
             q = c.calculateInverseKinematics(
-                body,
-                info.end_effector,
-                target.tolist(),
-                orientation,
-                lowerLimits=self._lower,
-                upperLimits=self._upper,
-                jointRanges=self._ranges,
-                restPoses=rest,
-                maxNumIterations=100,
-                residualThreshold=1e-5,
+                body, info.end_effector, target.tolist(), orientation,
+                lowerLimits=self._lower, upperLimits=self._upper, jointRanges=self._ranges, restPoses=rest,
+                maxNumIterations=100, residualThreshold=1e-5,
             )
             solution = tuple(float(q[self._movable.index(j)]) for j in info.joints)
             solution = tuple(float(np.clip(v, lo, hi)) for v, lo, hi in zip(solution, info.lower, info.upper))
@@ -168,22 +243,23 @@ class Robot:
             reached, _ = self.end_effector_pose(arm)
             if np.linalg.norm(reached - target) < 1e-3:
                 break
-        reached, _ = self.end_effector_pose(arm)
+        reached, quat = self.end_effector_pose(arm)
         error = float(np.linalg.norm(reached - target))
-        if error > self.tolerance_m:
-            log.info("IK: %s arm misses %s by %.3f m", arm, np.round(target, 3).tolist(), error)
-            return None
-        return solution
-
-    def closer_arm(self, point_xy: np.ndarray) -> str:
-        """Left arm for points on the robot's left (+y), right arm otherwise."""
-        return "left" if point_xy[1] >= 0.0 else "right"
+        frame = np.asarray(c.getMatrixFromQuaternion(quat)).reshape(3, 3)
+        tilt = math.degrees(math.acos(float(np.clip(-frame[2, 2], -1.0, 1.0))))
+        reached_yaw = math.atan2(frame[1, 0], frame[0, 0])
+        twist = abs(math.degrees((reached_yaw - yaw + math.pi) % (2 * math.pi) - math.pi))
+        if error > self.tolerance_m or tilt > 10.0 or twist > 6.0:
+            log.warning("IK: %s arm misses %s by %.3f m (tilt %.0f deg, twist %.0f deg)", arm,
+                        np.round(target, 3).tolist(), error, tilt, twist)
+            return None, max(error, 0.01 if error <= self.tolerance_m else error)
+        return solution, error
 
     def arm_assignments(self, held_xy: np.ndarray | None, turned_xy: np.ndarray) -> list[tuple[str | None, str]]:
         """(arm holding, arm turning) pairs, best first: the closer arm turns when nothing is held, else the
         pairing with the shorter total shoulder distance; the other pairing is the fallback."""
         if held_xy is None:
-            first = self.closer_arm(turned_xy)
+            first = "left" if turned_xy[1] >= 0.0 else "right"
             return [(None, first), (None, "right" if first == "left" else "left")]
 
         def dist(arm: str, p: np.ndarray) -> float:
@@ -203,29 +279,36 @@ def _unwrap_yaw(yaw: float, previous: float | None) -> float:
     return min(candidates, key=lambda a: abs(a - previous))
 
 
-def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command | None:
-    """Plan a rotation action as a command, or return None when an arm pose cannot be reached."""
-    joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
+def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command | Unreachable:
+    """Plan a rotation action as a command, or say which link cannot be reached (nothing moves)."""
+    joint_between(action.turned_link, action.held_link, scene.n_links)  # refuses links that are not neighbours
     turned_xy = scene.link_center(action.turned_link)
     held_xy = scene.link_center(action.held_link) if action.held_link >= 1 else None
     saved = {arm: arm_joints(scene, arm) for arm in ARMS}
+    worst: Unreachable | None = None
     try:
         for holder, turner in robot.arm_assignments(held_xy, turned_xy):
-            command = _plan_rotation(scene, robot, action, joint_k, side, holder, turner)
-            if command is not None:
-                return command
-            for arm, q in saved.items():
-                set_arm_joints(scene, arm, q)
-        return None
+            for flip in (0.0, math.pi):
+                planned = _plan_rotation(scene, robot, action, holder, turner, flip)
+                if isinstance(planned, Command):
+                    return planned
+                if worst is None or planned.miss_m < worst.miss_m:
+                    worst = planned
+                for arm, q in saved.items():
+                    set_arm_joints(scene, arm, q)
+        assert worst is not None
+        return worst
     finally:
         for arm, q in saved.items():
             set_arm_joints(scene, arm, q)
 
 
-def _plan_rotation(
-    scene: Scene, robot: Robot, action: RotationAction, joint_k: int, side: str, holder: str | None, turner: str
-) -> Command | None:
-    (_, theta) = scene.configuration()
+def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: str | None, turner: str,
+                   flip: float = 0.0) -> Command | Unreachable:
+    """The command with `holder` holding and `turner` turning, the turning gripper grasping at the link's yaw
+    plus `flip` (0 or pi: the wrist's range decides which way round the turn can be followed)."""
+    joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
+    theta = scene.link_orientations_deg()
     pivot = scene.joint_points()[joint_k - 1]
     turned_xy = scene.link_center(action.turned_link)
     held_xy = scene.link_center(action.held_link) if action.held_link >= 1 else None
@@ -233,115 +316,267 @@ def _plan_rotation(
     z_above = z_grasp + robot.approach_height_m
     primitives: list[Primitive] = []
 
-    def reach(arm: str, xy: np.ndarray, z: float, yaw: float) -> bool:
-        q = robot.solve_ik(arm, [xy[0], xy[1], z], yaw)
+    def solve(arm: str, link: int, xy: np.ndarray, z: float, yaw: float, what: str) -> tuple[float, ...] | Unreachable:
+        q, miss = robot.solve_ik(arm, [xy[0], xy[1], z], yaw)
         if q is None:
-            return False
+            beyond = max(miss, reach_shortfall(xy, scene.spec.cell().robot))
+            return Unreachable(link, beyond, f"{arm} arm, {what} at x={xy[0]:.2f} m, y={xy[1]:.2f} m")
+        return q
+
+    def move(arm: str, link: int, xy: np.ndarray, z: float, yaw: float, what: str) -> Unreachable | None:
+        q = solve(arm, link, xy, z, yaw, what)
+        if isinstance(q, Unreachable):
+            return q
         primitives.append(MoveArm(arm, q))
-        return True
+        return None
 
     if holder is not None:
         held_yaw = -math.radians(theta[action.held_link - 1])
-        if not (reach(holder, held_xy, z_above, held_yaw) and reach(holder, held_xy, z_grasp, held_yaw)):
-            return None
-        primitives.append(Grip(holder, True))
-    turned_yaw = -math.radians(theta[action.turned_link - 1])
-    if not (reach(turner, turned_xy, z_above, turned_yaw) and reach(turner, turned_xy, z_grasp, turned_yaw)):
-        return None
-    primitives.append(Grip(turner, True))
+        for z in (z_above, z_grasp):
+            if (miss := move(holder, action.held_link, held_xy, z, held_yaw, "holding")) is not None:
+                return miss
+        primitives.append(Grasp(holder, action.held_link))
+    turned_yaw = -math.radians(theta[action.turned_link - 1]) + flip
+    for z in (z_above, z_grasp):
+        if (miss := move(turner, action.turned_link, turned_xy, z, turned_yaw, "grasping")) is not None:
+            return miss
+    primitives.append(Grasp(turner, action.turned_link))
 
     n = max(1, math.ceil(abs(action.delta_deg) / robot.step_deg))
-    increment = action.delta_deg / n
     yaw = turned_yaw
     for i in range(1, n + 1):
-        angle = increment * i
+        angle = action.delta_deg * i / n
         xy = rotate_point(turned_xy, pivot, angle)
         yaw = _unwrap_yaw(turned_yaw - math.radians(angle), yaw)
-        primitives.append(RotateObject(joint_k, increment, side))
-        if not reach(turner, xy, z_grasp, yaw):
-            return None
+        q = solve(turner, action.turned_link, xy, z_grasp, yaw, f"turning, {angle:+.0f} deg")
+        if isinstance(q, Unreachable):
+            return q
+        primitives.append(Turn(turner, q, angle))
     final_xy = rotate_point(turned_xy, pivot, action.delta_deg)
-    primitives.append(Grip(turner, False))
+    primitives.append(Release(turner))
     if holder is not None:
-        primitives.append(Grip(holder, False))
-    if not reach(turner, final_xy, z_above, yaw):
-        return None
-    if holder is not None and not reach(holder, held_xy, z_above, -math.radians(theta[action.held_link - 1])):
-        return None
+        primitives.append(Release(holder))
+    if (miss := move(turner, action.turned_link, final_xy, z_above, yaw, "lifting")) is not None:
+        return miss
+    if holder is not None:
+        if (miss := move(holder, action.held_link, held_xy, z_above, -math.radians(theta[action.held_link - 1]),
+                         "lifting")) is not None:
+            return miss
     for arm in (turner, holder):
         if arm is not None:
             primitives.append(MoveArm(arm, HOME_POSE[arm]))
-    return Command(tuple(primitives), joint_k, side, float(action.delta_deg))
+    return Command(tuple(primitives), joint_k, side, float(action.delta_deg), action.turned_link, action.held_link)
 
 
 # -- execution -----------------------------------------------------------------------------------------------
 Interrupt = Callable[[int, int], bool]
 
 
-def _move_arm(scene: Scene, robot: Robot, arm: str, target: Sequence[float]) -> None:
-    start = np.array(arm_joints(scene, arm))
-    goal = np.array(target)
-    steps = max(1, robot.interpolation_steps)
-    for i in range(1, steps + 1):
-        set_arm_joints(scene, arm, start + (goal - start) * (i / steps))
+class _Hands:
+    """The grasps an execution holds: arm -> (constraint id, link, grasp point in the link's frame)."""
+
+    def __init__(self, scene: Scene, robot: Robot) -> None:
+        self.scene, self.robot = scene, robot
+        self.held: dict[str, tuple[int, int]] = {}
+
+    def grasp(self, arm: str, link: int, steps: int = 8) -> bool:
+        """Close the fingers; once a finger touches the link, fix the link to the gripper. False: it closed
+        on nothing."""
+        s, c = self.scene, self.scene.client
+        drive_gripper(s, arm, close=True)
+        target = s.object_link_index(link)
+        for _ in range(steps):
+            s.step()
+            if any(s.near(s.robot, f, s.body, target, 0.006) for f in self.robot.hand_links[arm]):
+                break
+        else:
+            return False
+        # a constraint's frames are given in each body's centre-of-mass frame
+        ee = s.arms[arm].end_effector
+        ee_state = c.getLinkState(s.robot, ee, computeForwardKinematics=True)
+        link_pos, link_quat = s.link_pose(link)
+        inv_pos, inv_quat = c.invertTransform(link_pos.tolist(), link_quat)
+        rel_pos, rel_quat = c.multiplyTransforms(inv_pos, inv_quat, ee_state[0], ee_state[1])
+        cid = c.createConstraint(s.robot, ee, s.body, target, pybullet.JOINT_PRISMATIC, [0, 0, 1],
+                                 parentFramePosition=[0, 0, 0], childFramePosition=rel_pos,
+                                 parentFrameOrientation=[0, 0, 0, 1], childFrameOrientation=rel_quat)
+        c.changeConstraint(cid, maxForce=200.0)
+        self.held[arm] = (cid, link)
+        s.gripped.add(link)
+        return True
+
+    def offset(self, arm: str) -> float:
+        """How far the grasped link has slid from the gripper (metres)."""
+        cid, link = self.held[arm]
+        c = self.scene.client
+        info = c.getConstraintInfo(cid)
+        ee_pos = np.asarray(c.getLinkState(self.scene.robot, info[1], computeForwardKinematics=True)[0])
+        link_pos, link_quat = self.scene.link_pose(link)
+        grip_pos, _ = c.multiplyTransforms(link_pos.tolist(), link_quat, info[7], info[9])
+        return float(np.linalg.norm(np.asarray(grip_pos) - ee_pos))
+
+    def release(self, arm: str) -> None:
+        if arm in self.held:
+            cid, link = self.held.pop(arm)
+            self.scene.client.removeConstraint(cid)
+            self.scene.gripped.discard(link)
+        drive_gripper(self.scene, arm, close=False)
+
+    def release_all(self) -> None:
+        for arm in tuple(self.held):
+            self.release(arm)
+
+
+def _drive(scene: Scene, robot: Robot, arm: str, target: Sequence[float], max_steps: int = 60,
+           tolerance_rad: float = 0.004) -> bool:
+    """Drive `arm`'s joint motors to `target`, stepping the physics until the arm is there (True) or
+    `max_steps` have passed (False: the arm stalls)."""
+    goal = np.asarray(target, dtype=float)
+    hold_arm(scene, arm, goal)
+    for _ in range(max_steps):
+        scene.step()
         if robot.realtime_s:
             time.sleep(robot.realtime_s)
+        if float(np.max(np.abs(np.asarray(arm_joints(scene, arm)) - goal))) < tolerance_rad:
+            return True
+    return False
+
+
+def _follow(scene: Scene, robot: Robot, arm: str, target: Sequence[float], tolerance_rad: float = 0.03) -> bool:
+    """Move `arm` smoothly to the next waypoint of an arc (the motor targets interpolated over
+    `robot.arc_steps` physics steps, so the object is carried, not jerked); False when the arm lags behind."""
+    start = np.asarray(arm_joints(scene, arm))
+    goal = np.asarray(target, dtype=float)
+    for i in range(1, robot.arc_steps + 1):
+        hold_arm(scene, arm, start + (goal - start) * (i / robot.arc_steps))
+        scene.step()
+        if robot.realtime_s:
+            time.sleep(robot.realtime_s)
+    for _ in range(robot.arc_steps):
+        if float(np.max(np.abs(np.asarray(arm_joints(scene, arm)) - goal))) < tolerance_rad:
+            return True
+        scene.step()
+    return False
+
+
+def _relative_deg(scene: Scene, turned: int, held: int) -> float:
+    theta = scene.link_orientations_deg()
+    return theta[turned - 1] - (theta[held - 1] if held >= 1 else 0.0)
+
+
+def _signed_turn(now: float, before: float, commanded: float) -> float:
+    """The turn from `before` to `now` (degrees), taken on the side of a full circle nearest `commanded`."""
+    d = (now - before) % 360.0
+    return min((d - 360.0, d, d + 360.0), key=lambda v: abs(v - commanded))
+
+
+def _arm_contact(scene: Scene, robot: Robot, arms: Sequence[str]) -> str | None:
+    """What an arm (shoulder to wrist) touches now: a link of the object, the table, or None."""
+    for arm in arms:
+        for link_index in robot.arm_links[arm]:
+            for k in range(1, scene.n_links + 1):
+                if scene.near(scene.robot, link_index, scene.body, scene.object_link_index(k), 0.0):
+                    return f"the {arm} arm hits link {k}"
+            if scene.near(scene.robot, link_index, scene.table, None, 0.0):
+                return f"the {arm} arm hits the table"
+    return None
 
 
 def execute(
     scene: Scene,
-    command: Command | None,
+    command: Command | Unreachable | None,
     robot: Robot | None = None,
     interrupt: Interrupt | None = None,
     stop_fraction: float | None = None,
-) -> Outcome:
-    """Play `command`; FAILED when there is none, PARTIAL when the rotation stopped before its full amount.
+) -> ActionResult:
+    """Play `command` physically and judge the outcome from the world.
 
-    `interrupt(done, total)` is called before each rotation increment (it may change the scene, as a human
-    would) and stops the rotation by returning True; `stop_fraction` stops it once that share is done.
-    After a stop both grippers open and the arms go home.
+    `interrupt(done, total)` is called before each waypoint of the turn (the human may start acting then; it
+    acts on the physics clock) and stops the turn by returning True; `stop_fraction` makes the turning gripper
+    lose its grasp once that share of the turn is done (a scripted fault). After a stop both grippers open and
+    the arms go home.
     """
-    if command is None:
-        return Outcome.FAILED
+    if command is None or isinstance(command, Unreachable):
+        message = command.message if isinstance(command, Unreachable) else "no command"
+        return ActionResult(Outcome.FAILED, Reason.UNREACHABLE, message, 0.0, 0.0)
     robot = robot or Robot(scene)
+    hands = _Hands(scene, robot)
     total = command.rotation_steps
-    done = 0.0  # rotation increments performed (the last one may be a fraction)
-    stopped = False
-    for primitive in command.primitives:
-        if isinstance(primitive, RotateObject):
-            if stopped:
-                continue
-            if interrupt is not None and interrupt(int(done), total):
-                stopped = True
-                continue
-            share = 1.0
-            if stop_fraction is not None:
-                share = min(1.0, max(0.0, stop_fraction * total - done))
-                if share <= 1e-9:
-                    stopped = True
+    done = 0
+    before = _relative_deg(scene, command.turned_link, command.held_link)
+    problem: tuple[Reason, str] | None = None
+    arms_used = tuple(dict.fromkeys(p.arm for p in command.primitives))
+    try:
+        for primitive in command.primitives:
+            if isinstance(primitive, MoveArm):
+                if problem is not None and primitive.joint_positions != tuple(HOME_POSE[primitive.arm]):
                     continue
-            scene.rotate_at_joint(primitive.joint, primitive.delta_deg, primitive.turned, fraction=share)
-            done += share
-            if share < 1.0:
-                stopped = True
-        elif isinstance(primitive, Grip):
-            set_gripper(scene, primitive.arm, primitive.close)
-        elif isinstance(primitive, MoveArm):
-            if stopped and not _is_home(primitive):
-                continue  # skip the following motion; open grippers and go home below
-            _move_arm(scene, robot, primitive.arm, primitive.joint_positions)
-        else:  # pragma: no cover - the union is closed
-            raise SimError(f"primitive: unknown {primitive!r}")
-    if stopped:
-        for arm in ARMS:
-            set_gripper(scene, arm, close=False)
-            _move_arm(scene, robot, arm, HOME_POSE[arm])
-        return Outcome.PARTIAL if done > 0 else Outcome.FAILED
-    return Outcome.SUCCEEDED
+                if not _drive(scene, robot, primitive.arm, primitive.joint_positions) and problem is None:
+                    problem = (Reason.STALL, f"the {primitive.arm} arm did not reach its pose")
+            elif isinstance(primitive, Grasp):
+                if problem is not None:
+                    continue
+                if not hands.grasp(primitive.arm, primitive.link):
+                    problem = (Reason.GRASP_LOST, f"the {primitive.arm} gripper closed on nothing at link {primitive.link}")
+            elif isinstance(primitive, Release):
+                if primitive.arm in hands.held:
+                    scene.step(robot.arc_steps)  # hold still until the object has stopped moving, then let go
+                hands.release(primitive.arm)
+                scene.step(3)
+            elif isinstance(primitive, Turn):
+                if problem is not None:
+                    continue
+                if interrupt is not None and interrupt(done, total):
+                    problem = (Reason.STALL, "stopped on request")
+                    continue
+                if stop_fraction is not None and done >= stop_fraction * total:
+                    hands.release(primitive.arm)
+                    problem = (Reason.GRASP_LOST, f"the {primitive.arm} gripper let go of link {command.turned_link}")
+                    continue
+                if not _follow(scene, robot, primitive.arm, primitive.joint_positions):
+                    problem = (Reason.STALL, f"the {primitive.arm} arm could not follow the arc")
+                done += 1
+                if (hit := _arm_contact(scene, robot, arms_used)) is not None:
+                    problem = (Reason.COLLISION, hit)
+                elif any(hands.offset(arm) > 0.02 for arm in hands.held):
+                    slipping = next(arm for arm in hands.held if hands.offset(arm) > 0.02)
+                    problem = (Reason.SLIP, f"link {hands.held[slipping][1]} slipped in the {slipping} gripper")
+                if problem is not None:
+                    hands.release_all()
+    finally:
+        hands.release_all()
+    if problem is not None:  # the rest of the command was skipped: the arms go home with open hands
+        for arm in arms_used:
+            _drive(scene, robot, arm, HOME_POSE[arm])
+    scene.step(6)
+    return _judge(scene, robot, command, before, problem)
 
 
-def _is_home(primitive: MoveArm) -> bool:
-    return tuple(primitive.joint_positions) == tuple(HOME_POSE[primitive.arm])
+def _judge(scene: Scene, robot: Robot, command: Command, before: float, problem: tuple[Reason, str] | None
+           ) -> ActionResult:
+    reached = _signed_turn(_relative_deg(scene, command.turned_link, command.held_link), before, command.delta_deg)
+    commanded = command.delta_deg
+    short = commanded - reached
+    link = command.turned_link
+    off = scene.off_table_links()
+    if off:
+        reason, sentence = Reason.LEFT_TABLE, f"link {off[0]} left the table"
+    elif problem is not None:
+        reason, sentence = problem
+    elif abs(short) > robot.success_tolerance_deg:
+        reason = Reason.SLIP if abs(reached) > 1.0 else Reason.STALL
+        sentence = f"link {link} {'slipped' if reason is Reason.SLIP else 'did not turn'}"
+    else:
+        return ActionResult(Outcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f}",
+                            commanded, reached)
+    if abs(short) <= robot.success_tolerance_deg and reason is not Reason.LEFT_TABLE:
+        # the turn itself is complete; the problem (a touch on the way back) is reported with it
+        return ActionResult(Outcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f} "
+                            f"({sentence})", commanded, reached)
+    moved = abs(reached) > 1.0 and reached * commanded > 0
+    outcome = Outcome.PARTIAL if moved else Outcome.FAILED
+    detail = f"{sentence}: turned {reached:+.1f} of {commanded:+.0f} deg, short by {abs(short):.1f} deg"
+    return ActionResult(outcome, reason, detail, commanded, reached)
 
 
 def perform_action(
@@ -350,6 +585,6 @@ def perform_action(
     action: RotationAction,
     interrupt: Interrupt | None = None,
     stop_fraction: float | None = None,
-) -> Outcome:
+) -> ActionResult:
     """Plan and execute one action; an action that cannot be planned is FAILED and nothing moves."""
     return execute(scene, rotate_skill(scene, robot, action), robot, interrupt, stop_fraction)
