@@ -154,10 +154,10 @@ class KBClient:
             else {"joint_angles_deg": list(joint_angles_deg or ())})
         return self._request("PUT", f"/objects/{object_id}/goal", body)
 
-    def post_perception(self, object_id: str, link_orientations_deg: Sequence[float]) -> Decision:
-        """One perception: a fresh idempotency key, reused by every retry of this request."""
+    def post_perception(self, object_id: str, link_orientations_deg: Sequence[float | None]) -> Decision:
+        """One perception (None = a link not seen): a fresh idempotency key, reused by every retry of it."""
         key = str(uuid.uuid4())
-        body = {"link_orientations_deg": [float(v) for v in link_orientations_deg]}
+        body = {"link_orientations_deg": [None if v is None else float(v) for v in link_orientations_deg]}
         return Decision.from_json(self._request("POST", f"/objects/{object_id}/perceptions", body, key))
 
     def next_action(self, object_id: str) -> dict[str, Any] | None:

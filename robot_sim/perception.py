@@ -1,7 +1,10 @@
 """Perception of the object's link orientations: a camera with ArUco markers, or noisy simulator poses.
 
-`CameraPerception` renders the head camera's view of the table with TinyRenderer, detects one ArUco marker
-per link and turns each marker's corners into a table angle. Instead of reading the angle off the image
+`CameraPerception` is a camera on Baxter's head (where the paper's Kinect sat): it takes the head camera
+link's pose and the head's pan from the simulated robot, renders what it sees with TinyRenderer, detects one
+ArUco marker per link and turns each marker's corners into a table angle. It reads nothing else from the
+simulator: a link whose marker it does not see is reported as unseen (None). `look` looks again with the head
+turned, keeping what each view saw. Instead of reading the angle off the image
 (whose axes are tilted by the oblique view and flipped: image rows grow downwards), every corner is cast
 back through the camera onto the plane of the marker tops, and the angle is measured on the table in
 the world frame: theta = atan2(-dy, dx), clockwise seen from above from +x.
@@ -17,7 +20,7 @@ import numpy as np
 import pybullet
 
 from planhrc.robot_sim.markers import aruco_dictionary
-from planhrc.robot_sim.scene import Scene
+from planhrc.robot_sim.scene import Scene, SimError
 
 
 @dataclass(frozen=True)
@@ -26,6 +29,7 @@ class Perception:
 
     link_orientations_deg: tuple[float | None, ...]
     frame: np.ndarray | None = None
+    looks: int = 1  # views taken (more than one: the head turned to look again)
 
     @property
     def complete(self) -> bool:
@@ -43,18 +47,17 @@ class Perceiver(Protocol):
 
 @dataclass(frozen=True)
 class CameraSpec:
-    """A camera above Baxter's head looking down at the table (the head camera's viewpoint, raised)."""
+    """The head camera: mounted on Baxter's head camera link, pitched down to look at the table."""
 
-    eye: tuple[float, float, float] = (0.2, 0.0, 1.2)
-    target: tuple[float, float, float] = (0.6, 0.0, -0.18)
-    up: tuple[float, float, float] = (1.0, 0.0, 0.0)
-    fov_deg: float = 36.0  # vertical
+    look_at: tuple[float, float, float] = (0.6, 0.0, -0.18)  # where it looks with the head pan at 0
+    fov_deg: float = 50.0  # vertical
     width: int = 960
     height: int = 720
     near: float = 0.05
     far: float = 5.0
     # Markers are only ~20 px wide: detect on enlarged copies, trying each scale until every marker is found.
     upscales: tuple[int, ...] = (2, 1, 3)
+    look_again_pans_rad: tuple[float, ...] = (0.35, -0.35)  # head pans tried when a marker was not seen
 
 
 def circular_mean_deg(angles: list[float]) -> float:
@@ -78,16 +81,39 @@ class CameraPerception:
     """Render, detect markers, back-project their corners onto the table and measure each link's angle."""
 
     def __init__(self, client, scene: Scene, camera: CameraSpec | None = None) -> None:
+        if scene.head_camera is None:
+            raise SimError("scene: the head camera needs the robot (load_robot=True)")
         self.client = client
         self.scene = scene
         self.camera = camera or CameraSpec()
-        cam = self.camera
-        self._view = client.computeViewMatrix(list(cam.eye), list(cam.target), list(cam.up))
-        self._proj = client.computeProjectionMatrixFOV(cam.fov_deg, cam.width / cam.height, cam.near, cam.far)
+        self._detector = cv2.aruco.ArucoDetector(aruco_dictionary(), self._detector_parameters())
+        self._aim()
+
+    def _aim(self) -> None:
+        """View and projection matrices from the head camera link's pose and the head's pan."""
+        c, cam, scene = self.client, self.camera, self.scene
+        eye = np.asarray(c.getLinkState(scene.robot, scene.head_camera, computeForwardKinematics=True)[4])
+        pan = c.getJointState(scene.robot, scene.head_pan)[0]
+        ahead = np.asarray(cam.look_at) - eye
+        cos, sin = math.cos(pan), math.sin(pan)
+        ahead = np.array([cos * ahead[0] - sin * ahead[1], sin * ahead[0] + cos * ahead[1], ahead[2]])
+        forward = np.array([math.cos(pan), math.sin(pan), 0.0])
+        self._view = c.computeViewMatrix(eye.tolist(), (eye + ahead).tolist(), forward.tolist())
+        self._proj = c.computeProjectionMatrixFOV(cam.fov_deg, cam.width / cam.height, cam.near, cam.far)
         view = np.array(self._view, dtype=float).reshape(4, 4).T  # PyBullet matrices are column-major
         proj = np.array(self._proj, dtype=float).reshape(4, 4).T
         self._inverse = np.linalg.inv(proj @ view)
-        self._detector = cv2.aruco.ArucoDetector(aruco_dictionary(), self._detector_parameters())
+
+    def turn_head(self, pan_rad: float, max_steps: int = 60) -> None:
+        """Turn the head (its pan motor, on the physics clock) and aim the camera from where it ends."""
+        c, scene = self.client, self.scene
+        c.setJointMotorControl2(scene.robot, scene.head_pan, pybullet.POSITION_CONTROL, targetPosition=pan_rad,
+                                force=50.0, maxVelocity=4.0)
+        for _ in range(max_steps):
+            scene.step()
+            if abs(c.getJointState(scene.robot, scene.head_pan)[0] - pan_rad) < 0.01:
+                break
+        self._aim()
 
     @staticmethod
     def _detector_parameters() -> cv2.aruco.DetectorParameters:
@@ -104,6 +130,7 @@ class CameraPerception:
 
     def render(self) -> np.ndarray:
         cam = self.camera
+        self.scene.sync_markers()
         _, _, rgba, _, _ = self.client.getCameraImage(
             cam.width, cam.height, self._view, self._proj, renderer=pybullet.ER_TINY_RENDERER
         )
@@ -129,10 +156,28 @@ class CameraPerception:
         return circular_mean_deg(along + across)
 
     def perceive(self) -> Perception:
+        """One look from where the head points now."""
+        self._aim()
         frame = self.render()
         link_ids = [asset.marker_id for asset in self.scene.markers]
         found = self.detect(frame, set(link_ids))
         return Perception(tuple(found.get(m) for m in link_ids), frame)
+
+    def look(self) -> Perception:
+        """Look; while markers are missing, look again with the head turned to each side, keeping what each
+        view saw (the first view's frame is kept); the head turns back afterwards."""
+        seen = self.perceive()
+        if seen.complete:
+            return seen
+        values = list(seen.link_orientations_deg)
+        for pan in self.camera.look_again_pans_rad:
+            self.turn_head(pan)
+            again = self.perceive()
+            values = [v if v is not None else a for v, a in zip(values, again.link_orientations_deg)]
+            if all(v is not None for v in values):
+                break
+        self.turn_head(0.0)
+        return Perception(tuple(values), seen.frame, looks=1 + len(self.camera.look_again_pans_rad))
 
     def detect(self, frame: np.ndarray, wanted: set[int]) -> dict[int, float]:
         """Marker id -> table angle for the wanted markers seen in `frame`."""
@@ -153,12 +198,16 @@ class CameraPerception:
 
 
 class FallbackPerception:
-    """Ground-truth link orientations from the simulator plus Gaussian noise (sigma in degrees, seeded)."""
+    """Ground-truth link orientations from the simulator plus Gaussian noise (sigma in degrees, seeded): the
+    explicit no-camera mode, never a stand-in for what the camera missed."""
 
     def __init__(self, scene: Scene, sigma_deg: float = 1.0, seed: int = 0) -> None:
         self.scene = scene
         self.sigma_deg = sigma_deg
         self._rng = np.random.default_rng(seed)
+
+    def look(self) -> Perception:
+        return self.perceive()
 
     def perceive(self) -> Perception:
         truth = self.scene.link_orientations_deg()
