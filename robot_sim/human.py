@@ -1,11 +1,13 @@
-"""Simulated human co-workers, as data: what the human does to the object, and when.
+"""Simulated human co-workers: what the human does to the object and when (scenarios, as data), and a
+visible body that does it physically, in parallel with the robot, on the physics clock (`Human`).
 
 A scenario is a list of `HumanEvent`s plus `RobotFault`s (a robot rotation that stops part-way). Steps count
 the worker's perceive -> act cycles from 1. Timing of an event:
 
 * ``before``: after the robot's previous action and before it perceives at that step. If the goal was reached
   before the step comes, the human acts once the robot is idle and the robot perceives again.
-* ``during``: half-way through the robot's rotation at that step.
+* ``during``: half-way through the robot's rotation at that step (the human acts while the robot turns; if the
+  robot's action stops early, the human acts anyway).
 
 Kinds of event (the human turns a link lK about joint point pK: lK .. lN move, l(K-1) stays):
 
@@ -19,12 +21,15 @@ Kinds of event (the human turns a link lK about joint point pK: lK .. lN move, l
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
+import pybullet
 
-from planhrc.robot_sim.scene import Scene, SimError, is_workable
+from planhrc.geometry import rotated, sweep_feasible
+from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction, is_feasible
 
 log = logging.getLogger(__name__)
 
@@ -90,12 +95,12 @@ def scenario_none() -> Scenario:
 
 def scenario_fig13() -> Scenario:
     """While the robot does its first action the human does the plan's second one (the robot resumes further
-    on: the goal comes early); later the human disturbs link 2, and the robot puts it back."""
+    on: the goal comes early); later the human disturbs link 3, and the robot puts it back."""
     return Scenario(
         "fig13", assists_after_failures=2,
         events=(
             HumanEvent(at_step=1, when="during", kind="next_planned"),
-            HumanEvent(at_step=3, when="before", kind="rotate", link=2, delta_deg=None, direction=1),
+            HumanEvent(at_step=3, when="before", kind="rotate", link=3, delta_deg=None, direction=1),
         ),
     )
 
@@ -113,7 +118,8 @@ def scenario_fig14() -> Scenario:
 
 
 def scenario_random(seed: int = 0, n: int = 3, max_step: int = 6, n_links: int = 5) -> Scenario:
-    """`n` random interventions: a random link turned by one step either way, before or during a random step."""
+    """`n` random interventions: any link of the chain turned by one step either way, before or during a
+    random step (a considerate human: only moves that keep the object feasible, see `planhrc.geometry`)."""
     rng = np.random.default_rng(seed)
     events = tuple(
         sorted(
@@ -192,69 +198,250 @@ def _difference(theta: Sequence[float], link: int) -> float:
     return (theta[link - 1] - prev) % 360.0
 
 
-def apply_event(scene: Scene, event: HumanEvent, context: HumanContext) -> str | None:
-    """Perform `event` on the scene; return a description of what the human did, or None if nothing."""
+def _move(link: int, delta: float, what: str) -> HumanMove:
+    held = link - 1  # the human turns lK about pK: lK .. lN move, l(K-1) (or the table) stays
+    return HumanMove(link, held, delta, f"{what} l{link} by {delta:+g} deg")
+
+
+def _feasible_after(scene: Scene, link: int, delta: float) -> bool:
+    base, theta = scene.configuration()
+    _, after = rotated(scene.spec.geometry(base), theta, link, link - 1, delta)
+    return is_feasible(scene.spec, after, base) and sweep_feasible(
+        scene.spec.geometry(base), theta, link, link - 1, delta, cell=scene.spec.cell()).ok
+
+
+def choose_move(scene: Scene, event: HumanEvent, context: HumanContext) -> HumanMove | None:
+    """What the human will do for `event` now, or None when there is nothing to do."""
     n = scene.n_links
+    first_free = max(context.busy_links, default=0) + 1  # links the robot does not hold and does not move
     if event.kind == "rotate":
         link = event.link if event.link > 0 else n + 1 + event.link
         if not 1 <= link <= n:
             raise SimError(f"link: {event.link} is not a link of a {n}-link object")
         delta = event.delta_deg if event.delta_deg is not None else event.direction * context.step_deg
-        if event.keep_workable:
-            return _considerate_rotation(scene, link, delta, context)
-        scene.rotate_at_joint(link, delta, "downstream")
-        return f"human turned l{link} by {delta:+g} deg"
+        if not event.keep_workable:
+            return _move(link, delta, "human turned")
+        # a considerate human: this link or any other it may touch, either way, keeping the object feasible
+        candidates = ([link] if link >= first_free else []) + [k for k in range(first_free, n + 1) if k != link]
+        for k in candidates:
+            for d in (delta, -delta):
+                if _feasible_after(scene, k, d):
+                    return _move(k, d, "human turned")
+        log.info("human: no move of l%d or any free link keeps the object feasible", link)
+        return None
     if event.kind == "next_planned":
         if context.next_planned is None:
             log.info("human: the plan has no action after the robot's current one")
             return None
         turned, held, delta = context.next_planned
-        scene.rotate_link(turned, held, delta)
         context.next_planned = None
-        return f"human did the plan's next action: l{turned} (holding l{held}) by {delta:+g} deg"
+        return HumanMove(turned, held, delta, f"human did the plan's next action: l{turned} (holding l{held}) by {delta:+g} deg")
     if event.kind == "complete_partial":
         if context.partial is None:
             log.info("human: no partial rotation to complete")
             return None
         turned, held, remaining = context.partial
-        scene.rotate_link(turned, held, remaining)
         context.partial = None
-        return f"human completed the rotation of l{turned} by {remaining:+g} deg"
+        return HumanMove(turned, held, remaining, f"human completed the rotation of l{turned} by {remaining:+g} deg")
     # toward_goal: the highest link beyond the robot's hands whose angle to its predecessor is off the goal
-    # (turning a link at or before them would move the links the robot holds)
     _, theta = scene.configuration()
-    first_free = max(context.busy_links, default=0) + 1
     for link in sorted(context.goal_differences, reverse=True):
         if link < first_free:
             continue
-        wanted = context.goal_differences[link]
-        off = (wanted - _difference(theta, link) + 180.0) % 360.0 - 180.0
+        off = (context.goal_differences[link] - _difference(theta, link) + 180.0) % 360.0 - 180.0
         if abs(off) >= context.step_deg / 2:
             delta = context.step_deg if off > 0 else -context.step_deg
-            scene.rotate_at_joint(link, delta, "downstream")
-            return f"human turned l{link} by {delta:+g} deg towards the goal"
+            return _move(link, delta, "human turned (towards the goal)")
     log.info("human: no link to turn towards the goal")
     return None
 
 
-def _considerate_rotation(scene: Scene, link: int, delta: float, context: HumanContext) -> str | None:
-    """Turn `link` (or, while the robot works, a link beyond its hands) by `delta`, or the other way, so that
-    the object stays within the robot's reach; do nothing when no such move exists."""
-    first_free = max(context.busy_links, default=0) + 1
-    candidates = [link] if link >= first_free else []
-    candidates += [k for k in range(first_free, scene.n_links + 1) if k != link]
-    base, theta = scene.configuration()
-    for k in candidates:
-        for d in (delta, -delta):
-            trial = [t + d if i >= k - 1 else t for i, t in enumerate(theta)]
-            if is_workable(scene.spec, trial, base):
-                scene.rotate_at_joint(k, d, "downstream")
-                return f"human turned l{k} by {d:+g} deg"
-    log.info("human: no move of l%d or beyond keeps the object workable", link)
-    return None
+def apply_event(human: Human, event: HumanEvent, context: HumanContext) -> str | None:
+    """Start the human's move for `event` (it happens on the physics clock); its description, or None."""
+    move = choose_move(human.scene, event, context)
+    if move is None:
+        return None
+    human.start(move)
+    return move.label
 
 
-def assist_failed_action(scene: Scene, turned_link: int, held_link: int, delta_deg: float) -> str:
-    """The human performs the rotation the robot could not (the paper's cooperation model)."""
-    scene.rotate_link(turned_link, held_link, delta_deg)
-    return f"human did the robot's failed action: l{turned_link} (holding l{held_link}) by {delta_deg:+g} deg"
+def assist_failed_action(human: Human, turned_link: int, held_link: int, delta_deg: float) -> str:
+    """The human performs the rotation the robot could not (the paper's cooperation model), and finishes it."""
+    move = HumanMove(turned_link, held_link, delta_deg,
+                     f"human did the robot's failed action: l{turned_link} (holding l{held_link}) by {delta_deg:+g} deg")
+    human.start(move)
+    human.finish()
+    return move.label
+
+
+# -- the human's body: two hands that grasp and turn links on the physics clock --------------------------------
+REST_XY = ((1.05, 0.25), (1.05, -0.25))  # where the hands wait, beyond the table's far edge
+HAND_SPEED_M_S = 1.2
+TURN_SPEED_DEG_S = 90.0
+HAND_FORCE_N = 30.0  # a firm human grip, weaker than the robot's
+
+
+@dataclass(frozen=True)
+class HumanMove:
+    """Turn `turned` about its joint with `held` (0 = the table) by `delta_deg`; `label` says it in words."""
+
+    turned: int
+    held: int
+    delta_deg: float
+    label: str
+
+
+class Human:
+    """A visible human with two hands (forearm and hand boxes). A move is acted out on the physics clock as a
+    ticker of the scene: the hands travel to the links, the holding hand fixes the link that stays (unless the
+    robot already holds it), the turning hand grips the turned link once it touches it and carries it along
+    the arc about the joint, then both let go and go back. Moves queue; `finish` steps the scene until the
+    human is idle (the robot waiting)."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        c = scene.client
+        self.hands: list[int] = []
+        for xy in REST_XY:
+            visual = c.createVisualShapeArray(
+                shapeTypes=[pybullet.GEOM_BOX, pybullet.GEOM_BOX],
+                halfExtents=[[0.045, 0.035, 0.015], [0.14, 0.03, 0.03]],
+                visualFramePositions=[[0.0, 0.0, 0.0], [0.18, 0.0, 0.04]],  # the forearm reaches back to the human
+                rgbaColors=[[0.87, 0.68, 0.55, 1], [0.55, 0.42, 0.62, 1]],
+            )
+            body = c.createMultiBody(baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual,
+                                     basePosition=[xy[0], xy[1], scene.spec.table_top_z + 0.15])
+            self.hands.append(body)
+        self.queue: list[HumanMove] = []
+        self.done: list[str] = []
+        self._phase: Callable[[], bool] | None = None
+        self._grips: list[int] = []
+        scene.add_ticker(self._tick)
+
+    @property
+    def idle(self) -> bool:
+        return self._phase is None and not self.queue
+
+    def start(self, move: HumanMove) -> None:
+        self.queue.append(move)
+
+    def finish(self, max_steps: int = 2000) -> None:
+        """Step the physics until every queued move is done (the robot waits)."""
+        for _ in range(max_steps):
+            if self.idle:
+                return
+            self.scene.step()
+        log.warning("human: a move did not finish within %d steps", max_steps)
+
+    def close(self) -> None:
+        self.scene.remove_ticker(self._tick)
+
+    # -- acting ------------------------------------------------------------------------------------------------
+    def _tick(self, scene: Scene) -> None:
+        if self._phase is None and self.queue:
+            self._phase = self._plan(self.queue.pop(0))
+        if self._phase is not None and self._phase():
+            self._phase = None
+
+    def _place(self, hand: int, xy: np.ndarray, z: float, theta_deg: float) -> None:
+        quat = self.scene.client.getQuaternionFromEuler([0.0, 0.0, -math.radians(theta_deg)])
+        self.scene.client.resetBasePositionAndOrientation(hand, [float(xy[0]), float(xy[1]), z], quat)
+
+    def _plan(self, move: HumanMove) -> Callable[[], bool]:
+        """A generator of per-tick actions for one move, wrapped as a callable returning True when done."""
+        steps = self._acting(move)
+
+        def advance() -> bool:
+            try:
+                next(steps)
+                return False
+            except StopIteration:
+                return True
+
+        return advance
+
+    def _acting(self, move: HumanMove):
+        s, c = self.scene, self.scene.client
+        dt = TIME_STEP_S
+        z_grip = s.link_center_z + s.spec.link_height_m
+        z_high = s.spec.table_top_z + 0.15
+        hold_hand, turn_hand = self.hands
+        holds = move.held >= 1 and move.held not in s.gripped  # the robot may hold it already
+
+        def hands_to(targets: list[tuple[int, Callable[[], tuple[np.ndarray, float, float]]]]):
+            starts = {h: np.asarray(c.getBasePositionAndOrientation(h)[0]) for h, _ in targets}
+            goal = {h: f() for h, f in targets}
+            distance = max(float(np.linalg.norm(np.append(goal[h][0], goal[h][1]) - starts[h])) for h, _ in targets)
+            n = max(2, int(distance / (HAND_SPEED_M_S * dt)))
+            for i in range(1, n + 1):
+                for h, f in targets:
+                    xy, z, theta = f()
+                    p = starts[h] + (np.append(xy, z) - starts[h]) * (i / n)
+                    self._place(h, p[:2], float(p[2]), theta)
+                yield
+
+        def over(link: int, z: float):
+            return lambda: (s.link_center(link), z, s.link_orientations_deg()[link - 1])
+
+        def rest(i: int):
+            return lambda: (np.asarray(REST_XY[i]), z_high, 0.0)
+
+        targets = [(turn_hand, over(move.turned, z_high))] + ([(hold_hand, over(move.held, z_high))] if holds else [])
+        yield from hands_to(targets)
+        targets = [(turn_hand, over(move.turned, z_grip))] + ([(hold_hand, over(move.held, z_grip))] if holds else [])
+        yield from hands_to(targets)
+        # grip: a constraint from the world to each link the hands now touch
+        grips = {}
+
+        def grip(hand: int, link: int) -> None:
+            position, quat = s.link_pose(link)
+            hand_position = np.asarray(c.getBasePositionAndOrientation(hand)[0])
+            if float(np.linalg.norm(hand_position[:2] - position[:2])) > 0.03:
+                log.info("human: the hand missed link %d", link)
+                return
+            cid = c.createConstraint(s.body, s.object_link_index(link), -1, -1, pybullet.JOINT_FIXED, [0, 0, 0],
+                                     [0, 0, 0], position.tolist(), [0, 0, 0, 1], quat)
+            c.changeConstraint(cid, maxForce=HAND_FORCE_N)
+            grips[hand] = (cid, link)
+            self._grips.append(cid)
+
+        grip(turn_hand, move.turned)
+        if holds:
+            grip(hold_hand, move.held)
+        if turn_hand in grips:
+            cid = grips[turn_hand][0]
+            theta0 = s.link_orientations_deg()
+            reference0 = theta0[move.held - 1] if move.held >= 1 else 0.0
+            relative0 = theta0[move.turned - 1] - reference0
+            pivot0 = s.joint_points()[max(move.turned, move.held) - 1] if move.held == 0 else None
+            n = max(2, int(abs(move.delta_deg) / (TURN_SPEED_DEG_S * dt)))
+            half = s.spec.link_length_m / 2.0
+            for i in range(1, n + 1):
+                theta = s.link_orientations_deg()
+                reference = theta[move.held - 1] if move.held >= 1 else 0.0
+                wanted = reference + relative0 + move.delta_deg * i / n
+                if move.held == 0:
+                    pivot = pivot0
+                else:
+                    held_centre = s.link_center(move.held)
+                    sign = 1.0 if move.turned > move.held else -1.0  # the joint at the held link's far or near end
+                    pivot = held_centre + sign * half * direction(reference)
+                sign = 1.0 if move.turned > move.held else -1.0
+                centre = pivot + sign * half * direction(wanted)
+                quat = c.getQuaternionFromEuler([0.0, 0.0, -math.radians(wanted)])
+                c.changeConstraint(cid, [float(centre[0]), float(centre[1]), s.link_center_z], quat, maxForce=HAND_FORCE_N)
+                self._place(turn_hand, centre, z_grip, wanted)
+                if move.held >= 1 and hold_hand not in grips and move.held not in s.gripped:
+                    # the robot let go of the link that should stay: the other hand takes it
+                    self._place(hold_hand, s.link_center(move.held), z_grip, reference)
+                    grip(hold_hand, move.held)
+                if hold_hand in grips:
+                    self._place(hold_hand, s.link_center(move.held), z_grip, s.link_orientations_deg()[move.held - 1])
+                yield
+            for _ in range(6):
+                yield  # let the object settle under the hands
+        for cid in self._grips:
+            c.removeConstraint(cid)
+        self._grips = []
+        self.done.append(move.label)
+        yield from hands_to([(turn_hand, rest(1)), (hold_hand, rest(0))])
