@@ -3,9 +3,10 @@
 Unless `--kb URL` names a running service, the demo starts `planhrc serve` as a separate process on a free
 loopback port, on the embedded SQLite store in the output folder, protected by a fresh token. Each episode
 creates an object, sets its goal and runs the worker (PyBullet Baxter, camera perception, simulated human)
-until the goal is reached. The output folder gets, per episode, the camera frames (PNG), an animated GIF and
-a picture of the configuration sequence (like the paper's Figs 10-12), and one `summary.json` with every
-decision and its reason, the re-plans, resumes, actions and the time to goal.
+until the goal is reached. The output folder gets one `episode-NNN` folder per episode (the worker's
+`summary.json` with every step, the camera frames, an animated GIF and a picture of the configuration
+sequence like the paper's Figs 10-12) and one `summary.json` with every decision and its reason, the re-plans,
+resumes, actions, outcomes with their failure reasons, links seen and unseen, and the time to goal.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import os
 import secrets
 import signal
 import socket
+import statistics
 import subprocess
 import sys
 import time
@@ -23,13 +25,14 @@ from collections import Counter
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 
 from planhrc.cli_args import http_url, non_negative_int, positive_int, writable_dir
 from planhrc.client import KBClient, ProtocolError, RetryPolicy
-from planhrc.robot_sim.scene import SceneSpec, SimError, is_workable
+from planhrc.geometry import configuration_feasible
+from planhrc.robot_sim.scene import SceneSpec, SimError, is_feasible, random_orientations
 
 log = logging.getLogger(__name__)
 
@@ -45,57 +48,65 @@ class DemoScenario:
     goal_deg: tuple[float, ...]
     human: str
     description: str
+    base_point_xy: tuple[float, float] | None = None  # where p1 lies on the table (default: the scene's)
 
 
 DEMO_SCENARIOS: dict[str, DemoScenario] = {
     "paper-3-4": DemoScenario(
         "paper-3-4", "relative", 4, (90.0, 90.0, 90.0), (90.0, 180.0, 270.0), "none",
         "the paper's 3-4 example (Figs 10-11): 3 links, 90 degree resolution, no human",
+        base_point_xy=(0.7, 0.2325),  # the plan's first action swings links 2-3 towards the robot
     ),
     "fig13": DemoScenario(
         "fig13", "relative", 4, (90.0,) * 5, (90.0, 90.0, 90.0, 180.0, 90.0), "fig13",
         "Fig 13: the human turns a link while the robot works on another (the goal comes early), then "
         "disturbs a link and the robot restores it",
+        base_point_xy=(0.7, 0.3875),  # far enough forward that the disturbed object stays on the table
     ),
     "fig14": DemoScenario(
         "fig14", "absolute", 8, (90.0,) * 5, (90.0, 45.0, 90.0, 135.0, 90.0), "fig14",
-        "Fig 14: a robot rotation stops half-way; the human completes it and also turns the last link",
+        "Fig 14: the robot's gripper lets go half-way through a rotation; the human completes it and also turns "
+        "the last link",
+        base_point_xy=(0.43, 0.3875),  # the plan's first action swings links 2-5 towards the far edge
     ),
 }
 
 
-def reachable_goal(rng: np.random.Generator, spec: SceneSpec, formulation: str, orientations: int,
-                   max_joints: int = 4, max_steps: int = 3, attempts: int = 10_000) -> tuple[float, ...]:
-    """A random goal a few steps away whose configuration, and every configuration the plan passes through
-    (our planners emit actions in chain order; turning lK moves lK..lN), stay within the robot's reach.
-    The relative formulation does not move l1, so its goals keep l1 where it is."""
+def random_goal(rng: np.random.Generator, spec: SceneSpec, start: Sequence[float], formulation: str,
+                orientations: int, min_changed: int = 3, max_changed: int = 10, attempts: int = 2_000
+                ) -> tuple[float, ...]:
+    """A goal drawn uniformly from the feasible configurations (on the table, clear of the robot, within
+    reach, see `planhrc.geometry`) in which `min_changed` .. `max_changed` links have another orientation
+    than at the start. The relative formulation does not move l1, so its goals keep l1 where it is."""
     step = 360.0 / orientations
-    start = list(spec.orientations0)
-    first = 1 if formulation == "absolute" else 2
+    fixed_first = formulation == "relative"
+    limit = min(max_changed, spec.n_links - (1 if fixed_first else 0))
+    if limit < min_changed:
+        raise SimError(f"n_links: {spec.n_links} links cannot have {min_changed} changed in a {formulation} goal")
     for _ in range(attempts):
-        links = rng.choice(np.arange(first, spec.n_links + 1), size=int(rng.integers(1, max_joints + 1)),
-                           replace=False)
-        changes = {int(k): int(rng.choice([s for s in range(-max_steps, max_steps + 1) if s])) for k in links}
-        theta, ok = list(start), True
-        for link in sorted(changes):
-            for _ in range(abs(changes[link])):
-                d = step if changes[link] > 0 else -step
-                theta = [t + d if i >= link - 1 else t for i, t in enumerate(theta)]
-                ok = ok and is_workable(spec, theta)
-        if ok:
-            return tuple(t % 360.0 for t in theta)
-    raise SimError(f"no reachable random goal found in {attempts} attempts")
+        goal = random_orientations(rng, spec, step_deg=step)
+        if fixed_first:
+            goal = (float(start[0]),) + tuple(goal[1:])
+            if not is_feasible(spec, goal):
+                continue
+        changed = sum(1 for a, b in zip(goal, start) if abs((a - b + 180.0) % 360.0 - 180.0) > 1e-6)
+        if min_changed <= changed <= limit:
+            return tuple(float(v) % 360.0 for v in goal)
+    raise SimError(f"no feasible random goal with {min_changed}..{limit} links changed in {attempts} attempts")
 
 
 def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interventions: int = 3) -> DemoScenario:
-    """A random reachable goal (seeded), either formulation, and `interventions` random human moves at random
-    moments (each keeps the object within the robot's reach)."""
+    """A random feasible start (not always straight), a goal drawn uniformly from the feasible configurations
+    with 3 or more links changed (seeded), either formulation, and `interventions` random human moves at
+    random moments anywhere on the chain (each keeps the object feasible)."""
     rng = np.random.default_rng(seed)
     spec = SceneSpec(n_links=n_links)
     formulation = ("relative", "absolute")[seed % 2]
-    goal = reachable_goal(rng, spec, formulation, orientations)
-    return DemoScenario(f"random-{seed}", formulation, orientations, spec.orientations0, goal,
-                        f"random:{seed}:{interventions}", "random goal and random human interventions")
+    step = 360.0 / orientations
+    start = spec.orientations0 if rng.random() < 0.25 else random_orientations(rng, spec, step_deg=step)
+    goal = random_goal(rng, spec, start, formulation, orientations)
+    return DemoScenario(f"random-{seed}", formulation, orientations, tuple(start), goal,
+                        f"random:{seed}:{interventions}", "random start, goal and human interventions")
 
 
 def free_port() -> int:
@@ -178,7 +189,8 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
     with KBClient(kb_url, token=token) as kb:
         obj = kb.create_object(scenario.name, len(scenario.initial_deg), scenario.orientations, scenario.formulation)
         print(f"[demo] watch {scenario.name} live: {kb_url}/?object={obj['id']}", flush=True)
-        spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg)
+        spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg,
+                         base_point_xy=scenario.base_point_xy)
         summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
                              token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
                              seed=seed, kb=kb)
@@ -206,9 +218,63 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
                      "held_link_index": a.get("held_link_index"), "delta_deg": a.get("delta_deg")}
                     for a in actions],
         "outcomes": list(summary.outcomes),
+        "failure_reasons": summary.failure_reasons,
+        "stop_message": summary.stop_message,
         "human_assists": summary.human_assists,
+        "human_moves_scheduled": summary.human_scheduled,
+        "human_moves_performed": summary.human_performed,
+        "seen_links": summary.seen_links,
+        "unseen_links": summary.unseen_links,
+        "action_s": [round(s.action_s, 3) for s in summary.steps if s.action is not None],
+        "marker_error_deg": _marker_errors(summary),
+        "states_off_table": _states_off_table(summary, spec),
         "decisions": [{"seq": e["seq"], "kind": e["kind"], "reason": e["reason"]} for e in decisions],
         "out_dir": str(out_dir),
+    }
+
+
+def _marker_errors(summary) -> list[float]:
+    """|camera estimate - simulator's measured pose| of every link seen, in degrees (for evaluation)."""
+    out = []
+    for s in summary.steps:
+        for est, true in zip(s.perceived_deg, s.true_deg):
+            if est is not None:
+                out.append(round(abs((est - true + 180.0) % 360.0 - 180.0), 2))
+    return out
+
+
+def _states_off_table(summary, spec: SceneSpec) -> int:
+    """Perceived configurations (measured) with a link off the table or inside the robot."""
+    count = 0
+    for base, theta in zip(summary.base_points, summary.configurations):
+        result = configuration_feasible(spec.geometry(base), theta, spec.cell())
+        count += any(r.code in ("off_table", "inside_robot") for r in result.reasons)
+    return count
+
+
+def aggregate(results: list[dict]) -> dict:
+    """The numbers a run of episodes is judged by."""
+    outcomes = Counter(o for r in results for o in r["outcomes"])
+    reasons: Counter = Counter()
+    for r in results:
+        reasons.update(r["failure_reasons"])
+    action_s = sorted(t for r in results for t in r["action_s"])
+    errors = sorted(e for r in results for e in r["marker_error_deg"])
+    actions = sum(outcomes.values())
+    return {
+        "actions": actions,
+        "action_success_rate": round(outcomes.get("succeeded", 0) / actions, 3) if actions else None,
+        "outcomes": dict(outcomes),
+        "failure_reasons": dict(reasons),
+        "stop_reasons": dict(Counter(r["stop_reason"] for r in results)),
+        "human_assists": sum(r["human_assists"] for r in results),
+        "human_moves": {"scheduled": sum(r["human_moves_scheduled"] for r in results),
+                        "performed": sum(r["human_moves_performed"] for r in results)},
+        "states_off_table": sum(r["states_off_table"] for r in results),
+        "links_seen": sum(r["seen_links"] for r in results),
+        "links_unseen": sum(r["unseen_links"] for r in results),
+        "action_s": {"median": round(statistics.median(action_s), 3), "max": round(action_s[-1], 3)} if action_s else None,
+        "marker_error_deg": {"mean": round(statistics.fmean(errors), 2), "max": round(errors[-1], 2)} if errors else None,
     }
 
 
@@ -227,7 +293,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
 
     def run_all(url: str, tok: str | None) -> None:
         for i, sc in enumerate(scenarios):
-            folder = out_dir if len(scenarios) == 1 else out_dir / f"episode-{i + 1:03d}"
+            folder = out_dir / f"episode-{i + 1:03d}"  # the worker's own records stay beside the demo's summary
             result = run_episode(url, tok, sc, folder, gui, perception, max_steps, seed + i)
             results.append(result)
             print(f"[demo] {sc.name}: {'goal reached' if result['reached_goal'] else result['stop_reason']} "
@@ -242,7 +308,8 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
             "reached_goal_without_human_assist": sum(r["reached_goal"] and not r["human_assists"] for r in results),
             "perception": perception,
             "wall_s": round(time.perf_counter() - started, 3),
-        "results": results,
+            **aggregate(results),
+            "results": results,
         }
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
         return summary
@@ -293,5 +360,7 @@ def run_demo_cli(args: argparse.Namespace) -> int:
         print(f"planhrc demo: {exc}", file=sys.stderr)
         return 1
     print(f"[demo] {summary['reached_goal']}/{summary['episodes']} episodes reached the goal; "
+          f"action success rate {summary['action_success_rate']}, failure reasons {summary['failure_reasons']}, "
+          f"unseen links {summary['links_unseen']}, states off the table {summary['states_off_table']}; "
           f"summary in {Path(args.out) / 'summary.json'}")
     return 0 if summary["reached_goal"] == summary["episodes"] else 1

@@ -2,8 +2,13 @@
 
 Each cycle (a "step") the simulated human may act first (`before` events), the worker perceives the object
 and posts the perception; the service's decision says whether the goal is reached or which action comes next.
-The worker asks for that action (which dispatches it), runs the rotation skill — the human may act half-way
-(`during` events), the robot may stop part-way (faults) — and posts the observed outcome.
+The worker asks for that action (which dispatches it), runs the rotation skill physically — the human, a
+visible body, may start acting half-way (`during` events) and goes on in parallel on the physics clock; the
+turning gripper may lose its grasp part-way (faults) — and posts the outcome judged from the world, with its
+reason and a sentence. In camera mode a link the head camera does not see is posted as unseen (null); the
+simulator's truth is recorded only for evaluation (`true_deg`). A failed action is not retried the same way:
+a macro step is split into single steps; a single step that failed again is handed to the human when the
+scenario has one who helps, else the worker gives up and says so in the action's feedback.
 
 Everything is recorded in `out_dir`: `summary.json` (decisions, actions, outcomes, timings), one camera frame
 per perception (`frame_NNN.png`), `run.gif`, and `configurations.png` (top views of each successive
@@ -28,14 +33,14 @@ import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
-from planhrc.robot_sim.human import (HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action, get_scenario,
-                             goal_differences)
-from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception, angle_difference_deg
 from planhrc.client import KBClient, ProtocolError
+from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action,
+                                     get_scenario, goal_differences)
+from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
 from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene
-from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
+from planhrc.robot_sim.skills import ActionResult, Outcome, Robot, RotationAction, perform_action
 
 log = logging.getLogger(__name__)
 
@@ -44,16 +49,20 @@ log = logging.getLogger(__name__)
 class StepRecord:
     step: int
     human_before: tuple[str, ...]
-    perceived_deg: tuple[float, ...]
-    true_deg: tuple[float, ...]
+    perceived_deg: tuple[float | None, ...]
+    true_deg: tuple[float, ...]  # the simulator's measured poses, for evaluation only (never sent)
     missing_links: tuple[int, ...]
     decision: str
     reason: str
     matched_expected_step: int | None
     action: dict[str, Any] | None = None
     outcome: str | None = None
+    outcome_reason: str | None = None  # unreachable, collision, slip, stall, grasp_lost, left_table
+    outcome_message: str = ""
+    reached_deg: float | None = None
     human_during: tuple[str, ...] = ()
     human_assist: str | None = None
+    looks: int = 1
     perception_s: float = 0.0
     service_s: float = 0.0
     action_s: float = 0.0
@@ -70,6 +79,10 @@ class WorkerSummary:
     base_points: tuple[tuple[float, float], ...]
     out_dir: str
     wall_s: float
+    perception: str = "camera"
+    stop_message: str = ""
+    human_scheduled: int = 0
+    human_performed: int = 0
 
     @property
     def decisions(self) -> tuple[str, ...]:
@@ -82,6 +95,22 @@ class WorkerSummary:
     @property
     def human_assists(self) -> int:
         return sum(1 for s in self.steps if s.human_assist)
+
+    @property
+    def seen_links(self) -> int:
+        return sum(sum(1 for v in s.perceived_deg if v is not None) for s in self.steps)
+
+    @property
+    def unseen_links(self) -> int:
+        return sum(len(s.missing_links) for s in self.steps)
+
+    @property
+    def failure_reasons(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for s in self.steps:
+            if s.outcome_reason:
+                out[s.outcome_reason] = out.get(s.outcome_reason, 0) + 1
+        return out
 
 
 @dataclass
@@ -96,6 +125,8 @@ class _Run:
     base_points: list[tuple[float, float]] = field(default_factory=list)
     labels: list[str] = field(default_factory=list)
     applied: set[int] = field(default_factory=set)  # indices of scenario events already performed
+    performed: int = 0  # scenario events the human actually carried out
+    stop_message: str = ""
 
 
 def _joint_index(name: str) -> int:
@@ -129,24 +160,20 @@ def _following_action(kb: KBClient, action: dict[str, Any]) -> tuple[int, int, f
     except ProtocolError as exc:
         log.warning("plan %s: cannot read it (%s)", plan_id, exc)
         return None
+    last = int(action.get("last_step") or step)
     for entry in plan.get("steps", []):
-        if entry.get("step") == int(step) + 1:
+        if entry.get("step") == last + 1:
             return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
     return None
 
 
-def _perceive(perceiver, fallback: FallbackPerception, tries: int = 2) -> tuple[Perception, tuple[float, ...]]:
-    """Perceive; retry when a marker is missing, then fill what is still missing from the fallback."""
-    seen = perceiver.perceive()
-    for _ in range(tries - 1):
-        if seen.complete:
-            break
-        seen = perceiver.perceive()
-    if seen.complete:
-        return seen, tuple(seen.link_orientations_deg)
-    backup = fallback.perceive().link_orientations_deg
-    log.warning("perception: links %s not seen; using the simulator's (noisy) values for them", seen.missing_links)
-    return seen, tuple(v if v is not None else b for v, b in zip(seen.link_orientations_deg, backup))
+def _perceive(perceiver) -> Perception:
+    """Look (the camera looks again with the head turned while markers are missing). An unseen link stays
+    unseen: nothing fills it in."""
+    seen = perceiver.look()
+    if not seen.complete:
+        log.warning("perception: links %s not seen", seen.missing_links)
+    return seen
 
 
 def run_worker(
@@ -192,12 +219,12 @@ def run_worker(
         scene = build_scene(client, spec)
         robot = Robot(scene, realtime_s=0.01 if gui else 0.0)
         camera = CameraPerception(client, scene)
-        fallback = FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed)
-        perceiver = camera if perception == "camera" else fallback
+        perceiver = camera if perception == "camera" else FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed)
+        human = Human(scene)
         context = HumanContext(step_deg=float(obj.get("step_deg") or 360 / int(obj["orientations"])),
                                goal_differences=_read_goal_differences(kb, obj))
         run = _Run()
-        summary_reason = _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, context,
+        summary_reason = _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, context,
                                max_steps, run, record_motion=record_motion and record_frames,
                                record_frames=record_frames)
         reached = summary_reason == "goal_reached"
@@ -211,6 +238,10 @@ def run_worker(
             base_points=tuple(run.base_points),
             out_dir=str(out),
             wall_s=time.perf_counter() - start,
+            perception=perception,
+            stop_message=run.stop_message,
+            human_scheduled=len(scenario.events),
+            human_performed=run.performed,
         )
         _save(out, summary, run, spec, goal_link_orientations_deg)
         return summary
@@ -226,35 +257,74 @@ def _events(scenario: Scenario, run: _Run, step: int, when: str) -> list[tuple[i
     return [(i, e) for i, e in enumerate(scenario.events) if e.at_step == step and e.when == when and i not in run.applied]
 
 
-def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, context, max_steps, run,
-          max_failures: int = 3, record_motion: bool = True, record_frames: bool = True) -> str:
-    """Perceive -> decide -> act until the goal; returns why it stopped."""
+def _act(human: Human, run: _Run, index: int, event: HumanEvent, context: HumanContext) -> str | None:
+    run.applied.add(index)
+    done = apply_event(human, event, context)
+    if done is not None:
+        run.performed += 1
+    return done
+
+
+def _signature(action: RotationAction) -> tuple[int, int, float, int]:
+    return action.turned_link, action.held_link, round(action.delta_deg, 3), action.macro_steps
+
+
+def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, context, max_steps, run,
+          record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3) -> str:
+    """Perceive -> decide -> act until the goal; returns why it stopped.
+
+    A failed action is not tried again the same way: a macro step that failed is split into its single steps;
+    a single step that failed and comes again is done by the human when the scenario says the human helps,
+    else the worker gives up, and says so to the service in the feedback of that action."""
     step = 1
-    failures, last_failed = 0, None  # consecutive failures of the same action: the robot cannot do it
+    unseen_in_a_row = 0
+    failed: dict[tuple[int, int, float, int], str] = {}  # signature of a failed action -> its sentence
     while step <= max_steps:
         human_before = []
         for index, event in _events(scenario, run, step, "before"):
-            run.applied.add(index)
-            if (done := apply_event(scene, event, context)) is not None:
+            if (done := _act(human, run, index, event, context)) is not None:
                 human_before.append(done)
+        human.finish()  # the robot waits until the human has let go
 
         t0 = time.perf_counter()
-        seen, values = _perceive(perceiver, fallback)
+        seen = _perceive(perceiver)
         t1 = time.perf_counter()
-        decision = kb.post_perception(object_id, values)
+        values = seen.link_orientations_deg
+        try:
+            decision = kb.post_perception(object_id, values)
+        except ProtocolError as exc:
+            if seen.complete or exc.status is None or exc.status >= 500:
+                raise
+            # the service does not take a perception with unseen links: look again later, without guessing
+            unseen_in_a_row += 1
+            decision = None
+            log.warning("perception with unseen links %s refused (%s)", seen.missing_links, exc)
         t2 = time.perf_counter()
         frame = seen.frame if seen.frame is not None or not record_frames else camera.render()
         if frame is not None:
             run.frames.append(frame)
             run.movie.append((step, "perceived", frame))
-        _, theta = scene.configuration()
+        base_xy, theta = scene.configuration()
         run.configurations.append(tuple(round(v, 3) for v in theta))
-        run.base_points.append(scene.base_point())
-        run.labels.append(f"{step}: {decision.decision}")
-        base = dict(step=step, human_before=tuple(human_before), perceived_deg=tuple(round(v, 2) for v in values),
-                    true_deg=tuple(round(v, 2) for v in scene.link_orientations_deg()), missing_links=seen.missing_links,
-                    decision=decision.decision, reason=decision.reason,
-                    matched_expected_step=decision.matched_expected_step, perception_s=t1 - t0, service_s=t2 - t1)
+        run.base_points.append(base_xy)
+        kind = decision.decision if decision is not None else "incomplete_perception"
+        run.labels.append(f"{step}: {kind}")
+        base = dict(step=step, human_before=tuple(human_before),
+                    perceived_deg=tuple(None if v is None else round(v, 2) for v in values),
+                    true_deg=tuple(round(v, 2) for v in theta), missing_links=seen.missing_links,
+                    decision=kind, reason=decision.reason if decision is not None else
+                    f"links {list(seen.missing_links)} not seen", looks=seen.looks,
+                    matched_expected_step=decision.matched_expected_step if decision is not None else None,
+                    perception_s=t1 - t0, service_s=t2 - t1)
+        if decision is None:
+            run.records.append(StepRecord(**base))
+            if unseen_in_a_row >= max_unseen:
+                run.stop_message = f"links {list(seen.missing_links)} not seen in {max_unseen} perceptions"
+                return "unseen_links"
+            scene.step(30)  # a quarter of a second: whatever covers a marker may move away
+            step += 1
+            continue
+        unseen_in_a_row = 0
         log.info("step %d: %s (%s)", step, decision.decision, decision.reason)
 
         if decision.decision == "goal_reached":
@@ -267,6 +337,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, co
             continue
         if decision.decision == "no_plan":
             run.records.append(StepRecord(**base))
+            run.stop_message = decision.reason
             return "no_plan"
 
         data = kb.next_action(object_id)
@@ -284,41 +355,85 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, fallback, scenario, co
             if done == total // 2 and record_motion:
                 run.movie.append((step, "moving", camera.render()))  # the arms at work
             if during_events and done >= total / 2:
-                while during_events:
+                while during_events:  # the human starts now and acts while the robot goes on
                     index, event = during_events.pop(0)
-                    run.applied.add(index)
-                    if (what := apply_event(scene, event, context)) is not None:
+                    if (what := _act(human, run, index, event, context)) is not None:
                         human_during.append(what)
             return False
 
+        signature = _signature(action)
         fault = scenario.fault_at(step)
-        before = scene.link_orientations_deg()
         t3 = time.perf_counter()
-        outcome = perform_action(scene, robot, action, interrupt=interrupt,
-                                 stop_fraction=fault.stop_fraction if fault else None)
-        t4 = time.perf_counter()
-        if outcome is Outcome.PARTIAL:
-            turned_change = angle_difference_deg(scene.link_orientations_deg()[action.turned_link - 1],
-                                                 before[action.turned_link - 1])
-            context.partial = (action.turned_link, action.held_link, action.delta_deg - turned_change)
-        context.busy_links = ()
-        if action.action_id is not None:
-            kb.post_feedback(object_id, action.action_id, outcome.value)
-        failures = failures + 1 if outcome is Outcome.FAILED and action.action_id == last_failed else (
-            1 if outcome is Outcome.FAILED else 0)
-        last_failed = action.action_id if outcome is Outcome.FAILED else None
         assist = None
-        if scenario.assists_after_failures is not None and failures >= scenario.assists_after_failures:
-            # the paper: when the robot cannot do an action, the human does it on the robot's behalf
-            assist = assist_failed_action(scene, action.turned_link, action.held_link, action.delta_deg)
-            failures, last_failed = 0, None
-        run.records.append(StepRecord(**base, action=dict(data), outcome=outcome.value,
+        if signature in failed and action.macro_steps <= 1:
+            result = None
+        else:
+            parts = action.split() if signature in failed else (action,)
+            result = _perform_parts(scene, robot, parts, interrupt, fault.stop_fraction if fault else None)
+        t4 = time.perf_counter()
+        while during_events:  # the robot stopped before half-way: the human acts anyway
+            index, event = during_events.pop(0)
+            if (what := _act(human, run, index, event, context)) is not None:
+                human_during.append(what)
+        human.finish()
+        context.busy_links = ()
+        if result is None:
+            # the same single step failed before: do not try it the same way again
+            sentence = failed[signature]
+            if scenario.assists_after_failures is not None:
+                # the paper: when the robot cannot do an action, the human does it on the robot's behalf
+                assist = assist_failed_action(human, action.turned_link, action.held_link, action.delta_deg)
+                message = f"robot did not retry ({sentence}); the human did it"
+                if action.action_id is not None:
+                    kb.post_feedback(object_id, action.action_id, "failed", message)
+                failed.pop(signature)
+                run.records.append(StepRecord(**base, action=dict(data), outcome="failed", outcome_reason=None,
+                                              outcome_message=message, human_during=tuple(human_during),
+                                              human_assist=assist, action_s=t4 - t3))
+                step += 1
+                continue
+            run.stop_message = f"gave up on {action.name or 'the action'}: {sentence}"
+            if action.action_id is not None:
+                kb.post_feedback(object_id, action.action_id, "failed", f"worker gives up: {sentence}")
+            run.records.append(StepRecord(**base, action=dict(data), outcome="failed", outcome_message=run.stop_message,
+                                          human_during=tuple(human_during), action_s=t4 - t3))
+            return "gave_up"
+        if result.outcome is Outcome.PARTIAL:
+            context.partial = (action.turned_link, action.held_link, action.delta_deg - result.reached_deg)
+        message = result.message if result.reason is None else f"{result.reason.value}: {result.message}"
+        if action.action_id is not None:
+            kb.post_feedback(object_id, action.action_id, result.outcome.value, message)
+        if result.outcome is Outcome.SUCCEEDED:
+            failed.pop(signature, None)
+        elif result.reason is not None:
+            failed[signature] = result.message
+        run.records.append(StepRecord(**base, action=dict(data), outcome=result.outcome.value,
+                                      outcome_reason=result.reason.value if result.reason else None,
+                                      outcome_message=result.message, reached_deg=round(result.reached_deg, 2),
                                       human_during=tuple(human_during), human_assist=assist, action_s=t4 - t3))
-        log.info("step %d: %s -> %s", step, action, outcome.value)
-        if failures >= max_failures:
-            return "repeated_failure"
+        log.info("step %d: %s -> %s (%s)", step, action, result.outcome.value, result.message)
         step += 1
     return "max_steps"
+
+
+def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt, stop_fraction):
+    """Perform the single steps of an action one after the other; stop at the first that does not succeed.
+    The result covers them all: the turn reached is their sum."""
+    reached = 0.0
+    result = None
+    for part in parts:
+        result = perform_action(scene, robot, part, interrupt=interrupt, stop_fraction=stop_fraction)
+        reached += result.reached_deg
+        if result.outcome is not Outcome.SUCCEEDED:
+            break
+    assert result is not None
+    if len(parts) == 1:
+        return result
+    total = sum(p.delta_deg for p in parts)
+    outcome = result.outcome
+    if outcome is Outcome.FAILED and abs(reached) > 1.0:
+        outcome = Outcome.PARTIAL
+    return ActionResult(outcome, result.reason, f"in single steps: {result.message}", total, reached)
 
 
 # -- records ---------------------------------------------------------------------------------------------
@@ -329,6 +444,9 @@ def _save(out: Path, summary: WorkerSummary, run: _Run, spec: SceneSpec,
     data = asdict(summary)
     data["decisions"] = list(summary.decisions)
     data["outcomes"] = list(summary.outcomes)
+    data["seen_links"] = summary.seen_links
+    data["unseen_links"] = summary.unseen_links
+    data["failure_reasons"] = summary.failure_reasons
     (out / "summary.json").write_text(json.dumps(data, indent=2, default=str))
     steps = picture_steps(run.records, run.configurations, run.base_points)
     by_step = {s.step: s for s in steps}
@@ -447,6 +565,8 @@ def run_worker_cli(args: argparse.Namespace) -> int:
         print(f"planhrc worker: {exc}", file=sys.stderr)
         return 1
     print(json.dumps({"reached_goal": summary.reached_goal, "stop_reason": summary.stop_reason,
+                      "reason": summary.stop_message, "failure_reasons": summary.failure_reasons,
+                      "unseen_links": summary.unseen_links,
                       "decisions": list(summary.decisions), "outcomes": list(summary.outcomes),
                       "steps": len(summary.steps), "wall_s": round(summary.wall_s, 2), "out_dir": summary.out_dir}))
     return 0 if summary.reached_goal else 1

@@ -40,7 +40,8 @@ def test_fig14_run_reaches_the_goal_through_the_service(service_url, tmp_path, f
     assert summary.reached_goal, summary.decisions
     assert "partial" in summary.outcomes
     assert summary.decisions[0] == "replan" and summary.decisions[-1] == "goal_reached"
-    assert [round(v) % 360 for v in summary.configurations[-1]] == [90, 45, 90, 135, 90]
+    # the measured pose of the physical object, within a few degrees of the goal
+    assert all(abs((v - g + 180) % 360 - 180) < 6 for v, g in zip(summary.configurations[-1], [90, 45, 90, 135, 90]))
 
 
 def test_worker_survives_a_restart_of_the_service_and_no_perception_counts_twice(tmp_path):
