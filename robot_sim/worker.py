@@ -278,7 +278,8 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
     else the worker gives up, and says so to the service in the feedback of that action."""
     step = 1
     unseen_in_a_row = 0
-    failed: dict[tuple[int, int, float, int], str] = {}  # signature of a failed action -> its sentence
+    # signature of a failed action -> (its sentence, whether it was also tried in single steps)
+    failed: dict[tuple[int, int, float, int], tuple[str, bool]] = {}
     while step <= max_steps:
         human_before = []
         for index, event in _events(scenario, run, step, "before"):
@@ -365,11 +366,15 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         fault = scenario.fault_at(step)
         t3 = time.perf_counter()
         assist = None
-        if signature in failed and action.macro_steps <= 1:
-            result = None
+        previous = failed.get(signature)
+        if previous is None:
+            parts: tuple[RotationAction, ...] | None = (action,)
+        elif action.macro_steps > 1 and not previous[1]:
+            parts = action.split()  # the macro motion failed: try its single steps
         else:
-            parts = action.split() if signature in failed else (action,)
-            result = _perform_parts(scene, robot, parts, interrupt, fault.stop_fraction if fault else None)
+            parts = None  # tried every way the robot knows: not again
+        result = None if parts is None else _perform_parts(scene, robot, parts, interrupt,
+                                                             fault.stop_fraction if fault else None)
         t4 = time.perf_counter()
         while during_events:  # the robot stopped before half-way: the human acts anyway
             index, event = during_events.pop(0)
@@ -379,7 +384,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         context.busy_links = ()
         if result is None:
             # the same single step failed before: do not try it the same way again
-            sentence = failed[signature]
+            sentence = failed[signature][0]
             if scenario.assists_after_failures is not None:
                 # the paper: when the robot cannot do an action, the human does it on the robot's behalf
                 assist = assist_failed_action(human, action.turned_link, action.held_link, action.delta_deg)
@@ -406,7 +411,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         if result.outcome is Outcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
-            failed[signature] = result.message
+            failed[signature] = (result.message, len(parts) > 1 or action.macro_steps <= 1)
         run.records.append(StepRecord(**base, action=dict(data), outcome=result.outcome.value,
                                       outcome_reason=result.reason.value if result.reason else None,
                                       outcome_message=result.message, reached_deg=round(result.reached_deg, 2),

@@ -175,3 +175,16 @@ def test_an_unseen_link_is_posted_unseen_and_never_filled_from_the_simulator(kb,
     assert summary.stop_reason == "unseen_links" and not summary.reached_goal
     assert summary.unseen_links == 3 and summary.seen_links == 12
     assert all(s.decision == "incomplete_perception" and s.looks == 3 for s in summary.steps)
+
+
+def test_a_failure_is_not_retried_the_same_way_and_the_worker_gives_up_out_loud(kb, tmp_path):
+    # short links in the table's far left corner: the camera sees them, no arm reaches them
+    spec = SceneSpec(link_length_m=0.06, base_point_xy=(0.87, 0.62))
+    summary = run_worker(kb.url, "o1", spec, "none", tmp_path, max_steps=10)
+    assert summary.stop_reason == "gave_up" and not summary.reached_goal
+    assert summary.stop_message.startswith("gave up on rotate: link ") and "beyond reach" in summary.stop_message
+    feedback = [b for m, path, _, b in kb.log if path.endswith("/feedback")]
+    assert [b["outcome"] for b in feedback] == ["failed", "failed"]
+    assert feedback[0]["message"].startswith("unreachable: link ")
+    assert feedback[1]["message"].startswith("worker gives up: link ")
+    assert summary.failure_reasons == {"unreachable": 1}  # the robot tried once, not again the same way
