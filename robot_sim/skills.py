@@ -21,6 +21,7 @@ import numpy as np
 import pybullet
 
 from planhrc.geometry import reach_shortfall
+from planhrc.vocabulary import ActionOutcome as Outcome
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
@@ -35,12 +36,6 @@ from planhrc.robot_sim.scene import (
 )
 
 log = logging.getLogger(__name__)
-
-
-class Outcome(str, Enum):
-    SUCCEEDED = "succeeded"
-    FAILED = "failed"
-    PARTIAL = "partial"
 
 
 class Reason(str, Enum):
