@@ -5,11 +5,13 @@ configurations form an abelian group and a plan is a multiset of axes. With the 
 order, try the transforms T = identity, downstream differences (x_i - x_(i-1)) and upstream differences
 (x_i - x_(i+1)). When every axis, restricted to S and mapped by T, is 0 or +-e_i, the task decomposes:
 coordinate i needs change t_i (mod K), realised by min(t_i, K - t_i) uses of one axis; each action changes
-at most one transformed coordinate by one, so the length is optimal. When no transform decomposes every axis
-but under one of them every axis touches one coordinate or two neighbouring ones (the paper's absolute
-schema, whose unguarded actions turn l(k-1) about jk and move jk alone: after downstream differences
-e_i - e_(i+1)), an exact dynamic programme along the chain finds a shortest plan (``optimal=True``). Failing
-that, if some transform still offers a +-e_i axis for every coordinate that must change, that plan is
+at most one transformed coordinate by one, so the length is optimal. When the distinct effects form a basis
+of Z_K^m, each action moves one basis coordinate and the same argument holds in that basis. When under one
+transform every axis touches one coordinate or two neighbouring ones (the paper's absolute schema, whose
+unguarded actions turn l(k-1) about jk and move jk alone: after downstream differences e_i - e_(i+1)), an
+exact dynamic programme along the chain finds a shortest plan; when every two-coordinate axis shares one hub
+coordinate (the benchmark style's upstream turns: e_1 - e_(k+1)), an exact dynamic programme over the
+spokes does (both ``optimal=True``). Failing that, if some transform still offers a +-e_i axis for every coordinate that must change, that plan is
 returned with ``optimal=False``. Otherwise the status is error: never a wrong plan. Every plan is replayed
 and checked against the goal before it is returned.
 
@@ -258,6 +260,13 @@ class GroundTask:
             if verdict == "solved" and uses is not None:
                 return self._finish(uses, current, wanted,
                                     f"{tname} transform leaves a chain of neighbouring coordinates: exact chain DP", True)
+        for tname, images, need in attempts:
+            verdict, uses = self._star_dp(chain, images, need)
+            if verdict == "unsolvable":
+                return PlanStatus.UNSOLVABLE, (), f"no combination of actions reaches the goal ({tname} star)", None
+            if verdict == "solved" and uses is not None:
+                return self._finish(uses, current, wanted,
+                                    f"{tname} transform leaves moves around one hub coordinate: exact star DP", True)
         best: tuple[str, list[tuple[Axis, int]]] | None = None
         for tname, images, need in attempts:
             cover = _cover(images, self.k)
@@ -397,6 +406,91 @@ class GroundTask:
             if pairs[i]:
                 for move in _path(search(tuple(sorted(pairs[i])), 2)[1], pair_state):
                     counts[pairs[i][move]] = counts.get(pairs[i][move], 0) + 1
+            for move in _path(search(tuple(sorted(singles[i])), 1)[1], (u,)):
+                counts[singles[i][move]] = counts.get(singles[i][move], 0) + 1
+            y = carry
+        return "solved", list(counts.items())
+
+    def _star_dp(self, chain: list[int], images: list[tuple[Axis, tuple[int, ...]]], need: list[int]
+                 ) -> tuple[str, list[tuple[Axis, int]] | None]:
+        """Exact minimum when every transformed axis touches one coordinate, or two of which one is the same
+        hub for all (the benchmark style's upstream turns after downstream differences: e_1 - e_(k+1)).
+
+        Per spoke i, moves on (hub, i) and on i alone are tabulated by breadth-first search; a dynamic
+        programme over the spokes carries the hub's accumulated share, and the hub's own moves close it.
+        Returns ("unfit", None), ("unsolvable", None) or ("solved", uses) like `_chain_dp`.
+        """
+        k, m = self.k, len(need)
+        supports = []
+        for axis, img in images:
+            nz = tuple(i for i, x in enumerate(img) if x % k)
+            if len(nz) > 2:
+                return "unfit", None
+            supports.append(nz)
+        common = None
+        for nz in supports:
+            if len(nz) == 2:
+                common = set(nz) if common is None else common & set(nz)
+        if not common:
+            return "unfit", None
+        hub = min(common)
+        singles: list[dict[tuple[int, ...], Axis]] = [{} for _ in range(m)]
+        spokes: list[dict[tuple[int, ...], Axis]] = [{} for _ in range(m)]
+        for (axis, img), nz in zip(images, supports):
+            if not nz:
+                continue
+            if len(nz) == 1:
+                table, move, target = singles[nz[0]], (img[nz[0]] % k,), chain[nz[0]]
+            else:
+                spoke = nz[0] if nz[1] == hub else nz[1]
+                table, move, target = spokes[spoke], (img[hub] % k, img[spoke] % k), chain[spoke]
+            if move not in table or self._preference(axis, target) < self._preference(table[move], target):
+                table[move] = axis
+        searches: dict[tuple, tuple[dict, dict]] = {}
+
+        def search(moves: tuple[tuple[int, ...], ...], dims: int) -> tuple[dict, dict]:
+            key = (dims, moves)
+            if key not in searches:
+                searches[key] = _breadth_first(moves, k, dims)
+            return searches[key]
+
+        dp: dict[int, int] = {0: 0}
+        back: list[tuple[int, dict[int, tuple[int, tuple[int, int], int]]]] = []
+        for i in range(m):
+            if i == hub:
+                continue
+            pair_dist = search(tuple(sorted(spokes[i])), 2)[0] if spokes[i] else {(0, 0): 0}
+            single_dist = search(tuple(sorted(singles[i])), 1)[0]
+            best: dict[int, tuple[int, tuple[int, int], int]] = {}  # hub share -> (cost, pair state, single)
+            for (a, b), pair_cost in pair_dist.items():
+                u = (need[i] - b) % k
+                single_cost = single_dist.get((u,))
+                if single_cost is not None and pair_cost + single_cost < best.get(a, (pair_cost + single_cost + 1,))[0]:
+                    best[a] = (pair_cost + single_cost, (a, b), u)
+            new: dict[int, int] = {}
+            step_back: dict[int, tuple[int, tuple[int, int], int]] = {}
+            for carry, cost in dp.items():
+                for a, (c, pair_state, u) in best.items():
+                    y = (carry + a) % k
+                    if cost + c < new.get(y, cost + c + 1):
+                        new[y] = cost + c
+                        step_back[y] = (carry, pair_state, u)
+            dp = new
+            back.append((i, step_back))
+        hub_dist = search(tuple(sorted(singles[hub])), 1)[0]
+        finals = [(cost + hub_dist[((need[hub] - carry) % k,)], carry) for carry, cost in dp.items()
+                  if ((need[hub] - carry) % k,) in hub_dist]
+        if not finals:
+            return "unsolvable", None
+        _, y = min(finals)
+        counts: dict[Axis, int] = {}
+        for move in _path(search(tuple(sorted(singles[hub])), 1)[1], ((need[hub] - y) % k,)):
+            counts[singles[hub][move]] = counts.get(singles[hub][move], 0) + 1
+        for i, step_back in reversed(back):
+            carry, pair_state, u = step_back[y]
+            if spokes[i]:
+                for move in _path(search(tuple(sorted(spokes[i])), 2)[1], pair_state):
+                    counts[spokes[i][move]] = counts.get(spokes[i][move], 0) + 1
             for move in _path(search(tuple(sorted(singles[i])), 1)[1], (u,)):
                 counts[singles[i][move]] = counts.get(singles[i][move], 0) + 1
             y = carry
