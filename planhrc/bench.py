@@ -14,9 +14,17 @@ relative formulation does not track where l1 lies on the table, so the same chan
 the absolute formulation the relative optimum plus the cyclic distance of l1's rotation; the report gives
 both.
 
-`--replan` measures the re-planning loop on 20 links x 12 orientations: a new perceived state in the ABox ->
-translation -> planning -> VAL -> expected states stored, median of repeated runs (`--replan-runs`), beside the whole-process
-time of Fast Downward on the same problem.
+`--replan-only` (or `--replan` after the grid) measures re-planning on 20 links x 12 orientations, in one
+run: the in-process stages on PDDL text (grounding once, planning, VAL, the whole in-process loop), the
+library pipeline with the knowledge base (new perceived state -> translation -> planning -> VAL -> expected
+states stored), Fast Downward's whole process (bounded by `--fd-timeout` and `--fd-runs`; a timeout is
+reported as such and not repeated) and a re-planning `POST /objects/{id}/perceptions` to a real
+`planhrc serve` process; medians and p90.
+
+`--scale` measures how grounding, planning, VAL and the in-process loop grow with links (20..200) and
+orientations (12..72); a table and a plot go to `--out`.
+
+An interrupted bench (Ctrl-C or SIGTERM) kills the process group of every planner and validator it started.
 """
 from __future__ import annotations
 
@@ -26,6 +34,7 @@ import json
 import logging
 import platform
 import random
+import signal
 import statistics
 import sys
 import time
@@ -37,6 +46,7 @@ from planhrc.cli_args import int_list, name_list, positive_float, positive_int, 
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
 from planhrc.plots import plot_times
+from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS, available_planners, get_planner
 from planhrc.planner.result import PlanStatus
 from planhrc.planner.validate import validate_plan
@@ -215,9 +225,127 @@ def machine_info() -> dict:
 
 
 # -- re-planning latency -------------------------------------------------------------------------------------
-def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10,
-                   fd_runs: int = 10, seed: int = 7) -> dict:
-    """Median time from a new perceived state to a validated plan with expected states stored."""
+def stats_ms(values: Sequence[float]) -> dict:
+    """Count, median and p90 in milliseconds (the one percentile helper: `planhrc.service_bench.percentile`)."""
+    from planhrc.service_bench import percentile
+
+    return {"n": len(values), "median_ms": round(percentile(list(values), 0.5) * 1000, 3),
+            "p90_ms": round(percentile(list(values), 0.9) * 1000, 3)}
+
+
+def _random_case(formulation: str, links: int, orientations: int, rng: random.Random
+                 ) -> tuple[ArticulatedObject, list[int], list[int]]:
+    obj = make_object("obj1", formulation, links, orientations)
+    degs = obj.orientation_degrees
+    return obj, [rng.choice(degs) for _ in obj.joint_indices], [rng.choice(degs) for _ in obj.joint_indices]
+
+
+def measure_planner(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7,
+                    val_timeout_s: float = 60.0, validate: bool = True, val_runs: int | None = None) -> dict:
+    """The in-process stages on PDDL text: grounding (parse, ground, recognise; once per object), re-planning
+    on the ground task from new initial states, VAL against the paper's exact domain, and the whole
+    in-process loop (problem text -> `InprocPlanner.solve` with its memoised grounding -> VAL). With
+    `val_runs`, only the first that many plans are validated (VAL is slow on large absolute tasks); the loop
+    figure then covers those runs."""
+    from planhrc.planner.inproc import InprocPlanner, ground_task
+
+    tbox = default_tbox_path()
+    domain = get_domain(tbox, formulation)
+    paper = get_domain(tbox, formulation, paper_exact=True)
+    rng = random.Random(seed)
+    obj, init, goal = _random_case(formulation, links, orientations, rng)
+    goal_atoms = obj.configuration_atoms(goal)
+    problem = get_problem(obj, obj.configuration_atoms(init), goal_atoms, "bench")
+    t = time.perf_counter()
+    task = ground_task(domain, problem)
+    ground_s = time.perf_counter() - t
+    plan_s, lengths, problems = [], [], []
+    for _ in range(runs):
+        values = [rng.choice(obj.orientation_degrees) for _ in obj.joint_indices]
+        atoms = obj.configuration_atoms(values)
+        t = time.perf_counter()
+        result = task.solve(atoms, task.goal)
+        plan_s.append(time.perf_counter() - t)
+        lengths.append(len(result.plan))
+        problems.append(get_problem(obj, atoms, goal_atoms, "bench"))
+    out: dict = {"formulation": formulation, "links": links, "orientations": orientations,
+                 "ground_ms": round(ground_s * 1000, 3), "plan": stats_ms(plan_s),
+                 "median_plan_length": statistics.median(lengths), "optimal": result.optimal}
+    planner = InprocPlanner()
+    planner.solve(domain, problem, 60.0)  # the loop re-plans a known object: its grounding is memoised
+    loop_s, val_s, solve_s, status = [], [], [], "valid"
+    for i, text in enumerate(problems):
+        t = time.perf_counter()
+        result = planner.solve(domain, text, 60.0)
+        solve_s.append(time.perf_counter() - t)
+        if validate and val_runs is not None and i >= val_runs:
+            continue
+        if validate:
+            try:
+                check = validate_plan(paper, text, result.plan, timeout_s=val_timeout_s)
+            except PlannerError as exc:  # VAL's own time limit
+                status = f"VAL timeout ({exc})"
+                break
+            val_s.append(check.seconds)
+            if not check.valid:
+                status = f"VAL rejected a plan: {check.reason}"
+                break
+        loop_s.append(time.perf_counter() - t)
+    out["solve_from_text"] = stats_ms(solve_s)
+    if validate:
+        out["validate"] = stats_ms(val_s)
+        out["validation"] = status
+    out["inproc_loop"] = stats_ms(loop_s)
+    return out
+
+
+def measure_fast_downward(formulation: str, links: int = 20, orientations: int = 12, runs: int = 3,
+                          timeout_s: float = 10.0, seed: int = 7, planner: str = "fd-lama") -> dict:
+    """Fast Downward's whole process (driver, translator, search, plan file) on the same kind of problem.
+    A run that hits `timeout_s` is reported as a timeout and not repeated."""
+    tbox = default_tbox_path()
+    domain = get_domain(tbox, formulation)
+    rng = random.Random(seed)
+    obj, init, goal = _random_case(formulation, links, orientations, rng)
+    problem = get_problem(obj, obj.configuration_atoms(init), obj.configuration_atoms(goal), "bench")
+    fd = get_planner(planner)
+    times, statuses = [], []
+    for _ in range(runs):
+        result = fd.solve(domain, problem, timeout_s)
+        statuses.append(result.status.value)
+        if result.status is PlanStatus.TIMEOUT:
+            break
+        times.append(result.seconds)
+    out = {"planner": planner, "formulation": formulation, "links": links, "orientations": orientations,
+           "runs": len(statuses), "statuses": statuses, "time_limit_s": timeout_s, **stats_ms(times)}
+    if statuses and statuses[-1] == "timeout":
+        out["note"] = f"no plan within {timeout_s} s; not repeated"
+    return out
+
+
+def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7) -> dict:
+    """A re-planning `POST /objects/{id}/perceptions` to a real `planhrc serve` process, request to answer."""
+    import tempfile
+
+    import httpx
+
+    from planhrc.service_bench import TOKEN, create_object, random_angles, replanning_latencies, running_service, set_goal
+
+    rng = random.Random(seed)
+    with tempfile.TemporaryDirectory(prefix="planhrc-bench-http-") as tmp, running_service(Path(tmp)) as server, \
+            httpx.Client(base_url=server.base, timeout=120,
+                         headers={"Authorization": f"Bearer {TOKEN}"}) as client:
+        ident = create_object(client, links, orientations, formulation, f"bench-{formulation}")
+        set_goal(client, ident, random_angles(rng, links, orientations))
+        replanning_latencies(client, ident, links, orientations, 3, rng)  # the first one grounds the task
+        times = replanning_latencies(client, ident, links, orientations, runs, rng)
+    return {"formulation": formulation, "links": links, "orientations": orientations, **stats_ms(times)}
+
+
+def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10, seed: int = 7) -> dict:
+    """The library pipeline in this process: a new perceived state -> translation -> planning -> VAL ->
+    expected states, then what the service writes after a re-plan (perceived state, problem, plan and
+    expected states) in one transaction; medians per stage."""
     from planhrc.kb_service.store import KnowledgeBase
     from planhrc.pipeline import config_from_settings, plan
     from planhrc.settings import make_settings
@@ -250,27 +378,119 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
             lengths.append(len(outcome.actions))
             if outcome.status != "solved":
                 raise RuntimeError(f"re-plan failed: {outcome.status} {outcome.message}")
-        out["first_run_s"] = times[0]
-        out["replan_median_s"] = statistics.median(times[1:])
-        out["replan_p90_s"] = sorted(times[1:])[int(0.9 * (runs - 1))]
-        out["stage_medians_s"] = {k: statistics.median(s.get(k, 0.0) for s in stages[1:]) for k in stages[1]}
-        out["median_plan_length"] = statistics.median(lengths[1:])
-        problem_text = get_problem(obj, obj.state(vals), obj.configuration_atoms(goal_vals), "replan")
-    domain = get_domain(tbox, formulation)
-    if "fd-lama" in available_planners():
-        fd = get_planner("fd-lama")
-        fd_times = []
-        for _ in range(fd_runs):
-            t = time.perf_counter()
-            res = fd.solve(domain, problem_text, 60.0)
-            fd_times.append(time.perf_counter() - t)
-        out["fd_lama_whole_process_median_s"] = statistics.median(fd_times)
-        out["fd_lama_status"] = res.status.value
+    out["first_run_ms"] = round(times[0] * 1000, 3)
+    out.update(stats_ms(times[1:]))
+    out["stage_medians_ms"] = {k: stats_ms([s.get(k, 0.0) for s in stages[1:]])["median_ms"] for k in stages[1]}
+    out["median_plan_length"] = statistics.median(lengths[1:])
     return out
 
 
+def replan_report(formulations: Sequence[str], runs: int, fd_runs: int, fd_timeout_s: float,
+                  http: bool = True) -> dict:
+    """Everything `--replan-only` measures, in one run, on 20 links x 12 orientations."""
+    report: dict = {"machine": machine_info(), "links": 20, "orientations": 12, "formulations": {}}
+    for f in formulations:
+        row: dict = {"planner": measure_planner(f, runs=runs)}
+        log.info("%s: in-process stages done", f)
+        row["pipeline"] = measure_replan(f, runs=runs)
+        if "fd-lama" in available_planners():
+            row["fast_downward"] = measure_fast_downward(f, runs=fd_runs, timeout_s=fd_timeout_s)
+        if http:
+            row["http"] = measure_http(f, runs=runs)
+        report["formulations"][f] = row
+    return report
+
+
+def replan_table(report: dict) -> str:
+    lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; "
+             f"{report['links']} links x {report['orientations']} orientations; medians (p90) in ms",
+             "| formulation | ground (once) | plan | VAL | in-process loop | pipeline (KB) | "
+             "Fast Downward process | HTTP perception |", "|---|---|---|---|---|---|---|---|"]
+    for f, row in report["formulations"].items():
+        p = row["planner"]
+        fd = row.get("fast_downward")
+        fd_text = "-" if fd is None else (
+            f"{fd['median_ms']} ({fd['p90_ms']}), {fd['runs']} runs" if not fd.get("note")
+            else f"timeout at {fd['time_limit_s']} s")
+        http = row.get("http")
+        lines.append(
+            f"| {f} | {p['ground_ms']} | {p['plan']['median_ms']} ({p['plan']['p90_ms']}) | "
+            f"{p['validate']['median_ms']} ({p['validate']['p90_ms']}) | "
+            f"{p['inproc_loop']['median_ms']} ({p['inproc_loop']['p90_ms']}) | "
+            f"{row['pipeline']['median_ms']} ({row['pipeline']['p90_ms']}) | {fd_text} | "
+            + (f"{http['median_ms']} ({http['p90_ms']}) |" if http else "- |"))
+    return "\n".join(lines)
+
+
+# -- scale ----------------------------------------------------------------------------------------------------
+SCALE_LINKS = (20, 50, 100, 200)
+SCALE_ORIENTATIONS = (12, 36, 72)
+
+
+def scale_report(formulations: Sequence[str], links: Sequence[int], orientations: Sequence[int], runs: int,
+                 val_timeout_s: float) -> dict:
+    """Every cell validates one plan; once VAL times out for a formulation and orientation count, larger
+    cells skip VAL (and say so) instead of waiting for it again."""
+    rows = []
+    for f in formulations:
+        for k in orientations:
+            val_failed_at = None
+            for n in links:
+                validate = val_failed_at is None
+                row = measure_planner(f, n, k, runs=runs, val_timeout_s=val_timeout_s, validate=validate, val_runs=1)
+                if not validate:
+                    row["validation"] = f"skipped: VAL timed out at {val_failed_at} links"
+                elif row["validation"].startswith("VAL timeout"):
+                    val_failed_at = n
+                log.info("scale %s %dx%d: ground %.1f ms, %s", f, n, k, row["ground_ms"], row.get("validation"))
+                rows.append(row)
+    return {"machine": machine_info(), "rows": rows}
+
+
+def scale_table(report: dict) -> str:
+    lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; medians in ms",
+             "| formulation | links | orientations | ground (once) | plan | VAL | in-process loop | plan length | VAL |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in report["rows"]:
+        val = r.get("validate", {})
+        lines.append(f"| {r['formulation']} | {r['links']} | {r['orientations']} | {r['ground_ms']} | "
+                     f"{r['plan']['median_ms']} | {val.get('median_ms', '-')} | {r['inproc_loop']['median_ms']} | "
+                     f"{r['median_plan_length']} | {r.get('validation', '-')} |")
+    return "\n".join(lines)
+
+
+def scale_plot(report: dict, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = report["rows"]
+    formulations = sorted({r["formulation"] for r in rows})
+    stages = (("ground_ms", "ground (once)"), ("plan", "plan"), ("validate", "VAL"), ("inproc_loop", "loop"))
+    fig, axes = plt.subplots(1, len(formulations), figsize=(6 * len(formulations), 4), squeeze=False)
+    for ax, f in zip(axes[0], formulations):
+        for k in sorted({r["orientations"] for r in rows}):
+            sel = sorted((r for r in rows if r["formulation"] == f and r["orientations"] == k), key=lambda r: r["links"])
+            for (key, label), style in zip(stages, ("-o", "-s", "-^", "-d")):
+                ys = [r[key] if key == "ground_ms" else r.get(key, {}).get("median_ms") for r in sel]
+                pts = [(r["links"], y) for r, y in zip(sel, ys) if y is not None and y == y]
+                if pts:
+                    ax.plot(*zip(*pts), style, label=f"{label}, K={k}")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("links")
+        ax.set_ylabel("ms (median)")
+        ax.set_title(f"{f} formulation")
+        ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def add_bench_parser(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("bench", help="the paper's planning grid and re-planning latency",
+    p = subparsers.add_parser("bench", help="the paper's planning grid, re-planning latency and scale",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--planners", type=name_list(list(PLANNERS)), default="inproc,fd-lama",
                    help="comma separated planner names")
@@ -280,9 +500,19 @@ def add_bench_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--instances", type=positive_int, default=INSTANCES, help="random instances per cell")
     p.add_argument("--timeout", type=positive_float, default=10.0, metavar="S", help="per planner call")
     p.add_argument("--no-validate", action="store_true")
-    p.add_argument("--replan", action="store_true", help="also measure the re-planning loop on 20 x 12")
-    p.add_argument("--replan-only", action="store_true", help="only measure the re-planning loop")
-    p.add_argument("--replan-runs", type=positive_int, default=30, help="re-plans measured per formulation (median)")
+    p.add_argument("--replan", action="store_true", help="also measure re-planning on 20 x 12")
+    p.add_argument("--replan-only", action="store_true", help="only measure re-planning on 20 x 12")
+    p.add_argument("--replan-runs", type=positive_int, default=30, help="re-plans measured per formulation and stage")
+    p.add_argument("--fd-runs", type=positive_int, default=3, help="Fast Downward runs in the re-planning comparison")
+    p.add_argument("--fd-timeout", type=positive_float, default=10.0, metavar="S",
+                   help="Fast Downward's limit in the re-planning comparison (a timeout is not repeated)")
+    p.add_argument("--no-http", action="store_true", help="skip the planhrc serve measurement")
+    p.add_argument("--scale", action="store_true", help="only measure how the in-process stages grow")
+    p.add_argument("--scale-links", type=int_list(2), default=",".join(map(str, SCALE_LINKS)))
+    p.add_argument("--scale-orientations", type=orientation_list, default=",".join(map(str, SCALE_ORIENTATIONS)))
+    p.add_argument("--scale-runs", type=positive_int, default=5, help="re-plans per cell")
+    p.add_argument("--val-timeout", type=positive_float, default=20.0, metavar="S",
+                   help="VAL's limit per plan in --scale")
     p.add_argument("--out", type=writable_dir, default="bench-results", help="output folder")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_bench)
@@ -297,9 +527,36 @@ def orientation_list(text: str) -> list[int]:
     return values
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def run_bench(args: argparse.Namespace) -> int:
+    """SIGTERM is turned into KeyboardInterrupt while the bench runs, so every planner process group and the
+    service process are killed on the way out, as on Ctrl-C."""
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        return _run_bench(args)
+    except KeyboardInterrupt:
+        print("planhrc bench: interrupted; planner processes stopped", file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run_bench(args: argparse.Namespace) -> int:
     out_dir = Path(args.out)
     formulations, planners = args.formulations, args.planners
+    if args.scale:
+        report = scale_report(formulations, args.scale_links, args.scale_orientations, args.scale_runs,
+                              args.val_timeout)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "scale.json").write_text(json.dumps(report, indent=2))
+        table = scale_table(report)
+        (out_dir / "scale.md").write_text(table + "\n")
+        print(table)
+        print(f"wrote {out_dir / 'scale.json'}, {out_dir / 'scale.md'}, {scale_plot(report, out_dir / 'scale.png')}")
+        return 0
     usable = set(available_planners())
     missing = [p for p in planners if p not in usable]
     if missing and not args.replan_only:
@@ -307,12 +564,15 @@ def run_bench(args: argparse.Namespace) -> int:
         return 2
     extra: dict = {}
     if args.replan or args.replan_only:
-        extra["replan"] = [measure_replan(f, runs=args.replan_runs) for f in formulations]
-        for r in extra["replan"]:
-            print(json.dumps(r))
+        extra["replan"] = replan_report(formulations, args.replan_runs, args.fd_runs, args.fd_timeout,
+                                        http=not args.no_http)
+        table = replan_table(extra["replan"])
+        print(table)
     if args.replan_only:
         out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "replan.json").write_text(json.dumps({"machine": machine_info(), **extra}, indent=2))
+        (out_dir / "replan.json").write_text(json.dumps(extra["replan"], indent=2))
+        (out_dir / "replan.md").write_text(table + "\n")
+        print(f"wrote {out_dir / 'replan.json'}, {out_dir / 'replan.md'}")
         return 0
     instances = make_instances(args.links, args.orientations, args.instances)
     rows = run_grid(planners, formulations, instances, args.timeout, not args.no_validate, not args.no_progress)

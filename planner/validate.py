@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import logging
 import os
-import subprocess
 import tempfile
 import time
 from dataclasses import dataclass
@@ -16,7 +15,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import PlannerError
-from .process import installed_file
+from .process import ProcessOutcome, installed_file, run_limited
 
 log = logging.getLogger(__name__)
 
@@ -54,11 +53,11 @@ def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: flo
     return ValidationResult(False, reason, time.perf_counter() - start)
 
 
-def _run(cmd: list[str], env: dict[str, str], cwd: str, timeout_s: float) -> subprocess.CompletedProcess:
-    try:
-        return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=timeout_s)
-    except subprocess.TimeoutExpired as exc:
-        raise PlannerError(f"validation: VAL did not finish within {timeout_s} s") from exc
+def _run(cmd: list[str], env: dict[str, str], cwd: str, timeout_s: float) -> ProcessOutcome:
+    outcome = run_limited(cmd, cwd, timeout_s, env)
+    if outcome.timed_out:
+        raise PlannerError(f"validation: VAL did not finish within {timeout_s} s")
+    return outcome
 
 
 def extract_reason(output: str) -> str:
