@@ -33,6 +33,7 @@ from .schemas import (
     ObjectCreate,
     ObjectPublic,
     PerceptionCreate,
+    SQLITE_MAX_INT,
     PlanPublic,
     ProblemPublic,
     StatePublic,
@@ -41,16 +42,23 @@ from .schemas import (
 log = logging.getLogger(__name__)
 
 ERRORS: dict[int | str, dict[str, Any]] = {
-    401: {"model": ErrorPublic, "description": "A bearer token is configured and missing or wrong."},
+    400: {"model": ErrorPublic, "description": "The body is not UTF-8 JSON, or Content-Length is not a number."},
+    401: {"model": ErrorPublic, "description": "A bearer token is configured and missing or wrong (writes; reads "
+          "of the knowledge base too when reads are protected)."},
     404: {"model": ErrorPublic, "description": "Unknown object, state, problem, plan or action."},
     409: {"model": ErrorPublic, "description": "Conflicts with what is stored."},
+    413: {"model": ErrorPublic, "description": "The request body is over the service's size limit."},
     422: {"model": ErrorPublic, "description": "Bad input; the message names the field."},
+}
+ERROR_JSON = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorPublic"}}}
+TEXT_ERRORS: dict[int | str, dict[str, Any]] = {  # routes answering text/plain still send their errors as JSON
+    status: {"description": ERRORS[status]["description"], "content": ERROR_JSON} for status in (404, 422)
 }
 RDF_TYPES = {"application/rdf+xml": "xml", "text/turtle": "turtle"}
 NEXT_ACTION_MOVED = ("GET /objects/{object_id}/next-action was removed (a GET must not change state): take the next "
                      "action with POST /objects/{object_id}/actions/next")
 
-router = APIRouter(responses={404: ERRORS[404], 422: ERRORS[422]})
+router = APIRouter(responses={401: ERRORS[401], 404: ERRORS[404], 422: ERRORS[422]})
 
 
 # -- dependencies -----------------------------------------------------------------------------------------
@@ -65,7 +73,7 @@ def require_writer(request: Request, authorization: Annotated[str | None, Header
 
 Orch = Annotated[Orchestrator, Depends(get_orchestrator)]
 Writer = [Depends(require_writer)]
-WRITE_ERRORS: dict[int | str, dict[str, Any]] = {401: ERRORS[401], 409: ERRORS[409]}
+WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for status in (400, 401, 409, 413)}
 
 
 # -- objects ------------------------------------------------------------------------------------------------
@@ -165,13 +173,15 @@ def read_problem(problem_id: str, orch: Orch) -> dict[str, Any]:
     return orch.describe_problem(problem_id)
 
 
-@router.get("/objects/{object_id}/pddl/domain", response_class=PlainTextResponse, tags=["pddl"])
+@router.get("/objects/{object_id}/pddl/domain", response_class=PlainTextResponse, responses=TEXT_ERRORS,
+            tags=["pddl"])
 def read_pddl_domain(object_id: str, orch: Orch) -> PlainTextResponse:
     """The PDDL domain of the object's formulation, written from the TBox."""
     return PlainTextResponse(orch.pddl_task(object_id).domain)
 
 
-@router.get("/objects/{object_id}/pddl/problem", response_class=PlainTextResponse, tags=["pddl"])
+@router.get("/objects/{object_id}/pddl/problem", response_class=PlainTextResponse, responses=TEXT_ERRORS,
+            tags=["pddl"])
 def read_pddl_problem(object_id: str, orch: Orch) -> PlainTextResponse:
     """The PDDL problem of the object's latest Problem (initial state and goal from the ABox)."""
     return PlainTextResponse(orch.pddl_task(object_id, with_problem=True).problem)
@@ -188,7 +198,7 @@ def read_ontology(orch: Orch, accept: Annotated[str | None, Header()] = None) ->
 
 # -- events ---------------------------------------------------------------------------------------------
 @router.get("/objects/{object_id}/events", response_model=list[EventPublic], tags=["events"])
-def list_events(object_id: str, orch: Orch, after_seq: Annotated[int, Query(ge=0)] = 0) -> list[dict[str, Any]]:
+def list_events(object_id: str, orch: Orch, after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT)] = 0) -> list[dict[str, Any]]:
     """The object's log, oldest first: every decision with its reason, goals, dispatches and feedback."""
     return orch.list_events(object_id, after_seq)
 
@@ -199,14 +209,14 @@ def stream_object_events(
     object_id: str,
     request: Request,
     orch: Orch,
-    after_seq: Annotated[int, Query(ge=0, description="Send events after this seq.")] = 0,
-    max_events: Annotated[int | None, Query(ge=1, description="Stop after this many events.")] = None,
+    after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT, description="Send events after this seq.")] = 0,
+    max_events: Annotated[int | None, Query(ge=1, le=SQLITE_MAX_INT, description="Stop after this many events.")] = None,
     timeout_s: Annotated[float | None, Query(gt=0, le=86400, description="Stop after this many seconds.")] = None,
     last_event_id: Annotated[str | None, Header()] = None,
 ) -> StreamingResponse:
     """Every new event of the object, live, as Server-Sent Events."""
     orch.events_after(object_id, after_seq)  # an unknown object is a 404 before the stream starts
-    if last_event_id and last_event_id.isdigit():
+    if last_event_id and last_event_id.isascii() and last_event_id.isdigit() and int(last_event_id) <= SQLITE_MAX_INT:
         after_seq = max(after_seq, int(last_event_id))
     frames = stream_events(lambda seq: orch.events_after(object_id, seq), request.is_disconnected,
                            after_seq=after_seq, max_events=max_events, timeout_s=timeout_s)
@@ -244,10 +254,7 @@ async def _request_validation_error(request: Request, exc: Exception) -> JSONRes
     assert isinstance(exc, RequestValidationError)  # registered for that type only
     errors = exc.errors()
     messages = [f"{_field_path(e.get('loc', ()))}: {e.get('msg', 'invalid')}" for e in errors]
-    return JSONResponse({"detail": "; ".join(messages) or "invalid request",
-                         "errors": [{"loc": list(e.get("loc", ())), "msg": e.get("msg"), "type": e.get("type")}
-                                    for e in errors]},
-                        status_code=422)
+    return JSONResponse({"detail": "; ".join(messages) or "invalid request"}, status_code=422)
 
 
 def _field_path(loc: tuple | list) -> str:

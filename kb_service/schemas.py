@@ -13,6 +13,8 @@ from planhrc.model import Formulation
 from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+MIN_LINKS, MAX_LINKS = 2, 200  # one bound for both forms of ObjectCreate.links
+SQLITE_MAX_INT = 2**63 - 1  # the largest integer the store (SQLite INTEGER) can hold: the bound of every count and seq
 
 
 def _config(description: str, example: dict[str, Any]) -> ConfigDict:
@@ -34,7 +36,9 @@ class ObjectCreate(BaseModel):
     )
 
     name: str = Field(default="", max_length=200, description="Human-readable name.", examples=["rod"])
-    links: Annotated[int, Field(ge=2, le=200)] | list[LinkSpec] = Field(
+    links: Annotated[int, Field(ge=MIN_LINKS, le=MAX_LINKS)] | Annotated[
+        list[LinkSpec], Field(min_length=MIN_LINKS, max_length=MAX_LINKS)
+    ] = Field(
         description="Number of links (each 0.155 m long), or the list of links in chain order.",
         examples=[4, [{"name": "l1", "length_m": 0.155}, {"name": "l2", "length_m": 0.2}]],
     )
@@ -335,7 +339,8 @@ class HealthPublic(BaseModel):
 
 class ErrorPublic(BaseModel):
     model_config = _config(
-        "An error: the message names the offending field.",
+        "Every error the service sends (400, 401, 404, 409, 410, 413, 422), as JSON whatever the route's own media "
+        "type: one message that names the offending field.",
         {"detail": "link_orientations_deg: expected 4 values (one per link), got 3"},
     )
 
