@@ -28,8 +28,8 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.geometry import rotated, sweep_feasible
-from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction, is_feasible
+from planhrc.geometry import configuration_feasible, rotated
+from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction
 
 log = logging.getLogger(__name__)
 
@@ -204,10 +204,16 @@ def _move(link: int, delta: float, what: str) -> HumanMove:
 
 
 def _feasible_after(scene: Scene, link: int, delta: float) -> bool:
+    """Whether turning `link` keeps the object on the table, clear of the robot's body and not overlapping, all
+    the way (the human reaches anywhere; whether the robot can reach afterwards is the robot's matter)."""
     base, theta = scene.configuration()
-    _, after = rotated(scene.spec.geometry(base), theta, link, link - 1, delta)
-    return is_feasible(scene.spec, after, base) and sweep_feasible(
-        scene.spec.geometry(base), theta, link, link - 1, delta, cell=scene.spec.cell()).ok
+    geometry = scene.spec.geometry(base)
+    for i in range(1, 4):
+        placed, values = rotated(geometry, theta, link, link - 1, delta * i / 3)
+        result = configuration_feasible(placed, values, scene.spec.cell())
+        if any(r.code != "out_of_reach" for r in result.reasons):
+            return False
+    return True
 
 
 def choose_move(scene: Scene, event: HumanEvent, context: HumanContext) -> HumanMove | None:

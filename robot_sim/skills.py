@@ -28,6 +28,7 @@ from planhrc.robot_sim.scene import (
     Scene,
     SimError,
     arm_joints,
+    direction,
     drive_gripper,
     hold_arm,
     joint_between,
@@ -181,6 +182,8 @@ class Robot:
         arc_steps: int = 8,
         realtime_s: float = 0.0,
         success_tolerance_deg: float = 4.0,
+        hold_twist_deg: float = 25.0,
+        turn_twist_deg: float = 6.0,
     ) -> None:
         if scene.robot is None:
             raise SimError("scene: was built without the robot (load_robot=False)")
@@ -193,6 +196,8 @@ class Robot:
         self.arc_steps = arc_steps  # physics steps per waypoint of a turn: 5 deg in 8 steps of 1/120 s = 75 deg/s
         self.realtime_s = realtime_s
         self.success_tolerance_deg = success_tolerance_deg
+        self.hold_twist_deg = hold_twist_deg  # a bar held still may sit a little off square in the fingers
+        self.turn_twist_deg = turn_twist_deg  # the turning gripper carries the link's yaw: it must match
         c, body = self.client, scene.robot
         self._movable = [j for j in range(c.getNumJoints(body)) if c.getJointInfo(body, j)[2] != 4]  # 4 = fixed
         self._lower = [c.getJointInfo(body, j)[8] for j in self._movable]
@@ -214,8 +219,8 @@ class Robot:
         state = self.client.getLinkState(self.scene.robot, self.scene.arms[arm].end_effector, computeForwardKinematics=True)
         return np.array(state[4]), state[5]
 
-    def solve_ik(self, arm: str, position: Sequence[float], yaw: float, iterations: int = 6
-                 ) -> tuple[tuple[float, ...] | None, float]:
+    def solve_ik(self, arm: str, position: Sequence[float], yaw: float, iterations: int = 6,
+                 max_twist_deg: float = 6.0) -> tuple[tuple[float, ...] | None, float]:
         """(joint positions putting `arm`'s gripper at `position`, pointing down, turned by `yaw` (radians), or
         None when it misses by more than the tolerance or tilts; the miss in metres).
 
@@ -244,7 +249,7 @@ class Robot:
         tilt = math.degrees(math.acos(float(np.clip(-frame[2, 2], -1.0, 1.0))))
         reached_yaw = math.atan2(frame[1, 0], frame[0, 0])
         twist = abs(math.degrees((reached_yaw - yaw + math.pi) % (2 * math.pi) - math.pi))
-        if error > self.tolerance_m or tilt > 10.0 or twist > 6.0:
+        if error > self.tolerance_m or tilt > 10.0 or twist > max_twist_deg:
             log.warning("IK: %s arm misses %s by %.3f m (tilt %.0f deg, twist %.0f deg)", arm,
                         np.round(target, 3).tolist(), error, tilt, twist)
             return None, max(error, 0.01 if error <= self.tolerance_m else error)
@@ -301,62 +306,77 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command 
 def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: str | None, turner: str,
                    flip: float = 0.0) -> Command | Unreachable:
     """The command with `holder` holding and `turner` turning, the turning gripper grasping at the link's yaw
-    plus `flip` (0 or pi: the wrist's range decides which way round the turn can be followed)."""
+    plus `flip` (0 or pi: the wrist's range decides which way round the turn can be followed). Each gripper
+    takes the first grasp point it reaches along its link (the centre, then a quarter of the link to either
+    side); the holding gripper may meet its link up to `robot.hold_twist_deg` off square, either way round."""
     joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
     theta = scene.link_orientations_deg()
     pivot = scene.joint_points()[joint_k - 1]
-    turned_xy = scene.link_center(action.turned_link)
-    held_xy = scene.link_center(action.held_link) if action.held_link >= 1 else None
     z_grasp = scene.link_center_z + robot.grasp_height_m
     z_above = z_grasp + robot.approach_height_m
+    quarter = scene.spec.link_length_m / 4.0
     primitives: list[Primitive] = []
 
-    def solve(arm: str, link: int, xy: np.ndarray, z: float, yaw: float, what: str) -> tuple[float, ...] | Unreachable:
-        q, miss = robot.solve_ik(arm, [xy[0], xy[1], z], yaw)
-        if q is None:
-            beyond = max(miss, reach_shortfall(xy, scene.spec.cell().robot))
-            return Unreachable(link, beyond, f"{arm} arm, {what} at x={xy[0]:.2f} m, y={xy[1]:.2f} m")
-        return q
+    def unreachable(arm: str, link: int, xy: np.ndarray, miss: float, what: str) -> Unreachable:
+        beyond = max(miss, reach_shortfall(xy, scene.spec.cell().robot))
+        return Unreachable(link, beyond, f"{arm} arm, {what} at x={xy[0]:.2f} m, y={xy[1]:.2f} m")
 
-    def move(arm: str, link: int, xy: np.ndarray, z: float, yaw: float, what: str) -> Unreachable | None:
-        q = solve(arm, link, xy, z, yaw, what)
-        if isinstance(q, Unreachable):
-            return q
-        primitives.append(MoveArm(arm, q))
-        return None
+    def approach(arm: str, link: int, yaws: Sequence[float], twist: float, what: str
+                 ) -> tuple[np.ndarray, float] | Unreachable:
+        """Above the link, then down onto it: the grasp point and yaw used, or the smallest miss."""
+        centre, along = scene.link_center(link), direction(theta[link - 1])
+        best: Unreachable | None = None
+        for offset in (0.0, -quarter, quarter):
+            xy = centre + offset * along
+            for yaw in yaws:
+                above, miss = robot.solve_ik(arm, [xy[0], xy[1], z_above], yaw, max_twist_deg=twist)
+                down = None
+                if above is not None:
+                    down, miss = robot.solve_ik(arm, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=twist)
+                if above is not None and down is not None:
+                    primitives.extend((MoveArm(arm, above), MoveArm(arm, down)))
+                    return xy, yaw
+                found = unreachable(arm, link, xy, miss, what)
+                best = found if best is None or found.miss_m < best.miss_m else best
+        assert best is not None
+        return best
 
+    held: tuple[np.ndarray, float] | None = None
     if holder is not None:
         held_yaw = -math.radians(theta[action.held_link - 1])
-        for z in (z_above, z_grasp):
-            if (miss := move(holder, action.held_link, held_xy, z, held_yaw, "holding")) is not None:
-                return miss
+        reached = approach(holder, action.held_link, (held_yaw, held_yaw + math.pi), robot.hold_twist_deg, "holding")
+        if isinstance(reached, Unreachable):
+            return reached
+        held = reached
         primitives.append(Grasp(holder, action.held_link))
-    turned_yaw = -math.radians(theta[action.turned_link - 1]) + flip
-    for z in (z_above, z_grasp):
-        if (miss := move(turner, action.turned_link, turned_xy, z, turned_yaw, "grasping")) is not None:
-            return miss
+    reached = approach(turner, action.turned_link, (-math.radians(theta[action.turned_link - 1]) + flip,),
+                       robot.turn_twist_deg, "grasping")
+    if isinstance(reached, Unreachable):
+        return reached
+    grasp_xy, turned_yaw = reached
     primitives.append(Grasp(turner, action.turned_link))
 
     n = max(1, math.ceil(abs(action.delta_deg) / robot.step_deg))
     yaw = turned_yaw
     for i in range(1, n + 1):
         angle = action.delta_deg * i / n
-        xy = rotate_point(turned_xy, pivot, angle)
+        xy = rotate_point(grasp_xy, pivot, angle)
         yaw = _unwrap_yaw(turned_yaw - math.radians(angle), yaw)
-        q = solve(turner, action.turned_link, xy, z_grasp, yaw, f"turning, {angle:+.0f} deg")
-        if isinstance(q, Unreachable):
-            return q
+        q, miss = robot.solve_ik(turner, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=robot.turn_twist_deg)
+        if q is None:
+            return unreachable(turner, action.turned_link, xy, miss, f"turning, {angle:+.0f} deg")
         primitives.append(Turn(turner, q, angle))
-    final_xy = rotate_point(turned_xy, pivot, action.delta_deg)
     primitives.append(Release(turner))
     if holder is not None:
         primitives.append(Release(holder))
-    if (miss := move(turner, action.turned_link, final_xy, z_above, yaw, "lifting")) is not None:
-        return miss
-    if holder is not None:
-        if (miss := move(holder, action.held_link, held_xy, z_above, -math.radians(theta[action.held_link - 1]),
-                         "lifting")) is not None:
-            return miss
+    final_xy = rotate_point(grasp_xy, pivot, action.delta_deg)
+    lifts = [(turner, action.turned_link, final_xy, yaw)] + ([(holder, action.held_link, held[0], held[1])]
+                                                              if holder is not None and held is not None else [])
+    for arm, link, xy, arm_yaw in lifts:
+        q, miss = robot.solve_ik(arm, [xy[0], xy[1], z_above], arm_yaw, max_twist_deg=robot.hold_twist_deg)
+        if q is None:
+            return unreachable(arm, link, xy, miss, "lifting")
+        primitives.append(MoveArm(arm, q))
     for arm in (turner, holder):
         if arm is not None:
             primitives.append(MoveArm(arm, HOME_POSE[arm]))

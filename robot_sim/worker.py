@@ -278,10 +278,11 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
     else the worker gives up, and says so to the service in the feedback of that action."""
     step = 1
     unseen_in_a_row = 0
+    carried: list[str] = []  # human moves made while the robot idled at the goal, reported with the next step
     # signature of a failed action -> (its sentence, whether it was also tried in single steps)
     failed: dict[tuple[int, int, float, int], tuple[str, bool]] = {}
     while step <= max_steps:
-        human_before = []
+        human_before, carried = carried, []
         for index, event in _events(scenario, run, step, "before"):
             if (done := _act(human, run, index, event, context)) is not None:
                 human_before.append(done)
@@ -330,11 +331,16 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
 
         if decision.decision == "goal_reached":
             run.records.append(StepRecord(**base))
+            # a move due now or earlier that found no robot action to go with happens now, while the robot idles
+            late = [(i, e) for i, e in enumerate(scenario.events) if i not in run.applied and e.at_step <= step]
             pending = [e for i, e in enumerate(scenario.events) if i not in run.applied and e.at_step > step]
-            if not pending:
+            if not late and not pending:
                 return "goal_reached"
+            for index, event in late:
+                if (done := _act(human, run, index, event, context)) is not None:
+                    carried.append(done)
             # the robot is idle: the next scheduled human intervention happens now
-            step = max(step + 1, min(e.at_step for e in pending))
+            step = step + 1 if late else max(step + 1, min(e.at_step for e in pending))
             continue
         if decision.decision == "no_plan":
             run.records.append(StepRecord(**base))
