@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import re
 import sys
@@ -34,6 +35,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
 from planhrc.client import KBClient, ProtocolError
+from planhrc.geometry import sweep_feasible
 from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action,
                                      get_scenario, goal_differences)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
@@ -374,9 +376,9 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         assist = None
         previous = failed.get(signature)
         if previous is None:
-            parts: tuple[RotationAction, ...] | None = (action,)
+            parts: tuple[RotationAction, ...] | None = (way_round(scene, action),)
         elif action.macro_steps > 1 and not previous[1]:
-            parts = action.split()  # the macro motion failed: try its single steps
+            parts = way_round(scene, action).split()  # the macro motion failed: try its single steps
         else:
             parts = None  # tried every way the robot knows: not again
         result = None if parts is None else _perform_parts(scene, robot, parts, interrupt,
@@ -393,7 +395,8 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
             sentence = failed[signature][0]
             if scenario.assists_after_failures is not None:
                 # the paper: when the robot cannot do an action, the human does it on the robot's behalf
-                assist = assist_failed_action(human, action.turned_link, action.held_link, action.delta_deg)
+                done_way = way_round(scene, action)
+                assist = assist_failed_action(human, done_way.turned_link, done_way.held_link, done_way.delta_deg)
                 message = f"robot did not retry ({sentence}); the human did it"
                 if action.action_id is not None:
                     kb.post_feedback(object_id, action.action_id, "failed", message)
@@ -410,7 +413,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                                           human_during=tuple(human_during), action_s=t4 - t3))
             return "gave_up"
         if result.outcome is Outcome.PARTIAL:
-            context.partial = (action.turned_link, action.held_link, action.delta_deg - result.reached_deg)
+            context.partial = (action.turned_link, action.held_link, result.commanded_deg - result.reached_deg)
         message = result.message if result.reason is None else f"{result.reason.value}: {result.message}"
         if action.action_id is not None:
             kb.post_feedback(object_id, action.action_id, result.outcome.value, message)
@@ -425,6 +428,23 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         log.info("step %d: %s -> %s (%s)", step, action, result.outcome.value, result.message)
         step += 1
     return "max_steps"
+
+
+def way_round(scene: Scene, action: RotationAction) -> RotationAction:
+    """The action, or the same turn the other way round when only that way keeps the object on the table, clear
+    of the robot and of itself all along (`planhrc.geometry.sweep_feasible`): both end in the same orientation."""
+    base, theta = scene.configuration()
+    geometry, cell = scene.spec.geometry(base), scene.spec.cell()
+    turn = (action.turned_link, action.held_link)
+    if sweep_feasible(geometry, theta, *turn, action.delta_deg, cell=cell).ok:
+        return action
+    other = action.delta_deg - math.copysign(360.0, action.delta_deg)
+    if not sweep_feasible(geometry, theta, *turn, other, cell=cell).ok:
+        return action
+    step = abs(action.delta_deg) / max(1, action.macro_steps)
+    log.info("turning l%d the other way round (%+g deg instead of %+g): that way stays on the table",
+             action.turned_link, other, action.delta_deg)
+    return replace(action, delta_deg=other, macro_steps=max(1, round(abs(other) / step)))
 
 
 def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt, stop_fraction):

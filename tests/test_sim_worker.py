@@ -188,3 +188,24 @@ def test_a_failure_is_not_retried_the_same_way_and_the_worker_gives_up_out_loud(
     assert feedback[0]["message"].startswith("unreachable: link ")
     assert feedback[1]["message"].startswith("worker gives up: link ")
     assert summary.failure_reasons == {"unreachable": 1}  # the robot tried once, not again the same way
+
+
+def test_a_turn_goes_the_other_way_round_when_only_that_way_stays_clear():
+    import pybullet
+    from pybullet_utils.bullet_client import BulletClient
+
+    from planhrc.robot_sim.scene import build_scene
+    from planhrc.robot_sim.skills import RotationAction
+    from planhrc.robot_sim.worker import way_round
+
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    scene = build_scene(client, SceneSpec(load_robot=False, initial_orientations_deg=(90, 90, 90, 90, 0)))
+    try:
+        # turning l5 clockwise by 180 folds it back over l4 half-way; anticlockwise it swings clear
+        action = RotationAction(turned_link=5, held_link=4, delta_deg=-180, macro_steps=4)
+        assert way_round(scene, action) == RotationAction(5, 4, 180, macro_steps=4)
+        clear = RotationAction(turned_link=5, held_link=4, delta_deg=90, macro_steps=2)
+        assert way_round(scene, clear) is clear
+    finally:
+        scene.close()
+        client.disconnect()
