@@ -186,7 +186,8 @@ def summarise(rows: Sequence[Row]) -> list[dict]:
             "invalid": sum(1 for r in sel if r.valid is False),
             "median_s": statistics.median(times) if times else None,
             "max_s": max(times) if times else None,
-            "mean_length_ratio": (statistics.fmean(r.plan_length / r.optimal_length for r in solved if r.optimal_length)
+            "mean_length_ratio": (statistics.fmean(r.plan_length / r.optimal_length for r in solved
+                                                  if r.optimal_length and r.plan_length is not None)
                                   if any(r.optimal_length for r in solved) else None),
         })
     return out

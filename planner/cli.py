@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from typing import Any, cast
 
 from planhrc.cli_args import OneLineParser, existing_file, positive_float
 
@@ -29,7 +29,7 @@ def add_plan_parser(subparsers: Any) -> argparse.ArgumentParser:
     parser.add_argument("--timeout", type=positive_float, default=60.0, help="time limit in seconds")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.set_defaults(func=run_plan)
-    return parser
+    return cast(argparse.ArgumentParser, parser)
 
 
 def run_plan(args: argparse.Namespace) -> int:
@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(prog="planhrc")
     add_plan_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
-    return args.func(args)
+    return int(args.func(args))
 
 
 if __name__ == "__main__":

@@ -27,10 +27,12 @@ from dataclasses import dataclass
 from functools import cached_property
 from math import gcd
 from types import MappingProxyType
-from typing import Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
+
+from planhrc.model import natural_key
 
 from .pddl import Atom, format_sexpr
-from .recognise import Axis, CyclicTask, natural_key
+from .recognise import Axis, CyclicTask
 from .result import PlanResult, PlanStatus
 
 log = logging.getLogger(__name__)
@@ -281,7 +283,7 @@ class GroundTask:
                 "no transform (identity, downstream, upstream differences) decomposes this task; "
                 "refusing to guess a plan", None)
 
-    def _preference(self, axis: Axis, target: int) -> tuple:
+    def _preference(self, axis: Axis, target: int) -> tuple[Any, ...]:
         """Prefer the axis pinning the target itself, then the nearest, then (among equal effects) the binding
         with the later-numbered objects: with links numbered from the table outwards that turns the downstream
         link and holds the upstream one."""
@@ -351,6 +353,7 @@ class GroundTask:
         Z_K x Z_K; a dynamic programme along the chain carries the pair moves' share into the next coordinate.
         Returns ("unfit", None) when some axis spans more, ("unsolvable", None) or ("solved", uses).
         """
+        move: tuple[int, ...]
         k, m = self.k, len(need)
         singles: list[dict[tuple[int, ...], Axis]] = [{} for _ in range(m)]
         pairs: list[dict[tuple[int, ...], Axis]] = [{} for _ in range(m)]
@@ -369,9 +372,9 @@ class GroundTask:
                 table[move] = axis
         if not any(pairs):
             return "unfit", None
-        searches: dict[tuple, tuple[dict, dict]] = {}
+        searches: dict[tuple[Any, ...], tuple[dict[Any, Any], dict[Any, Any]]] = {}
 
-        def search(moves: tuple[tuple[int, ...], ...], dims: int) -> tuple[dict, dict]:
+        def search(moves: tuple[tuple[int, ...], ...], dims: int) -> tuple[dict[Any, Any], dict[Any, Any]]:
             key = (dims, moves)
             if key not in searches:
                 searches[key] = _breadth_first(moves, k, dims)
@@ -420,6 +423,7 @@ class GroundTask:
         programme over the spokes carries the hub's accumulated share, and the hub's own moves close it.
         Returns ("unfit", None), ("unsolvable", None) or ("solved", uses) like `_chain_dp`.
         """
+        move: tuple[int, ...]
         k, m = self.k, len(need)
         supports = []
         for axis, img in images:
@@ -446,9 +450,9 @@ class GroundTask:
                 table, move, target = spokes[spoke], (img[hub] % k, img[spoke] % k), chain[spoke]
             if move not in table or self._preference(axis, target) < self._preference(table[move], target):
                 table[move] = axis
-        searches: dict[tuple, tuple[dict, dict]] = {}
+        searches: dict[tuple[Any, ...], tuple[dict[Any, Any], dict[Any, Any]]] = {}
 
-        def search(moves: tuple[tuple[int, ...], ...], dims: int) -> tuple[dict, dict]:
+        def search(moves: tuple[tuple[int, ...], ...], dims: int) -> tuple[dict[Any, Any], dict[Any, Any]]:
             key = (dims, moves)
             if key not in searches:
                 searches[key] = _breadth_first(moves, k, dims)
@@ -555,7 +559,7 @@ def _unit(v: tuple[int, ...], k: int) -> tuple[int, int] | None:
     return None
 
 
-def _breadth_first(moves: tuple[tuple[int, ...], ...], k: int, dims: int) -> tuple[dict, dict]:
+def _breadth_first(moves: tuple[tuple[int, ...], ...], k: int, dims: int) -> tuple[dict[Any, Any], dict[Any, Any]]:
     """Fewest moves from 0 to every reachable vector of Z_K^dims, with parent links."""
     start = (0,) * dims
     dist = {start: 0}
@@ -574,7 +578,7 @@ def _breadth_first(moves: tuple[tuple[int, ...], ...], k: int, dims: int) -> tup
     return dist, parent
 
 
-def _path(parent: Mapping, target: tuple[int, ...]) -> list[tuple[int, ...]]:
+def _path(parent: Mapping[Any, Any], target: tuple[int, ...]) -> list[tuple[int, ...]]:
     moves = []
     while parent[target] is not None:
         target, mv = parent[target]

@@ -101,7 +101,7 @@ class FastDownwardPlanner:
             return PlanResult(PlanStatus.UNSOLVABLE, (), elapsed, self.name, UNSOLVABLE_CODES[code])
         if code in TIMEOUT_CODES:
             return PlanResult(PlanStatus.TIMEOUT, (), elapsed, self.name, TIMEOUT_CODES[code])
-        detail = ERROR_CODES.get(code, f"unexpected exit code {code}")
+        detail = ERROR_CODES.get(code, f"unexpected exit code {code}") if code is not None else "no exit code"
         tail = _tail(outcome.stderr or outcome.stdout)
         return PlanResult(PlanStatus.ERROR, (), elapsed, self.name, f"exit code {code}: {detail}. {tail}".strip())
 

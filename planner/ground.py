@@ -109,7 +109,7 @@ def find_state_predicates(operators: tuple[Operator, ...], changing: frozenset[s
                                 f"action {op.name} {verb} {format_sexpr(atom)} with no matching "
                                 f"{'delete' if verb == 'adds' else 'add'} that differs in one argument: "
                                 f"{name} is not a state variable with one value")
-                        candidates[name] &= positions  # type: ignore[arg-type]
+                        candidates[name] &= positions
     out = []
     for name in sorted(changing):
         if len(candidates[name]) != 1:

@@ -20,6 +20,8 @@ def installed_file(package: str, relative: str, what: str) -> Path:
         module = importlib.import_module(package)
     except ImportError as exc:  # pragma: no cover - dependency of the project
         raise PlannerError(f"{what}: the {package} package is not installed") from exc
+    if module.__file__ is None:
+        raise PlannerError(f"{what}: the {package} package has no files on disk")
     path = Path(module.__file__).resolve().parent / relative
     if not path.is_file():
         raise PlannerError(f"{what}: {relative} not found at {path}")

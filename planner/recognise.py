@@ -21,6 +21,8 @@ import logging
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
+from planhrc.model import natural_key
+
 from .ground import GroundAction, GroundedProblem, OutsideFamilyError, StateVariablePredicate
 from .operators import EQUALITY, Literal
 from .pddl import Atom, format_sexpr
@@ -165,13 +167,6 @@ def _rotation_step(facts: frozenset[Atom], name: str, cycle: tuple[str, ...]) ->
     if len(steps) != 1 or len({a for a, _ in pairs}) != k:
         return None
     return steps.pop()
-
-
-def natural_key(name: str) -> tuple:
-    """obj1_j10 sorts after obj1_j9: split trailing digits off each name."""
-    stem = name.rstrip("0123456789")
-    digits = name[len(stem):]
-    return (stem, int(digits) if digits else -1, name)
 
 
 class _Context:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from planhrc.vocabulary import PlanStatus
+from planhrc.vocabulary import PlanStatus as PlanStatus
 
 
 @dataclass(frozen=True)

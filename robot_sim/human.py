@@ -221,6 +221,8 @@ def choose_move(scene: Scene, event: HumanEvent, context: HumanContext) -> Human
     n = scene.n_links
     first_free = max(context.busy_links, default=0) + 1  # links the robot does not hold and does not move
     if event.kind == "rotate":
+        if event.link is None:
+            raise SimError("link: a rotate event names the link it turns")
         link = event.link if event.link > 0 else n + 1 + event.link
         if not 1 <= link <= n:
             raise SimError(f"link: {event.link} is not a link of a {n}-link object")
@@ -427,6 +429,7 @@ class Human:
                 reference = theta[move.held - 1] if move.held >= 1 else 0.0
                 wanted = reference + relative0 + move.delta_deg * i / n
                 if move.held == 0:
+                    assert pivot0 is not None  # set above whenever the table is held
                     pivot = pivot0
                 else:
                     held_centre = s.link_center(move.held)

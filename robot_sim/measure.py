@@ -48,7 +48,10 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
                 else:
                     errors.append(abs(angle_difference_deg(est, true)))
         robot = Robot(scene)
-        rotation_s, outcomes, reasons, turn_errors = [], Counter(), Counter(), []
+        rotation_s: list[float] = []
+        outcomes: Counter[str] = Counter()
+        reasons: Counter[str] = Counter()
+        turn_errors: list[float] = []
         scene.set_configuration(spec.orientations0, spec.base_xy)
         while len(rotation_s) < rotations:
             link = int(rng.integers(2, spec.n_links + 1))

@@ -187,7 +187,7 @@ def caption_frame(frame: np.ndarray, lines: Sequence[str], width: int | None = N
     image = overlay_markers(frame, markers) if markers else np.ascontiguousarray(frame[..., :3])
     picture = Image.fromarray(image)
     if width and picture.width != width:
-        picture = picture.resize((width, round(picture.height * width / picture.width)), Image.LANCZOS)
+        picture = picture.resize((width, round(picture.height * width / picture.width)), Image.Resampling.LANCZOS)
     try:
         font = ImageFont.load_default(size=CAPTION_FONT_PX)
     except TypeError:  # Pillow < 10.1 has one fixed-size default font
@@ -227,6 +227,6 @@ def write_movie(path: Path, frames: Sequence[np.ndarray], seconds_per_frame: flo
             padded = Image.new("RGB", (image.width, height), "white")
             padded.paste(image, (0, 0))
             image = padded
-        images.append(image.convert("P", palette=Image.ADAPTIVE, colors=255))
+        images.append(image.convert("P", palette=Image.Palette.ADAPTIVE, colors=255))
     images[0].save(path, save_all=True, append_images=images[1:], duration=int(seconds_per_frame * 1000), loop=0)
     return path

@@ -139,7 +139,7 @@ def baxter_urdf_source() -> Path:
     dist = importlib.metadata.distribution("example-robot-data")
     for entry in dist.files or ():
         if str(entry).endswith(BAXTER_URDF):
-            return Path(dist.locate_file(entry))
+            return Path(str(dist.locate_file(entry)))
     raise SimError("example-robot-data: baxter.urdf not found in the installed distribution")
 
 
@@ -275,8 +275,12 @@ class Scene:
             self.time_s += TIME_STEP_S
 
     # -- contacts -------------------------------------------------------------------------------------------
-    def near(self, body: int, link: int, other: int, other_link: int | None = None, distance_m: float = 0.0) -> bool:
-        """Whether `body`'s `link` comes within `distance_m` of `other` (its `other_link`, or any part of it)."""
+    def near(self, body: int | None, link: int, other: int | None, other_link: int | None = None,
+             distance_m: float = 0.0) -> bool:
+        """Whether `body`'s `link` comes within `distance_m` of `other` (its `other_link`, or any part of it);
+        False while either body is not in the scene."""
+        if body is None or other is None:
+            return False
         if other_link is None:
             points = self.client.getClosestPoints(body, other, distance_m, linkIndexA=link)
         else:

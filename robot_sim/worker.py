@@ -313,7 +313,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         run.base_points.append(base_xy)
         kind = decision.decision if decision is not None else "incomplete_perception"
         run.labels.append(f"{step}: {kind}")
-        base = dict(step=step, human_before=tuple(human_before),
+        base: dict[str, Any] = dict(step=step, human_before=tuple(human_before),
                     perceived_deg=tuple(None if v is None else round(v, 2) for v in values),
                     true_deg=tuple(round(v, 2) for v in theta), missing_links=seen.missing_links,
                     decision=kind, reason=decision.reason if decision is not None else
@@ -420,7 +420,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         if result.outcome is Outcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
-            failed[signature] = (result.message, len(parts) > 1 or action.macro_steps <= 1)
+            failed[signature] = (result.message, len(parts or ()) > 1 or action.macro_steps <= 1)
         run.records.append(StepRecord(**base, action=dict(data), outcome=result.outcome.value,
                                       outcome_reason=result.reason.value if result.reason else None,
                                       outcome_message=result.message, reached_deg=round(result.reached_deg, 2),
