@@ -227,8 +227,8 @@ def machine_info() -> dict:
 
 # -- re-planning latency -------------------------------------------------------------------------------------
 def stats_ms(values: Sequence[float]) -> dict:
-    """Count, median and p90 in milliseconds (the one percentile helper: `planhrc.service_bench.percentile`)."""
-    from planhrc.service_bench import percentile
+    """Count, median and p90 in milliseconds (the one percentile helper: `planhrc.stats.percentile`)."""
+    from planhrc.stats import percentile
 
     return {"n": len(values), "median_ms": round(percentile(list(values), 0.5) * 1000, 3),
             "p90_ms": round(percentile(list(values), 0.9) * 1000, 3)}
