@@ -318,7 +318,7 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
     primitives: list[Primitive] = []
 
     def unreachable(arm: str, link: int, xy: np.ndarray, miss: float, what: str) -> Unreachable:
-        beyond = max(miss, reach_shortfall(xy, scene.spec.cell().robot))
+        beyond = max(miss, reach_shortfall((float(xy[0]), float(xy[1])), scene.spec.cell().robot))
         return Unreachable(link, beyond, f"{arm} arm, {what} at x={xy[0]:.2f} m, y={xy[1]:.2f} m")
 
     def approach(arm: str, link: int, yaws: Sequence[float], twist: float, what: str
@@ -377,9 +377,9 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
         if q is None:
             return unreachable(arm, link, xy, miss, "lifting")
         primitives.append(MoveArm(arm, q))
-    for arm in (turner, holder):
-        if arm is not None:
-            primitives.append(MoveArm(arm, HOME_POSE[arm]))
+    for home in (turner, holder):
+        if home is not None:
+            primitives.append(MoveArm(home, HOME_POSE[home]))
     return Command(tuple(primitives), joint_k, side, float(action.delta_deg), action.turned_link, action.held_link)
 
 
@@ -447,7 +447,7 @@ def _drive(scene: Scene, robot: Robot, arm: str, target: Sequence[float], max_st
     """Drive `arm`'s joint motors to `target`, stepping the physics until the arm is there (True) or
     `max_steps` have passed (False: the arm stalls)."""
     goal = np.asarray(target, dtype=float)
-    hold_arm(scene, arm, goal)
+    hold_arm(scene, arm, target)
     for _ in range(max_steps):
         scene.step()
         if robot.realtime_s:

@@ -124,7 +124,7 @@ class _ObjectInfo:
         self.static_fragment = {atom: atom_fragment(obj, obj.ident, atom) for atom in self.static}
         self.shared_stored: set[str] = set()  # object-level HasOrientation individuals known to be stored
         # every well-formed HasOrientation atom of the object, with the name of its individual
-        self.orientation_atom_name = {
+        self.orientation_atom_name: dict[Atom, str] = {
             (HAS_ORIENTATION, o, j): atom_fragment(obj, obj.ident, (HAS_ORIENTATION, o, j))
             for j in obj.joints for o in obj.orientation_names
         }
@@ -249,6 +249,13 @@ class Abox:
 
     def _obj1(self, sid: int, prop: str) -> int | None:
         return self._q.object(sid, self._t[prop])
+
+    def _ref(self, sid: int, prop: str) -> int:
+        """The one object of a property every record of its kind has; a missing one is a damaged store."""
+        found = self._q.object(sid, self._t[prop])
+        if found is None:
+            raise KBError(f"store: record {self._sid_name.get(sid, sid)} has no {prop}")
+        return found
 
     def _objn(self, sid: int, prop: str) -> list[int]:
         return self._q.objects(sid, self._t[prop])
@@ -672,7 +679,7 @@ class Abox:
         kind = next((k for k, cls in STATE_CLASSES.items() if self._t[cls] in types), None)
         if kind is None:
             return None
-        obj_sid = self._obj1(sid, "stateOf")
+        obj_sid = self._ref(sid, "stateOf")
         self._names([obj_sid])
         atoms = frozenset(self._predicate_atoms(self._objn(sid, "madeof")).values())
         if self._data1(sid, "includesStaticFacts"):
@@ -682,7 +689,7 @@ class Abox:
         if lo:
             values: dict[int, float] = {}
             for p in lo:
-                link = self._obj1(p, "arg1")
+                link = self._ref(p, "arg1")
                 values[int(self._data1(link, "chainIndex"))] = float(self._data1(p, "observedDegrees"))
             observed = tuple(values[k] for k in sorted(values))
         return StoredState(
@@ -742,7 +749,7 @@ class Abox:
         sid = self._sid(problem_id)
         if sid is None or not self._is_a(sid, "Problem"):
             return None
-        refs = [self._obj1(sid, p) for p in ("aboutObject", "init", "goal")]
+        refs = [self._ref(sid, p) for p in ("aboutObject", "init", "goal")]
         self._names(refs)
         o, i, g = (self._sid_name[r] for r in refs)
         return StoredProblem(problem_id, o, i, g, float(self._data1(sid, "createdAt")))
@@ -940,7 +947,7 @@ class Abox:
         sid = self._sid(plan_id)
         if sid is None or not self._is_a(sid, "Plan"):
             return None
-        refs = [self._obj1(sid, "aboutObject"), self._obj1(sid, "solves")]
+        refs = [self._ref(sid, "aboutObject"), self._ref(sid, "solves")]
         action_sids = self._objn(sid, "madeof")
         state_sids = self._objn(sid, "expectedState")
         self._names(refs + action_sids + state_sids)
