@@ -1,16 +1,22 @@
 #!/usr/bin/env python3
-"""Set up `.venv` at the repository root (once, or again when pyproject.toml changes) and run a task.
+"""Set up `.venv` at the repository root (once, or again when pyproject.toml or constraints.txt changes) and run
+a task.
 
     python3 ./run.py demo [ARGS...]   # the main job: `planhrc demo` on the embedded store
     python3 ./run.py test [ARGS...]   # the whole test suite (every marker)
+    python3 ./run.py setup            # only create or update .venv
+    python3 ./run.py lock             # rewrite constraints.txt from .venv (pip freeze)
     python3 ./run.py planhrc ARGS...  # any `planhrc` command inside the environment
 
-Only the standard library is used here, so this works from a fresh clone with nothing but python3.
+The environment gets planhrc (editable) with the `sim` and `test` extras, pinned by constraints.txt (the
+versions the suite last passed with), so every machine resolves the same versions.
+Only the standard library is used here, so this works from a fresh clone with nothing but python3; the file
+also parses on old interpreters (no newer syntax, annotations as strings) so that they get the version message.
 """
-from __future__ import annotations
-
 import hashlib
 import os
+import re
+import shutil
 import subprocess
 import sys
 import venv
@@ -20,30 +26,131 @@ ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 STAMP = VENV / ".planhrc-installed"
 CHROMIUM = Path("/usr/bin/chromium")
+CONSTRAINTS = ROOT / "constraints.txt"
+EXTRAS = "all,test"
+CONSTRAINTS_HEADER = """\
+# The versions the test suite last passed with: `pip freeze` of run.py's .venv (all extras and the test extra).
+# Used as `pip install -c constraints.txt ...` by run.py (so CI), and by the Docker images.
+# Regenerate with `python3 ./run.py lock` (delete this file first to let pip resolve fresh versions, then run the
+# suite before locking).
+"""
+TASKS = ("demo", "test", "setup", "planhrc", "lock")
 
 
-def venv_python() -> Path:
+class SetupError(Exception):
+    """The environment cannot be made here; the message says why and what to do."""
+
+
+def say(message: str) -> None:
+    print(f"[run.py] {message}", file=sys.stderr, flush=True)
+
+
+def venv_python() -> "Path":
     return VENV / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
 
 
+def required_python() -> "tuple[int, int]":
+    """The minimum (major, minor) of pyproject.toml's `requires-python = ">=X.Y"` (read without tomllib, which an
+    old interpreter lacks)."""
+    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    match = re.search(r'^requires-python\s*=\s*"\s*>=\s*(\d+)\.(\d+)', text, re.MULTILINE)
+    if not match:
+        raise SetupError('pyproject.toml: no requires-python = ">=X.Y" line')
+    return int(match.group(1)), int(match.group(2))
+
+
+def check_interpreter() -> None:
+    """Refuse an interpreter older than the project needs, before anything is created."""
+    need = required_python()
+    if sys.version_info[:2] < need:
+        have = ".".join(map(str, sys.version_info[:3]))
+        raise SetupError(f"Python {need[0]}.{need[1]} or newer is needed, this is {have} ({sys.executable}); "
+                         f"run run.py with a newer python3 (nothing was created)")
+
+
 def requirements_digest() -> str:
-    return hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes())
+    if CONSTRAINTS.exists():
+        digest.update(CONSTRAINTS.read_bytes())
+    digest.update(EXTRAS.encode())
+    return digest.hexdigest()
 
 
-def ensure_environment() -> Path:
-    """Create `.venv` and install the project (editable, with test extras) when it is missing or stale."""
+def venv_version() -> "tuple[int, int] | None":
+    """(major, minor) of the interpreter inside `.venv`, or None when it is missing or does not run."""
+    try:
+        out = subprocess.run([str(venv_python()), "-c", "import sys; print(*sys.version_info[:2])"],
+                             capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    parts = out.stdout.split()
+    if out.returncode != 0 or len(parts) != 2 or not all(p.isdigit() for p in parts):
+        return None
+    return int(parts[0]), int(parts[1])
+
+
+def venv_problem() -> "str | None":
+    """Why the existing `.venv` cannot be kept (made by another interpreter, or half-created), or None."""
+    if not VENV.exists():
+        return None
+    version = venv_version()
+    if version is None:
+        return "its python is missing or does not run (a half-created environment)"
+    if version != sys.version_info[:2]:
+        return (f"it was made by Python {version[0]}.{version[1]}, this is "
+                f"{sys.version_info[0]}.{sys.version_info[1]}")
+    if not STAMP.exists():
+        return "an earlier installation did not finish"
+    return None
+
+
+def remove_venv() -> None:
+    """Delete `.venv`, but only what looks like a virtual environment (or an empty folder)."""
+    if VENV.is_symlink() or not VENV.is_dir():
+        raise SetupError(f"{VENV} is not a folder; remove it yourself")
+    if not (VENV / "pyvenv.cfg").exists() and any(VENV.iterdir()):
+        raise SetupError(f"{VENV} does not look like a virtual environment (no pyvenv.cfg); remove it yourself")
+    shutil.rmtree(VENV)
+
+
+def create_venv() -> None:
+    venv.EnvBuilder(with_pip=True).create(VENV)
+
+
+def install_project(py: str) -> None:
+    constraints = ["-c", str(CONSTRAINTS)] if CONSTRAINTS.exists() else []
+    subprocess.run([py, "-m", "pip", "install", "--quiet", "--upgrade", "pip", *constraints], check=True)
+    subprocess.run([py, "-m", "pip", "install", "--quiet", *constraints, "-e", f"{ROOT}[{EXTRAS}]"], check=True)
+
+
+def ensure_environment() -> "Path":
+    """Create `.venv` and install the project when it is missing or stale; rebuild it when it was made by another
+    interpreter or left half-made."""
+    check_interpreter()
+    problem = venv_problem()
+    if problem:
+        say(f"rebuilding .venv: {problem}")
+        remove_venv()
     digest = requirements_digest()
     if STAMP.exists() and STAMP.read_text().strip() == digest and venv_python().exists():
         return venv_python()
     if not venv_python().exists():
-        print("[run.py] creating .venv", flush=True)
-        venv.EnvBuilder(with_pip=True).create(VENV)
-    py = str(venv_python())
-    print("[run.py] installing planhrc and its dependencies into .venv", flush=True)
-    subprocess.run([py, "-m", "pip", "install", "--quiet", "--upgrade", "pip"], check=True)
-    subprocess.run([py, "-m", "pip", "install", "--quiet", "-e", f"{ROOT}[test]"], check=True)
+        say("creating .venv")
+        create_venv()
+    STAMP.unlink(missing_ok=True)  # until the installation below finishes, the environment counts as half-made
+    say("installing planhrc and its dependencies into .venv")
+    install_project(str(venv_python()))
     STAMP.write_text(digest)
     return venv_python()
+
+
+def write_constraints(py: str) -> None:
+    """constraints.txt := `pip freeze` of `.venv` (the project itself left out), with a header saying so."""
+    frozen = subprocess.run([py, "-m", "pip", "freeze", "--exclude-editable"], check=True, capture_output=True,
+                            text=True).stdout
+    lines = sorted((l for l in frozen.splitlines() if l and not l.lower().startswith("planhrc")), key=str.lower)
+    CONSTRAINTS.write_text(CONSTRAINTS_HEADER + "\n".join(lines) + "\n")
+    say(f"wrote {CONSTRAINTS.name}: {len(lines)} pinned distributions")
 
 
 def ensure_chromium() -> None:
@@ -63,25 +170,39 @@ def ensure_chromium() -> None:
         print("[run.py] installing chromium failed: the browser tests will skip", flush=True)
 
 
-def main(argv: list[str]) -> int:
+def main(argv: "list[str]") -> int:
     if not argv or argv[0] in {"-h", "--help"}:
         print(__doc__)
         return 0
     task, rest = argv[0], argv[1:]
-    py = str(ensure_environment())
+    if task not in TASKS:
+        say(f"unknown task {task!r}; use {', '.join(TASKS)}")
+        return 2
+    try:
+        py = str(ensure_environment())
+    except SetupError as exc:
+        say(str(exc))
+        return 2
+    except subprocess.CalledProcessError as exc:
+        say(f"installation failed ({' '.join(exc.cmd[:4])} ... exited with {exc.returncode}); "
+            "run again to retry, the environment will be repaired")
+        return 1
     if task == "setup":
+        return 0
+    if task == "lock":
+        write_constraints(py)
         return 0
     if task == "test":
         ensure_chromium()
         cmd = [py, "-m", "pytest", *rest]
     elif task == "demo":
         cmd = [py, "-m", "planhrc.cli", "demo", *rest]
-    elif task == "planhrc":
-        cmd = [py, "-m", "planhrc.cli", *rest]
     else:
-        print(f"[run.py] unknown task {task!r}; use demo, test, setup or planhrc", file=sys.stderr)
-        return 2
-    return subprocess.run(cmd, cwd=ROOT).returncode
+        cmd = [py, "-m", "planhrc.cli", *rest]
+    try:
+        return subprocess.run(cmd, cwd=ROOT).returncode
+    except KeyboardInterrupt:  # the child got the same Ctrl-C and reports it itself
+        return 130
 
 
 if __name__ == "__main__":
