@@ -73,9 +73,9 @@ def test_a_signalled_demo_stops_its_service_and_says_so_in_one_line(tmp_path, si
         db = str(out / "planhrc.sqlite3")
         service = wait_for(lambda: [pid for pid, (ppid, _, cmd) in processes().items()
                                     if ppid == demo.pid and " serve " in cmd and db in cmd], 60, "planhrc serve")
-        # the service answers (the demo has moved on to its episode): the log says it is running
-        wait_for(lambda: "running on" in (out / "kb-service.log").read_text(errors="replace").lower(), 90,
-                 "the service to listen")
+        # the episode is under way: the worker has posted a perception (its simulator is up)
+        wait_for(lambda: "/perceptions" in (out / "kb-service.log").read_text(errors="replace"), 120,
+                 "the first perception")
         demo.send_signal(signum)
         stdout, stderr = demo.communicate(timeout=60)
     finally:
