@@ -20,6 +20,7 @@ from .auth import AuthError, check_bearer
 from .events import stream_events
 from .orchestrator import Orchestrator
 from .store import ConflictError, NotFoundError, ValidationError
+from .store.knowledge_base import MAX_EVENTS_PAGE
 from .schemas import (
     DecisionPublic,
     ErrorPublic,
@@ -198,9 +199,16 @@ def read_ontology(orch: Orch, accept: Annotated[str | None, Header()] = None) ->
 
 # -- events ---------------------------------------------------------------------------------------------
 @router.get("/objects/{object_id}/events", response_model=list[EventPublic], tags=["events"])
-def list_events(object_id: str, orch: Orch, after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT)] = 0) -> list[dict[str, Any]]:
-    """The object's log, oldest first: every decision with its reason, goals, dispatches and feedback."""
-    return orch.list_events(object_id, after_seq)
+def list_events(
+    object_id: str,
+    orch: Orch,
+    after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT, description="Return events after this seq.")] = 0,
+    limit: Annotated[int, Query(ge=1, le=MAX_EVENTS_PAGE, description="At most this many events.")] = MAX_EVENTS_PAGE,
+) -> list[dict[str, Any]]:
+    """A page of the object's log, oldest first: every decision with its reason, goals, dispatches and feedback.
+    The next page starts after the last `seq` returned (`after_seq`); a page never holds more than
+    `MAX_EVENTS_PAGE` events, so its cost does not grow with the history."""
+    return orch.list_events(object_id, after_seq, limit)
 
 
 @router.get("/objects/{object_id}/events/stream", tags=["events"],
@@ -215,7 +223,7 @@ def stream_object_events(
     last_event_id: Annotated[str | None, Header()] = None,
 ) -> StreamingResponse:
     """Every new event of the object, live, as Server-Sent Events."""
-    orch.events_after(object_id, after_seq)  # an unknown object is a 404 before the stream starts
+    orch.events_after(object_id, after_seq, limit=1)  # an unknown object is a 404 before the stream starts
     if last_event_id and last_event_id.isascii() and last_event_id.isdigit() and int(last_event_id) <= SQLITE_MAX_INT:
         after_seq = max(after_seq, int(last_event_id))
     frames = stream_events(lambda seq: orch.events_after(object_id, seq), request.is_disconnected,

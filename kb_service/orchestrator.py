@@ -38,6 +38,7 @@ from planhrc.translator import PddlTask, domain_text, read_domain_model, transla
 from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, PlanningStatus, one_of
 
 from .locks import ObjectLocks
+from .store.knowledge_base import MAX_EVENTS_PAGE
 from .public import (event_public, execution_public, object_public, plan_public, problem_public,
                      state_public)
 
@@ -260,19 +261,22 @@ class Orchestrator:
     def describe_problem(self, problem_id: str) -> dict[str, Any]:
         return problem_public(self.kb.get_problem(problem_id))
 
-    def list_events(self, object_id: str, after_seq: int = 0) -> list[dict[str, Any]]:
-        """The object's log, oldest first."""
-        return [event_public(e) for e in self.events_after(object_id, after_seq)]
+    def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> list[dict[str, Any]]:
+        """A page of the object's log, oldest first: at most `limit` events after `after_seq`."""
+        return [event_public(e) for e in self.kb.list_events(object_id, after_seq=after_seq, limit=limit)]
 
-    def events_after(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
-        return self.kb.list_events(object_id, after_seq=after_seq)
+    def events_after(self, object_id: str, after_seq: int = 0,
+                     limit: int = MAX_EVENTS_PAGE) -> tuple[StoredEvent, ...]:
+        """One page of events after `after_seq` (a stream reads the next page at its next poll)."""
+        return self.kb.list_events(object_id, after_seq=after_seq, limit=limit)
 
     def export_ontology(self, fmt: str) -> bytes:
         """TBox and ABox as RDF/XML (`xml`) or Turtle (`turtle`)."""
         return self.kb.export(fmt)
 
     def health(self) -> dict[str, Any]:
-        return {"objects": len(self.kb.list_objects()), "triples": self.kb.triple_count()}
+        """Counts kept by the store's commits: no scan and no lock, so /health answers while anything runs."""
+        return {"objects": self.kb.object_count(), "triples": self.kb.triple_count()}
 
     def _plan_public(self, plan: StoredPlan) -> dict[str, Any]:
         obj = self.kb.get_object(plan.object_id)

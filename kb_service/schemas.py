@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
 from planhrc.model import Formulation
 from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus
@@ -15,6 +15,17 @@ from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 MIN_LINKS, MAX_LINKS = 2, 200  # one bound for both forms of ObjectCreate.links
 SQLITE_MAX_INT = 2**63 - 1  # the largest integer the store (SQLite INTEGER) can hold: the bound of every count and seq
+
+
+def _printable(value: str) -> str:
+    """Names are printable text (no control, line-break or format characters), so every output shows them as sent."""
+    if not value.isprintable():
+        bad = next(c for c in value if not c.isprintable())
+        raise ValueError(f"must be printable characters only, got {bad!r}")
+    return value
+
+
+PrintableName = Annotated[str, AfterValidator(_printable)]
 
 
 def _config(description: str, example: dict[str, Any]) -> ConfigDict:
@@ -25,7 +36,8 @@ def _config(description: str, example: dict[str, Any]) -> ConfigDict:
 class LinkSpec(BaseModel):
     model_config = _config("One link of an articulated object.", {"name": "l1", "length_m": 0.155})
 
-    name: str = Field(min_length=1, max_length=64, description="Name of the link (informative).", examples=["l1"])
+    name: PrintableName = Field(min_length=1, max_length=64, description="Name of the link (informative).",
+                                examples=["l1"])
     length_m: FiniteFloat = Field(gt=0, description="Length of the link in metres.", examples=[0.155])
 
 
@@ -35,7 +47,8 @@ class ObjectCreate(BaseModel):
         {"name": "rod", "links": 4, "orientations": 4, "formulation": "relative"},
     )
 
-    name: str = Field(default="", max_length=200, description="Human-readable name.", examples=["rod"])
+    name: PrintableName = Field(default="", max_length=200, description="Human-readable name (printable characters).",
+                                examples=["rod"])
     links: Annotated[int, Field(ge=MIN_LINKS, le=MAX_LINKS)] | Annotated[
         list[LinkSpec], Field(min_length=MIN_LINKS, max_length=MAX_LINKS)
     ] = Field(

@@ -86,6 +86,9 @@ _TBOX_TERMS = (
     "plannerName position staticFactOf includesStaticFacts"
 ).split()
 
+# Records and storids cached past this many entries are dropped after a commit (they are re-read on demand).
+CACHE_LIMIT = 20_000
+
 _TABLES = (
     "CREATE TABLE IF NOT EXISTS planhrc_meta (key TEXT PRIMARY KEY, value TEXT)",
     "CREATE TABLE IF NOT EXISTS planhrc_counter (name TEXT PRIMARY KEY, value INTEGER)",
@@ -178,6 +181,10 @@ class Abox:
             self._q.world.close()
             raise
         self._depth = 0
+        # /health reads these without a query: counted once at open, then kept by every commit.
+        self._triples = self._q.count()
+        self._n_objects = len(self._q.subjects(RDF_TYPE, self._t["ArticulatedObject"], self._c))
+        self._pending = [0, 0]  # triples, objects written by the open transaction
         self._iri_sid: dict[str, int] = {}
         self._sid_name: dict[int, str] = {}
         self._objects: dict[str, _ObjectInfo] = {}
@@ -292,9 +299,15 @@ class Abox:
 
         self._q.insert_objs(self._c, [(resolve(s), p, resolve(o)) for s, p, o in batch.objs])
         self._q.insert_datas(self._c, [(resolve(s), p, value) for s, p, value in batch.datas])
+        self._pending[0] += len(batch.objs) + len(batch.datas)
 
     def _commit(self) -> None:
         self._q.commit()
+        self._triples += self._pending[0]
+        self._n_objects += self._pending[1]
+        self._pending = [0, 0]
+        if len(self._sid_name) + len(self._states) > CACHE_LIMIT:
+            self._drop_caches()  # records refill from the database on demand: memory stays flat as history grows
 
     def _write(self, fill: Callable[[], T]) -> T:
         """Run `fill()` (which adds triples / side-table rows) in one transaction; roll back on any error.
@@ -337,6 +350,10 @@ class Abox:
     def _forget_uncommitted(self) -> None:
         # Storids handed out in a rolled-back transaction are invalid, and records cached during it were never
         # stored: drop every cache (they refill from the database on demand).
+        self._pending = [0, 0]
+        self._drop_caches()
+
+    def _drop_caches(self) -> None:
         self._iri_sid.clear()
         self._sid_name.clear()
         self._objects.clear()
@@ -408,6 +425,7 @@ class Abox:
                     name = self._add_predicate(b, info, info.static_fragment[atom], atom)
                     b.rel(name, "staticFactOf", obj.ident)
                 self._flush(b)
+                self._pending[1] += 1
 
             self._write(fill)
             self._objects[obj.ident] = info
@@ -765,19 +783,16 @@ class Abox:
                 self._problems[problem_id] = record
             return record
 
-    def _latest(self, object_id: str, cls: str) -> str | None:
-        info = self._info(object_id)
-        obj_sid = self._sid(info.obj.ident)
-        sids = self._q.subjects_typed(self._t["aboutObject"], obj_sid, self._t[cls]) if obj_sid else []
-        if not sids:
-            return None
-        self._names(sids)
-        return max((self._sid_name[s] for s in sids), key=natural_key)
+    def _latest_by_counter(self, object_id: str, kind: str) -> str | None:
+        """The newest `<object>_<kind>_<n>`: n is the object's counter (one row read, whatever the history)."""
+        ident = self._info(object_id).obj.ident
+        row = self._q.execute("SELECT value FROM planhrc_counter WHERE name=?", (f"{ident}:{kind}",)).fetchone()
+        return f"{ident}_{kind}_{row[0]}" if row and row[0] else None
 
     def latest_problem(self, object_id: str) -> StoredProblem | None:
         with self._lock:
             self._check_open()
-            pid = self._latest(object_id, "Problem")
+            pid = self._latest_by_counter(object_id, "problem")
             return self.get_problem(pid) if pid else None
 
     # -- plans ------------------------------------------------------------------------------------------
@@ -974,10 +989,15 @@ class Abox:
     def latest_plan(self, object_id: str) -> StoredPlan | None:
         with self._lock:
             self._check_open()
-            pid = self._latest(object_id, "Plan")
+            pid = self._latest_by_counter(object_id, "plan")
             return self.get_plan(pid) if pid else None
 
     def triple_count(self) -> int:
-        with self._lock:
-            self._check_open()
-            return self._q.count()
+        """Triples stored (kept by every commit: no scan, no lock)."""
+        self._check_open()
+        return self._triples
+
+    def object_count(self) -> int:
+        """Objects stored (kept by every commit: no scan, no lock)."""
+        self._check_open()
+        return self._n_objects

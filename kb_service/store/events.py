@@ -46,9 +46,11 @@ class EventLog:
                            (object_id, seq, kind, reason, text, created))
         return StoredEvent(seq, object_id, kind, reason, json.loads(text), created)
 
-    def after(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
+    def after(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
+        """Events with seq > after_seq, oldest first, at most `limit` of them (None: all); the primary key
+        (object_id, seq) makes a page cost what it returns."""
         rows = self.quads.execute(
-            "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id=? AND seq>? ORDER BY seq",
-            (object_id, int(after_seq)),
+            "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id=? AND seq>? ORDER BY seq"
+            " LIMIT ?", (object_id, int(after_seq), -1 if limit is None else int(limit)),
         ).fetchall()
         return tuple(StoredEvent(s, object_id, k, r, json.loads(d), c) for s, k, r, d, c in rows)

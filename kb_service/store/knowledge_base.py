@@ -16,6 +16,9 @@ from .export import export_rdf
 from .records import Execution, StoredEvent
 from .responses import ResponseMemory
 
+MAX_SEQ = 2**63 - 1  # the largest event seq a caller may name (the largest SQLite INTEGER)
+MAX_EVENTS_PAGE = 1000  # the most events one read of the log returns over HTTP (a page, or one poll of a stream)
+
 
 class KnowledgeBase(Abox):
     """TBox + ABox in one owlready2 World on SQLite, with the service's side tables; thread safe (one RLock)."""
@@ -39,10 +42,15 @@ class KnowledgeBase(Abox):
             text = self._events.check(kind, reason, data)
             return self._write(lambda: self._events.append(ident, kind, reason, text))
 
-    def list_events(self, object_id: str, after_seq: int = 0) -> tuple[StoredEvent, ...]:
+    def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
+        """The object's events after `after_seq`, oldest first, at most `limit` (None: all)."""
+        if isinstance(after_seq, bool) or not isinstance(after_seq, int) or not 0 <= after_seq <= MAX_SEQ:
+            raise ValidationError(f"after_seq: must be an integer from 0 to {MAX_SEQ}, got {after_seq!r}")
+        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
+            raise ValidationError(f"limit: must be a positive integer, got {limit!r}")
         with self._lock:
             self._check_open()
-            return self._events.after(self._info(object_id).obj.ident, after_seq)
+            return self._events.after(self._info(object_id).obj.ident, after_seq, limit)
 
     # -- execution ----------------------------------------------------------------------------------------
     def get_execution(self, object_id: str) -> Execution:

@@ -1,0 +1,94 @@
+"""The service as history grows: reads cost what they return, /health stays cheap, bounds refuse hostile input."""
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")  # starlette's notice about httpx2
+    from fastapi.testclient import TestClient
+
+from planhrc.kb_service.app import create_app
+from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store.knowledge_base import MAX_EVENTS_PAGE, MAX_SEQ
+from planhrc.settings import make_settings
+
+
+@pytest.fixture
+def db(tmp_path):
+    return str(tmp_path / "kb.sqlite3")
+
+
+@pytest.fixture
+def client(db):
+    with TestClient(create_app(make_settings(db_path=db, token=None))) as c:
+        yield c
+
+
+def new_object(client, links=3, orientations=4) -> str:
+    r = client.post("/objects", json={"name": "rod", "links": links, "orientations": orientations,
+                                      "formulation": "relative"})
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+def test_health_counts_are_kept_by_commits_and_match_a_fresh_scan(client, db):
+    before = client.get("/health").json()
+    oid = new_object(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
+    for links in ([0, 0, 0], [0, 0, 90], [5, 3, 2]):
+        assert client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).status_code == 200
+    refused = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0]})
+    assert refused.status_code == 422
+    after = client.get("/health").json()
+    assert after["objects"] == before["objects"] + 1 and after["triples"] > before["triples"]
+    client.app.state.kb.close()
+    with KnowledgeBase(db, make_settings().tbox_path) as kb:  # counted by a scan of the tables
+        assert (kb.object_count(), kb.triple_count()) == (after["objects"], after["triples"])
+
+
+def test_events_come_in_pages(client):
+    oid = new_object(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
+    for _ in range(4):
+        client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0]})
+    every = client.get(f"/objects/{oid}/events").json()
+    assert len(every) == 6 and [e["seq"] for e in every] == list(range(1, 7))
+    page = client.get(f"/objects/{oid}/events", params={"after_seq": 2, "limit": 3}).json()
+    assert [e["seq"] for e in page] == [3, 4, 5]
+    assert client.get(f"/objects/{oid}/events", params={"after_seq": MAX_SEQ}).json() == []
+    for params, field in (({"after_seq": 10**30}, "after_seq"), ({"after_seq": MAX_SEQ + 1}, "after_seq"),
+                          ({"limit": MAX_EVENTS_PAGE + 1}, "limit"), ({"limit": 0}, "limit")):
+        r = client.get(f"/objects/{oid}/events", params=params)
+        assert r.status_code == 422 and r.json()["detail"].startswith(field), (params, r.text)
+    r = client.get(f"/objects/{oid}/events/stream", params={"after_seq": 10**30})
+    assert r.status_code == 422 and r.json()["detail"].startswith("after_seq")
+
+
+def test_pddl_problem_is_the_latest_problem(client):
+    oid = new_object(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
+    client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0]})
+    first = client.get(f"/objects/{oid}/pddl/problem").text
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 0, 90]})  # a second problem
+    second = client.get(f"/objects/{oid}/pddl/problem").text
+    assert first[:first.index("(:goal")] == second[:second.index("(:goal")]  # same perceived state
+    assert first[first.index("(:goal"):] != second[second.index("(:goal"):]  # the new goal
+    plan = client.get(f"/objects/{oid}/plan").json()
+    assert plan["id"] == f"{oid}_plan_1"
+
+
+@pytest.mark.parametrize("body, field", [
+    ({"name": "rod\n", "links": 3}, "name"),
+    ({"name": "rod\x1b[31m", "links": 3}, "name"),
+    ({"name": "rod\u202e", "links": 3}, "name"),
+    ({"name": "rod", "links": [{"name": "l\x00", "length_m": 0.1}] * 3}, "links"),
+    ({"name": "rod", "links": [{"name": "l", "length_m": 0.1}] * 201}, "links"),
+    ({"name": "rod", "links": 201}, "links"),
+])
+def test_names_are_printable_and_objects_bounded_in_every_form(client, body, field):
+    before = client.get("/health").json()
+    r = client.post("/objects", json={**body, "orientations": 4, "formulation": "relative"})
+    assert r.status_code == 422 and field in r.json()["detail"], r.text
+    assert client.get("/health").json() == before
