@@ -7,7 +7,7 @@ thread pool, and the orchestrator's per-object locks serialize what touches one 
 from __future__ import annotations
 
 import logging
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, FastAPI, Header, Query, Request
 from fastapi.exceptions import RequestValidationError
@@ -55,7 +55,7 @@ ERROR_JSON = {"application/json": {"schema": {"$ref": "#/components/schemas/Erro
 TEXT_ERRORS: dict[int | str, dict[str, Any]] = {  # routes answering text/plain still send their errors as JSON
     status: {"description": ERRORS[status]["description"], "content": ERROR_JSON} for status in (404, 422)
 }
-RDF_TYPES = {"application/rdf+xml": "xml", "text/turtle": "turtle"}
+RDF_TYPES = {"application/rdf+xml": "xml", "text/turtle": "turtle", "application/n-triples": "nt"}
 NEXT_ACTION_MOVED = ("GET /objects/{object_id}/next-action was removed (a GET must not change state): take the next "
                      "action with POST /objects/{object_id}/actions/next")
 
@@ -189,12 +189,26 @@ def read_pddl_problem(object_id: str, orch: Orch) -> PlainTextResponse:
 
 
 @router.get("/ontology", tags=["records"],
-            responses={200: {"content": {"application/rdf+xml": {}, "text/turtle": {}},
+            responses={200: {"content": {"application/rdf+xml": {}, "text/turtle": {}, "application/n-triples": {}},
                              "description": "TBox and ABox."}})
-def read_ontology(orch: Orch, accept: Annotated[str | None, Header()] = None) -> Response:
-    """TBox and ABox as RDF/XML (default) or Turtle (`Accept: text/turtle`)."""
+def read_ontology(
+    orch: Orch,
+    accept: Annotated[str | None, Header()] = None,
+    history: Annotated[Literal["current", "all"], Query(
+        description="current: each object's current ABox (object, goal, latest perceived state, latest problem, "
+                    "current plan with its actions and expected states); all: every stored triple.")] = "current",
+    object_id: Annotated[str | None, Query(alias="object", max_length=200,
+                                           description="Only this object's current ABox (with the TBox).")] = None,
+) -> Response:
+    """TBox and ABox as RDF/XML (default), Turtle (`Accept: text/turtle`) or N-Triples
+    (`Accept: application/n-triples`, streamed as it is read: the way to fetch the whole history). By default the
+    ABox is each object's current state of affairs, so the export costs what it returns however long the history;
+    `?history=all` adds every past perception, problem and plan; `?object=objN` restricts it to one object."""
     media = _rdf_media_type(accept)
-    return Response(orch.export_ontology(RDF_TYPES[media]), media_type=media)
+    if RDF_TYPES[media] == "nt":
+        lines = orch.export_ntriples(history, object_id)
+        return StreamingResponse((line.encode("utf-8") for line in lines), media_type=media)
+    return Response(orch.export_ontology(RDF_TYPES[media], history, object_id), media_type=media)
 
 
 # -- events ---------------------------------------------------------------------------------------------
@@ -280,7 +294,7 @@ def _field_path(loc: tuple | list) -> str:
 
 # -- conversions ----------------------------------------------------------------------------------------
 def _rdf_media_type(accept: str | None) -> str:
-    """The first of RDF/XML and Turtle named by the Accept header; RDF/XML when neither is."""
+    """The first of RDF/XML, Turtle and N-Triples named by the Accept header; RDF/XML when none is."""
     if accept:
         for part in accept.split(","):
             media = part.split(";")[0].strip().lower()

@@ -25,7 +25,7 @@ import logging
 import math
 import threading
 from dataclasses import dataclass, replace
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 from planhrc import pipeline
 from planhrc.cooperation import Decision, PlanView, decide
@@ -270,9 +270,13 @@ class Orchestrator:
         """One page of events after `after_seq` (a stream reads the next page at its next poll)."""
         return self.kb.list_events(object_id, after_seq=after_seq, limit=limit)
 
-    def export_ontology(self, fmt: str) -> bytes:
-        """TBox and ABox as RDF/XML (`xml`) or Turtle (`turtle`)."""
-        return self.kb.export(fmt)
+    def export_ontology(self, fmt: str, history: str = "current", object_id: str | None = None) -> bytes:
+        """TBox and ABox (the current ABox, or the whole `history`) as RDF/XML (`xml`) or Turtle (`turtle`)."""
+        return self.kb.export(fmt, history, None if object_id is None else [object_id])
+
+    def export_ntriples(self, history: str = "current", object_id: str | None = None) -> Iterator[str]:
+        """TBox and ABox as N-Triples lines, read as they are sent."""
+        return self.kb.export_lines(history, None if object_id is None else [object_id])
 
     def health(self) -> dict[str, Any]:
         """Counts kept by the store's commits: no scan and no lock, so /health answers while anything runs."""

@@ -92,3 +92,53 @@ def test_names_are_printable_and_objects_bounded_in_every_form(client, body, fie
     r = client.post("/objects", json={**body, "orientations": 4, "formulation": "relative"})
     assert r.status_code == 422 and field in r.json()["detail"], r.text
     assert client.get("/health").json() == before
+
+
+# -- the ontology export ------------------------------------------------------------------------------------
+NT = {"Accept": "application/n-triples"}
+
+
+def _graph(data: bytes):
+    import rdflib
+
+    return rdflib.Graph().parse(data=data, format="nt")
+
+
+def _individuals(graph, oid: str) -> set[str]:
+    """ABox individuals of `oid` (subjects), by fragment."""
+    return {str(s).rsplit("#", 1)[1] for s in graph.subjects() if str(s).startswith("http://planhrc.org/abox#")
+            and str(s).rsplit("#", 1)[1].startswith(oid)}
+
+
+def test_ontology_exports_the_current_abox_by_default_and_the_history_on_request(client):
+    oid, other = new_object(client), new_object(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
+    answers = [client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).json()
+               for links in ([0, 0, 0], [0, 90, 0], [0, 0, 0], [0, 0, 90])]
+    everything = _graph(client.app.state.kb.ntriples())  # owlready2's own serialisation of the world
+
+    history = client.get("/ontology", params={"history": "all"}, headers=NT)
+    assert history.status_code == 200 and history.headers["content-type"].startswith("application/n-triples")
+    assert len(_graph(history.content)) == len(everything)
+
+    current = _graph(client.get("/ontology", headers=NT).content)
+    names = _individuals(current, oid)
+    latest, older = answers[-1], answers[:-1]
+    plan_id = client.get(f"/objects/{oid}").json()["execution"]["plan_id"] or latest["plan_id"]
+    assert latest["perceived_state_id"] in names and plan_id in names and f"{oid}_l3" in names
+    problem = client.get(f"/problems/{client.get(f'/plans/{plan_id}').json()['problem_id']}").json()
+    kept = {problem["init_state_id"]}  # the state the current plan starts from
+    past = {a["perceived_state_id"] for a in older} - kept
+    assert past and not past & names, "past perceptions are history"
+    assert past <= _individuals(_graph(history.content), oid)
+    assert len(current) < len(everything) and _individuals(current, other)  # every object, by default
+
+    one = _graph(client.get("/ontology", params={"object": oid}, headers=NT).content)
+    assert _individuals(one, oid) == names and not _individuals(one, other)
+    xml = client.get("/ontology", params={"object": oid})
+    assert xml.headers["content-type"].startswith("application/rdf+xml") and b"<rdf:RDF" in xml.content
+
+    for params, status, field in (({"object": "obj999"}, 404, "object_id"), ({"history": "some"}, 422, "history"),
+                                  ({"history": "all", "object": oid}, 422, "object")):
+        r = client.get("/ontology", params=params, headers=NT)
+        assert r.status_code == status and r.json()["detail"].startswith(field), (params, r.text)

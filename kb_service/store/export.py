@@ -1,9 +1,26 @@
-"""RDF export of the whole ontology (TBox + ABox) as RDF/XML or Turtle."""
+"""RDF export of the ontology: the TBox with the *current* ABox (default) or with the whole history.
+
+The current ABox of an object is what the cooperation model works with now: the object (links, joints,
+orientations, static facts), its goal, its latest perceived state, its latest problem and its current plan with
+the plan's actions and expected states — every individual reachable from these by object properties. It costs
+what it returns, however long the history. The whole history (`history=all`) is every triple.
+
+N-Triples are written row by row from SQLite on a read-only connection of their own (a snapshot of the last
+commit), so an export neither holds the store's lock nor loads individuals into owlready2; RDF/XML and Turtle
+are that N-Triples re-serialised by rdflib (which holds the graph in memory: ask for the whole history in
+N-Triples).
+"""
 from __future__ import annotations
 
-from .errors import ValidationError
+import sqlite3
+from typing import Any, Iterator, Sequence
 
-FORMATS = ("xml", "turtle")
+from .errors import ValidationError
+from .owl import ntriple_lines, reachable, storids_of, subjects_to
+
+FORMATS = ("xml", "turtle", "nt")
+HISTORY = ("current", "all")
+_CHUNK = 500
 
 
 def export_rdf(ntriples: bytes, fmt: str, prefixes: dict[str, str]) -> bytes:
@@ -11,10 +28,48 @@ def export_rdf(ntriples: bytes, fmt: str, prefixes: dict[str, str]) -> bytes:
     import rdflib
 
     if fmt not in FORMATS:
-        raise ValidationError(f"fmt: must be 'xml' or 'turtle', got {fmt!r}")
+        raise ValidationError(f"fmt: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    if fmt == "nt":
+        return ntriples
     graph = rdflib.Graph()
     graph.parse(data=ntriples, format="nt")
     for prefix, iri in prefixes.items():
         graph.bind(prefix, iri)
     out = graph.serialize(format=fmt)
     return out.encode("utf-8") if isinstance(out, str) else out
+
+
+def current_roots(db: sqlite3.Connection, object_id: str) -> list[str]:
+    """Names of the individuals an object's current ABox starts from: the object, the goal and perceived state
+    its event log names last, the plan its execution follows (else its latest plan) and its latest problem."""
+    roots = [object_id]
+    for sql in ("SELECT json_extract(data, '$.goal_state_id') FROM planhrc_event WHERE object_id = ? "
+                "AND kind = 'goal_set' ORDER BY seq DESC LIMIT 1",
+                "SELECT json_extract(data, '$.perceived_state_id') FROM planhrc_event WHERE object_id = ? "
+                "AND json_extract(data, '$.perceived_state_id') IS NOT NULL ORDER BY seq DESC LIMIT 1",
+                "SELECT plan_id FROM planhrc_execution WHERE object_id = ?"):
+        row = db.execute(sql, (object_id,)).fetchone()
+        if row and row[0]:
+            roots.append(str(row[0]))
+    for kind in ("plan", "problem"):
+        row = db.execute("SELECT value FROM planhrc_counter WHERE name = ?", (f"{object_id}:{kind}",)).fetchone()
+        if row and row[0]:
+            roots.append(f"{object_id}_{kind}_{row[0]}")
+    return roots
+
+
+def ntriples(db: sqlite3.Connection, abox_iri: str, abox_c: int, static_fact_of: int,
+             object_ids: Sequence[str] | None) -> Iterator[str]:
+    """TBox + ABox as N-Triples lines: every triple (`object_ids` None), else the TBox and the current ABox of
+    these objects."""
+    if object_ids is None:
+        yield from ntriple_lines(db, "1")
+        return
+    yield from ntriple_lines(db, "t.c <> ?", (abox_c,))
+    roots = storids_of(db, [abox_iri + name for oid in object_ids for name in current_roots(db, oid)])
+    statics = subjects_to(db, abox_c, static_fact_of, roots)  # an object's static facts point to it
+    ontology = storids_of(db, [abox_iri.rstrip("#")])
+    subjects = sorted(reachable(db, abox_c, roots + statics) | set(ontology))
+    for i in range(0, len(subjects), _CHUNK):
+        chunk: list[Any] = subjects[i:i + _CHUNK]
+        yield from ntriple_lines(db, f"t.c = ? AND t.s IN ({','.join('?' * len(chunk))})", [abox_c] + chunk)

@@ -6,13 +6,13 @@ Each part validates its input completely before anything is written; every write
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Iterator, Sequence
 
 from .abox import ABOX_IRI, TBOX_IRI, Abox
 from .errors import NotFoundError, ValidationError
 from .events import EventLog
 from .execution import ExecutionCursor
-from .export import export_rdf
+from .export import FORMATS, HISTORY, export_rdf, ntriples
 from .records import Execution, StoredEvent
 from .responses import ResponseMemory
 
@@ -94,7 +94,36 @@ class KnowledgeBase(Abox):
             self._check_open()
             return self._q.ntriples()
 
-    def export(self, fmt: str = "xml") -> bytes:
-        """TBox + ABox serialised by rdflib as RDF/XML (`xml`) or Turtle (`turtle`)."""
-        return export_rdf(self.ntriples(), fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
-                                                 "owl": "http://www.w3.org/2002/07/owl#"})
+    def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
+        """TBox + ABox as N-Triples lines: the current ABox of `object_ids` (None: of every object) when
+        `history` is 'current', every triple when it is 'all' (see `export`). Unknown objects are a NotFoundError
+        before the first line. A file store is read on a connection of the export's own, without the store's lock."""
+        if history not in HISTORY:
+            raise ValidationError(f"history: must be one of {', '.join(HISTORY)}, got {history!r}")
+        ids = None
+        if history == "current":
+            ids = [o.ident for o in self.list_objects()] if object_ids is None else list(object_ids)
+            for oid in ids:
+                self.get_object(oid)
+        elif object_ids is not None:
+            raise ValidationError("object: the whole history is exported for every object (history=all)")
+        with self._lock:
+            self._check_open()
+            reader = self._q.reader()
+            if reader is None:  # an in-memory store: read on its connection, under its lock, at once
+                return iter(list(ntriples(self._q.db, ABOX_IRI, self._c, self._t["staticFactOf"], ids)))
+        return self._read_lines(reader, ids)
+
+    def _read_lines(self, reader: Any, ids: list[str] | None) -> Iterator[str]:
+        try:
+            yield from ntriples(reader, ABOX_IRI, self._c, self._t["staticFactOf"], ids)
+        finally:
+            reader.close()
+
+    def export(self, fmt: str = "xml", history: str = "current", object_ids: Sequence[str] | None = None) -> bytes:
+        """TBox + ABox (see `export_lines`) as RDF/XML (`xml`), Turtle (`turtle`) or N-Triples (`nt`)."""
+        if fmt not in FORMATS:
+            raise ValidationError(f"fmt: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        text = "".join(self.export_lines(history, object_ids)).encode("utf-8")
+        return export_rdf(text, fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
+                                      "owl": "http://www.w3.org/2002/07/owl#"})

@@ -42,7 +42,9 @@ class QuadStore:
     """An owlready2 World on SQLite (or in memory), read and written through its quad tables."""
 
     def __init__(self, path: str | None) -> None:
-        self.world = World(filename=str(path)) if path else World()
+        # Not owlready2's default exclusive locking: readers on connections of their own (`reader`) must be able
+        # to read the file while this connection writes.
+        self.world = World(filename=str(path), exclusive=False) if path else World()
         self.db: sqlite3.Connection = self.world.graph.db
 
     # -- SQL on the same connection (the store's own side tables live in this database too) ------------------
@@ -83,6 +85,18 @@ class QuadStore:
         buf = io.BytesIO()
         self.world.save(buf, format="ntriples")
         return buf.getvalue()
+
+    def reader(self) -> sqlite3.Connection | None:
+        """A read-only connection of its own on the database file (WAL: it reads the last commit while writers
+        go on, and holds no lock of the store), or None for an in-memory store. The caller closes it."""
+        row = self.db.execute("PRAGMA database_list").fetchone()
+        path = row[2] if row else ""
+        if not path:
+            return None
+        conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True, check_same_thread=False)
+        conn.execute("BEGIN")  # one snapshot for every query of the export, taken now
+        conn.execute("SELECT COUNT(*) FROM store").fetchone()
+        return conn
 
     # -- storids -----------------------------------------------------------------------------------------------
     def storid(self, iri: str, create: bool = True) -> int:
@@ -164,6 +178,63 @@ class QuadStore:
         a = self.db.execute("SELECT COUNT(*) FROM objs").fetchone()[0]
         b = self.db.execute("SELECT COUNT(*) FROM datas").fetchone()[0]
         return int(a + b)
+
+
+# -- N-Triples straight from the tables ---------------------------------------------------------------------------
+def _escape(text: str) -> str:
+    return text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n").replace("\r", "\\r")
+
+
+def ntriple_lines(db: sqlite3.Connection, where: str, params: Sequence[Any] = ()) -> Iterable[str]:
+    """The triples of `objs` and `datas` rows matching `where` (on columns of `t`) as N-Triples lines, read
+    row by row (nothing is loaded into owlready2), literals encoded as owlready2 encodes them."""
+    def node(iri: str | None, sid: int) -> str:
+        return f"_:b{-sid}" if sid < 0 or iri is None else f"<{iri}>"
+
+    q = ("SELECT rs.iri, t.s, rp.iri, ro.iri, t.o FROM objs t LEFT JOIN resources rs ON rs.storid = t.s "
+         "JOIN resources rp ON rp.storid = t.p LEFT JOIN resources ro ON ro.storid = t.o WHERE " + where)
+    for s_iri, s, p_iri, o_iri, o in db.execute(q, params):
+        yield f"{node(s_iri, s)} <{p_iri}> {node(o_iri, o)} .\n"
+    q = ("SELECT rs.iri, t.s, rp.iri, t.o, t.d, rd.iri FROM datas t LEFT JOIN resources rs ON rs.storid = t.s "
+         "JOIN resources rp ON rp.storid = t.p LEFT JOIN resources rd ON rd.storid = t.d WHERE " + where)
+    for s_iri, s, p_iri, o, d, d_iri in db.execute(q, params):
+        text = f'"{_escape(str(o))}"'
+        if isinstance(d, str) and d.startswith("@"):
+            text += d
+        elif d_iri:
+            text += f"^^<{d_iri}>"
+        yield f"{node(s_iri, s)} <{p_iri}> {text} .\n"
+
+
+def storids_of(db: sqlite3.Connection, iris: Sequence[str]) -> list[int]:
+    """The storids of those of `iris` that are stored (on any connection to the database)."""
+    out: list[int] = []
+    for i in range(0, len(iris), 500):
+        chunk = list(iris[i:i + 500])
+        out.extend(s for (s,) in db.execute(
+            f"SELECT storid FROM resources WHERE iri IN ({','.join('?' * len(chunk))})", chunk))
+    return out
+
+
+def subjects_to(db: sqlite3.Connection, c: int, p: int, objects: Sequence[int]) -> list[int]:
+    """Subjects s of context `c` with (s p o) for some o of `objects`."""
+    return [s for o in objects for (s,) in db.execute("SELECT s FROM objs WHERE o = ? AND p = ? AND c = ?", (o, p, c))]
+
+
+def reachable(db: sqlite3.Connection, c: int, roots: Iterable[int]) -> set[int]:
+    """Every individual of context `c` reachable from `roots` by object properties (rdf:type excluded)."""
+    seen = set(roots)
+    frontier = list(seen)
+    while frontier:
+        found: set[int] = set()
+        for i in range(0, len(frontier), 500):
+            chunk = frontier[i:i + 500]
+            q = (f"SELECT DISTINCT o FROM objs WHERE s IN ({','.join('?' * len(chunk))}) AND c = ? AND p <> ? "
+                 "AND o > 0")
+            found.update(o for (o,) in db.execute(q, chunk + [c, RDF_TYPE]))
+        frontier = list(found - seen)
+        seen |= found
+    return seen
 
 
 # -- reasoners ---------------------------------------------------------------------------------------------------
