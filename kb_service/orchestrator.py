@@ -23,6 +23,8 @@ import hashlib
 import json
 import logging
 import math
+import os
+import signal
 import threading
 from dataclasses import dataclass, replace
 from typing import Any, Iterator, Sequence
@@ -69,6 +71,7 @@ class Orchestrator:
         self._views: dict[str, tuple[StoredPlan, PlanView]] = {}
         self._memos: dict[str, _ObjectMemo] = {}
         self._guard = threading.Lock()
+        self._perceptions = 0  # counted only for the crash test's hook
 
     # -- objects ------------------------------------------------------------------------------------------
     def create_object(self, name: str, links: int | Sequence[float], orientations: int,
@@ -151,6 +154,7 @@ class Orchestrator:
                                                            validation)
                     self._log_decision(object_id, answer, extra)
                     self._remember(object_id, idempotency_key, fingerprint, answer)
+                    self._crash_point()
             except _Refused as refused:  # VAL refused the new plan: the same perception, without it
                 assert goal is not None and decision is not None
                 with self.kb.transaction():
@@ -163,6 +167,18 @@ class Orchestrator:
                 with self._guard:
                     self._views[new_view[0].id] = new_view
             return answer
+
+    def _crash_point(self) -> None:
+        """The crash test's hook (setting `crash_in_perception_write`, off by default): die like a killed process,
+        with the perception's write complete but not committed."""
+        if not self.settings.crash_in_perception_write:
+            return
+        with self._guard:
+            self._perceptions += 1
+            due = self._perceptions >= self.settings.crash_in_perception_write
+        if due:
+            log.critical("crash_in_perception_write: killing the service inside a perception's write")
+            os.kill(os.getpid(), signal.SIGKILL)
 
     def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State) -> PlanOutcome:
         try:

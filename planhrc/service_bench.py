@@ -174,6 +174,15 @@ def _timed_get(client: httpx.Client, path: str, headers: dict[str, str] | None =
     return time.perf_counter() - t, r.status_code, len(r.content)
 
 
+def _last_seq(client: httpx.Client, object_id: str, after_seq: int) -> int:
+    """The object's last event seq, paging through the log from `after_seq`."""
+    while True:
+        page = client.get(f"/objects/{object_id}/events", params={"after_seq": after_seq}).json()
+        if not page:
+            return after_seq
+        after_seq = int(page[-1]["seq"])
+
+
 def _read_paths(object_id: str, last_seq: int) -> dict[str, str]:
     return {"object": f"/objects/{object_id}", "plan": f"/objects/{object_id}/plan",
             "events": f"/objects/{object_id}/events?after_seq={max(0, last_seq - 50)}",
@@ -214,15 +223,14 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
             _client(server, read_timeout) as client:
         obj = create_object(client, links, orientations, formulation, "history")
         set_goal(client, obj, random_angles(rng, links, orientations))
-        sent = 0
+        sent = last_seq = 0
         for checkpoint in sorted(checkpoints):
             while sent < checkpoint - samples:
                 perceive(client, obj, random_angles(rng, links, orientations))
                 sent += 1
             lat = replanning_latencies(client, obj, links, orientations, samples, rng)
             sent += samples
-            events = client.get(f"/objects/{obj}/events", params={"after_seq": 0}).json()
-            last_seq = int(events[-1]["seq"]) if events else 0
+            last_seq = _last_seq(client, obj, last_seq)
             reads: dict[str, Any] = {}
             for name, path in _read_paths(obj, last_seq).items():
                 times = []

@@ -59,6 +59,11 @@ class Settings(BaseSettings):
         default=1_048_576, ge=1024, le=1_073_741_824,
         description="Largest request body accepted; larger ones get 413 before they are read.",
     )
+    crash_in_perception_write: int = Field(
+        default=0, ge=0,
+        description="For crash tests only: the service kills itself (SIGKILL) inside the store write of its N-th "
+        "perception, after every row is written and before the commit; 0 (the default) never.",
+    )
 
 
 @lru_cache

@@ -1,0 +1,52 @@
+"""One perception, one transaction: `planhrc serve` killed (SIGKILL) inside a perception's store write keeps
+all of every earlier perception and nothing of the killed one, and goes on after a restart."""
+from __future__ import annotations
+
+import time
+
+import httpx
+import pytest
+
+from planhrc.service_bench import _client, create_object, running_service, set_goal
+
+
+def _perceive(client: httpx.Client, oid: str, links: list[float], key: str) -> httpx.Response:
+    return client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links},
+                       headers={"Idempotency-Key": key})
+
+
+def _dead(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] in ("Z", "X")
+    except FileNotFoundError:
+        return True
+
+
+def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path):
+    with running_service(tmp_path, {"PLANHRC_CRASH_IN_PERCEPTION_WRITE": "3"}) as server, \
+            _client(server, 60) as client:
+        oid = create_object(client, 3, 4, "relative", "rod")
+        set_goal(client, oid, [0, 90, 90])
+        kept = [_perceive(client, oid, links, f"p{i}") for i, links in enumerate(([0, 0, 0], [0, 90, 0]))]
+        assert [r.status_code for r in kept] == [200, 200]
+        health = client.get("/health").json()
+        events = client.get(f"/objects/{oid}/events").json()
+        with pytest.raises(httpx.TransportError):  # the third perception kills the service mid-write
+            _perceive(client, oid, [0, 0, 90], "p2")
+        deadline = time.monotonic() + 10
+        while not _dead(server.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _dead(server.pid)
+
+    with running_service(tmp_path) as server, _client(server, 60) as client:
+        after = client.get("/health").json()  # counted by a scan of the tables at start-up
+        assert (after["objects"], after["triples"]) == (health["objects"], health["triples"])
+        assert client.get(f"/objects/{oid}/events").json() == events
+        for i, r in enumerate(kept):  # all of each earlier perception: its remembered answer comes back
+            again = _perceive(client, oid, ([0, 0, 0], [0, 90, 0])[i], f"p{i}")
+            assert again.status_code == 200 and again.json() == r.json()
+        retried = _perceive(client, oid, [0, 0, 90], "p2")  # nothing of the killed one: decided anew
+        assert retried.status_code == 200
+        assert retried.json()["perceived_state_id"] not in {r.json()["perceived_state_id"] for r in kept}
+        assert len(client.get(f"/objects/{oid}/events").json()) == len(events) + 1
