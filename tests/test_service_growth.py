@@ -142,3 +142,52 @@ def test_ontology_exports_the_current_abox_by_default_and_the_history_on_request
                                   ({"history": "all", "object": oid}, 422, "object")):
         r = client.get("/ontology", params=params, headers=NT)
         assert r.status_code == status and r.json()["detail"].startswith(field), (params, r.text)
+
+
+# -- no object stalls another ---------------------------------------------------------------------------------
+def test_a_slow_plan_on_one_object_stalls_neither_another_object_nor_reads(client, monkeypatch):
+    """Object A's planning takes 3 s (the planner is slowed for A only); meanwhile B is perceived, re-planned
+    and read, and /health answers, each well before A's plan is done."""
+    import threading
+    import time
+
+    from planhrc import pipeline
+
+    slow, fast = new_object(client), new_object(client)
+    real_plan = pipeline.plan
+    started = threading.Event()
+
+    def plan(obj, *args, **kwargs):
+        if obj.ident == slow:
+            started.set()
+            time.sleep(3.0)
+        return real_plan(obj, *args, **kwargs)
+
+    for oid in (slow, fast):
+        client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
+    client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 90, 0]})  # the planner's imports
+    monkeypatch.setattr(pipeline, "plan", plan)
+    result: dict = {}
+    worker = threading.Thread(target=lambda: result.update(r=client.post(
+        f"/objects/{slow}/perceptions", json={"link_orientations_deg": [0, 0, 0]})))
+    t0 = time.perf_counter()
+    worker.start()
+    assert started.wait(10)
+    timings = {}
+    for name, call in (
+        ("perception", lambda: client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 0, 0]})),
+        ("replan", lambda: client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [90, 0, 0]})),
+        ("health", lambda: client.get("/health")),
+        ("object", lambda: client.get(f"/objects/{fast}")),
+        ("events", lambda: client.get(f"/objects/{fast}/events")),
+        ("ontology", lambda: client.get("/ontology", params={"object": fast}, headers=NT)),
+        ("health_again", lambda: client.get("/health")),
+    ):
+        t = time.perf_counter()
+        assert call().status_code == 200, name
+        timings[name] = time.perf_counter() - t
+    done_before = time.perf_counter() - t0
+    worker.join(30)
+    assert result["r"].status_code == 200 and result["r"].json()["decision"] == "replan"
+    assert done_before < 3.0, (done_before, timings)  # everything on B answered while A was still planning
+    assert max(timings["health"], timings["health_again"]) < 0.25, timings
