@@ -31,6 +31,7 @@ TABLES: dict[str, tuple[str, ...]] = {
     "objs": ("c", "s", "p", "o"),
     "datas": ("c", "s", "p", "o", "d"),
 }
+PAGE_CACHE_KIB = 16_384  # SQLite page cache of the store's connection
 STORE_COUNTER = "current_resource"  # column of the one-row table `store`: the last storid handed out
 
 
@@ -57,6 +58,10 @@ class QuadStore:
         self.db.commit()
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
+        # owlready2 asks for a 200 MB page cache and a 30 GB memory map, both of which fill as the file grows:
+        # bounded here so the service's memory does not follow its history (reads stay in the OS page cache).
+        self.db.execute(f"PRAGMA cache_size = -{PAGE_CACHE_KIB}")
+        self.db.execute("PRAGMA mmap_size = 0")
 
     def commit(self) -> None:
         self.world.save()
