@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import threading
 from contextlib import asynccontextmanager
 from typing import AsyncIterator
 
@@ -27,6 +28,18 @@ def open_knowledge_base(settings: Settings):
     return KnowledgeBase(path, settings.tbox_path)
 
 
+def compact_on_schedule(kb, settings: Settings, stop: threading.Event) -> None:
+    """Compact the store every `compact_every_s` seconds until `stop` is set (the retention policy)."""
+    from planhrc.kb_service.store import KBError
+
+    while not stop.wait(settings.compact_every_s):
+        try:
+            done = kb.compact(settings.keep_perceived)
+            log.info("compacted the store: %d individuals, %d triples dropped", done.individuals, done.triples)
+        except KBError as exc:
+            log.error("compaction failed: %s", exc)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The planHRC knowledge-base service: a KnowledgeBase is opened at start-up and closed at shutdown."""
     settings = settings or get_settings()
@@ -37,9 +50,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.kb = kb
         app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks())
         log.info("knowledge base open: %s", settings.db_path or "in memory")
+        stop = threading.Event()
+        compactor = None
+        if settings.compact_every_s > 0:
+            compactor = threading.Thread(target=compact_on_schedule, args=(kb, settings, stop),
+                                         name="planhrc-compact", daemon=True)
+            compactor.start()
         try:
             yield
         finally:
+            stop.set()
+            if compactor is not None:
+                compactor.join(timeout=60)
             kb.close()
             log.info("knowledge base closed")
 

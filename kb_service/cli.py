@@ -121,6 +121,53 @@ def run_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_compact_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from planhrc.cli_args import tbox_file
+
+    p = subparsers.add_parser(
+        "compact", help="drop the history the retention policy does not keep",
+        description="Compact a store: keep each object's current records (goal, latest problem, current plan and "
+        "what they refer to) and its last N perceived states, delete the rest of its history. Run it on a store "
+        "no service is writing; a running service compacts its own store every PLANHRC_COMPACT_EVERY_S seconds.")
+    p.add_argument("--db", default=None, help="SQLite file of the store (default planhrc.sqlite3, env PLANHRC_DB_PATH)")
+    p.add_argument("--keep", type=int, default=None,
+                   help="perceived states kept per object (default 100, env PLANHRC_KEEP_PERCEIVED)")
+    p.add_argument("--tbox", type=tbox_file, default=None, help="TBox OWL file (default: the repository's)")
+    p.set_defaults(func=run_compact)
+    return p
+
+
+def run_compact(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from planhrc.cli_args import settings_error_line
+    from planhrc.settings import make_settings
+
+    from .store import KBError, KnowledgeBase
+
+    options = {"db_path": "--db", "keep_perceived": "--keep", "tbox_path": "--tbox"}
+    overrides = {key: value for key, value in {"db_path": args.db, "keep_perceived": args.keep,
+                                               "tbox_path": args.tbox}.items() if value is not None}
+    try:
+        settings = make_settings(**overrides)
+    except ValidationError as exc:
+        print(f"planhrc compact: {settings_error_line(exc, {f: options[f] for f in overrides})}", file=sys.stderr)
+        return 2
+    db_option = "--db" if "db_path" in overrides else "PLANHRC_DB_PATH"
+    if settings.db_path in (None, "", ":memory:") or not Path(settings.db_path).is_file():
+        print(f"planhrc compact: {db_option}: no store file {settings.db_path!r}", file=sys.stderr)
+        return 2
+    try:
+        with KnowledgeBase(settings.db_path, settings.tbox_path) as kb:
+            done = kb.compact(settings.keep_perceived)
+    except KBError as exc:
+        print(f"planhrc compact: {exc}", file=sys.stderr)
+        return 1
+    print(f"compacted {settings.db_path}: {done.individuals} individuals and {done.triples} triples dropped from "
+          f"{done.objects} objects (the last {settings.keep_perceived} perceived states of each kept)")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     from planhrc.cli_args import OneLineParser
 

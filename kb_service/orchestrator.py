@@ -68,7 +68,8 @@ class Orchestrator:
         self.planning = config_from_settings(settings)
         self.merge_macro_steps = settings.merge_macro_steps
         self.locks = locks or ObjectLocks()
-        self._views: dict[str, tuple[StoredPlan, PlanView]] = {}
+        self._views: dict[str, tuple[StoredPlan, PlanView]] = {}  # plan id -> view, one plan per object
+        self._view_of: dict[str, str] = {}  # object id -> the plan id cached in _views
         self._memos: dict[str, _ObjectMemo] = {}
         self._guard = threading.Lock()
         self._perceptions = 0  # counted only for the crash test's hook
@@ -164,8 +165,7 @@ class Orchestrator:
                     self._log_decision(object_id, answer, extra)
                     self._remember(object_id, idempotency_key, fingerprint, answer)
             if new_view is not None:
-                with self._guard:
-                    self._views[new_view[0].id] = new_view
+                self._keep_view(*new_view)
             return answer
 
     def _crash_point(self) -> None:
@@ -389,9 +389,18 @@ class Orchestrator:
             expected_states=tuple(self.kb.get_state(sid).atoms for sid in plan.expected_state_ids),
             preconditions=tuple(a.spec.pre for a in sorted(plan.actions, key=lambda a: a.step)),
         )
-        with self._guard:
-            self._views[plan_id] = (plan, view)
+        self._keep_view(plan, view)
         return plan, view
+
+    def _keep_view(self, plan: StoredPlan, view: PlanView) -> None:
+        """Cache the view of an object's plan in place of the object's previous one: the cache holds one plan per
+        object, not every plan an object ever had."""
+        with self._guard:
+            previous = self._view_of.get(plan.object_id)
+            if previous is not None and previous != plan.id:
+                self._views.pop(previous, None)
+            self._views[plan.id] = (plan, view)
+            self._view_of[plan.object_id] = plan.id
 
     def _memo(self, object_id: str) -> _ObjectMemo:
         """Bring the memo of an object up to date with its event log (caller holds the object's lock)."""

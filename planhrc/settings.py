@@ -59,6 +59,16 @@ class Settings(BaseSettings):
         default=1_048_576, ge=1024, le=1_073_741_824,
         description="Largest request body accepted; larger ones get 413 before they are read.",
     )
+    keep_perceived: int = Field(
+        default=100, ge=1,
+        description="Retention: the perceived states kept per object when the store is compacted (besides every "
+        "record the current plan, goal and latest problem refer to).",
+    )
+    compact_every_s: float = Field(
+        default=3600.0, ge=0,
+        description="The service compacts its store this often (seconds; 0: never). `planhrc compact` runs it "
+        "on a store by hand.",
+    )
     crash_in_perception_write: int = Field(
         default=0, ge=0,
         description="For crash tests only: the service kills itself (SIGKILL) inside the store write of its N-th "

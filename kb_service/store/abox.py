@@ -87,7 +87,7 @@ _TBOX_TERMS = (
 ).split()
 
 # Records and storids cached past this many entries are dropped after a commit (they are re-read on demand).
-CACHE_LIMIT = 20_000
+CACHE_LIMIT = 5_000
 
 _TABLES = (
     "CREATE TABLE IF NOT EXISTS planhrc_meta (key TEXT PRIMARY KEY, value TEXT)",

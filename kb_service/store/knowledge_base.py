@@ -15,6 +15,7 @@ from .execution import ExecutionCursor
 from .export import FORMATS, HISTORY, export_rdf, ntriples
 from .records import Execution, StoredEvent
 from .responses import ResponseMemory
+from .retention import DEFAULT_KEEP_PERCEIVED, Compaction, compact_object
 
 MAX_SEQ = 2**63 - 1  # the largest event seq a caller may name (the largest SQLite INTEGER)
 MAX_EVENTS_PAGE = 1000  # the most events one read of the log returns over HTTP (a page, or one poll of a stream)
@@ -86,6 +87,29 @@ class KnowledgeBase(Abox):
             self._check_open()
             text = self._responses.check(key, response)
             self._write(lambda: self._responses.remember(object_id, key, text))
+
+    # -- retention ------------------------------------------------------------------------------------------
+    def compact(self, keep_perceived: int = DEFAULT_KEEP_PERCEIVED) -> Compaction:
+        """Apply the retention policy (`retention`) to every object in one transaction: keep each object's current
+        records and its last `keep_perceived` perceived states, delete the rest of its history."""
+        if isinstance(keep_perceived, bool) or not isinstance(keep_perceived, int) or keep_perceived < 1:
+            raise ValidationError(f"keep_perceived: must be a positive integer, got {keep_perceived!r}")
+        with self._lock:
+            self._check_open()
+            objects = [o.ident for o in self.list_objects()]
+            shared = {oid: sorted(self._info(oid).orientation_atom_name.values()) for oid in objects}
+
+            def fill() -> Compaction:
+                individuals = triples = 0
+                for oid in objects:
+                    i, t = compact_object(self._q.db, ABOX_IRI, self._c, self._t, oid, shared[oid], keep_perceived)
+                    individuals, triples = individuals + i, triples + t
+                self._pending[0] -= triples
+                return Compaction(len(objects), individuals, triples)
+
+            result = self._write(fill)
+            self._drop_caches()  # records of deleted individuals must not be served from memory
+            return result
 
     # -- whole-ontology views -----------------------------------------------------------------------------
     def ntriples(self) -> bytes:

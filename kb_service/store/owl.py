@@ -211,6 +211,11 @@ def ntriple_lines(db: sqlite3.Connection, where: str, params: Sequence[Any] = ()
         yield f"{node(s_iri, s)} <{p_iri}> {text} .\n"
 
 
+def other_contexts(db: sqlite3.Connection, c: int) -> list[int]:
+    """The graph contexts of every ontology of the world but `c` (the TBox, for the ABox's context)."""
+    return [int(x) for (x,) in db.execute("SELECT c FROM ontologies WHERE c <> ?", (c,))]
+
+
 def storids_of(db: sqlite3.Connection, iris: Sequence[str]) -> list[int]:
     """The storids of those of `iris` that are stored (on any connection to the database)."""
     out: list[int] = []
@@ -240,6 +245,20 @@ def reachable(db: sqlite3.Connection, c: int, roots: Iterable[int]) -> set[int]:
         frontier = list(found - seen)
         seen |= found
     return seen
+
+
+def delete_individuals(db: sqlite3.Connection, c: int, sids: Sequence[int]) -> int:
+    """Delete individuals of context `c`: their triples (as subject or object) and their IRIs, inside the open
+    transaction; the number of triples deleted."""
+    deleted = 0
+    for i in range(0, len(sids), 500):
+        chunk = list(sids[i:i + 500])
+        marks = ",".join("?" * len(chunk))
+        deleted += db.execute(f"DELETE FROM objs WHERE c = ? AND (s IN ({marks}) OR o IN ({marks}))",
+                              [c] + chunk + chunk).rowcount
+        deleted += db.execute(f"DELETE FROM datas WHERE c = ? AND s IN ({marks})", [c] + chunk).rowcount
+        db.execute(f"DELETE FROM resources WHERE storid IN ({marks})", chunk)
+    return deleted
 
 
 # -- reasoners ---------------------------------------------------------------------------------------------------
