@@ -10,9 +10,6 @@ no browser is ever downloaded. Without it, or without the `playwright` package, 
 from __future__ import annotations
 
 import os
-import socket
-import subprocess
-import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -20,6 +17,8 @@ from typing import Iterator
 
 import httpx
 import pytest
+
+from tests.servers import free_port, serving
 
 REPO = Path(__file__).resolve().parent.parent
 CHROMIUM = Path("/usr/bin/chromium")
@@ -40,48 +39,11 @@ def browser_missing() -> str | None:
     return None
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @contextmanager
 def serve(db: Path, port: int | None = None, token: str | None = None, *extra: str) -> Iterator[str]:
     """`planhrc serve` as a process on a loopback port; yields its base URL and stops it afterwards."""
-    port = port or free_port()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    args = [sys.executable, "-m", "planhrc.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
-            "--db", str(db), "--log-level", "warning"]
-    if token:
-        args += ["--token", token]
-    args += list(extra)
-    log_path = db.parent / f"serve-{port}.log"
-    with open(log_path, "w") as log_file:
-        proc = subprocess.Popen(args, cwd=db.parent, env=env, stdout=log_file, stderr=subprocess.STDOUT)
-        base = f"http://127.0.0.1:{port}"
-        try:
-            deadline = time.monotonic() + 60
-            while True:
-                if proc.poll() is not None:
-                    raise AssertionError(f"planhrc serve exited with {proc.returncode}:\n{log_path.read_text()}")
-                try:
-                    if httpx.get(f"{base}/health", timeout=1).status_code == 200:
-                        break
-                except httpx.TransportError:
-                    pass
-                if time.monotonic() > deadline:
-                    raise AssertionError("planhrc serve did not answer /health within 60 s")
-                time.sleep(0.1)
-            yield base
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+    with serving(db, port, (["--token", token] if token else []) + list(extra)) as base:
+        yield base
 
 
 @contextmanager

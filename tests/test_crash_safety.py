@@ -30,7 +30,7 @@ if str(REPO / "tests") not in sys.path:
     sys.path.insert(0, str(REPO / "tests"))
 
 from test_service_api import move, noisy  # noqa: E402
-from test_service_integration import free_port, serve_command  # noqa: E402
+from tests.servers import free_port, serve_command  # noqa: E402
 
 pytestmark = pytest.mark.integration
 

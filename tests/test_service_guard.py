@@ -8,10 +8,7 @@ the server did not wait for, or read, the rest.
 from __future__ import annotations
 
 import json
-import os
 import socket
-import subprocess
-import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,6 +16,8 @@ from typing import Iterator
 
 import httpx
 import pytest
+
+from tests.servers import free_port, serving
 
 from planhrc.kb_service.guard import GuardPolicy, RequestGuard, is_data_path, token_matches
 
@@ -28,40 +27,13 @@ TOKEN, READ_TOKEN = "s3cret-writer", "s3cret-reader"
 LIMIT = 64 * 1024
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @contextmanager
 def guarded_server(tmp_path: Path, protect_reads: bool) -> Iterator[int]:
-    port = _free_port()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
-    env.update(PLANHRC_TOKEN=TOKEN, PLANHRC_READ_TOKEN=READ_TOKEN, PLANHRC_MAX_BODY_BYTES=str(LIMIT),
-               PLANHRC_PROTECT_READS="true" if protect_reads else "false")
-    proc = subprocess.Popen([sys.executable, "-m", "planhrc.cli", "serve", "--port", str(port), "--db",
-                             str(tmp_path / "kb.sqlite3"), "--log-level", "warning"],
-                            cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        deadline = time.monotonic() + 60
-        while True:
-            assert proc.poll() is None, "the server exited"
-            try:
-                if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            assert time.monotonic() < deadline, "no /health within 60 s"
-            time.sleep(0.1)
+    env = {"PLANHRC_TOKEN": TOKEN, "PLANHRC_READ_TOKEN": READ_TOKEN, "PLANHRC_MAX_BODY_BYTES": str(LIMIT),
+           "PLANHRC_PROTECT_READS": "true" if protect_reads else "false"}
+    port = free_port()
+    with serving(tmp_path / "kb.sqlite3", port, env=env):
         yield port
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 def _raw_request(port: int, head: str, first_bytes: bytes = b"") -> tuple[int, dict, float]:

@@ -4,10 +4,6 @@ two objects in parallel, idempotent retries, the bearer token from the environme
 """
 from __future__ import annotations
 
-import importlib.util
-import os
-import socket
-import subprocess
 import sys
 import threading
 import time
@@ -22,62 +18,21 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO / "tests") not in sys.path:  # the simulated worker lives beside this file (any pytest import mode)
     sys.path.insert(0, str(REPO / "tests"))
 
+from tests.servers import serving  # noqa: E402
 from test_service_api import drive_to_goal, links_of, move, noisy, perceive  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def serve_command(port: int, db: Path) -> list[str]:
-    """`planhrc serve` through the project CLI when it registers the command, else the service's own CLI."""
-    args = ["serve", "--host", "127.0.0.1", "--port", str(port), "--db", str(db), "--log-level", "warning"]
-    if importlib.util.find_spec("planhrc.cli") is not None and "planhrc.kb_service.cli" in (REPO / "planhrc" / "cli.py").read_text():
-        return [sys.executable, "-m", "planhrc.cli", *args]
-    return [sys.executable, "-m", "planhrc.kb_service.cli", *args]
-
-
 @contextmanager
 def running_server(db: Path, token: str | None = None) -> Iterator[httpx.Client]:
-    port = free_port()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env = {"PLANHRC_MERGE_MACRO_STEPS": "false"}  # one plan step per action: the episodes name expected states
     if token:
         env["PLANHRC_TOKEN"] = token
-    env["PLANHRC_MERGE_MACRO_STEPS"] = "false"  # one plan step per action: the episodes name expected states
-    log_path = db.parent / f"server-{port}.log"
-    log_file = open(log_path, "w")
-    proc = subprocess.Popen(serve_command(port, db), cwd=db.parent, env=env, stdout=log_file,
-                            stderr=subprocess.STDOUT, text=True)
-    base = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + 60
-        while True:
-            if proc.poll() is not None:
-                raise AssertionError(f"server exited with {proc.returncode}:\n{log_path.read_text()}")
-            try:
-                if httpx.get(f"{base}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if time.monotonic() > deadline:
-                raise AssertionError("server did not answer /health within 60 s")
-            time.sleep(0.1)
+    with serving(db, env=env) as base:
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         with httpx.Client(base_url=base, timeout=30, headers=headers) as client:
             yield client
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        log_file.close()
 
 
 def create(client: httpx.Client, formulation: str = "relative", links: int = 4, k: int = 4) -> str:

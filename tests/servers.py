@@ -1,0 +1,68 @@
+"""One way for the tests to run `planhrc serve` as a real process on a loopback port."""
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator, Mapping, Sequence
+
+import httpx
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def serve_command(port: int, db: Path, args: Sequence[str] = ()) -> list[str]:
+    return [sys.executable, "-m", "planhrc.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
+            "--db", str(db), "--log-level", "warning", *args]
+
+
+def serve_env(env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The test process's environment without its `PLANHRC_*` settings, plus `env`."""
+    out = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
+    out["PYTHONPATH"] = str(REPO) + os.pathsep + out.get("PYTHONPATH", "")
+    out.update(env or {})
+    return out
+
+
+@contextmanager
+def serving(db: Path, port: int | None = None, args: Sequence[str] = (),
+            env: Mapping[str, str] | None = None) -> Iterator[str]:
+    """`planhrc serve` on `db` until it answers /health; yields its base URL, stops it afterwards.
+    The server's output goes to `serve-<port>.log` beside the database and is shown if it exits early."""
+    port = port or free_port()
+    log_path = db.parent / f"serve-{port}.log"
+    with open(log_path, "w") as log_file:
+        proc = subprocess.Popen(serve_command(port, db, args), cwd=db.parent, env=serve_env(env),
+                                stdout=log_file, stderr=subprocess.STDOUT)
+        base = f"http://127.0.0.1:{port}"
+        try:
+            deadline = time.monotonic() + 60
+            while True:
+                if proc.poll() is not None:
+                    raise AssertionError(f"planhrc serve exited with {proc.returncode}:\n{log_path.read_text()}")
+                try:
+                    if httpx.get(f"{base}/health", timeout=1).status_code == 200:
+                        break
+                except httpx.TransportError:
+                    pass
+                if time.monotonic() > deadline:
+                    raise AssertionError("planhrc serve did not answer /health within 60 s")
+                time.sleep(0.1)
+            yield base
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
