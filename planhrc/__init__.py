@@ -29,8 +29,8 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(["PddlTask", "TranslationError", "read_domain_model", "translate"], "planhrc.translator"),
     **dict.fromkeys(["PlanOutcome", "PlanningConfig", "config_from_settings", "plan"], "planhrc.pipeline"),
     **dict.fromkeys(["Decision", "PlanView", "decide"], "planhrc.cooperation"),
-    **dict.fromkeys(["ActionOutcome", "DecisionKind", "ExecutionStatus", "PlanningStatus", "PlanStatus"],
-                    "planhrc.vocabulary"),
+    **dict.fromkeys(["ActionOutcome", "DecisionKind", "ExecutionStatus", "FailureReason", "PlanningStatus",
+                    "PlanStatus"], "planhrc.vocabulary"),
     **dict.fromkeys(["KBClient", "ProtocolError", "RetryPolicy"], "planhrc.client"),
     **dict.fromkeys(["Settings", "get_settings", "make_settings"], "planhrc.settings"),
 }

@@ -4,6 +4,8 @@ as plain JSON strings and appear as enums in the service's OpenAPI schemas.
 * `DecisionKind`: what the cooperation model decides after a perception;
 * `ExecutionStatus`: where the execution of an object's plan stands;
 * `ActionOutcome`: what a worker reports about an action it executed;
+* `FailureReason`: why an action that did not succeed failed (machine-readable; the feedback's sentence says the
+  rest);
 * `PlanStatus`: what one planner call returned (the planner package uses this very enum);
 * `PlanningStatus`: what one run of the planning pipeline produced (a planner status, or `invalid` when VAL or
   the replay refused the plan).
@@ -19,6 +21,8 @@ class DecisionKind(StrEnum):
     RESUME = "resume"
     REPLAN = "replan"
     NO_PLAN = "no_plan"
+    HUMAN_HELP_REQUESTED = "human_help_requested"
+    INCOMPLETE_PERCEPTION = "incomplete_perception"
 
 
 class ExecutionStatus(StrEnum):
@@ -33,6 +37,17 @@ class ActionOutcome(StrEnum):
     SUCCEEDED = "succeeded"
     FAILED = "failed"
     PARTIAL = "partial"
+
+
+class FailureReason(StrEnum):
+    """Why an action did not do what it was asked."""
+
+    UNREACHABLE = "unreachable"
+    COLLISION = "collision"
+    SLIP = "slip"
+    STALL = "stall"
+    GRASP_LOST = "grasp_lost"
+    LEFT_TABLE = "left_table"
 
 
 class PlanStatus(StrEnum):
