@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Collection, Sequence
 
 import numpy as np
 
@@ -172,29 +172,7 @@ def link_centres(geometry: ObjectGeometry, angles: Sequence[float]) -> tuple[np.
     return tuple((a + b) / 2.0 for a, b in zip(points, points[1:]))
 
 
-def _segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
-    def point_segment(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> float:
-        d = s1 - s0
-        t = float(np.clip(np.dot(p - s0, d) / max(float(np.dot(d, d)), 1e-12), 0.0, 1.0))
-        return float(np.linalg.norm(p - (s0 + t * d)))
-
-    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
-
-    if cross(a0, a1, b0) * cross(a0, a1, b1) < 0 and cross(b0, b1, a0) * cross(b0, b1, a1) < 0:
-        return 0.0
-    return min(point_segment(a0, b0, b1), point_segment(a1, b0, b1), point_segment(b0, a0, a1),
-               point_segment(b1, a0, a1))
-
-
-def _outside_by(point: np.ndarray, bounds: tuple[float, float, float, float]) -> float:
-    """How far `point` lies outside the rectangle `bounds` (0 inside)."""
-    dx = max(bounds[0] - point[0], 0.0, point[0] - bounds[1])
-    dy = max(bounds[2] - point[1], 0.0, point[1] - bounds[3])
-    return float(math.hypot(dx, dy))
-
-
-def reach_shortfall(point_xy: Sequence[float], robot: RobotBody | None = None) -> float:
+def reach_shortfall(point_xy: Sequence[float] | np.ndarray, robot: RobotBody | None = None) -> float:
     """How far a table point lies beyond the reach of the nearer arm that could take it (0 when reachable)."""
     robot = robot or RobotBody()
     p = np.asarray(point_xy, dtype=float)
@@ -208,48 +186,97 @@ def reach_shortfall(point_xy: Sequence[float], robot: RobotBody | None = None) -
 
 
 def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], cell: Cell | None = None,
-                           min_fold_gap_deg: float = 25.0) -> Feasibility:
+                           min_fold_gap_deg: float = 25.0, reach_links: Collection[int] | None = None) -> Feasibility:
     """Whether the object with link orientations `angles` lies on the table, clear of the robot, graspable,
-    and without overlapping itself; every problem found is named (see the module's docstring)."""
+    and without overlapping itself; every problem found is named (see the module's docstring).
+
+    `reach_links` restricts the reach check to those links (the ones a rotation grasps); None checks every link.
+    The checks are vectorised over links and link pairs: a plan's ordering calls this thousands of times."""
     cell = cell or Cell()
-    points = joint_points(geometry, angles)
     values = _check_angles(geometry, angles)
+    points = np.asarray(joint_points(geometry, values))
+    n = geometry.n_links
     half_width = geometry.link_width_m / 2.0
-    table = cell.table.bounds(margin_m=half_width)
-    body = cell.robot.footprint_xy
+    a, b = points[:-1], points[1:]
+    x0, x1, y0, y1 = cell.table.bounds(margin_m=half_width)
+    outside = np.hypot(np.maximum(np.maximum(x0 - points[:, 0], 0.0), points[:, 0] - x1),
+                       np.maximum(np.maximum(y0 - points[:, 1], 0.0), points[:, 1] - y1))
+    off = np.maximum(outside[:-1], outside[1:])
+    inside = _segments_enter_box(a, b, cell.robot.footprint_xy, half_width)
+    centres = (a + b) / 2.0
+    short = _reach_shortfalls(centres, cell.robot)
+    checked = range(1, n + 1) if reach_links is None else sorted(k for k in set(reach_links) if 1 <= k <= n)
+    reach = set(checked)
     reasons: list[Infeasibility] = []
-    for k in range(1, geometry.n_links + 1):
-        a, b = points[k - 1], points[k]
-        off = max(_outside_by(a, table), _outside_by(b, table))
-        if off > 1e-9:
-            reasons.append(Infeasibility("off_table", k, f"link {k} leaves the table: {off:.2f} m past its edge", float(off)))
-        if _segment_box_overlap(a, b, body, half_width):
+    for k in range(1, n + 1):
+        if off[k - 1] > 1e-9:
+            d = float(off[k - 1])
+            reasons.append(Infeasibility("off_table", k, f"link {k} leaves the table: {d:.2f} m past its edge", d))
+        if inside[k - 1]:
             reasons.append(Infeasibility("inside_robot", k, f"link {k} lies inside the robot's body"))
-        short = reach_shortfall((a + b) / 2.0, cell.robot)
-        if short > 1e-9:
-            reasons.append(Infeasibility("out_of_reach", k, f"link {k} unreachable: {short:.2f} m beyond reach", float(short)))
-    for k in range(1, geometry.n_links):  # neighbours fold onto each other
-        fold = (values[k] - values[k - 1]) % 360.0
-        if abs(fold - 180.0) < min_fold_gap_deg:
-            reasons.append(Infeasibility("overlap", k + 1, f"link {k + 1} folds back onto link {k}"))
-    for i in range(geometry.n_links):
-        for j in range(i + 2, geometry.n_links):
-            gap = _segment_distance(points[i], points[i + 1], points[j], points[j + 1])
-            if gap < geometry.link_width_m:
-                reasons.append(Infeasibility("overlap", j + 1, f"link {j + 1} overlaps link {i + 1}"))
+        if k in reach and short[k - 1] > 1e-9:
+            d = float(short[k - 1])
+            reasons.append(Infeasibility("out_of_reach", k, f"link {k} unreachable: {d:.2f} m beyond reach", d))
+    folds = (np.diff(np.asarray(values)) % 360.0) if n > 1 else np.zeros(0)
+    for fold in np.flatnonzero(np.abs(folds - 180.0) < min_fold_gap_deg):  # neighbours fold onto each other
+        reasons.append(Infeasibility("overlap", int(fold) + 2,
+                                     f"link {int(fold) + 2} folds back onto link {int(fold) + 1}"))
+    if n > 2:
+        i, j = np.triu_indices(n, k=2)
+        gaps = _segment_distances(a[i], b[i], a[j], b[j])
+        for pi, pj in zip(i[gaps < geometry.link_width_m], j[gaps < geometry.link_width_m]):
+            reasons.append(Infeasibility("overlap", int(pj) + 1, f"link {int(pj) + 1} overlaps link {int(pi) + 1}"))
     return Feasibility(not reasons, tuple(reasons))
 
 
-def _segment_box_overlap(a: np.ndarray, b: np.ndarray, box: tuple[float, float, float, float], pad: float) -> bool:
-    """Whether the bar from a to b (half width `pad`) enters the rectangle `box`, sampled every centimetre."""
-    length = float(np.linalg.norm(b - a))
-    n = max(2, int(math.ceil(length / 0.01)) + 1)
-    grown = (box[0] - pad, box[1] + pad, box[2] - pad, box[3] + pad)
-    for t in np.linspace(0.0, 1.0, n):
-        p = a + t * (b - a)
-        if grown[0] <= p[0] <= grown[1] and grown[2] <= p[1] <= grown[3]:
-            return True
-    return False
+def _reach_shortfalls(points: np.ndarray, robot: RobotBody) -> np.ndarray:
+    """`reach_shortfall` of many table points at once."""
+    best = np.full(len(points), np.inf)
+    for shoulder, side in ((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0)):
+        beyond = np.maximum(0.0, np.linalg.norm(points - np.asarray(shoulder), axis=1) - robot.reach_m)
+        awkward = (points[:, 0] < robot.near_x_m) & (side * points[:, 1] < robot.own_side_y_m)
+        across = np.minimum(robot.near_x_m - points[:, 0], robot.own_side_y_m - side * points[:, 1])
+        beyond = np.where(awkward, np.maximum(beyond, across), beyond)
+        best = np.minimum(best, beyond)
+    return best
+
+
+def _segments_enter_box(a: np.ndarray, b: np.ndarray, box: tuple[float, float, float, float],
+                        pad: float) -> np.ndarray:
+    """For each bar from a[i] to b[i] (half width `pad`), whether it enters the rectangle `box` (clipping the
+    segment against the grown rectangle, Liang-Barsky)."""
+    lo = np.array([box[0] - pad, box[2] - pad])
+    hi = np.array([box[1] + pad, box[3] + pad])
+    d = b - a
+    t0 = np.zeros(len(a))
+    t1 = np.ones(len(a))
+    ok = np.ones(len(a), dtype=bool)
+    for axis in (0, 1):
+        da, pa = d[:, axis], a[:, axis]
+        still = np.abs(da) < 1e-12
+        ok &= ~(still & ((pa < lo[axis]) | (pa > hi[axis])))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta = np.where(still, -np.inf, (lo[axis] - pa) / da)
+            tb = np.where(still, np.inf, (hi[axis] - pa) / da)
+        t0 = np.maximum(t0, np.minimum(ta, tb))
+        t1 = np.minimum(t1, np.maximum(ta, tb))
+    return ok & (t0 <= t1)
+
+
+def _segment_distances(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
+    """Distance between segments a0[i]-a1[i] and b0[i]-b1[i] for every i (0 when they cross)."""
+    def point_segment(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
+        d = s1 - s0
+        t = np.clip(np.einsum("ij,ij->i", p - s0, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-12), 0.0, 1.0)
+        return np.asarray(np.linalg.norm(p - (s0 + t[:, None] * d), axis=1))
+
+    def cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return np.asarray((p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (q[:, 0] - o[:, 0]))
+
+    crossing = (cross(a0, a1, b0) * cross(a0, a1, b1) < 0) & (cross(b0, b1, a0) * cross(b0, b1, a1) < 0)
+    nearest = np.minimum(np.minimum(point_segment(a0, b0, b1), point_segment(a1, b0, b1)),
+                         np.minimum(point_segment(b0, a0, a1), point_segment(b1, a0, a1)))
+    return np.asarray(np.where(crossing, 0.0, nearest))
 
 
 def rotated(geometry: ObjectGeometry, angles: Sequence[float], turned_link: int, held_link: int,
@@ -274,13 +301,14 @@ def rotated(geometry: ObjectGeometry, angles: Sequence[float], turned_link: int,
 
 
 def sweep_feasible(geometry: ObjectGeometry, angles: Sequence[float], turned_link: int, held_link: int,
-                   delta_deg: float, increment_deg: float = 5.0, cell: Cell | None = None) -> Feasibility:
+                   delta_deg: float, increment_deg: float = 5.0, cell: Cell | None = None,
+                   reach_links: Collection[int] | None = None) -> Feasibility:
     """Whether every configuration a rotation passes through is feasible (checked every `increment_deg`); the
-    first infeasible one's reasons are returned."""
+    first infeasible one's reasons are returned. `reach_links` as in `configuration_feasible`."""
     n = max(1, int(math.ceil(abs(delta_deg) / increment_deg)))
     for i in range(1, n + 1):
         placed, values = rotated(geometry, angles, turned_link, held_link, delta_deg * i / n)
-        result = configuration_feasible(placed, values, cell)
+        result = configuration_feasible(placed, values, cell, reach_links=reach_links)
         if not result.ok:
             return result
     return Feasibility(True)
