@@ -1,8 +1,9 @@
 """The planning pipeline, one stage after another, from values to a value:
 
     object, initial and goal states -> translate (TBox domain model -> PDDL domain, states -> PDDL problem)
-      -> plan (a planner of the registry, then the fallback) -> validate (VAL)
-      -> expected states (replay with the paper's transition equations) -> `PlanOutcome`
+      -> plan (a planner of the registry, then the fallback)
+      -> order (for an object placed in the cell: an order of the actions that stays on the table, `ordering`)
+      -> validate (VAL) -> expected states (replay with the paper's transition equations) -> `PlanOutcome`
 
 `plan(...)` reads nothing from and writes nothing to the knowledge base: the caller (the service's orchestrator,
 `planhrc solve`) stores what it returns, in one write. Planners are reached only through the registry.
@@ -15,12 +16,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping, Protocol, Sequence
 
-from planhrc.model import ActionSpec, ArticulatedObject, Formulation, State, is_subsumed
+from planhrc.model import (HAS_ORIENTATION, ActionSpec, ArticulatedObject, DomainModelSpec, Formulation, State,
+                           is_subsumed, orientation_name)
+from planhrc.ordering import HelpItem, Move, Placement, feasible_alternative, order_moves
 from planhrc.planner.chain import plan_with_fallback
 from planhrc.planner.result import PlannerAttempt, PlanResult
 from planhrc.planner.validate import validate_plan
 from planhrc.settings import Settings, get_settings
-from planhrc.transition import TransitionError, parse_step, replay
+from planhrc.transition import TransitionError, apply, ground_action, parse_step, replay
 from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
 from planhrc.vocabulary import PlanningStatus
@@ -68,6 +71,8 @@ class PlanOutcome:
     attempts: tuple[PlannerAttempt, ...] = ()
     steps: tuple[str, ...] = ()  # the planner's plan as VAL reads it, one "(action arg ...)" per step
     validated: bool = False  # VAL accepted the plan
+    help: tuple[HelpItem, ...] = ()  # no feasible order: what the human could do instead
+    ordering: str = ""  # what the ordering did, in words (empty when the object is not placed)
 
     @property
     def solved(self) -> bool:
@@ -80,12 +85,14 @@ def problem_name(obj: ArticulatedObject) -> str:
 
 
 def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig | None = None, *,
-         defer_validation: bool = False) -> PlanOutcome:
+         defer_validation: bool = False, placement: Placement | None = None) -> PlanOutcome:
     """Translate, plan, validate and replay one task; returns a value and stores nothing. Without `config`, the
     settings (`PLANHRC_*` environment variables and their defaults) say how.
 
     `defer_validation` leaves VAL to the caller, who runs `validate(outcome)` (e.g. while it stores the plan) and
-    must not use the plan before VAL accepted it (`validated`)."""
+    must not use the plan before VAL accepted it (`validated`). With a `placement` (where the object lies when the
+    plan starts), the plan's actions are put in an order whose every configuration is feasible (or the plan is
+    refused, `unsolvable`, with the `help` to ask for); VAL and the replay then see that order."""
     config = config or config_from_settings(get_settings())
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -103,6 +110,17 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
         status = PlanningStatus(result.status.value)
         return PlanOutcome(status, result.message or result.status.value, result.planner, None,
                            timings=timings, task=task, attempts=result.attempts)
+
+    ordering = ""
+    if placement is not None:
+        t = time.perf_counter()
+        ordered = order_steps(obj, model, init, result.plan, placement)
+        timings["order"] = time.perf_counter() - t
+        if isinstance(ordered, Refusal):
+            return PlanOutcome(PlanningStatus.UNSOLVABLE, ordered.message, result.planner, None, timings=timings,
+                               task=task, attempts=result.attempts, help=ordered.help)
+        ordering = ordered.sentence
+        result = replace(result, plan=ordered.steps)
 
     if config.validate and not defer_validation:
         t = time.perf_counter()
@@ -126,7 +144,97 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
     timings["pipeline"] = time.perf_counter() - t0
     return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
                        tuple(states), timings, task, result.attempts, tuple(result.plan),
-                       validated=config.validate and not defer_validation)
+                       validated=config.validate and not defer_validation, ordering=ordering)
+
+
+def plan_moves(obj: ArticulatedObject, init: State, goal: State, moves: Sequence[Move],
+               config: PlanningConfig | None = None, *, placement: Placement | None = None,
+               defer_validation: bool = False, planner: str = "other_way") -> PlanOutcome:
+    """A plan the caller composed from motions (e.g. a joint turned the other way round), checked like a planner's:
+    ordered on the table for a placed object, grounded, VAL (or deferred, as in `plan`), replayed and its last
+    state checked against the goal. Raises TransitionError when the motions do not apply from `init`."""
+    config = config or config_from_settings(get_settings())
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    model = read_domain_model(config.tbox_path, obj.formulation.value)
+    task = translate(obj, init, goal, model, problem_name(obj))
+    ordering = ""
+    if placement is not None:
+        answer = order_moves(placement, moves)
+        timings["order"] = time.perf_counter() - t0
+        if answer.moves is None:
+            return PlanOutcome(PlanningStatus.UNSOLVABLE, answer.sentence(), planner, None, timings=timings,
+                               task=task, help=answer.help)
+        ordering = ("the planner's order stays on the table" if list(answer.moves) == list(moves)
+                    else "reordered so that every configuration stays on the table")
+        moves = answer.moves
+    steps = steps_of(obj, model, init, moves)
+    outcome = PlanOutcome(PlanningStatus.SOLVED, f"{len(steps)} composed steps", planner, None, task=task,
+                          steps=steps, timings=timings, ordering=ordering)
+    if config.validate and not defer_validation:
+        outcome = validate(outcome)
+        if not outcome.solved:
+            return outcome
+    actions, states = replay(model, init, steps)
+    if not is_subsumed(states[-1], goal):
+        return PlanOutcome(PlanningStatus.INVALID, "the composed plan's last state is not subsumed by the goal",
+                           planner, timings=timings, task=task)
+    timings["pipeline"] = time.perf_counter() - t0
+    return replace(outcome, actions=tuple(actions), expected_states=tuple(states), timings=timings)
+
+
+# -- an order that stays on the table ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Ordered:
+    """The plan's steps in a feasible order, and what the ordering did in words."""
+
+    steps: tuple[str, ...]
+    sentence: str
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """No feasible order: why, and what to ask the human."""
+
+    message: str
+    help: tuple[HelpItem, ...]
+
+
+def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, steps: Sequence[str],
+                placement: Placement) -> Ordered | Refusal:
+    """The planner's steps in an order whose every configuration is feasible (`ordering.feasible_alternative`:
+    the same steps, else a longer plan turning one joint the other way round), grounded again in that order (in
+    the absolute formulation an action's from/to orientations depend on the turns before it)."""
+    moves = [move_of(obj, step) for step in steps]
+    answer, added = feasible_alternative(placement, moves, obj.orientations)
+    if answer.moves is None:
+        return Refusal(answer.sentence(), answer.help)
+    if list(answer.moves) == moves:
+        return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table")
+    what = (f"{added} steps longer: one joint turns the other way round" if added
+            else f"reordered {len(moves)} actions")
+    return Ordered(steps_of(obj, model, init, answer.moves), f"{what} so that every configuration stays on the table")
+
+
+def move_of(obj: ArticulatedObject, step: str | ActionSpec) -> Move:
+    """The motion of one plan step (a PDDL step or a ground action)."""
+    name = step.name if isinstance(step, ActionSpec) else parse_step(step)[0]
+    m = action_motion(obj, step)
+    return Move(name, m["turned_link_index"], m["held_link_index"], m["joint_index"], m["delta_deg"])
+
+
+def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves: Sequence[Move]) -> tuple[str, ...]:
+    """PDDL steps for `moves` in this order from `init`: each from the joint's orientation at that point."""
+    state, steps = frozenset(init), []
+    for move in moves:
+        joint = obj.joint(move.joint)
+        now = next(int(a[1].split("_", 1)[1]) for a in state if a[0] == HAS_ORIENTATION and a[2] == joint)
+        after = (now + (obj.step if move.name == "rotateclockwise" else -obj.step)) % 360
+        step = (f"({move.name} {obj.link(move.turned)} {obj.link(move.held)} {joint} {orientation_name(now)} "
+                f"{orientation_name(after)})")
+        state = apply(state, ground_action(model, step, state))
+        steps.append(step)
+    return tuple(steps)
 
 
 def validate(outcome: PlanOutcome) -> PlanOutcome:

@@ -1,0 +1,279 @@
+"""An order of a plan's actions whose every configuration stays on the table: a pure function on values.
+
+The actions of this domain commute: a plan's final configuration depends only on how many steps each joint turns
+each way, not on their order. The order does matter on a table, though: turning link 2 before link 4 may swing
+links 4-5 past the table's edge or through the robot, the other order not. `order_moves` looks for an order of
+the given moves in which every step is geometrically feasible (see `planhrc.geometry`):
+
+* every configuration the step sweeps through (every 5°) keeps the links on the table, out of the robot's body
+  and clear of each other, and
+* the links the step grasps (the turned and the held one) are within reach before and after it.
+
+A problem the plan's start configuration already has (a link the human left off the table) is not held against
+the plan: only problems a step adds count.
+
+The search is a depth-first search over the multiset of remaining moves, trying the moves in the plan's own order
+first (so a feasible plan keeps its order) and remembering the configurations from which no order works. It is
+bounded by a number of step checks; when no order of the same moves works, `feasible_alternative` tries longer
+plans in which one joint turns the other way round (360° - delta), shortest first.
+
+When nothing works, the result names the obstacle (the first infeasible step of the plan's own order) and what the
+human could do instead: `HelpItem`s "turn link 4 to 135°".
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Sequence
+
+from planhrc.geometry import (Cell, Feasibility, Infeasibility, ObjectGeometry, configuration_feasible,
+                              link_centres, reach_shortfall, rotated, sweep_feasible)
+
+DEFAULT_BUDGET = 4000  # step checks per search (about 1 ms each for 20 links)
+CLOCKWISE, ANTICLOCKWISE = "rotateclockwise", "rotateanticlockwise"
+
+
+@dataclass(frozen=True)
+class Move:
+    """One planned step as a motion: the action's name, the link that turns, the link held (0 = the table), the
+    joint turned about and the turned link's signed rotation (+ clockwise seen from above)."""
+
+    name: str
+    turned: int
+    held: int
+    joint: int
+    delta_deg: int
+
+    def other_way(self) -> "Move":
+        """The same joint and links, turned in the other direction."""
+        return Move(ANTICLOCKWISE if self.name == CLOCKWISE else CLOCKWISE, self.turned, self.held, self.joint,
+                    -self.delta_deg)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where the object lies when the plan starts: its geometry (link lengths, base point) and the absolute
+    orientation of every link."""
+
+    geometry: ObjectGeometry
+    link_deg: tuple[float, ...]
+    cell: Cell = field(default_factory=Cell)
+
+
+@dataclass(frozen=True)
+class HelpItem:
+    """What the robot asks the human: bring link `link` to the absolute orientation `to_deg`."""
+
+    link: int
+    to_deg: int
+    sentence: str
+
+
+@dataclass(frozen=True)
+class Ordering:
+    """The answer of a search: a feasible order of moves (None when none was found), and otherwise the obstacle
+    the plan's own order meets (`step`, 1-based, and its `problem`) and the help to ask for."""
+
+    moves: tuple[Move, ...] | None
+    checks: int
+    exhausted: bool = True  # False: the search stopped at its budget, an order may still exist
+    step: int | None = None
+    problem: Feasibility | None = None
+    help: tuple[HelpItem, ...] = ()
+
+    @property
+    def found(self) -> bool:
+        return self.moves is not None
+
+    def sentence(self) -> str:
+        if self.moves is not None:
+            return f"a feasible order of {len(self.moves)} actions"
+        why = self.problem.sentence() if self.problem is not None else "no order found"
+        where = f"at action {self.step}: " if self.step is not None else "at the plan's end: "
+        bound = "" if self.exhausted else f" (search stopped after {self.checks} checks)"
+        return f"no order of the plan's actions stays on the table and within reach{bound}; {where}{why}"
+
+
+class _OutOfBudget(Exception):
+    pass
+
+
+@dataclass
+class _Search:
+    placement: Placement
+    budget: int
+    checks: int = 0
+    baseline: frozenset[tuple[str, int]] = frozenset()
+
+    def step(self, geometry: ObjectGeometry, angles: tuple[float, ...], move: Move) -> Feasibility:
+        """Whether `move` is feasible from this configuration (problems of the start configuration excepted)."""
+        self.checks += 1
+        if self.checks > self.budget:
+            raise _OutOfBudget
+        grasped = [k for k in (move.turned, move.held) if k >= 1]
+        centres = link_centres(geometry, angles)
+        for k in grasped:
+            short = reach_shortfall(centres[k - 1], self.placement.cell.robot)
+            if short > 1e-9 and ("out_of_reach", k) not in self.baseline:
+                return Feasibility(False, (Infeasibility("out_of_reach", k, f"link {k} unreachable: {short:.2f} m "
+                                                         "beyond reach", float(short)),))
+        result = sweep_feasible(geometry, angles, move.turned, move.held, move.delta_deg, cell=self.placement.cell,
+                                reach_links=grasped)
+        if result.ok:
+            return result
+        new = tuple(r for r in result.reasons if (r.code, r.link) not in self.baseline)
+        if not new:  # only the start's own problems: re-check every increment with the baseline excepted
+            return self._sweep_excepting(geometry, angles, move, grasped)
+        return Feasibility(False, new)
+
+    def _sweep_excepting(self, geometry: ObjectGeometry, angles: tuple[float, ...], move: Move,
+                         grasped: list[int]) -> Feasibility:
+        n = max(1, int(math.ceil(abs(move.delta_deg) / 5.0)))
+        for i in range(1, n + 1):
+            placed, values = rotated(geometry, angles, move.turned, move.held, move.delta_deg * i / n)
+            result = configuration_feasible(placed, values, self.placement.cell, reach_links=grasped)
+            new = tuple(r for r in result.reasons if (r.code, r.link) not in self.baseline)
+            if new:
+                return Feasibility(False, new)
+        return Feasibility(True)
+
+
+def order_moves(placement: Placement, moves: Sequence[Move], budget: int = DEFAULT_BUDGET) -> Ordering:
+    """A feasible order of `moves` (the plan's own order when it is feasible), or the obstacle and the help to
+    ask for when the search finds none within `budget` step checks."""
+    moves = tuple(moves)
+    search = _Search(placement, budget, baseline=_baseline(placement))
+    found, exhausted = _dfs(search, moves)
+    if found is not None:
+        return Ordering(found, search.checks)
+    step, problem = first_obstacle(placement, moves, search)
+    unreachable = final_out_of_reach(placement, moves)
+    if unreachable is not None:  # the plan's end itself is beyond the robot's reach: say that
+        step, problem = None, unreachable
+    return Ordering(None, search.checks, exhausted, step, problem, help_for(placement, moves, problem))
+
+
+def final_out_of_reach(placement: Placement, moves: Sequence[Move]) -> Feasibility | None:
+    """The links the moves turn whose grasp points lie beyond the robot's reach at the end (None when none do)."""
+    geometry, final = final_configuration(placement, moves)
+    turned = {m.turned for m in moves}
+    result = configuration_feasible(geometry, final, placement.cell, reach_links=turned)
+    reasons = tuple(r for r in result.reasons if r.code == "out_of_reach")
+    return Feasibility(False, reasons) if reasons else None
+
+
+def feasible_alternative(placement: Placement, moves: Sequence[Move], orientations: int,
+                         budget: int = DEFAULT_BUDGET, max_alternatives: int = 8) -> tuple[Ordering, int]:
+    """`order_moves` on the plan, then, if no order works, on longer plans where the steps of one joint turn the
+    other way round (360° - delta), shortest first: the first feasible one, and how many steps it adds. When none
+    is, the plan's own answer (with its obstacle and help) and 0."""
+    moves = tuple(moves)
+    first = order_moves(placement, moves, budget)
+    if first.found:
+        return first, 0
+    groups = Counter(moves)
+    flips = []
+    for move, count in groups.items():
+        if move.other_way() in groups:
+            continue
+        added = orientations - 2 * count
+        flips.append((added, moves.index(move), move, count))
+    for added, _, move, count in sorted(flips)[:max_alternatives]:
+        alternative = [m for m in moves if m != move] + [move.other_way()] * (orientations - count)
+        answer = order_moves(placement, alternative, budget)
+        if answer.found:
+            return answer, added
+    return first, 0
+
+
+def first_obstacle(placement: Placement, moves: Sequence[Move],
+                   search: _Search | None = None) -> tuple[int | None, Feasibility | None]:
+    """The first step of `moves`, in their order, that is not feasible, and why (None, None when all are)."""
+    search = search or _Search(placement, math.inf, baseline=_baseline(placement))  # type: ignore[arg-type]
+    search.budget = math.inf  # type: ignore[assignment]
+    geometry, angles = placement.geometry, tuple(float(a) for a in placement.link_deg)
+    for i, move in enumerate(moves, start=1):
+        result = search.step(geometry, angles, move)
+        if not result.ok:
+            return i, result
+        geometry, angles = rotated(geometry, angles, move.turned, move.held, move.delta_deg)
+    return None, None
+
+
+def final_configuration(placement: Placement, moves: Sequence[Move]) -> tuple[ObjectGeometry, tuple[float, ...]]:
+    geometry, angles = placement.geometry, tuple(float(a) for a in placement.link_deg)
+    for move in moves:
+        geometry, angles = rotated(geometry, angles, move.turned, move.held, move.delta_deg)
+    return geometry, angles
+
+
+def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility | None,
+             why: str | None = None) -> tuple[HelpItem, ...]:
+    """What to ask the human when the robot cannot carry the moves out: every link the plan turns and the
+    obstacle names (else every link the plan turns), to its orientation at the plan's end; `why` (else the
+    obstacle) is said in each sentence."""
+    if not moves:
+        return ()
+    _, final = final_configuration(placement, moves)
+    start = tuple(float(a) % 360.0 for a in placement.link_deg)
+    changed = [k for k in range(1, len(final) + 1) if round(final[k - 1]) % 360 != round(start[k - 1]) % 360]
+    named = [k for k in (problem.links if problem is not None else ()) if k in changed]
+    links = named or [m.turned for m in dict.fromkeys(moves) if m.turned in changed] or changed
+    why = f" ({why})" if why else f" ({problem.sentence()})" if problem is not None else ""
+    items = []
+    for k in dict.fromkeys(links):
+        to = int(round(final[k - 1])) % 360
+        items.append(HelpItem(k, to, f"turn link {k} to {to}°{why}"))
+    return tuple(items)
+
+
+def _baseline(placement: Placement) -> frozenset[tuple[str, int]]:
+    start = configuration_feasible(placement.geometry, placement.link_deg, placement.cell)
+    return frozenset((r.code, r.link) for r in start.reasons)
+
+
+def _dfs(search: _Search, moves: tuple[Move, ...]) -> tuple[tuple[Move, ...] | None, bool]:
+    """Depth-first search over the multiset of remaining moves; (order, exhausted)."""
+    groups = list(dict.fromkeys(moves))
+    index = {m: i for i, m in enumerate(groups)}
+    sequence = [index[m] for m in moves]
+    positions: list[list[int]] = [[] for _ in groups]  # where each group's steps sit in the plan's own order
+    for pos, g in enumerate(sequence):
+        positions[g].append(pos)
+    remaining = [len(p) for p in positions]
+    dead: set[tuple[object, ...]] = set()
+    path: list[int] = []
+
+    def key(geometry: ObjectGeometry) -> tuple[object, ...]:
+        return (tuple(remaining), round(geometry.base_point_xy[0], 6), round(geometry.base_point_xy[1], 6))
+
+    def visit(geometry: ObjectGeometry, angles: tuple[float, ...]) -> bool:
+        if not any(remaining):
+            return True
+        here = key(geometry)
+        if here in dead:
+            return False
+        done = [len(positions[g]) - remaining[g] for g in range(len(groups))]
+        candidates = sorted((positions[g][done[g]], g) for g in range(len(groups)) if remaining[g])
+        for _, g in candidates:
+            move = groups[g]
+            if not search.step(geometry, angles, move).ok:
+                continue
+            after = rotated(geometry, angles, move.turned, move.held, move.delta_deg)
+            remaining[g] -= 1
+            path.append(g)
+            if visit(*after):
+                return True
+            path.pop()
+            remaining[g] += 1
+        dead.add(here)
+        return False
+
+    start = (search.placement.geometry, tuple(float(a) for a in search.placement.link_deg))
+    try:
+        if visit(*start):
+            return tuple(groups[g] for g in path), True
+        return None, True
+    except _OutOfBudget:
+        return None, False
