@@ -15,6 +15,12 @@ Indices follow CONVENTIONS.md: ``s^e_1`` is the state the plan starts from and `
 ``a_{i+1}``", which with its own definition of ``s^e_1 = s^c`` is one step late.)
 
 The function only decides; storing states, planning and dispatching belong to the service's orchestrator.
+
+`escalate` then applies what the paper asks of a repeated failure: after a failed or partial action whose reason
+says the motion itself is the problem (unreachable, stall, slip, collision), the same motion is not retried
+identically. The remedies are tried in turn, one per failure of that motion: split the macro step (dispatch its
+steps one by one), turn that joint the other way round (360° - delta), re-plan; when they are spent, or the robot
+cannot reach the links at all, the human is asked (`human_help_requested`).
 """
 from __future__ import annotations
 
@@ -22,7 +28,11 @@ from dataclasses import dataclass
 
 from planhrc.errors import PlanhrcError
 from planhrc.model import State, is_subsumed
-from planhrc.vocabulary import ActionOutcome, DecisionKind
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Remedy
+
+# Reasons that say the motion itself failed (a retry of the same motion would fail the same way).
+MOTION_FAILURES = frozenset({FailureReason.UNREACHABLE, FailureReason.STALL, FailureReason.SLIP,
+                             FailureReason.COLLISION})
 
 
 class CooperationError(PlanhrcError, ValueError):
@@ -61,6 +71,19 @@ class Decision:
     next_step: int | None
     matched_expected_step: int | None
     reason: str
+    remedy: Remedy | None = None
+
+
+@dataclass(frozen=True)
+class FailureHistory:
+    """The failures of one motion (the joint turned about and the link turned) since the last success: how many,
+    the last reason, and the remedies already tried, in order."""
+
+    joint: int
+    turned: int
+    reason: FailureReason | None
+    failures: int = 1
+    tried: tuple[Remedy, ...] = ()
 
 
 def decide(
@@ -129,6 +152,42 @@ def decide(
         f"{after}the perceived state is subsumed by no expected state of the plan"
         f"{_expected_note(next_step)}: re-plan from it",
     )
+
+
+def escalate(decision: Decision, history: FailureHistory | None, next_motion: tuple[int, int] | None,
+             macro_steps: int = 1, reachable: bool = True) -> Decision:
+    """The decision after a failure of a motion, when it would retry that same motion.
+
+    `history` is the failing motion's record (None: no failure to answer), `next_motion` the (joint, turned link)
+    of the action `decision` would dispatch, `macro_steps` how many plan steps that motion merges, `reachable`
+    whether the robot can reach the links it grasps (geometry; False makes an `unreachable` failure go to the
+    human at once). Any other decision is returned unchanged."""
+    if history is None or history.reason not in MOTION_FAILURES:
+        return decision
+    if decision.kind not in (DecisionKind.CONTINUE, DecisionKind.RESUME) or decision.next_step is None:
+        return decision
+    if next_motion != (history.joint, history.turned):
+        return decision
+    what = (f"turning link {history.turned} about joint {history.joint} failed "
+            f"{history.failures} time{'s' if history.failures > 1 else ''} ({history.reason})")
+    if history.reason == FailureReason.UNREACHABLE and not reachable:
+        return Decision(DecisionKind.HUMAN_HELP_REQUESTED, decision.next_step, decision.matched_expected_step,
+                        f"{decision.reason}; {what} and the robot cannot reach the link: ask the human",
+                        Remedy.ASK_HUMAN)
+    remedies = ([Remedy.SPLIT] if macro_steps > 1 else []) + [Remedy.OTHER_WAY, Remedy.REPLAN]
+    remedy = next((r for r in remedies if r not in history.tried), Remedy.ASK_HUMAN)
+    if remedy == Remedy.SPLIT:
+        return Decision(decision.kind, decision.next_step, decision.matched_expected_step,
+                        f"{decision.reason}; {what} as one motion of {macro_steps} steps: dispatch its steps one "
+                        "by one", remedy)
+    if remedy == Remedy.OTHER_WAY:
+        return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
+                        f"{decision.reason}; {what}: turn that joint the other way round", remedy)
+    if remedy == Remedy.REPLAN:
+        return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
+                        f"{decision.reason}; {what}, the other way round too: re-plan", remedy)
+    return Decision(DecisionKind.HUMAN_HELP_REQUESTED, decision.next_step, decision.matched_expected_step,
+                    f"{decision.reason}; {what} after {', '.join(history.tried)}: ask the human", remedy)
 
 
 def _after(last_outcome: ActionOutcome | None) -> str:

@@ -6,6 +6,7 @@ as plain JSON strings and appear as enums in the service's OpenAPI schemas.
 * `ActionOutcome`: what a worker reports about an action it executed;
 * `FailureReason`: why an action that did not succeed failed (machine-readable; the feedback's sentence says the
   rest);
+* `Remedy`: what the cooperation model does instead of retrying a failed action identically;
 * `PlanStatus`: what one planner call returned (the planner package uses this very enum);
 * `PlanningStatus`: what one run of the planning pipeline produced (a planner status, or `invalid` when VAL or
   the replay refused the plan).
@@ -48,6 +49,16 @@ class FailureReason(StrEnum):
     STALL = "stall"
     GRASP_LOST = "grasp_lost"
     LEFT_TABLE = "left_table"
+
+
+class Remedy(StrEnum):
+    """A repeated failure is not retried identically: split the macro step, turn the other way round, re-plan,
+    and when those are spent (or the robot cannot reach), ask the human."""
+
+    SPLIT = "split"
+    OTHER_WAY = "other_way"
+    REPLAN = "replan"
+    ASK_HUMAN = "ask_human"
 
 
 class PlanStatus(StrEnum):

@@ -3,7 +3,7 @@ import re
 from pathlib import Path
 
 from planhrc.model import make_object, natural_key, relative_from_absolute, snap_angle
-from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, PlanStatus
+from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, PlanStatus, Remedy
 
 TEXT = (Path(__file__).resolve().parents[1] / "CONVENTIONS.md").read_text()
 
@@ -32,9 +32,9 @@ def test_names_sort_naturally():
 
 def test_the_shared_words_are_the_vocabulary():
     words = TEXT[TEXT.index("## Words"):]
-    for enum in (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, PlanStatus):
+    for enum in (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, Remedy, PlanStatus):
         for member in enum:
             assert f"`{member.value}`" in words, member
     listed = set(re.findall(r"`([a-z_]+)`", words))
-    known = {m.value for e in (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, PlanStatus) for m in e}
+    known = {m.value for e in (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, Remedy, PlanStatus) for m in e}
     assert listed - known <= {"planhrc"}, listed - known
