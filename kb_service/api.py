@@ -27,6 +27,8 @@ from .schemas import (
     EventPublic,
     FeedbackCreate,
     FeedbackPublic,
+    GiveUpCreate,
+    GiveUpPublic,
     GoalPublic,
     GoalUpdate,
     HealthPublic,
@@ -83,7 +85,7 @@ WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for stat
 def create_object(body: ObjectCreate, orch: Orch) -> dict[str, Any]:
     """Create an articulated object in the ABox."""
     links = body.links if isinstance(body.links, int) else [link.length_m for link in body.links]
-    obj = orch.create_object(body.name, links, body.orientations, body.formulation)
+    obj = orch.create_object(body.name, links, body.orientations, body.formulation, body.base_point_xy)
     return orch.describe_object(obj.ident)
 
 
@@ -106,8 +108,12 @@ def update_goal(object_id: str, body: GoalUpdate, orch: Orch) -> dict[str, Any]:
 
     The goal State is stored at once, with a Problem from the latest perceived state when there is one
     (`problem_id`, else null). Any current plan is dropped; planning happens at the next perception (the paper:
-    setting a goal triggers a perception), so a goal set before the first perception waits for it."""
-    return orch.set_goal(object_id, body.link_orientations_deg, body.joint_angles_deg)
+    setting a goal triggers a perception), so a goal set before the first perception waits for it.
+
+    For an object placed in the cell (created with `base_point_xy`), a complete goal configuration that does not
+    lie on the table (off the table, inside the robot's body, folded onto itself) is refused with 422 naming the
+    links, unless `allow_infeasible` is true; links beyond the robot's reach are accepted with `warnings`."""
+    return orch.set_goal(object_id, body.link_orientations_deg, body.joint_angles_deg, body.allow_infeasible)
 
 
 @router.post("/objects/{object_id}/perceptions", response_model=DecisionPublic, dependencies=Writer,
@@ -118,7 +124,10 @@ def create_perception(
     orch: Orch,
     idempotency_key: Annotated[str | None, Header(max_length=200)] = None,
 ) -> dict[str, Any]:
-    """Store a perceived state and apply the cooperation model: goal reached, continue, resume or re-plan."""
+    """Store a perceived state and apply the cooperation model: goal reached, continue, resume or re-plan; for an
+    object placed in the cell a new plan is put in an order that stays on the table, and when the robot cannot
+    carry it out the answer is `human_help_requested` with `help`. A perception with unseen links (null) is
+    answered `incomplete_perception` with `unseen_links`: it stores no state and changes nothing."""
     return orch.handle_perception(object_id, body.link_orientations_deg, idempotency_key)
 
 
@@ -148,8 +157,19 @@ def create_feedback(
     orch: Orch,
     idempotency_key: Annotated[str | None, Header(max_length=200)] = None,
 ) -> dict[str, Any]:
-    """Report the outcome of the dispatched action."""
-    return orch.handle_feedback(object_id, action_id, body.outcome, body.message, idempotency_key)
+    """Report the outcome of the dispatched action, with the failure's `reason` and the turned link's
+    `measured_deg` when it did not succeed (both stored in the feedback event)."""
+    return orch.handle_feedback(object_id, action_id, body.outcome, body.message, idempotency_key,
+                                reason=body.reason, measured_deg=body.measured_deg)
+
+
+@router.post("/objects/{object_id}/give-up", response_model=GiveUpPublic, dependencies=Writer,
+             responses=WRITE_ERRORS, tags=["cooperation"])
+def create_give_up(object_id: str, body: GiveUpCreate, orch: Orch) -> dict[str, Any]:
+    """For workers: say that the worker stopped working on the object, and why. The service records a
+    `worker_gave_up` event and leaves the execution idle with nothing dispatched; the next perception decides
+    anew."""
+    return orch.give_up(object_id, body.reason, body.message)
 
 
 # -- stored records -------------------------------------------------------------------------------------

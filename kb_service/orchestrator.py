@@ -26,18 +26,21 @@ import math
 import os
 import signal
 import threading
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterator, Sequence
 
 from planhrc import pipeline
-from planhrc.cooperation import Decision, PlanView, decide
+from planhrc.cooperation import Decision, FailureHistory, PlanView, decide, escalate
+from planhrc.geometry import GeometryError, ObjectGeometry, configuration_feasible, link_centres, reach_shortfall
+from planhrc.ordering import HelpItem, Move, Placement, help_for
 from .store import (ConflictError, Execution, KnowledgeBase, NotFoundError, StoredAction, StoredEvent, StoredPlan,
                     StoredState, ValidationError)
-from planhrc.model import ArticulatedObject, Formulation, ModelError, State, make_object, perceive
-from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps
+from planhrc.model import ArticulatedObject, Formulation, ModelError, Perception, State, make_object, perceive, snap_angle
+from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps, move_of
 from planhrc.settings import Settings
 from planhrc.translator import PddlTask, domain_text, read_domain_model, translate
-from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, PlanningStatus, one_of
+from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, PlanningStatus, Remedy,
+                                one_of)
 
 from .locks import ObjectLocks
 from .store.knowledge_base import MAX_EVENTS_PAGE
@@ -57,6 +60,9 @@ class _ObjectMemo:
     goal_state_id: str | None = None
     perceived_state_id: str | None = None
     last_outcome: ActionOutcome | None = None
+    base_point_xy: tuple[float, float] | None = None  # set: the object is placed in the cell (geometric checks)
+    failure: FailureHistory | None = None  # the motion failing since the last success, and the remedies tried
+    split_plans: set[str] = field(default_factory=set)  # plans whose macro steps are dispatched step by step
 
 
 class Orchestrator:
@@ -76,27 +82,44 @@ class Orchestrator:
 
     # -- objects ------------------------------------------------------------------------------------------
     def create_object(self, name: str, links: int | Sequence[float], orientations: int,
-                      formulation: str) -> ArticulatedObject:
-        make_object("probe", formulation, links, orientations, name)  # ModelError before an id is taken
+                      formulation: str, base_point_xy: Sequence[float] | None = None) -> ArticulatedObject:
+        """Create an object; with `base_point_xy` it is placed in the cell (kept in its `object_created` event,
+        which the log keeps whole), and its goals and plans are checked geometrically."""
+        probe = make_object("probe", formulation, links, orientations, name)  # ModelError before an id is taken
+        base = None
+        if base_point_xy is not None:
+            try:
+                base = ObjectGeometry.of(probe, (base_point_xy[0], base_point_xy[1])).base_point_xy
+            except (GeometryError, IndexError, TypeError) as exc:
+                raise ValidationError(f"base_point_xy: expected [x, y] in metres ({exc})") from None
         object_id = self.kb.new_object_id()
         obj = make_object(object_id, formulation, links, orientations, name)
         with self.locks.hold(object_id), self.kb.transaction():
             self.kb.create_object(obj)
             self.kb.add_event(object_id, "object_created", f"object {object_id} created",
                               {"formulation": obj.formulation.value, "links": obj.n_links,
-                               "orientations": obj.orientations})
+                               "orientations": obj.orientations,
+                               "base_point_xy": list(base) if base is not None else None})
         return obj
+
+    def base_point(self, object_id: str) -> tuple[float, float] | None:
+        return self._memo(object_id).base_point_xy
 
     def goal_state_id(self, object_id: str) -> str | None:
         return self._memo(object_id).goal_state_id
 
     # -- goal ---------------------------------------------------------------------------------------------
     def set_goal(self, object_id: str, link_orientations_deg: Sequence[float] | None = None,
-                 joint_angles_deg: Sequence[float | None] | None = None) -> dict[str, Any]:
+                 joint_angles_deg: Sequence[float | None] | None = None,
+                 allow_infeasible: bool = False) -> dict[str, Any]:
+        """Store a goal. For a placed object a complete goal configuration is checked first: one off the table,
+        inside the robot or folded onto itself is refused naming the links (unless `allow_infeasible`); links
+        beyond the robot's reach are accepted with a warning (the robot will ask the human for them)."""
         with self.locks.hold(object_id):
             obj = self.kb.get_object(object_id)
             atoms = _goal_atoms(obj, link_orientations_deg, joint_angles_deg)
             memo = self._memo(object_id)
+            warnings = self._goal_warnings(obj, memo, atoms, link_orientations_deg, allow_infeasible)
             with self.kb.transaction():
                 goal = self.kb.add_state(object_id, "goal", atoms)
                 problem = None
@@ -105,12 +128,50 @@ class Orchestrator:
                 # The old plan was made for another goal: the next perception decides anew.
                 self.kb.set_execution(object_id, Execution(None, None, IDLE, None))
                 self.kb.add_event(object_id, "goal_set",
-                                  "goal set; the next perception plans towards it",
-                                  {"goal_state_id": goal.id, "problem_id": problem.id if problem else None})
-            return {"goal_state_id": goal.id, "problem_id": problem.id if problem else None}
+                                  "goal set; the next perception plans towards it"
+                                  + (f" ({'; '.join(warnings)})" if warnings else ""),
+                                  {"goal_state_id": goal.id, "problem_id": problem.id if problem else None,
+                                   "warnings": warnings})
+            return {"goal_state_id": goal.id, "problem_id": problem.id if problem else None, "warnings": warnings}
+
+    def _goal_warnings(self, obj: ArticulatedObject, memo: _ObjectMemo, atoms: frozenset,
+                       link_orientations_deg: Sequence[float] | None, allow_infeasible: bool) -> list[str]:
+        """The geometric check of a goal (placed objects, complete goals): raises ValidationError for an infeasible
+        one unless allowed; the warnings to answer with."""
+        if memo.base_point_xy is None:
+            return []
+        links = self._goal_links(obj, memo, atoms, link_orientations_deg)
+        if links is None:
+            return []
+        result = configuration_feasible(ObjectGeometry.of(obj, memo.base_point_xy), links)
+        blocking = [r for r in result.reasons if r.code != "out_of_reach"]
+        warnings = [f"goal: {r.message}" for r in result.reasons if r.code == "out_of_reach"]
+        if blocking and not allow_infeasible:
+            raise ValidationError("goal: " + "; ".join(r.message for r in blocking)
+                                  + " (send allow_infeasible: true to set it anyway)")
+        if blocking:
+            warnings = [f"goal accepted although infeasible: {r.message}" for r in blocking] + warnings
+        return warnings
+
+    def _goal_links(self, obj: ArticulatedObject, memo: _ObjectMemo, atoms: frozenset,
+                    link_orientations_deg: Sequence[float] | None) -> tuple[int, ...] | None:
+        """Every link's absolute orientation in a complete goal: as given, or from the joints (relative: l1 as last
+        perceived); None when the goal leaves a joint free or l1 is not known."""
+        if link_orientations_deg is not None:
+            return tuple(int(float(v)) % 360 for v in link_orientations_deg)
+        values = obj.joint_values_of(atoms)
+        if len(values) != obj.n_joints:
+            return None
+        if obj.formulation is Formulation.ABSOLUTE:
+            return tuple(values[k] for k in obj.joint_indices)
+        if memo.perceived_state_id is None:
+            return None
+        perceived = self.kb.get_state(memo.perceived_state_id)
+        first = snap_angle(perceived.link_orientations_deg[0], obj.orientations) if perceived.link_orientations_deg else 0
+        return obj.link_orientations_of(atoms, first)
 
     # -- perception ---------------------------------------------------------------------------------------
-    def handle_perception(self, object_id: str, link_orientations_deg: Sequence[float],
+    def handle_perception(self, object_id: str, link_orientations_deg: Sequence[float | None],
                           idempotency_key: str | None = None) -> dict[str, Any]:
         """Decide on one perception and store all it leads to in one write: the perceived state and, after a
         re-plan, its problem, plan and expected states, then the execution, the decision's event and the
@@ -121,6 +182,8 @@ class Orchestrator:
             recalled = self._recall(object_id, idempotency_key, fingerprint)
             if recalled is not None:
                 return recalled
+            if any(v is None for v in link_orientations_deg):
+                return self._incomplete_perception(obj, link_orientations_deg, idempotency_key, fingerprint)
             try:
                 perception = perceive(obj, link_orientations_deg)  # validated and snapped once, here
             except ModelError as exc:
@@ -133,8 +196,9 @@ class Orchestrator:
             outcome = None
             if goal is not None:
                 decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
+                decision = self._escalate(obj, plan, perception, decision, memo)
                 if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
-                    outcome = self._run_pipeline(obj, perception.atoms, goal.atoms)
+                    outcome = self._plan_for(obj, perception, goal.atoms, plan, decision, memo)
             # VAL checks a new plan while the store writes it; the write commits only once VAL has accepted it.
             checked = self.planning.validate and outcome is not None and outcome.solved and bool(outcome.actions)
             validation = _Validation(outcome) if checked and outcome is not None else None
@@ -148,8 +212,10 @@ class Orchestrator:
                                          "no goal is set: PUT /objects/{id}/goal first")
                     else:
                         extra["goal_state_id"] = goal.id
+                        if decision.remedy is not None:
+                            extra["remedy"] = decision.remedy
                         if outcome is None:
-                            answer = self._follow(obj, perceived, execution, plan, decision)
+                            answer = self._follow(obj, perceived, execution, plan, decision, extra)
                         else:
                             answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra,
                                                            validation)
@@ -161,6 +227,8 @@ class Orchestrator:
                 with self.kb.transaction():
                     perceived = self.kb.add_perception(perception)
                     extra = {"goal_state_id": goal.id}
+                    if decision.remedy is not None:
+                        extra["remedy"] = decision.remedy
                     answer, new_view = self._adopt(obj, perceived, goal, decision, refused.outcome, extra, None)
                     self._log_decision(object_id, answer, extra)
                     self._remember(object_id, idempotency_key, fingerprint, answer)
@@ -180,16 +248,109 @@ class Orchestrator:
             log.critical("crash_in_perception_write: killing the service inside a perception's write")
             os.kill(os.getpid(), signal.SIGKILL)
 
-    def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State) -> PlanOutcome:
+    def _incomplete_perception(self, obj: ArticulatedObject, link_orientations_deg: Sequence[float | None],
+                               idempotency_key: str | None, fingerprint: str) -> dict[str, Any]:
+        """A perception with unseen links (None): validated like any, then answered `incomplete_perception`. It
+        stores no state and changes no plan or execution; only its event (naming the unseen links) is kept."""
+        if len(link_orientations_deg) != obj.n_links:
+            raise ValidationError(f"link_orientations_deg: expected {obj.n_links} values (one per link), "
+                                  f"got {len(link_orientations_deg)}")
+        _check_finite(link_orientations_deg, "link_orientations_deg")
+        unseen = [k for k, v in enumerate(link_orientations_deg, start=1) if v is None]
+        if len(unseen) == obj.n_links:
+            raise ValidationError("link_orientations_deg: at least one link must be seen (every value is null)")
+        named = " and ".join([", ".join(map(str, unseen[:-1])), str(unseen[-1])] if len(unseen) > 1 else
+                             [str(unseen[0])])
+        reason = f"link{'s' if len(unseen) > 1 else ''} {named} {'were' if len(unseen) > 1 else 'was'} not seen: look again"
+        answer = _answer(DecisionKind.INCOMPLETE_PERCEPTION, None, None, None, None, reason)
+        answer["unseen_links"] = unseen
+        with self.kb.transaction():
+            self.kb.add_event(obj.ident, DecisionKind.INCOMPLETE_PERCEPTION, reason,
+                              {"unseen_links": unseen, "link_orientations_deg": list(link_orientations_deg)})
+            self._remember(obj.ident, idempotency_key, fingerprint, answer)
+        return answer
+
+    def _placement(self, obj: ArticulatedObject, perception: Perception) -> Placement | None:
+        """Where a placed object lies at this perception (None for an abstract one: no geometric checks)."""
+        base = self._memo(obj.ident).base_point_xy
+        if base is None:
+            return None
+        return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg))
+
+    def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State,
+                      placement: Placement | None = None) -> PlanOutcome:
         try:
-            return pipeline.plan(obj, init, goal, self.planning, defer_validation=True)
+            return pipeline.plan(obj, init, goal, self.planning, defer_validation=True, placement=placement)
         except Exception as exc:  # a crashing stage must not leave the perception without a decision
             log.exception("planning failed for %s", obj.ident)
             return PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", self.planning.planner)
 
+    def _escalate(self, obj: ArticulatedObject, plan: StoredPlan | None, perception: Perception,
+                  decision: Decision, memo: _ObjectMemo) -> Decision:
+        """`cooperation.escalate` for the motion the decision would dispatch: after a failure of that motion (or
+        while the human is asked for it) it is not dispatched identically again."""
+        failure = memo.failure
+        asked = failure is not None and Remedy.ASK_HUMAN in failure.tried
+        fresh = memo.last_outcome in (ActionOutcome.FAILED, ActionOutcome.PARTIAL)
+        if failure is None or plan is None or decision.next_step is None or not (fresh or asked):
+            return decision
+        if not 1 <= decision.next_step <= len(plan.actions):
+            return decision
+        action = plan.actions[decision.next_step - 1]
+        motion = action_motion(obj, action)
+        macro = self._last_step(obj, plan, action) - action.step + 1
+        reachable = self._reachable(obj, perception, motion["turned_link_index"], motion["held_link_index"])
+        return escalate(decision, failure, (motion["joint_index"], motion["turned_link_index"]), macro, reachable)
+
+    def _reachable(self, obj: ArticulatedObject, perception: Perception, *links: int) -> bool:
+        """Whether the robot reaches the grasp points of `links` as perceived (always, for an abstract object)."""
+        base = self._memo(obj.ident).base_point_xy
+        if base is None:
+            return True
+        centres = link_centres(ObjectGeometry.of(obj, base), perception.snapped_deg)
+        return all(reach_shortfall(centres[k - 1]) <= 1e-9 for k in links if k >= 1)
+
+    def _plan_for(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
+                  decision: Decision, memo: _ObjectMemo) -> PlanOutcome:
+        """The new plan a decision asks for: the current plan's rest with the failing joint turned the other way
+        round (remedy other_way), else the planner's (ordered on the table for a placed object)."""
+        placement = self._placement(obj, perception)
+        if (decision.remedy == Remedy.OTHER_WAY and plan is not None and memo.failure is not None
+                and decision.matched_expected_step is not None):
+            rest = [a for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.matched_expected_step]
+            moves = _other_way(obj, [move_of(obj, a.spec) for a in rest], memo.failure)
+            if moves is not None:
+                try:
+                    return pipeline.plan_moves(obj, perception.atoms, goal, moves, self.planning,
+                                               placement=placement, defer_validation=True)
+                except Exception as exc:  # the composed plan does not hold: let the planner try
+                    log.warning("the other way round failed for %s: %s", obj.ident, exc)
+        return self._run_pipeline(obj, perception.atoms, goal, placement)
+
     def _follow(self, obj: ArticulatedObject, perceived: StoredState, execution: Execution,
-                plan: StoredPlan | None, decision: Decision) -> dict[str, Any]:
-        """Goal reached, continue or resume: the execution moves within the current plan."""
+                plan: StoredPlan | None, decision: Decision, extra: dict[str, Any]) -> dict[str, Any]:
+        """Goal reached, continue or resume: the execution moves within the current plan; or the human is asked
+        to do the next motion, and the execution waits for the next perception."""
+        if decision.kind == DecisionKind.HUMAN_HELP_REQUESTED:
+            assert plan is not None and decision.next_step is not None
+            action = plan.actions[decision.next_step - 1]
+            last = self._last_step(obj, plan, action)
+            moves = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
+                     if action.step <= a.step <= last]
+            base = self._memo(obj.ident).base_point_xy
+            seen = tuple(float(snap_angle(v, obj.orientations)) for v in perceived.link_orientations_deg or ())
+            if len(seen) != obj.n_links:  # not a perceived state with its observation: the plan's own view
+                seen = tuple(float(v) for v in obj.link_orientations_of(perceived.atoms))
+            geometry = ObjectGeometry.of(obj, base)
+            help_items = help_for(Placement(geometry, seen), moves, None, why=_failure_words(self._memo(obj.ident)))
+            self.kb.set_execution(obj.ident, Execution(plan.id, decision.next_step, IDLE, None))
+            answer = _answer(DecisionKind.HUMAN_HELP_REQUESTED, plan.id, perceived.id, None,
+                             decision.matched_expected_step, decision.reason)
+            answer["help"] = _help_public(help_items)
+            extra["help"] = answer["help"]
+            return answer
+        if decision.remedy == Remedy.SPLIT and plan is not None:  # its event says so too, for a restarted service
+            self._memo(obj.ident).split_plans.add(plan.id)
         if decision.kind == DecisionKind.GOAL_REACHED:
             self.kb.set_execution(obj.ident, Execution(execution.plan_id, None, ExecutionStatus.GOAL_REACHED,
                                                        execution.dispatched_action_id))
@@ -220,16 +381,27 @@ class Orchestrator:
             self.kb.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
         extra.update({"planning_status": outcome.status, "problem_id": problem.id,
                       "timings": {k: round(v, 6) for k, v in outcome.timings.items()}})
+        if outcome.ordering:
+            extra["ordering"] = outcome.ordering
         if outcome.solved and outcome.actions:
             view = PlanView(expected_states=outcome.expected_states,
                             preconditions=tuple(a.pre for a in outcome.actions))
-            reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions"
+            ordering = f" ({outcome.ordering})" if outcome.ordering else ""
+            reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions{ordering}"
             return _answer(DecisionKind.REPLAN, plan.id, perceived.id,
                            self._action_public(obj, plan, plan.actions[0]),
                            decision.matched_expected_step, reason), (plan, view)
         if outcome.solved:  # the perceived state already satisfies the goal
             self.kb.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
             return _answer(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message), None
+        if outcome.help:  # a plan exists but the robot cannot carry it out on this table: ask the human
+            self.kb.set_execution(obj.ident, Execution(None, None, IDLE, None))
+            reason = f"{decision.reason}; {outcome.message}; the robot asks the human for help"
+            answer = _answer(DecisionKind.HUMAN_HELP_REQUESTED, None, perceived.id, None,
+                             decision.matched_expected_step, reason)
+            answer["help"] = _help_public(outcome.help)
+            extra["help"] = answer["help"]
+            return answer, None
         self.kb.set_execution(obj.ident, Execution(None, None, ExecutionStatus.NO_PLAN, None))
         reason = (f"{decision.reason}; planning {outcome.status}: {outcome.message}; "
                   "a human must bring the object to a workable configuration")
@@ -257,7 +429,8 @@ class Orchestrator:
         with self.locks.hold(obj.ident):
             execution = self.kb.get_execution(obj.ident)
             goal_state_id = self.goal_state_id(obj.ident)
-        return object_public(obj, execution, goal_state_id)
+            base = self._memo(obj.ident).base_point_xy
+        return object_public(obj, execution, goal_state_id, base)
 
     def current_plan(self, object_id: str) -> dict[str, Any]:
         """The plan being followed (or, when none is, the latest one), with its expected states."""
@@ -337,13 +510,22 @@ class Orchestrator:
             return self._action_public(obj, plan, action)
 
     def handle_feedback(self, object_id: str, action_id: str, outcome: str, message: str = "",
-                        idempotency_key: str | None = None) -> dict[str, Any]:
+                        idempotency_key: str | None = None, reason: str | None = None,
+                        measured_deg: float | None = None) -> dict[str, Any]:
+        """Record a worker's report on the dispatched action, with why it failed (`reason`, a FailureReason) and
+        the turned link's measured orientation (`measured_deg`) when it did not succeed."""
         if outcome not in set(ActionOutcome):
             raise ValidationError(f"outcome: must be {one_of(ActionOutcome)}, got {outcome!r}")
         outcome = ActionOutcome(outcome)
+        failure = _failure_reason(outcome, reason)
+        if measured_deg is not None and (isinstance(measured_deg, bool) or not isinstance(measured_deg, (int, float))
+                                         or not math.isfinite(measured_deg)):
+            raise ValidationError(f"measured_deg: must be a finite number, got {measured_deg!r}")
         with self.locks.hold(object_id):
             self.kb.get_object(object_id)
-            fingerprint = _fingerprint({"feedback": [action_id, outcome, message]})
+            fingerprint = _fingerprint({"feedback": [action_id, outcome, message]}
+                                       if failure is None and measured_deg is None else
+                                       {"feedback": [action_id, outcome, message, failure, measured_deg]})
             recalled = self._recall(object_id, idempotency_key, fingerprint)
             if recalled is not None:
                 return recalled
@@ -360,21 +542,38 @@ class Orchestrator:
                 last = self._last_step(self.kb.get_object(object_id), plan, action) if plan else action.step
                 next_step = last + 1 if outcome == ActionOutcome.SUCCEEDED else action.step
                 new = Execution(execution.plan_id, next_step, READY, None)
-                reason = f"a_{action.step} {outcome}" + (
+                text = f"a_{action.step} {outcome}" + (
                     ": the next perception checks s^e_{}".format(next_step) if outcome == ActionOutcome.SUCCEEDED
                     else ": the next perception decides whether to retry, resume or re-plan")
             else:
                 accepted = "late"
                 new = replace(execution, dispatched_action_id=None)
-                reason = f"a_{action.step} {outcome}, reported after a perception had already moved the execution"
+                text = f"a_{action.step} {outcome}, reported after a perception had already moved the execution"
             answer = {"action_id": action_id, "accepted": accepted, "execution": execution_public(new)}
             with self.kb.transaction():
                 self.kb.set_execution(object_id, new)
-                self.kb.add_event(object_id, "feedback", reason + (f" ({message})" if message else ""),
+                why = f" [{failure}]" if failure is not None else ""
+                motion = action_motion(self.kb.get_object(object_id), action)
+                self.kb.add_event(object_id, "feedback", text + why + (f" ({message})" if message else ""),
                                   {"action_id": action_id, "step": action.step, "outcome": outcome,
-                                   "accepted": accepted})
+                                   "accepted": accepted, "reason": failure, "measured_deg": measured_deg,
+                                   "message": message, "joint_index": motion["joint_index"],
+                                   "turned_link_index": motion["turned_link_index"]})
                 self._remember(object_id, idempotency_key, fingerprint, answer)
             return answer
+
+    def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:
+        """A worker stopped working on the object: record it, and leave the execution idle with nothing dispatched
+        (the plan stays; the next perception decides anew)."""
+        with self.locks.hold(object_id):
+            self.kb.get_object(object_id)
+            execution = self.kb.get_execution(object_id)
+            with self.kb.transaction():
+                self.kb.set_execution(object_id, Execution(execution.plan_id, None, IDLE, None))
+                event = self.kb.add_event(object_id, "worker_gave_up", f"the worker gave up ({reason}): {message}",
+                                          {"reason": reason, "message": message, "plan_id": execution.plan_id,
+                                           "dropped_action_id": execution.dispatched_action_id})
+            return {"event_seq": event.seq}
 
     # -- helpers --------------------------------------------------------------------------------------------
     def _plan_view(self, plan_id: str | None) -> tuple[StoredPlan | None, PlanView | None]:
@@ -408,19 +607,33 @@ class Orchestrator:
             memo = self._memos.setdefault(object_id, _ObjectMemo())
         for event in self.kb.list_events(object_id, after_seq=memo.seq):
             memo.seq = max(memo.seq, event.seq)
-            if event.kind == "goal_set":
+            if event.kind == "object_created":
+                base = event.data.get("base_point_xy")
+                memo.base_point_xy = (float(base[0]), float(base[1])) if base else None
+            elif event.kind == "goal_set":
                 memo.goal_state_id = event.data.get("goal_state_id")
+                memo.failure = None
+            elif event.kind == DecisionKind.INCOMPLETE_PERCEPTION:
+                continue  # it stored no state and decided nothing: the last feedback still informs the next decision
             elif event.kind == "feedback":
                 outcome = event.data.get("outcome")
                 memo.last_outcome = ActionOutcome(outcome) if outcome else None
+                memo.failure = _next_failure(memo.failure, event.data)
             elif event.kind in set(DecisionKind):
                 memo.perceived_state_id = event.data.get("perceived_state_id") or memo.perceived_state_id
                 memo.last_outcome = None  # a feedback informs only the next decision
+                remedy = event.data.get("remedy")
+                if remedy and memo.failure is not None:
+                    memo.failure = replace(memo.failure, tried=memo.failure.tried + (Remedy(remedy),))
+                if remedy == Remedy.SPLIT and event.data.get("plan_id"):
+                    memo.split_plans.add(event.data["plan_id"])
         return memo
 
     def _last_step(self, obj: ArticulatedObject, plan: StoredPlan, action: StoredAction) -> int:
-        """Last plan step of the motion that starts with `action` (itself unless macro steps are merged)."""
-        if not self.merge_macro_steps:
+        """Last plan step of the motion that starts with `action` (itself unless macro steps are merged; not in a
+        plan whose merged motion failed, remedy split). Every single step of a placed object's plan was checked
+        geometrically, sweep included, so a merged motion sweeps only through checked configurations."""
+        if not self.merge_macro_steps or plan.id in self._memo(plan.object_id).split_plans:
             return action.step
         rest = [a for a in plan.actions if a.step >= action.step]
         return merge_macro_steps(obj, rest)[0].last_step
@@ -449,10 +662,59 @@ class Orchestrator:
             self.kb.remember_response(object_id, key, {"fingerprint": fingerprint, "response": answer})
 
 
-def _answer(kind: DecisionKind, plan_id: str | None, perceived_state_id: str, next_action: dict[str, Any] | None,
-            matched: int | None, reason: str) -> dict[str, Any]:
+def _answer(kind: DecisionKind, plan_id: str | None, perceived_state_id: str | None,
+            next_action: dict[str, Any] | None, matched: int | None, reason: str) -> dict[str, Any]:
     return {"decision": kind, "plan_id": plan_id, "perceived_state_id": perceived_state_id,
-            "next_action": next_action, "matched_expected_step": matched, "reason": reason}
+            "next_action": next_action, "matched_expected_step": matched, "reason": reason, "help": None,
+            "unseen_links": None}
+
+
+def _next_failure(failure: FailureHistory | None, data: dict[str, Any]) -> FailureHistory | None:
+    """The failure record after one feedback event: cleared by a success, counted for the same motion, started
+    anew for another; a failure without a reason is not a motion's failure."""
+    if data.get("outcome") == ActionOutcome.SUCCEEDED or data.get("accepted") == "late":
+        return None if data.get("outcome") == ActionOutcome.SUCCEEDED else failure
+    reason, joint, turned = data.get("reason"), data.get("joint_index"), data.get("turned_link_index")
+    if reason is None or joint is None or turned is None:
+        return None
+    if failure is not None and (failure.joint, failure.turned) == (joint, turned):
+        return replace(failure, reason=FailureReason(reason), failures=failure.failures + 1)
+    return FailureHistory(int(joint), int(turned), FailureReason(reason))
+
+
+def _other_way(obj: ArticulatedObject, moves: Sequence[Move], failure: FailureHistory) -> list[Move] | None:
+    """`moves` with the failing joint's steps replaced by the other way round (360° - delta), or None when that
+    joint has nothing left to turn in them."""
+    group = [m for m in moves if (m.joint, m.turned) == (failure.joint, failure.turned)]
+    total = sum(m.delta_deg for m in group)
+    if not group or total % 360 == 0:
+        return None
+    forward = group[0] if (group[0].delta_deg > 0) == (total > 0) else group[0].other_way()
+    turned_back = [forward.other_way()] * ((360 - abs(total) % 360) // obj.step)
+    first = moves.index(group[0])
+    rest = [m for m in moves if (m.joint, m.turned) != (failure.joint, failure.turned)]
+    return rest[:first] + turned_back + rest[first:]
+
+
+def _failure_words(memo: _ObjectMemo) -> str | None:
+    failure = memo.failure
+    if failure is None:
+        return None
+    return f"the robot failed {failure.failures} time{'s' if failure.failures > 1 else ''}: {failure.reason}"
+
+
+def _help_public(items: Sequence[HelpItem]) -> list[dict[str, Any]]:
+    return [{"link": h.link, "to_deg": h.to_deg, "sentence": h.sentence} for h in items]
+
+
+def _failure_reason(outcome: ActionOutcome, reason: str | None) -> FailureReason | None:
+    if reason is None:
+        return None
+    if reason not in set(FailureReason):
+        raise ValidationError(f"reason: must be {one_of(FailureReason)} or null, got {reason!r}")
+    if outcome == ActionOutcome.SUCCEEDED:
+        raise ValidationError(f"reason: must be null when the outcome is succeeded, got {reason!r}")
+    return FailureReason(reason)
 
 
 def _fingerprint(body: dict[str, Any]) -> str:

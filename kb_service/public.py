@@ -14,12 +14,15 @@ def execution_public(execution: Execution) -> dict[str, Any]:
             "dispatched_action_id": execution.dispatched_action_id}
 
 
-def object_public(obj: ArticulatedObject, execution: Execution, goal_state_id: str | None) -> dict[str, Any]:
+def object_public(obj: ArticulatedObject, execution: Execution, goal_state_id: str | None,
+                  base_point_xy: tuple[float, float] | None = None) -> dict[str, Any]:
     return {
         "id": obj.ident, "name": obj.name, "formulation": obj.formulation.value, "orientations": obj.orientations,
         "step_deg": obj.step,
         "links": [{"name": name, "length_m": length} for name, length in zip(obj.links, obj.link_lengths_m)],
-        "joints": list(obj.joints), "goal_state_id": goal_state_id, "execution": execution_public(execution),
+        "joints": list(obj.joints), "goal_state_id": goal_state_id,
+        "base_point_xy": list(base_point_xy) if base_point_xy is not None else None,
+        "execution": execution_public(execution),
     }
 
 

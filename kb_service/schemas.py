@@ -7,12 +7,13 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from planhrc.model import Formulation
-from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus
+from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+TableCoordinate = Annotated[float, Field(allow_inf_nan=False, ge=-10.0, le=10.0)]  # metres from the robot
 MIN_LINKS, MAX_LINKS = 2, 200  # one bound for both forms of ObjectCreate.links
 SQLITE_MAX_INT = 2**63 - 1  # the largest integer the store (SQLite INTEGER) can hold: the bound of every count and seq
 
@@ -62,6 +63,14 @@ class ObjectCreate(BaseModel):
         description="Planning formulation: joints carry relative angles, or absolute link orientations.",
         examples=["relative"],
     )
+    base_point_xy: list[TableCoordinate] | None = Field(
+        default=None, min_length=2, max_length=2,
+        description="Where the object's base point p1 lies on the table, [x, y] in metres in the robot's frame "
+        "(+x forward, +y left; the simulated cell's default is [0.6, 0.39]). An object given a base point is "
+        "placed in the cell: its goals and every planned configuration are checked against the table, the robot's "
+        "body and reach. Without it the object is abstract (no geometric checks).",
+        examples=[[0.6, 0.39]],
+    )
 
 
 class LinkPublic(BaseModel):
@@ -93,7 +102,7 @@ class ObjectPublic(BaseModel):
         {
             "id": "obj1", "name": "rod", "formulation": "relative", "orientations": 4, "step_deg": 90,
             "links": [{"name": "obj1_l1", "length_m": 0.155}, {"name": "obj1_l2", "length_m": 0.155}],
-            "joints": ["obj1_j1"], "goal_state_id": None,
+            "joints": ["obj1_j1"], "goal_state_id": None, "base_point_xy": [0.6, 0.39],
             "execution": {"plan_id": None, "next_step": None, "status": "idle", "dispatched_action_id": None},
         },
     )
@@ -106,6 +115,9 @@ class ObjectPublic(BaseModel):
     links: list[LinkPublic] = Field(description="Links l1..lN in chain order.", examples=[[{"name": "obj1_l1", "length_m": 0.155}]])
     joints: list[str] = Field(description="Joints that carry orientations, in order.", examples=[["obj1_j1"]])
     goal_state_id: str | None = Field(description="Current goal state, if one was set.", examples=["obj1_state_1"])
+    base_point_xy: list[float] | None = Field(
+        description="The object's base point p1 on the table, [x, y] in metres; null for an abstract object (no "
+        "geometric checks).", examples=[[0.6, 0.39], None])
     execution: ExecutionPublic = Field(
         description="Execution state of the cooperation model.",
         examples=[{"plan_id": None, "next_step": None, "status": "idle", "dispatched_action_id": None}],
@@ -131,6 +143,12 @@ class GoalUpdate(BaseModel):
         "orientations (absolute formulation); null leaves that joint free (a partial goal).",
         examples=[[90, 0, 90], [90, None, 90]],
     )
+    allow_infeasible: bool = Field(
+        default=False,
+        description="Accept a goal configuration that does not lie on the table (off the table, inside the "
+        "robot, folded onto itself); without it such a goal is refused with 422 naming the links.",
+        examples=[False],
+    )
 
     @model_validator(mode="after")
     def _exactly_one(self) -> "GoalUpdate":
@@ -150,19 +168,35 @@ class GoalPublic(BaseModel):
         description="Problem (latest perceived state -> goal); null until the first perception arrives.",
         examples=["obj1_problem_1", None],
     )
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="What the service noticed about a goal it accepted: links whose grasp point is beyond the "
+        "robot's reach in the goal configuration (the robot will ask the human for them), or an infeasible goal "
+        "accepted with allow_infeasible.",
+        examples=[["goal: link 5 unreachable: 0.08 m beyond reach"]],
+    )
 
 
 class PerceptionCreate(BaseModel):
     model_config = _config(
-        "A perceived configuration: the measured orientation of every link, noisy real values.",
+        "A perceived configuration: the measured orientation of every link, noisy real values; null for a link "
+        "the camera did not see.",
         {"link_orientations_deg": [1.7, 88.9, 91.2, 179.4]},
     )
 
-    link_orientations_deg: list[FiniteFloat] = Field(
+    link_orientations_deg: list[FiniteFloat | None] = Field(
         description="Measured absolute orientation of every link l1..lN, in degrees clockwise seen from above; "
-        "snapped to the nearest allowed orientation.",
-        examples=[[1.7, 88.9, 91.2, 179.4]],
+        "snapped to the nearest allowed orientation. null = the link was not seen: such a perception changes "
+        "nothing and is answered with the decision incomplete_perception; at least one link must be seen.",
+        examples=[[1.7, 88.9, 91.2, 179.4], [1.7, None, 91.2, 179.4]],
     )
+
+    @field_validator("link_orientations_deg")
+    @classmethod
+    def _one_seen(cls, values: list[float | None]) -> list[float | None]:
+        if values and all(v is None for v in values):
+            raise ValueError("at least one link must be seen (every value is null)")
+        return values
 
 
 class NextActionPublic(BaseModel):
@@ -191,6 +225,19 @@ class NextActionPublic(BaseModel):
     macro_steps: int = Field(description="Number of planned steps this motion stands for.", examples=[1])
 
 
+class HelpRequestPublic(BaseModel):
+    model_config = _config(
+        "What the robot asks the human to do: bring one link to an absolute orientation.",
+        {"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"},
+    )
+
+    link: int = Field(description="Index K of the link lK the human should turn (1-based).", examples=[4])
+    to_deg: int = Field(description="The absolute orientation (degrees clockwise from the robot's forward axis) "
+                        "link K should have afterwards.", examples=[135])
+    sentence: str = Field(description="The request in words, with why when known.",
+                          examples=["turn link 4 to 135°"])
+
+
 class DecisionPublic(BaseModel):
     model_config = _config(
         "What the cooperation model decided for a perception.",
@@ -202,11 +249,15 @@ class DecisionPublic(BaseModel):
 
     decision: DecisionKind = Field(
         description="goal_reached, continue (next planned action), resume (from a later or earlier expected "
-        "state), replan (a new plan was made) or no_plan (no goal, or no plan could be found).",
+        "state), replan (a new plan was made), no_plan (no goal, or no plan could be found), "
+        "human_help_requested (the robot cannot act: `help` says what the human should do; the execution waits "
+        "for the next perception) or incomplete_perception (some links were not seen: `unseen_links`; nothing "
+        "was stored or changed).",
         examples=["continue", "resume"],
     )
     plan_id: str | None = Field(description="Plan being followed after the decision.", examples=["obj1_plan_1"])
-    perceived_state_id: str | None = Field(description="The stored perceived State.", examples=["obj1_state_2"])
+    perceived_state_id: str | None = Field(description="The stored perceived State (null for an incomplete "
+                                           "perception, which stores none).", examples=["obj1_state_2"])
     next_action: NextActionPublic | None = Field(
         description="Action to execute next, if any (not yet dispatched).", examples=[None]
     )
@@ -214,6 +265,14 @@ class DecisionPublic(BaseModel):
         description="i of the expected state s^e_i that subsumes the perceived state, if any.", examples=[2]
     )
     reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by the goal state"])
+    help: list[HelpRequestPublic] | None = Field(
+        default=None, description="human_help_requested: what the human should do, one item per link.",
+        examples=[[{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"}]],
+    )
+    unseen_links: list[int] | None = Field(
+        default=None, description="incomplete_perception: the 1-based indices of the links not seen.",
+        examples=[[3, 5]],
+    )
 
 
 class FeedbackCreate(BaseModel):
@@ -223,8 +282,26 @@ class FeedbackCreate(BaseModel):
         description="succeeded, failed (nothing moved) or partial (moved, but not the whole step).",
         examples=["succeeded", "failed"],
     )
-    message: str = Field(default="", max_length=2000, description="Free text from the worker.",
-                         examples=["gripper lost the link"])
+    message: str = Field(default="", max_length=2000, description="Free text from the worker: the sentence "
+                         "saying what happened.", examples=["gripper lost the link"])
+    reason: FailureReason | None = Field(
+        default=None,
+        description="Why a failed or partial action did not do what it was asked (must be null for succeeded): "
+        "unreachable, collision, slip, stall, grasp_lost or left_table. A repeated failure with reason "
+        "unreachable, collision, slip or stall is not retried identically.",
+        examples=["stall", None],
+    )
+    measured_deg: FiniteFloat | None = Field(
+        default=None, ge=-720.0, le=720.0,
+        description="The turned link's measured orientation after release (degrees clockwise), for partial, slip "
+        "or stall.", examples=[95.0, None],
+    )
+
+    @model_validator(mode="after")
+    def _reason_only_for_failures(self) -> "FeedbackCreate":
+        if self.outcome == ActionOutcome.SUCCEEDED and self.reason is not None:
+            raise ValueError(f"reason: must be null when the outcome is succeeded, got {self.reason.value!r}")
+        return self
 
 
 class FeedbackPublic(BaseModel):
@@ -243,6 +320,25 @@ class FeedbackPublic(BaseModel):
         description="Execution state after the feedback.",
         examples=[{"plan_id": "obj1_plan_1", "next_step": 3, "status": "ready", "dispatched_action_id": None}],
     )
+
+
+class GiveUpCreate(BaseModel):
+    model_config = _config(
+        "A worker stops working on an object and says why.",
+        {"reason": "repeated_failure", "message": "a_3 failed three times: link 4 stalls at 95°"},
+    )
+
+    reason: str = Field(min_length=1, max_length=64, pattern=r"^[a-z][a-z0-9_]*$",
+                        description="A short machine-readable code (lower case, digits, underscores).",
+                        examples=["repeated_failure"])
+    message: PrintableName = Field(min_length=1, max_length=2000, description="What happened, in a sentence.",
+                                   examples=["a_3 failed three times: link 4 stalls at 95°"])
+
+
+class GiveUpPublic(BaseModel):
+    model_config = _config("The recorded give-up.", {"event_seq": 12})
+
+    event_seq: int = Field(description="Position of the worker_gave_up event in the object's log.", examples=[12])
 
 
 # -- stored records -------------------------------------------------------------------------------------
@@ -330,7 +426,9 @@ class EventPublic(BaseModel):
 
     seq: int = Field(description="Position in the log (increasing).", examples=[4])
     object_id: str = Field(description="Object the event is about.", examples=["obj1"])
-    kind: str = Field(description="goal_reached, continue, resume, replan, no_plan, goal_set, dispatched, feedback.",
+    kind: str = Field(description="A decision kind (goal_reached, continue, resume, replan, no_plan, "
+                      "human_help_requested, incomplete_perception), or goal_set, dispatched, feedback, "
+                      "worker_gave_up, object_created.",
                       examples=["continue"])
     reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by s^e_2"])
     data: dict[str, Any] = Field(description="Ids and numbers of the event.", examples=[{"next_step": 2}])

@@ -27,7 +27,7 @@ from typing import Any, Callable, Sequence
 import httpx
 
 from planhrc.errors import PlanhrcError
-from planhrc.vocabulary import ActionOutcome, DecisionKind
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +71,8 @@ class Decision:
     matched_expected_step: int | None
     reason: str
     raw: dict[str, Any] = field(default_factory=dict, compare=False)
+    help: list[dict[str, Any]] | None = None  # human_help_requested: [{"link", "to_deg", "sentence"}, ...]
+    unseen_links: list[int] | None = None  # incomplete_perception: 1-based indices of the links not seen
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> "Decision":
@@ -87,6 +89,8 @@ class Decision:
             matched_expected_step=data.get("matched_expected_step"),
             reason=str(data.get("reason", "")),
             raw=dict(data),
+            help=data.get("help"),
+            unseen_links=data.get("unseen_links"),
         )
 
 
@@ -140,18 +144,25 @@ class KBClient:
         raise ProtocolError(f"{method} {path}: gave up after {self.retry.attempts} attempts ({problem})")
 
     # -- the API ---------------------------------------------------------------------------------------------
-    def create_object(self, name: str, links: int | Sequence[dict[str, Any]], orientations: int, formulation: str) -> dict[str, Any]:
-        body = {"name": name, "links": links if isinstance(links, int) else list(links),
-                "orientations": orientations, "formulation": formulation}
+    def create_object(self, name: str, links: int | Sequence[dict[str, Any]], orientations: int, formulation: str,
+                      base_point_xy: Sequence[float] | None = None) -> dict[str, Any]:
+        """Create an object; with `base_point_xy` ([x, y] metres) it is placed in the cell and checked geometrically."""
+        body: dict[str, Any] = {"name": name, "links": links if isinstance(links, int) else list(links),
+                                "orientations": orientations, "formulation": formulation}
+        if base_point_xy is not None:
+            body["base_point_xy"] = [float(v) for v in base_point_xy]
         return self._request("POST", "/objects", body)
 
     def set_goal(self, object_id: str, link_orientations_deg: Sequence[float] | None = None,
-                 joint_angles_deg: Sequence[float | None] | None = None) -> dict[str, Any]:
+                 joint_angles_deg: Sequence[float | None] | None = None,
+                 allow_infeasible: bool = False) -> dict[str, Any]:
         if (link_orientations_deg is None) == (joint_angles_deg is None):
             raise ProtocolError("goal: give exactly one of link_orientations_deg and joint_angles_deg")
-        body: dict[str, list[float | None]] = (
+        body: dict[str, Any] = (
             {"link_orientations_deg": list(link_orientations_deg)} if link_orientations_deg is not None
             else {"joint_angles_deg": list(joint_angles_deg or ())})
+        if allow_infeasible:
+            body["allow_infeasible"] = True
         return self._request("PUT", f"/objects/{object_id}/goal", body)
 
     def post_perception(self, object_id: str, link_orientations_deg: Sequence[float | None]) -> Decision:
@@ -167,13 +178,24 @@ class KBClient:
         return data
 
     def post_feedback(self, object_id: str, action_id: str, outcome: ActionOutcome | str,
-                      message: str = "") -> dict[str, Any]:
-        """Report the outcome of the dispatched action: succeeded, failed or partial."""
+                      message: str = "", reason: FailureReason | str | None = None,
+                      measured_deg: float | None = None) -> dict[str, Any]:
+        """Report the outcome of the dispatched action: succeeded, failed or partial, with why it failed (`reason`)
+        and the turned link's measured orientation after release (`measured_deg`)."""
         key = str(uuid.uuid4())
         body: dict[str, Any] = {"outcome": str(outcome)}
         if message:
             body["message"] = message
+        if reason is not None:
+            body["reason"] = str(reason)
+        if measured_deg is not None:
+            body["measured_deg"] = float(measured_deg)
         return self._request("POST", f"/objects/{object_id}/actions/{action_id}/feedback", body, key)
+
+    def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:
+        """Tell the service the worker stopped working on the object (`reason` a short code, `message` a
+        sentence); the service records it and answers `{"event_seq": ...}`."""
+        return self._request("POST", f"/objects/{object_id}/give-up", {"reason": reason, "message": message})
 
     def read_object(self, object_id: str) -> dict[str, Any]:
         return self._request("GET", f"/objects/{object_id}")

@@ -1,0 +1,136 @@
+"""Plans that stay on the table: the ordering of a plan's actions (pure) and the service that dispatches it.
+
+The service test runs the real pipeline (in-process planner, VAL on) behind the HTTP API, and executes the
+dispatched actions with the kinematic `move` of test_service_api, checking every configuration on the way.
+"""
+from __future__ import annotations
+
+import random
+import warnings
+
+import pytest
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")  # starlette's notice about httpx2
+    from fastapi.testclient import TestClient
+
+from planhrc import pipeline
+from planhrc.geometry import ObjectGeometry, configuration_feasible, rotated, sweep_feasible
+from planhrc.kb_service.app import create_app
+from planhrc.model import make_object
+from planhrc.ordering import Move, Placement, feasible_alternative, first_obstacle, order_moves
+from planhrc.settings import make_settings
+from tests.test_service_api import move
+
+FIVE = ObjectGeometry((0.155,) * 5)  # the cell's default placement: base point (0.6, 0.39)
+STRAIGHT = (90.0,) * 5  # every link along -y: the default scene's start
+# A held-out absolute goal whose planner order swings link 5 past the table's edge and into the robot at its
+# first action, while another order of the same five actions stays on the table.
+GOAL = [90, 135, 90, 45, 135]
+
+
+def turn(turned: int, delta: int) -> Move:
+    return Move("rotateclockwise" if delta > 0 else "rotateanticlockwise", turned, turned - 1, turned - 1, delta)
+
+
+def test_a_feasible_order_is_kept_and_an_infeasible_one_is_reordered():
+    feasible = [turn(5, 45), turn(5, 45)]
+    assert order_moves(Placement(FIVE, STRAIGHT), feasible).moves == tuple(feasible)
+    planned = [turn(3, -45), turn(4, 45)]  # l3 first swings links 3-5 forward: link 5 leaves the table
+    step, problem = first_obstacle(Placement(FIVE, STRAIGHT), planned)
+    assert step == 1 and problem is not None and "link 5 leaves the table" in problem.sentence()
+    answer = order_moves(Placement(FIVE, STRAIGHT), planned)
+    assert answer.moves == (turn(4, 45), turn(3, -45))
+    geometry, angles = FIVE, STRAIGHT
+    for m in answer.moves:
+        assert sweep_feasible(geometry, angles, m.turned, m.held, m.delta_deg).ok
+        geometry, angles = rotated(geometry, angles, m.turned, m.held, m.delta_deg)
+
+
+def test_no_order_names_the_obstacle_and_the_help_to_ask_for():
+    # link 5 ends beyond the robot's reach whatever the order
+    obj = make_object("o", "absolute", 5, 8)
+    goal = [90, 45, 135, 135, 180]
+    out = pipeline.plan(obj, obj.state([90] * 5), obj.configuration_atoms(goal))
+    moves = [pipeline.move_of(obj, s) for s in out.steps]
+    answer, added = feasible_alternative(Placement(FIVE, STRAIGHT), moves, obj.orientations)
+    assert not answer.found and added == 0
+    assert "link 5 unreachable" in answer.sentence()
+    assert [(h.link, h.to_deg) for h in answer.help] == [(5, 180)]
+    assert answer.help[0].sentence.startswith("turn link 5 to 180°")
+
+
+def test_problems_of_the_start_are_not_held_against_the_plan():
+    start = (90.0, 90.0, 90.0, 0.0, 0.0)  # a human pushed links 4-5 past the far edge
+    geometry = ObjectGeometry((0.155,) * 5)
+    assert not configuration_feasible(geometry, start).ok
+    back = [turn(4, 45), turn(4, 45)]  # the robot brings them back
+    assert order_moves(Placement(geometry, start), back).found
+
+
+def test_twenty_links_are_ordered_within_the_budget():
+    n, step = 20, 30
+    geometry = ObjectGeometry((0.05,) * n, (0.5, 0.55))
+    start = (90.0,) * n
+    rng = random.Random(7)
+    done = 0
+    while done < 5:
+        goal = [90.0]
+        for _ in range(n - 1):
+            goal.append((goal[-1] + rng.choice([-30, 0, 0, 30])) % 360)
+        if not configuration_feasible(geometry, goal).ok:
+            continue
+        moves = []
+        for k in range(2, n + 1):
+            d = ((goal[k - 1] - goal[k - 2]) + 180) % 360 - 180
+            moves += [turn(k, step if d > 0 else -step)] * int(abs(d) // step)
+        rng.shuffle(moves)
+        answer = order_moves(Placement(geometry, start), moves)
+        assert answer.found and sorted(map(repr, answer.moves)) == sorted(map(repr, moves))
+        done += 1
+
+
+@pytest.fixture
+def client():
+    with TestClient(create_app(make_settings(db_path=None, token=None, merge_macro_steps=True,
+                                             validate_plans=True))) as c:
+        yield c
+
+
+def test_the_service_dispatches_a_plan_whose_shortest_order_leaves_the_table_in_a_feasible_order(client):
+    obj = make_object("o", "absolute", 5, 8)
+    planned = pipeline.plan(obj, obj.state([90] * 5), obj.configuration_atoms(GOAL))  # the planner's own order
+    step, problem = first_obstacle(Placement(FIVE, STRAIGHT), [pipeline.move_of(obj, s) for s in planned.steps])
+    assert step is not None and problem is not None  # that order leaves the table
+
+    oid = client.post("/objects", json={"name": "rod", "links": 5, "orientations": 8, "formulation": "absolute",
+                                        "base_point_xy": [0.6, 0.39]}).json()["id"]
+    assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": GOAL}).json()["warnings"] == []
+    links = list(STRAIGHT)
+    decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).json()
+    assert decision["decision"] == "replan" and "stays on the table" in decision["reason"]
+    plan = client.get(f"/objects/{oid}/plan").json()
+    assert len(plan["steps"]) == len(planned.steps)  # as short as the planner's plan
+    events = client.get(f"/objects/{oid}/events").json()
+    assert events[-1]["data"]["ordering"].startswith("reordered")
+    for _ in range(20):
+        action = client.post(f"/objects/{oid}/actions/next").json()
+        if action is None:
+            break
+        grasped = {action["turned_link_index"], action["held_link_index"]} - {0}  # reach matters where it grasps
+        assert sweep_feasible(FIVE, links, action["turned_link_index"], action["held_link_index"],
+                              action["delta_deg"], reach_links=grasped).ok, (links, action)
+        links = move(links, action)
+        client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"})
+        decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).json()
+        if decision["decision"] == "goal_reached":
+            break
+    assert decision["decision"] == "goal_reached" and [v % 360 for v in links] == GOAL
+
+
+def test_an_abstract_object_is_not_checked(client):
+    oid = client.post("/objects", json={"name": "rod", "links": 4, "orientations": 4,
+                                        "formulation": "relative"}).json()["id"]
+    assert client.get(f"/objects/{oid}").json()["base_point_xy"] is None
+    answer = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 180, 180, 0]})
+    assert answer.status_code == 200 and answer.json()["warnings"] == []

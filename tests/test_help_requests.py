@@ -1,0 +1,228 @@
+"""Failures with reasons, the human asked, incomplete perceptions and a worker that gives up.
+
+The remedies of a repeated failure are a pure function (`cooperation.escalate`), tested on values; the service
+carries them out (tested in process, in-memory store, VAL on); the client reaches all of it over real HTTP.
+"""
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")  # starlette's notice about httpx2
+    from fastapi.testclient import TestClient
+
+from planhrc.client import KBClient
+from planhrc.cooperation import Decision, FailureHistory, escalate
+from planhrc.kb_service.app import create_app
+from planhrc.settings import make_settings
+from planhrc.vocabulary import DecisionKind, FailureReason, Remedy
+from tests.servers import serving
+
+PLACED = {"name": "rod", "links": 5, "orientations": 8, "base_point_xy": [0.6, 0.39]}
+STRAIGHT = [90, 90, 90, 90, 90]
+OUT_OF_REACH = [90, 45, 135, 135, 180]  # feasible on the table, but link 5 ends beyond the robot's reach
+
+
+@pytest.fixture
+def client():
+    with TestClient(create_app(make_settings(db_path=None, token=None, validate_plans=True))) as c:
+        yield c
+
+
+def placed(client, formulation: str = "relative") -> str:
+    return client.post("/objects", json={**PLACED, "formulation": formulation}).json()["id"]
+
+
+# -- the pure remedies --------------------------------------------------------------------------------------
+RETRY = Decision(DecisionKind.CONTINUE, 3, 3, "the perceived state is subsumed by s^e_3: retry a_3")
+
+
+def test_a_motion_failure_is_split_then_turned_the_other_way_then_replanned_then_handed_to_the_human():
+    history = FailureHistory(joint=4, turned=5, reason=FailureReason.STALL)
+    first = escalate(RETRY, history, (4, 5), macro_steps=2)
+    assert (first.kind, first.next_step, first.remedy) == (DecisionKind.CONTINUE, 3, Remedy.SPLIT)
+    second = escalate(RETRY, FailureHistory(4, 5, FailureReason.STALL, 2, (Remedy.SPLIT,)), (4, 5), 1)
+    assert (second.kind, second.remedy) == (DecisionKind.REPLAN, Remedy.OTHER_WAY) and "other way" in second.reason
+    third = escalate(RETRY, FailureHistory(4, 5, FailureReason.SLIP, 3, (Remedy.SPLIT, Remedy.OTHER_WAY)), (4, 5))
+    assert (third.kind, third.remedy) == (DecisionKind.REPLAN, Remedy.REPLAN)
+    fourth = escalate(RETRY, FailureHistory(4, 5, FailureReason.SLIP, 4,
+                                            (Remedy.SPLIT, Remedy.OTHER_WAY, Remedy.REPLAN)), (4, 5))
+    assert (fourth.kind, fourth.remedy, fourth.next_step) == (DecisionKind.HUMAN_HELP_REQUESTED, Remedy.ASK_HUMAN, 3)
+    # a single step has nothing to split: the other way round comes first
+    assert escalate(RETRY, history, (4, 5), macro_steps=1).remedy == Remedy.OTHER_WAY
+
+
+def test_out_of_reach_goes_to_the_human_at_once_and_other_failures_are_retried():
+    history = FailureHistory(4, 5, FailureReason.UNREACHABLE)
+    asked = escalate(RETRY, history, (4, 5), macro_steps=2, reachable=False)
+    assert asked.kind == DecisionKind.HUMAN_HELP_REQUESTED and "cannot reach" in asked.reason
+    assert escalate(RETRY, FailureHistory(4, 5, FailureReason.GRASP_LOST), (4, 5), 2) == RETRY
+    assert escalate(RETRY, history, (2, 3), 2) == RETRY  # another motion is next: nothing to answer
+    assert escalate(RETRY, None, (4, 5), 2) == RETRY
+
+
+# -- through the service ----------------------------------------------------------------------------------------
+def test_a_goal_out_of_reach_ends_in_human_help_requested_naming_the_link(client):
+    oid = placed(client, "absolute")
+    goal = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": OUT_OF_REACH}).json()
+    assert goal["warnings"] == [f"goal: link 5 unreachable: {0.01:.2f} m beyond reach"]
+    decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+    assert decision["decision"] == "human_help_requested" and decision["next_action"] is None
+    assert [(h["link"], h["to_deg"]) for h in decision["help"]] == [(5, 180)]
+    assert decision["help"][0]["sentence"].startswith("turn link 5 to 180°")
+    assert client.post(f"/objects/{oid}/actions/next").json() is None  # the execution waits
+    event = client.get(f"/objects/{oid}/events").json()[-1]
+    assert event["kind"] == "human_help_requested" and event["data"]["help"] == decision["help"]
+
+
+def test_an_infeasible_goal_is_refused_naming_the_links_unless_allowed(client):
+    oid = placed(client)
+    refused = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 0, 0, 0]})
+    assert refused.status_code == 422
+    assert refused.json()["detail"].startswith("goal: link 4 leaves the table") and "link 5" in refused.json()["detail"]
+    assert client.get(f"/objects/{oid}").json()["goal_state_id"] is None  # nothing stored
+    allowed = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 0, 0, 0],
+                                                         "allow_infeasible": True})
+    assert allowed.status_code == 200 and allowed.json()["warnings"][0].startswith("goal accepted although")
+
+
+def test_a_repeated_stall_is_not_retried_identically(client):
+    oid = placed(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 0]})  # link 5 by -90
+    seen, remedies, actions = [], [], []
+    for _ in range(6):
+        decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+        seen.append(decision["decision"])
+        remedies.append(client.get(f"/objects/{oid}/events").json()[-1]["data"].get("remedy"))
+        if decision["decision"] == "human_help_requested" and remedies[-1] == "ask_human":
+            break
+        action = client.post(f"/objects/{oid}/actions/next").json()
+        if action is None:
+            continue
+        actions.append((action["turned_link_index"], action["delta_deg"], action["macro_steps"]))
+        client.post(f"/objects/{oid}/actions/{action['id']}/feedback",
+                    json={"outcome": "failed", "reason": "stall", "message": "link 5 stalled at 90°",
+                          "measured_deg": 90.4})
+    assert actions[0] == (5, -90, 2)  # one 90° macro step
+    assert seen[1] == "continue" and remedies[1] == "split" and actions[1] == (5, -45, 1)  # then its steps one by one
+    assert remedies[2] == "other_way"  # then the other way round (here it folds link 5 onto link 4: the human)
+    assert "replan" in remedies and remedies[-1] == "ask_human" and seen[-1] == "human_help_requested"
+    last = client.get(f"/objects/{oid}/events").json()[-1]
+    assert [(h["link"], h["to_deg"]) for h in last["data"]["help"]] == [(5, 0)]
+    feedback = [e for e in client.get(f"/objects/{oid}/events").json() if e["kind"] == "feedback"][0]
+    assert feedback["data"]["reason"] == "stall" and feedback["data"]["measured_deg"] == 90.4
+    assert feedback["data"]["message"] == "link 5 stalled at 90°" and "[stall]" in feedback["reason"]
+    # while the human is asked, the same perception asks again rather than dispatching the failing motion
+    again = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+    assert again["decision"] == "human_help_requested" and again["next_action"] is None
+    # the human did it: the plan goes on to the goal
+    done = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [90, 90, 90, 90, 0]}).json()
+    assert done["decision"] == "goal_reached"
+
+
+def test_an_incomplete_perception_changes_nothing_and_stores_no_state(client):
+    oid = placed(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 45]})
+    first = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+    before = (client.get(f"/objects/{oid}").json(), client.get(f"/objects/{oid}/plan").json(),
+              client.get("/health").json()["triples"])
+    answer = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [90, 90, None, 90, None]})
+    assert answer.status_code == 200
+    body = answer.json()
+    assert (body["decision"], body["next_action"], body["perceived_state_id"], body["plan_id"]) == (
+        "incomplete_perception", None, None, None)
+    assert body["unseen_links"] == [3, 5] and body["reason"] == "links 3 and 5 were not seen: look again"
+    after = (client.get(f"/objects/{oid}").json(), client.get(f"/objects/{oid}/plan").json(),
+             client.get("/health").json()["triples"])
+    assert after == before
+    event = client.get(f"/objects/{oid}/events").json()[-1]
+    assert event["kind"] == "incomplete_perception" and event["data"]["unseen_links"] == [3, 5]
+    # the plan goes on as if the incomplete perception had not come
+    action = client.post(f"/objects/{oid}/actions/next").json()
+    assert action["id"] == first["next_action"]["id"]
+
+
+def test_a_worker_that_gives_up_is_recorded_and_nothing_stays_dispatched(client):
+    oid = placed(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 45]})
+    client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT})
+    action = client.post(f"/objects/{oid}/actions/next").json()
+    answer = client.post(f"/objects/{oid}/give-up", json={"reason": "repeated_failure",
+                                                          "message": "a_1 failed three times"})
+    assert answer.status_code == 200
+    event = client.get(f"/objects/{oid}/events").json()[-1]
+    assert event["seq"] == answer.json()["event_seq"] and event["kind"] == "worker_gave_up"
+    assert event["data"]["reason"] == "repeated_failure" and event["data"]["dropped_action_id"] == action["id"]
+    execution = client.get(f"/objects/{oid}").json()["execution"]
+    assert execution["status"] == "idle" and execution["dispatched_action_id"] is None
+    assert client.post(f"/objects/{oid}/actions/next").json() is None
+    late = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "failed"})
+    assert late.status_code == 409  # the dropped action takes no feedback
+    again = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+    assert again["decision"] in ("continue", "resume") and again["next_action"]["id"] == action["id"]
+
+
+@pytest.mark.parametrize("path, body, field", [
+    ("/objects", {**PLACED, "formulation": "relative", "base_point_xy": [0.6]}, "base_point_xy"),
+    ("/objects", {**PLACED, "formulation": "relative", "base_point_xy": [0.6, "x"]}, "base_point_xy[1]"),
+    ("/objects", {**PLACED, "formulation": "relative", "base_point_xy": [60, 0]}, "base_point_xy[0]"),
+    ("{obj}/goal", {"link_orientations_deg": STRAIGHT, "allow_infeasible": "maybe"}, "allow_infeasible"),
+    ("{obj}/perceptions", {"link_orientations_deg": [None] * 5}, "link_orientations_deg"),
+    ("{obj}/perceptions", {"link_orientations_deg": [None, 90]}, "link_orientations_deg"),
+    ("{obj}/actions/{act}/feedback", {"outcome": "failed", "reason": "tired"}, "reason"),
+    ("{obj}/actions/{act}/feedback", {"outcome": "succeeded", "reason": "stall"}, "reason"),
+    ("{obj}/actions/{act}/feedback", {"outcome": "partial", "measured_deg": "far"}, "measured_deg"),
+    ("{obj}/actions/{act}/feedback", {"outcome": "partial", "measured_deg": 1e9}, "measured_deg"),
+    ("{obj}/give-up", {"message": "stopped"}, "reason"),
+    ("{obj}/give-up", {"reason": "Gave Up!", "message": "stopped"}, "reason"),
+    ("{obj}/give-up", {"reason": "stuck", "message": "x" * 2001}, "message"),
+    ("{obj}/give-up", {"reason": "stuck", "message": ""}, "message"),
+])
+def test_bad_input_for_every_new_field_is_a_422_naming_it_and_changes_nothing(client, path, body, field):
+    oid = placed(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 45]})
+    client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT})
+    action = client.post(f"/objects/{oid}/actions/next").json()
+    events = client.get(f"/objects/{oid}/events").json()
+    url = path.format(obj=f"/objects/{oid}", act=action["id"])
+    answer = client.put(url, json=body) if url.endswith("/goal") else client.post(url, json=body)
+    assert answer.status_code == 422, answer.text
+    assert field in answer.json()["detail"]
+    assert client.get(f"/objects/{oid}/events").json() == events
+
+
+def test_the_openapi_documents_the_new_fields_and_routes(client):
+    spec = client.get("/openapi.json").json()
+    schemas = spec["components"]["schemas"]
+    assert set(schemas["FeedbackCreate"]["properties"]) >= {"reason", "measured_deg", "message"}
+    assert set(schemas["DecisionPublic"]["properties"]) >= {"help", "unseen_links"}
+    assert set(schemas["HelpRequestPublic"]["properties"]) == {"link", "to_deg", "sentence"}
+    assert "base_point_xy" in schemas["ObjectCreate"]["properties"]
+    assert "allow_infeasible" in schemas["GoalUpdate"]["properties"]
+    assert "warnings" in schemas["GoalPublic"]["properties"]
+    assert set(schemas["FailureReason"]["enum"]) == {r.value for r in FailureReason}
+    assert {"human_help_requested", "incomplete_perception"} <= set(schemas["DecisionKind"]["enum"])
+    give_up = spec["paths"]["/objects/{object_id}/give-up"]["post"]
+    assert {"200", "404", "409", "422"} <= set(give_up["responses"])
+
+
+def test_the_client_reaches_all_of_it_over_http(tmp_path):
+    with serving(tmp_path / "kb.sqlite3") as base, KBClient(base) as kb:
+        oid = kb.create_object("rod", 5, 8, "absolute", base_point_xy=(0.6, 0.39))["id"]
+        assert kb.read_object(oid)["base_point_xy"] == [0.6, 0.39]
+        assert kb.set_goal(oid, OUT_OF_REACH)["warnings"]
+        unseen = kb.post_perception(oid, [90, None, 90, 90, 90])
+        assert unseen.decision == DecisionKind.INCOMPLETE_PERCEPTION and unseen.unseen_links == [2]
+        asked = kb.post_perception(oid, STRAIGHT)
+        assert asked.decision == DecisionKind.HUMAN_HELP_REQUESTED
+        assert asked.help is not None and asked.help[0]["link"] == 5
+        kb.set_goal(oid, [90, 90, 90, 90, 45])
+        decision = kb.post_perception(oid, STRAIGHT)
+        action = kb.next_action(oid)
+        assert decision.next_action is not None and action is not None
+        kb.post_feedback(oid, action["id"], "partial", "slipped", reason=FailureReason.SLIP, measured_deg=70.0)
+        event = kb.read_events(oid)[-1]
+        assert (event["data"]["reason"], event["data"]["measured_deg"]) == ("slip", 70.0)
+        assert kb.give_up(oid, "repeated_failure", "stopped")["event_seq"] == event["seq"] + 1
