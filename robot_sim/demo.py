@@ -33,6 +33,7 @@ from planhrc.cli_args import http_url, non_negative_int, positive_int, writable_
 from planhrc.client import KBClient, ProtocolError, RetryPolicy
 from planhrc.geometry import configuration_feasible
 from planhrc.robot_sim.scene import SceneSpec, SimError, is_feasible, random_orientations
+from planhrc.vocabulary import DecisionKind
 
 log = logging.getLogger(__name__)
 
@@ -186,16 +187,16 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
                 perception: str, max_steps: int, seed: int) -> dict:
     from planhrc.robot_sim.worker import run_worker
 
+    spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg,
+                     base_point_xy=scenario.base_point_xy)
     with KBClient(kb_url, token=token) as kb:
-        obj = kb.create_object(scenario.name, len(scenario.initial_deg), scenario.orientations, scenario.formulation)
+        obj = create_placed_object(kb, scenario, spec.base_xy)
         print(f"[demo] watch {scenario.name} live: {kb_url}/?object={obj['id']}", flush=True)
-        spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg,
-                         base_point_xy=scenario.base_point_xy)
         summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
                              token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
                              seed=seed, kb=kb)
         events = kb.read_events(obj["id"])
-    decisions = [e for e in events if e["kind"] in ("goal_reached", "continue", "resume", "replan", "no_plan")]
+    decisions = [e for e in events if e["kind"] in {str(kind) for kind in DecisionKind}]
     counts = Counter(e["kind"] for e in decisions)
     actions = [s.action for s in summary.steps if s.action is not None]
     return {
@@ -221,16 +222,33 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         "failure_reasons": summary.failure_reasons,
         "stop_message": summary.stop_message,
         "human_assists": summary.human_assists,
+        "human_help_requests": summary.help_requests,
+        "help_requested": [sentence for s in summary.steps for sentence in s.help_requested],
         "human_moves_scheduled": summary.human_scheduled,
         "human_moves_performed": summary.human_performed,
         "seen_links": summary.seen_links,
         "unseen_links": summary.unseen_links,
+        "links_per_perception": [{"step": s.step, "seen": sum(v is not None for v in s.perceived_deg),
+                                  "unseen": list(s.missing_links), "looks": s.looks} for s in summary.steps],
         "action_s": [round(s.action_s, 3) for s in summary.steps if s.action is not None],
         "marker_error_deg": _marker_errors(summary),
         "states_off_table": _states_off_table(summary, spec),
         "decisions": [{"seq": e["seq"], "kind": e["kind"], "reason": e["reason"]} for e in decisions],
         "out_dir": str(out_dir),
     }
+
+
+def create_placed_object(kb: KBClient, scenario: DemoScenario, base_point_xy: tuple[float, float]) -> dict:
+    """Create the scenario's object where it lies on the table. A service that does not take `base_point_xy`
+    yet (422 naming it) gets the object without it, and checks geometry at its default place."""
+    args = (scenario.name, len(scenario.initial_deg), scenario.orientations, scenario.formulation)
+    try:
+        return kb.create_object(*args, base_point_xy=base_point_xy)
+    except ProtocolError as exc:
+        if exc.status != 422 or "base_point_xy" not in str(exc):
+            raise
+        log.warning("create object: the service refused base_point_xy (%s); created without it", exc)
+        return kb.create_object(*args)
 
 
 def _marker_errors(summary) -> list[float]:
@@ -268,6 +286,7 @@ def aggregate(results: list[dict]) -> dict:
         "failure_reasons": dict(reasons),
         "stop_reasons": dict(Counter(r["stop_reason"] for r in results)),
         "human_assists": sum(r["human_assists"] for r in results),
+        "human_help_requests": sum(r["human_help_requests"] for r in results),
         "human_moves": {"scheduled": sum(r["human_moves_scheduled"] for r in results),
                         "performed": sum(r["human_moves_performed"] for r in results)},
         "states_off_table": sum(r["states_off_table"] for r in results),

@@ -28,8 +28,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.geometry import configuration_feasible, rotated
-from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction
+from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction, turn_hazard
 
 log = logging.getLogger(__name__)
 
@@ -206,14 +205,16 @@ def _move(link: int, delta: float, what: str) -> HumanMove:
 def _feasible_after(scene: Scene, link: int, delta: float) -> bool:
     """Whether turning `link` keeps the object on the table, clear of the robot's body and not overlapping, all
     the way (the human reaches anywhere; whether the robot can reach afterwards is the robot's matter)."""
-    base, theta = scene.configuration()
-    geometry = scene.spec.geometry(base)
-    for i in range(1, 4):
-        placed, values = rotated(geometry, theta, link, link - 1, delta * i / 3)
-        result = configuration_feasible(placed, values, scene.spec.cell())
-        if any(r.code != "out_of_reach" for r in result.reasons):
-            return False
-    return True
+    return turn_hazard(scene, link, link - 1, delta) is None
+
+
+def safe_way(scene: Scene, turned: int, held: int, delta_deg: float) -> float | None:
+    """`delta_deg`, or the same turn the other way round when only that way is safe all along; None when
+    neither is (see `turn_hazard`)."""
+    if abs(delta_deg) < 1e-9 or turn_hazard(scene, turned, held, delta_deg) is None:
+        return delta_deg
+    other = delta_deg - math.copysign(360.0, delta_deg)
+    return other if turn_hazard(scene, turned, held, other) is None else None
 
 
 def choose_move(scene: Scene, event: HumanEvent, context: HumanContext) -> HumanMove | None:
@@ -273,10 +274,33 @@ def apply_event(human: Human, event: HumanEvent, context: HumanContext) -> str |
     return move.label
 
 
-def assist_failed_action(human: Human, turned_link: int, held_link: int, delta_deg: float) -> str:
-    """The human performs the rotation the robot could not (the paper's cooperation model), and finishes it."""
-    move = HumanMove(turned_link, held_link, delta_deg,
-                     f"human did the robot's failed action: l{turned_link} (holding l{held_link}) by {delta_deg:+g} deg")
+def assist_failed_action(human: Human, turned_link: int, held_link: int, delta_deg: float) -> str | None:
+    """The human performs the rotation the robot could not (the paper's cooperation model), the way round that
+    keeps the object safe, and finishes it; None (nothing done) when neither way is safe."""
+    delta = safe_way(human.scene, turned_link, held_link, delta_deg)
+    if delta is None:
+        log.info("human: turning l%d by %+g deg either way would harm the object; not done", turned_link, delta_deg)
+        return None
+    move = HumanMove(turned_link, held_link, delta,
+                     f"human did the robot's failed action: l{turned_link} (holding l{held_link}) by {delta:+g} deg")
+    human.start(move)
+    human.finish()
+    return move.label
+
+
+def help_turn(human: Human, link: int, to_deg: float) -> str | None:
+    """What the robot asked for (`human_help_requested`): turn link `link` about its joint with the link before
+    it (the table for l1) until it points at `to_deg`, the shorter way unless only the longer one is safe, and
+    finish; None when it points there already or no way is safe. The human looks at the object itself."""
+    now = human.scene.link_orientations_deg()[link - 1]
+    delta = (float(to_deg) - now + 180.0) % 360.0 - 180.0
+    if abs(delta) < 1.0:
+        return None
+    way = safe_way(human.scene, link, link - 1, delta)
+    if way is None:
+        log.info("human: turning l%d to %g deg either way would harm the object; not done", link, to_deg)
+        return None
+    move = HumanMove(link, link - 1, way, f"human helped: l{link} to {float(to_deg) % 360.0:g} deg ({way:+.0f} deg)")
     human.start(move)
     human.finish()
     return move.label

@@ -31,8 +31,7 @@ from typing import Callable, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.geometry import Cell, ObjectGeometry, RobotBody, Table, configuration_feasible
-from planhrc.geometry import Cell, ObjectGeometry, RobotBody, Table, configuration_feasible
+from planhrc.geometry import Cell, Infeasibility, ObjectGeometry, RobotBody, Table, configuration_feasible, rotated
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
@@ -314,6 +313,27 @@ class Scene:
 def is_feasible(spec: SceneSpec, orientations_deg: Sequence[float], base_point_xy: Sequence[float] | None = None) -> bool:
     """On the table, clear of the robot, within reach and not overlapping itself (`planhrc.geometry`)."""
     return configuration_feasible(spec.geometry(base_point_xy), orientations_deg, spec.cell()).ok
+
+
+HAZARDS = ("off_table", "inside_robot", "overlap")  # what a turn must not cause; reach is the robot's matter
+
+
+def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float,
+                increment_deg: float = 5.0) -> Infeasibility | None:
+    """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
+    somewhere along its sweep (a link past the table's edge, inside the robot, folded onto or across another
+    link), from the object's measured pose; None when the turn is safe. Problems the object already has
+    before the turn, and links out of the robot's reach, do not count."""
+    base, theta = scene.configuration()
+    geometry, cell = scene.spec.geometry(base), scene.spec.cell()
+    before = {(r.code, r.link) for r in configuration_feasible(geometry, theta, cell).reasons}
+    n = max(1, math.ceil(abs(delta_deg) / increment_deg))
+    for i in range(1, n + 1):
+        placed, values = rotated(geometry, theta, turned_link, held_link, delta_deg * i / n)
+        for reason in configuration_feasible(placed, values, cell).reasons:
+            if reason.code in HAZARDS and (reason.code, reason.link) not in before:
+                return reason
+    return None
 
 
 def random_orientations(

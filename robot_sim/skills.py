@@ -14,7 +14,6 @@ import logging
 import math
 import time
 from dataclasses import dataclass
-from enum import Enum
 from typing import Any, Callable, Mapping, Sequence, Union
 
 import numpy as np
@@ -22,6 +21,7 @@ import pybullet
 
 from planhrc.geometry import reach_shortfall
 from planhrc.vocabulary import ActionOutcome as Outcome
+from planhrc.vocabulary import FailureReason as Reason  # the words of a failure, shared with the service
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
@@ -37,17 +37,6 @@ from planhrc.robot_sim.scene import (
 )
 
 log = logging.getLogger(__name__)
-
-
-class Reason(str, Enum):
-    """Why an action did not do what it was asked (machine-readable; the sentence says the rest)."""
-
-    UNREACHABLE = "unreachable"
-    COLLISION = "collision"
-    SLIP = "slip"
-    STALL = "stall"
-    GRASP_LOST = "grasp_lost"
-    LEFT_TABLE = "left_table"
 
 
 @dataclass(frozen=True)
@@ -250,7 +239,7 @@ class Robot:
         reached_yaw = math.atan2(frame[1, 0], frame[0, 0])
         twist = abs(math.degrees((reached_yaw - yaw + math.pi) % (2 * math.pi) - math.pi))
         if error > self.tolerance_m or tilt > 10.0 or twist > max_twist_deg:
-            log.warning("IK: %s arm misses %s by %.3f m (tilt %.0f deg, twist %.0f deg)", arm,
+            log.debug("IK: %s arm misses %s by %.3f m (tilt %.0f deg, twist %.0f deg)", arm,
                         np.round(target, 3).tolist(), error, tilt, twist)
             return None, max(error, 0.01 if error <= self.tolerance_m else error)
         return solution, error
@@ -297,6 +286,7 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command 
                 for arm, q in saved.items():
                     set_arm_joints(scene, arm, q)
         assert worst is not None
+        log.warning("cannot plan %s: %s", action.name or f"turning l{action.turned_link}", worst.message)
         return worst
     finally:
         for arm, q in saved.items():

@@ -35,14 +35,13 @@ from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
 from planhrc.client import KBClient, ProtocolError
-from planhrc.geometry import sweep_feasible
 from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action,
-                                     get_scenario, goal_differences)
+                                     get_scenario, goal_differences, help_turn, safe_way)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
-from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene
-from planhrc.robot_sim.skills import ActionResult, Outcome, Robot, RotationAction, perform_action
+from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene, turn_hazard
+from planhrc.robot_sim.skills import ActionResult, Outcome, Reason, Robot, RotationAction, perform_action
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +63,8 @@ class StepRecord:
     reached_deg: float | None = None
     human_during: tuple[str, ...] = ()
     human_assist: str | None = None
+    help_requested: tuple[str, ...] = ()  # human_help_requested: the service's sentences, in order
+    measured_deg: float | None = None  # after a failed or partial action: the turned link, as perceived again
     looks: int = 1
     perception_s: float = 0.0
     service_s: float = 0.0
@@ -97,6 +98,10 @@ class WorkerSummary:
     @property
     def human_assists(self) -> int:
         return sum(1 for s in self.steps if s.human_assist)
+
+    @property
+    def help_requests(self) -> int:
+        return sum(1 for s in self.steps if s.decision == "human_help_requested")
 
     @property
     def seen_links(self) -> int:
@@ -280,9 +285,10 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
     else the worker gives up, and says so to the service in the feedback of that action."""
     step = 1
     unseen_in_a_row = 0
+    helpless = 0  # help requests in a row the human could do nothing about
     carried: list[str] = []  # human moves made while the robot idled at the goal, reported with the next step
     # signature of a failed action -> (its sentence, whether it was also tried in single steps)
-    failed: dict[tuple[int, int, float, int], tuple[str, bool]] = {}
+    failed: dict[tuple[int, int, float, int], tuple[str, bool, Reason | None]] = {}
     while step <= max_steps:
         human_before, carried = carried, []
         for index, event in _events(scenario, run, step, "before"):
@@ -299,10 +305,10 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         except ProtocolError as exc:
             if seen.complete or exc.status is None or exc.status >= 500:
                 raise
-            # the service does not take a perception with unseen links: look again later, without guessing
-            unseen_in_a_row += 1
+            # a service that takes no perception with unseen links: look again later, without guessing
             decision = None
             log.warning("perception with unseen links %s refused (%s)", seen.missing_links, exc)
+        incomplete = decision is None or decision.decision == "incomplete_perception"
         t2 = time.perf_counter()
         frame = seen.frame if seen.frame is not None or not record_frames else camera.render()
         if frame is not None:
@@ -311,7 +317,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         base_xy, theta = scene.configuration()
         run.configurations.append(tuple(round(v, 3) for v in theta))
         run.base_points.append(base_xy)
-        kind = decision.decision if decision is not None else "incomplete_perception"
+        kind = "incomplete_perception" if decision is None else str(decision.decision)
         run.labels.append(f"{step}: {kind}")
         base: dict[str, Any] = dict(step=step, human_before=tuple(human_before),
                     perceived_deg=tuple(None if v is None else round(v, 2) for v in values),
@@ -320,16 +326,38 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                     f"links {list(seen.missing_links)} not seen", looks=seen.looks,
                     matched_expected_step=decision.matched_expected_step if decision is not None else None,
                     perception_s=t1 - t0, service_s=t2 - t1)
-        if decision is None:
+        if incomplete:
+            # the head has turned to look again already; nothing is filled in from elsewhere
+            unseen_in_a_row += 1
             run.records.append(StepRecord(**base))
             if unseen_in_a_row >= max_unseen:
                 run.stop_message = f"links {list(seen.missing_links)} not seen in {max_unseen} perceptions"
+                _give_up(kb, object_id, "unseen_links", run.stop_message)
                 return "unseen_links"
             scene.step(30)  # a quarter of a second: whatever covers a marker may move away
             step += 1
             continue
         unseen_in_a_row = 0
         log.info("step %d: %s (%s)", step, decision.decision, decision.reason)
+
+        if decision.decision == "human_help_requested":
+            requests = tuple(str(item.get("sentence") or f"turn link {item.get('link')} to {item.get('to_deg')} deg")
+                             for item in decision.help or ())
+            if scenario.assists_after_failures is None:
+                run.records.append(StepRecord(**base, help_requested=requests))
+                run.stop_message = f"the robot asked for help and no human helps: {decision.reason}"
+                _give_up(kb, object_id, "no_human_help", run.stop_message)
+                return "no_human_help"
+            helped = [label for item in decision.help or ()
+                    if (label := help_turn(human, int(item["link"]), float(item["to_deg"]))) is not None]
+            run.records.append(StepRecord(**base, help_requested=requests, human_assist="; ".join(helped) or None))
+            helpless = 0 if helped else helpless + 1
+            if helpless >= max_unseen:
+                run.stop_message = f"the human could not do what was asked ({'; '.join(requests)})"
+                _give_up(kb, object_id, "human_could_not_help", run.stop_message)
+                return "gave_up"
+            step += 1
+            continue
 
         if decision.decision == "goal_reached":
             run.records.append(StepRecord(**base))
@@ -395,34 +423,44 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
             sentence = failed[signature][0]
             if scenario.assists_after_failures is not None:
                 # the paper: when the robot cannot do an action, the human does it on the robot's behalf
-                done_way = way_round(scene, action)
-                assist = assist_failed_action(human, done_way.turned_link, done_way.held_link, done_way.delta_deg)
-                message = f"robot did not retry ({sentence}); the human did it"
+                assist = assist_failed_action(human, action.turned_link, action.held_link, action.delta_deg)
+                message = (f"robot did not retry ({sentence}); "
+                           + ("the human did it" if assist else "the human could not do it safely either"))
+                reason = failed[signature][2]
                 if action.action_id is not None:
-                    kb.post_feedback(object_id, action.action_id, "failed", message)
+                    _feedback(kb, object_id, action.action_id, Outcome.FAILED, message, reason)
                 failed.pop(signature)
-                run.records.append(StepRecord(**base, action=dict(data), outcome="failed", outcome_reason=None,
+                run.records.append(StepRecord(**base, action=dict(data), outcome="failed",
+                                              outcome_reason=reason.value if reason else None,
                                               outcome_message=message, human_during=tuple(human_during),
                                               human_assist=assist, action_s=t4 - t3))
                 step += 1
                 continue
             run.stop_message = f"gave up on {action.name or 'the action'}: {sentence}"
             if action.action_id is not None:
-                kb.post_feedback(object_id, action.action_id, "failed", f"worker gives up: {sentence}")
+                _feedback(kb, object_id, action.action_id, Outcome.FAILED, f"worker gives up: {sentence}",
+                          failed[signature][2])
+            _give_up(kb, object_id, "repeated_failure", run.stop_message)
             run.records.append(StepRecord(**base, action=dict(data), outcome="failed", outcome_message=run.stop_message,
                                           human_during=tuple(human_during), action_s=t4 - t3))
             return "gave_up"
         if result.outcome is Outcome.PARTIAL:
             context.partial = (action.turned_link, action.held_link, result.commanded_deg - result.reached_deg)
         message = result.message if result.reason is None else f"{result.reason.value}: {result.message}"
+        measured = None
+        if result.outcome is not Outcome.SUCCEEDED:
+            # where the turned link ended, as the robot sees it (the camera looks again; unseen stays None)
+            again = perceiver.look()
+            measured = again.link_orientations_deg[action.turned_link - 1]
         if action.action_id is not None:
-            kb.post_feedback(object_id, action.action_id, result.outcome.value, message)
+            _feedback(kb, object_id, action.action_id, result.outcome, message, result.reason, measured)
         if result.outcome is Outcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
-            failed[signature] = (result.message, len(parts or ()) > 1 or action.macro_steps <= 1)
+            failed[signature] = (result.message, len(parts or ()) > 1 or action.macro_steps <= 1, result.reason)
         run.records.append(StepRecord(**base, action=dict(data), outcome=result.outcome.value,
                                       outcome_reason=result.reason.value if result.reason else None,
+                                      measured_deg=None if measured is None else round(measured, 2),
                                       outcome_message=result.message, reached_deg=round(result.reached_deg, 2),
                                       human_during=tuple(human_during), human_assist=assist, action_s=t4 - t3))
         log.info("step %d: %s -> %s (%s)", step, action, result.outcome.value, result.message)
@@ -432,28 +470,37 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
 
 def way_round(scene: Scene, action: RotationAction) -> RotationAction:
     """The action, or the same turn the other way round when only that way keeps the object on the table, clear
-    of the robot and of itself all along (`planhrc.geometry.sweep_feasible`): both end in the same orientation."""
-    base, theta = scene.configuration()
-    geometry, cell = scene.spec.geometry(base), scene.spec.cell()
-    turn = (action.turned_link, action.held_link)
-    if sweep_feasible(geometry, theta, *turn, action.delta_deg, cell=cell).ok:
-        return action
-    other = action.delta_deg - math.copysign(360.0, action.delta_deg)
-    if not sweep_feasible(geometry, theta, *turn, other, cell=cell).ok:
+    of the robot and of itself all along (`scene.turn_hazard`): both end in the same orientation."""
+    delta = safe_way(scene, action.turned_link, action.held_link, action.delta_deg)
+    if delta is None or delta == action.delta_deg:
         return action
     step = abs(action.delta_deg) / max(1, action.macro_steps)
     log.info("turning l%d the other way round (%+g deg instead of %+g): that way stays on the table",
-             action.turned_link, other, action.delta_deg)
-    return replace(action, delta_deg=other, macro_steps=max(1, round(abs(other) / step)))
+             action.turned_link, delta, action.delta_deg)
+    return replace(action, delta_deg=delta, macro_steps=max(1, round(abs(delta) / step)))
+
+
+def refuse_unsafe(scene: Scene, action: RotationAction) -> ActionResult | None:
+    """A FAILED result, nothing moved, when the turn would put the object in harm's way either way round (a
+    link past the table's edge, inside the robot, folded onto another); None when it is safe to try."""
+    hazard = turn_hazard(scene, action.turned_link, action.held_link, action.delta_deg)
+    if hazard is None:
+        return None
+    reason = Reason.LEFT_TABLE if hazard.code == "off_table" else Reason.COLLISION
+    log.warning("not turning l%d by %+g deg: %s", action.turned_link, action.delta_deg, hazard.message)
+    return ActionResult(Outcome.FAILED, reason, f"not started: turning link {action.turned_link} by "
+                        f"{action.delta_deg:+g} deg either way round would end with {hazard.message}",
+                        action.delta_deg, 0.0)
 
 
 def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt, stop_fraction):
-    """Perform the single steps of an action one after the other; stop at the first that does not succeed.
-    The result covers them all: the turn reached is their sum."""
+    """Perform the single steps of an action one after the other; stop at the first that does not succeed or
+    would not be safe. The result covers them all: the turn reached is their sum."""
     reached = 0.0
     result = None
     for part in parts:
-        result = perform_action(scene, robot, part, interrupt=interrupt, stop_fraction=stop_fraction)
+        result = refuse_unsafe(scene, part) or perform_action(scene, robot, part, interrupt=interrupt,
+                                                              stop_fraction=stop_fraction)
         reached += result.reached_deg
         if result.outcome is not Outcome.SUCCEEDED:
             break
@@ -465,6 +512,32 @@ def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], 
     if outcome is Outcome.FAILED and abs(reached) > 1.0:
         outcome = Outcome.PARTIAL
     return ActionResult(outcome, result.reason, f"in single steps: {result.message}", total, reached)
+
+
+def _feedback(kb: KBClient, object_id: str, action_id: str, outcome: Outcome, message: str,
+              reason: Reason | None = None, measured_deg: float | None = None) -> None:
+    """Post an action's outcome with its reason and measured angle (for a failed or partial one). A service
+    that does not know those fields yet (422 naming them) gets the outcome and the sentence alone."""
+    reason = None if outcome is Outcome.SUCCEEDED else reason
+    try:
+        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
+    except ProtocolError as exc:
+        if exc.status != 422 or (reason is None and measured_deg is None) or not re.search(
+                r"\b(reason|measured_deg)\b", str(exc)):
+            raise
+        log.warning("feedback: the service refused reason/measured_deg (%s); sending the sentence alone", exc)
+        kb.post_feedback(object_id, action_id, outcome.value, message)
+
+
+def _give_up(kb: KBClient, object_id: str, reason: str, message: str) -> None:
+    """Tell the service the worker stops (it records it); a service without the call is told in the log only."""
+    log.warning("giving up on %s: %s", object_id, message)
+    try:
+        kb.give_up(object_id, reason, message[:500])
+    except ProtocolError as exc:
+        if exc.status not in (404, 405):
+            raise
+        log.warning("give-up: the service does not take it (%s)", exc)
 
 
 # -- records ---------------------------------------------------------------------------------------------
