@@ -319,11 +319,12 @@ HAZARDS = ("off_table", "inside_robot", "overlap")  # what a turn must not cause
 
 
 def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float,
-                increment_deg: float = 5.0) -> Infeasibility | None:
+                increment_deg: float = 5.0, overhang_m: float = 0.03) -> Infeasibility | None:
     """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
-    somewhere along its sweep (a link past the table's edge, inside the robot, folded onto or across another
-    link), from the object's measured pose; None when the turn is safe. Problems the object already has
-    before the turn, and links out of the robot's reach, do not count."""
+    somewhere along its sweep (a link past the table's edge by more than `overhang_m`, which a bar lying on the
+    table bears, inside the robot, folded onto or across another link), from the object's measured pose; None
+    when the turn is safe. Problems the object already has before the turn, and links out of the robot's
+    reach, do not count."""
     base, theta = scene.configuration()
     geometry, cell = scene.spec.geometry(base), scene.spec.cell()
     before = {(r.code, r.link) for r in configuration_feasible(geometry, theta, cell).reasons}
@@ -331,6 +332,8 @@ def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float
     for i in range(1, n + 1):
         placed, values = rotated(geometry, theta, turned_link, held_link, delta_deg * i / n)
         for reason in configuration_feasible(placed, values, cell).reasons:
+            if reason.code == "off_table" and reason.distance_m <= overhang_m:
+                continue
             if reason.code in HAZARDS and (reason.code, reason.link) not in before:
                 return reason
     return None

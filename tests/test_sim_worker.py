@@ -19,8 +19,10 @@ GOAL = [90, 90, 90, 135, 45]  # three single steps, every configuration on the w
 class GreedyKB:
     """Plans one step at a time: the first joint whose relative angle is off the goal turns by one step."""
 
-    def __init__(self, goal):
+    def __init__(self, goal, accept_unseen=False, help_first=None):
         self.goal = [g % 360 for g in goal]
+        self.accept_unseen = accept_unseen  # as the contract says: unseen links answered incomplete_perception
+        self.help_first = help_first  # help items answered to the first perception (human_help_requested)
         self.pending = None
         self.counter = 0
         self.log = []
@@ -60,8 +62,18 @@ class GreedyKB:
                 kb.log.append(("POST", self.path, dict(self.headers), body))
                 if self.path.endswith("/perceptions"):
                     values = body["link_orientations_deg"]
-                    if None in values:  # as the service does today: a perception must be complete
+                    if None in values and kb.accept_unseen:
+                        unseen = [i + 1 for i, v in enumerate(values) if v is None]
+                        self._reply(200, {"decision": "incomplete_perception", "plan_id": None, "next_action": None,
+                                          "matched_expected_step": None, "unseen_links": unseen,
+                                          "reason": f"links {unseen} were not seen: look again"})
+                    elif None in values:  # a service that takes complete perceptions only
                         self._reply(422, {"detail": f"link_orientations_deg.{values.index(None)}: not a number"})
+                    elif kb.help_first is not None:
+                        help_items, kb.help_first = kb.help_first, None
+                        self._reply(200, {"decision": "human_help_requested", "plan_id": "p1", "next_action": None,
+                                          "matched_expected_step": None, "help": help_items,
+                                          "reason": "the robot cannot reach link 4"})
                     else:
                         self._reply(200, kb.decide(values))
                 elif self.path == "/objects/o1/actions/next":
@@ -132,8 +144,13 @@ def test_partial_rotation_is_reported_and_the_human_completes_it(kb, tmp_path):
     assert feedback[1]["outcome"] == "partial"
     # the turning gripper let go half-way: the reason, and the angle reached measured after release
     assert feedback[1]["message"].startswith("grasp_lost: the ")
+    assert feedback[1]["reason"] == "grasp_lost" and "reason" not in feedback[0]
     partial = [s for s in summary.steps if s.outcome == "partial"][0]
     assert partial.outcome_reason == "grasp_lost" and 10 < abs(partial.reached_deg) < 35
+    # the turned link's orientation after release, as perceived again: where it was plus the turn reached
+    turned = partial.action["turned_link_index"]
+    before = summary.steps[summary.steps.index(partial)].true_deg[turned - 1]
+    assert abs((feedback[1]["measured_deg"] - before - partial.reached_deg + 180) % 360 - 180) < 4
 
 
 def test_a_disturbance_after_the_goal_is_repaired(kb, tmp_path):
@@ -209,3 +226,41 @@ def test_a_turn_goes_the_other_way_round_when_only_that_way_stays_clear():
     finally:
         scene.close()
         client.disconnect()
+
+
+def test_a_service_that_takes_unseen_links_is_asked_again_and_told_when_the_worker_gives_up(tmp_path):
+    kb = GreedyKB(GOAL, accept_unseen=True)
+    try:
+        summary = run_worker(kb.url, "o1", SceneSpec(unmarked_links=(3,)), "none", tmp_path, max_steps=10)
+    finally:
+        kb.close()
+    posted = [b["link_orientations_deg"] for m, path, _, b in kb.log if path.endswith("/perceptions")]
+    assert len(posted) == 3 and all(p[2] is None and None not in p[:2] + p[3:] for p in posted)
+    assert [s.decision for s in summary.steps] == ["incomplete_perception"] * 3
+    assert summary.stop_reason == "unseen_links"
+    gave_up = [b for m, path, _, b in kb.log if path == "/objects/o1/give-up"]
+    assert gave_up == [{"reason": "unseen_links", "message": "links [3] not seen in 3 perceptions"}]
+
+
+@pytest.mark.parametrize("helps", [True, False])
+def test_a_help_request_is_done_by_the_visible_human_or_the_worker_says_it_gives_up(tmp_path, helps):
+    kb = GreedyKB(GOAL, help_first=[{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"}])
+    scenario = Scenario("helping", assists_after_failures=2) if helps else Scenario("alone")
+    try:
+        summary = run_worker(kb.url, "o1", SceneSpec(), scenario, tmp_path, max_steps=10, perception="fallback",
+                             record_frames=False)
+    finally:
+        kb.close()
+    first = summary.steps[0]
+    assert first.decision == "human_help_requested" and first.help_requested == ("turn link 4 to 135°",)
+    assert summary.help_requests == 1
+    gave_up = [b for m, path, _, b in kb.log if path == "/objects/o1/give-up"]
+    if helps:
+        assert first.human_assist.startswith("human helped: l4 to 135 deg")
+        # the human turned l4 (and l5 with it) about p4; the robot then did the rest
+        assert abs((summary.configurations[1][3] - 135 + 180) % 360 - 180) < 8
+        assert summary.reached_goal and not gave_up
+        assert summary.steps[1].action["turned_link_index"] == 5  # l4 is where the goal wants it already
+    else:
+        assert summary.stop_reason == "no_human_help" and not summary.reached_goal
+        assert gave_up and gave_up[0]["reason"] == "no_human_help"
