@@ -424,8 +424,10 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
             if scenario.assists_after_failures is not None:
                 # the paper: when the robot cannot do an action, the human does it on the robot's behalf
                 assist = assist_failed_action(human, action.turned_link, action.held_link, action.delta_deg)
-                message = (f"robot did not retry ({sentence}); "
-                           + ("the human did it" if assist else "the human could not do it safely either"))
+                if assist is None:
+                    sentence = f"{sentence}; the human could not do it safely either"
+            if assist is not None:
+                message = f"robot did not retry ({sentence}); the human did it"
                 reason = failed[signature][2]
                 if action.action_id is not None:
                     _feedback(kb, object_id, action.action_id, Outcome.FAILED, message, reason)
