@@ -99,15 +99,24 @@ def random_goal(rng: np.random.Generator, spec: SceneSpec, start: Sequence[float
 def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interventions: int = 3) -> DemoScenario:
     """A random feasible start (not always straight), a goal drawn uniformly from the feasible configurations
     with 3 or more links changed (seeded), either formulation, and `interventions` random human moves at
-    random moments anywhere on the chain (each keeps the object feasible)."""
+    random moments anywhere on the chain (each keeps the object feasible).
+
+    A straight start lies where a straight object fits (the scene's default place); any other start has its base
+    point drawn in the middle of the table, between the arms, where both can work on the links around it."""
     rng = np.random.default_rng(seed)
-    spec = SceneSpec(n_links=n_links)
     formulation = ("relative", "absolute")[seed % 2]
     step = 360.0 / orientations
-    start = spec.orientations0 if rng.random() < 0.25 else random_orientations(rng, spec, step_deg=step)
+    if rng.random() < 0.25:
+        spec = SceneSpec(n_links=n_links)
+        start = spec.orientations0
+    else:
+        base = (round(float(rng.uniform(0.5, 0.65)), 3), round(float(rng.uniform(-0.15, 0.15)), 3))
+        spec = SceneSpec(n_links=n_links, base_point_xy=base)
+        start = random_orientations(rng, spec, step_deg=step)
     goal = random_goal(rng, spec, start, formulation, orientations)
     return DemoScenario(f"random-{seed}", formulation, orientations, tuple(start), goal,
-                        f"random:{seed}:{interventions}", "random start, goal and human interventions")
+                        f"random:{seed}:{interventions}", "random start, goal and human interventions",
+                        base_point_xy=spec.base_xy)
 
 
 def free_port() -> int:

@@ -38,10 +38,11 @@ def test_random_scenarios_start_anywhere_change_several_links_and_the_human_acts
     for sc in scenarios:
         changed = sum(1 for a, b in zip(sc.initial_deg, sc.goal_deg) if abs(angle_difference_deg(a, b)) > 1e-6)
         assert 3 <= changed <= 10, sc
-        assert configuration_feasible(spec.geometry(), sc.goal_deg, spec.cell()).ok
-        assert configuration_feasible(spec.geometry(), sc.initial_deg, spec.cell()).ok
+        assert configuration_feasible(spec.geometry(sc.base_point_xy), sc.goal_deg, spec.cell()).ok
+        assert configuration_feasible(spec.geometry(sc.base_point_xy), sc.initial_deg, spec.cell()).ok
         if sc.formulation == "relative":
             assert sc.goal_deg[0] == sc.initial_deg[0]
     assert sum(sc.initial_deg != (90.0,) * 5 for sc in scenarios) >= 5  # not always straight
+    assert len({sc.base_point_xy for sc in scenarios}) >= 5  # nor always in the same place
     links = {e.link for sc in scenarios for e in get_scenario(sc.human).events}
     assert links == {1, 2, 3, 4, 5}
