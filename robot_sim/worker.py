@@ -348,8 +348,9 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                 run.stop_message = f"the robot asked for help and no human helps: {decision.reason}"
                 _give_up(kb, object_id, "no_human_help", run.stop_message)
                 return "no_human_help"
-            helped = [label for item in decision.help or ()
-                    if (label := help_turn(human, int(item["link"]), float(item["to_deg"]))) is not None]
+            # upstream first: turning a link carries the ones beyond it, whose targets are absolute
+            helped = [label for item in sorted(decision.help or (), key=lambda item: int(item["link"]))
+                      if (label := help_turn(human, int(item["link"]), float(item["to_deg"]))) is not None]
             run.records.append(StepRecord(**base, help_requested=requests, human_assist="; ".join(helped) or None))
             helpless = 0 if helped else helpless + 1
             if helpless >= max_unseen:
