@@ -30,11 +30,15 @@ def service_url():
 @pytest.mark.parametrize("formulation", ["relative", "absolute"])
 def test_fig14_run_reaches_the_goal_through_the_service(service_url, tmp_path, formulation):
     from planhrc.client import KBClient
+    from planhrc.robot_sim.demo import DEMO_SCENARIOS
+    from planhrc.robot_sim.scene import SceneSpec
     from planhrc.robot_sim.worker import run_worker
 
+    # where the demo places it: the plan's first action swings l2-l5 towards the far edge, and there they fit
+    spec = SceneSpec(base_point_xy=DEMO_SCENARIOS["fig14"].base_point_xy)
     with KBClient(service_url, token="tok") as kb:
         obj = kb.create_object("rod", 5, 8, formulation)
-        summary = run_worker(service_url, obj["id"], None, "fig14", tmp_path, max_steps=10, token="tok",
+        summary = run_worker(service_url, obj["id"], spec, "fig14", tmp_path, max_steps=10, token="tok",
                              perception="fallback", goal_link_orientations_deg=[90, 45, 90, 135, 90],
                              record_frames=False, kb=kb)
     assert summary.reached_goal, summary.decisions
@@ -52,7 +56,8 @@ def test_worker_survives_a_restart_of_the_service_and_no_perception_counts_twice
     import sys
     from pathlib import Path
 
-    from planhrc.robot_sim.demo import free_port
+    from planhrc.robot_sim.demo import DEMO_SCENARIOS, free_port
+    from planhrc.robot_sim.scene import SceneSpec
     from planhrc.client import KBClient, ProtocolError, RetryPolicy
     from planhrc.robot_sim.worker import run_worker
 
@@ -82,7 +87,9 @@ def test_worker_survives_a_restart_of_the_service_and_no_perception_counts_twice
         result = {}
 
         def work():
-            result["summary"] = run_worker(url, obj["id"], None, "none", tmp_path / "w", max_steps=15, token="tok",
+            # placed where this goal's plan stays on the table (see the fig14 test above)
+            spec = SceneSpec(base_point_xy=DEMO_SCENARIOS["fig14"].base_point_xy)
+            result["summary"] = run_worker(url, obj["id"], spec, "none", tmp_path / "w", max_steps=15, token="tok",
                                            perception="fallback",
                                            goal_link_orientations_deg=[90, 45, 90, 135, 90], record_frames=False,
                                            kb=kb)
