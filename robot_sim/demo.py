@@ -199,7 +199,9 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
     spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg,
                      base_point_xy=scenario.base_point_xy)
     with KBClient(kb_url, token=token) as kb:
-        obj = create_placed_object(kb, scenario, spec.base_xy)
+        # placed where the scene puts it: the service checks its plans there
+        obj = kb.create_object(scenario.name, len(scenario.initial_deg), scenario.orientations,
+                               scenario.formulation, base_point_xy=spec.base_xy)
         print(f"[demo] watch {scenario.name} live: {kb_url}/?object={obj['id']}", flush=True)
         summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
                              token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
@@ -245,19 +247,6 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         "decisions": [{"seq": e["seq"], "kind": e["kind"], "reason": e["reason"]} for e in decisions],
         "out_dir": str(out_dir),
     }
-
-
-def create_placed_object(kb: KBClient, scenario: DemoScenario, base_point_xy: tuple[float, float]) -> dict:
-    """Create the scenario's object where it lies on the table. A service that does not take `base_point_xy`
-    yet (422 naming it) gets the object without it, and checks geometry at its default place."""
-    args = (scenario.name, len(scenario.initial_deg), scenario.orientations, scenario.formulation)
-    try:
-        return kb.create_object(*args, base_point_xy=base_point_xy)
-    except ProtocolError as exc:
-        if exc.status != 422 or "base_point_xy" not in str(exc):
-            raise
-        log.warning("create object: the service refused base_point_xy (%s); created without it", exc)
-        return kb.create_object(*args)
 
 
 def _marker_errors(summary) -> list[float]:

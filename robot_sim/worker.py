@@ -300,15 +300,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         seen = _perceive(perceiver)
         t1 = time.perf_counter()
         values = seen.link_orientations_deg
-        try:
-            decision = kb.post_perception(object_id, values)
-        except ProtocolError as exc:
-            if seen.complete or exc.status is None or exc.status >= 500:
-                raise
-            # a service that takes no perception with unseen links: look again later, without guessing
-            decision = None
-            log.warning("perception with unseen links %s refused (%s)", seen.missing_links, exc)
-        incomplete = decision is None or decision.decision == "incomplete_perception"
+        decision = kb.post_perception(object_id, values)
         t2 = time.perf_counter()
         frame = seen.frame if seen.frame is not None or not record_frames else camera.render()
         if frame is not None:
@@ -317,16 +309,14 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         base_xy, theta = scene.configuration()
         run.configurations.append(tuple(round(v, 3) for v in theta))
         run.base_points.append(base_xy)
-        kind = "incomplete_perception" if decision is None else str(decision.decision)
+        kind = str(decision.decision)
         run.labels.append(f"{step}: {kind}")
         base: dict[str, Any] = dict(step=step, human_before=tuple(human_before),
                     perceived_deg=tuple(None if v is None else round(v, 2) for v in values),
                     true_deg=tuple(round(v, 2) for v in theta), missing_links=seen.missing_links,
-                    decision=kind, reason=decision.reason if decision is not None else
-                    f"links {list(seen.missing_links)} not seen", looks=seen.looks,
-                    matched_expected_step=decision.matched_expected_step if decision is not None else None,
-                    perception_s=t1 - t0, service_s=t2 - t1)
-        if incomplete:
+                    decision=kind, reason=decision.reason, looks=seen.looks,
+                    matched_expected_step=decision.matched_expected_step, perception_s=t1 - t0, service_s=t2 - t1)
+        if decision.decision == "incomplete_perception":
             # the head has turned to look again already; nothing is filled in from elsewhere
             unseen_in_a_row += 1
             run.records.append(StepRecord(**base))
@@ -519,28 +509,17 @@ def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], 
 
 def _feedback(kb: KBClient, object_id: str, action_id: str, outcome: Outcome, message: str,
               reason: Reason | None = None, measured_deg: float | None = None) -> None:
-    """Post an action's outcome with its reason and measured angle (for a failed or partial one). A service
-    that does not know those fields yet (422 naming them) gets the outcome and the sentence alone."""
-    reason = None if outcome is Outcome.SUCCEEDED else reason
-    try:
-        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
-    except ProtocolError as exc:
-        if exc.status != 422 or (reason is None and measured_deg is None) or not re.search(
-                r"\b(reason|measured_deg)\b", str(exc)):
-            raise
-        log.warning("feedback: the service refused reason/measured_deg (%s); sending the sentence alone", exc)
-        kb.post_feedback(object_id, action_id, outcome.value, message)
+    """Post an action's outcome with its sentence and, for a failed or partial one, its reason and the turned
+    link's measured orientation."""
+    if outcome is Outcome.SUCCEEDED:
+        reason, measured_deg = None, None
+    kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
 
 
 def _give_up(kb: KBClient, object_id: str, reason: str, message: str) -> None:
-    """Tell the service the worker stops (it records it); a service without the call is told in the log only."""
+    """Tell the service the worker stops (it records the reason and dispatches nothing until a perception)."""
     log.warning("giving up on %s: %s", object_id, message)
-    try:
-        kb.give_up(object_id, reason, message[:500])
-    except ProtocolError as exc:
-        if exc.status not in (404, 405):
-            raise
-        log.warning("give-up: the service does not take it (%s)", exc)
+    kb.give_up(object_id, reason, message[:500])
 
 
 # -- records ---------------------------------------------------------------------------------------------

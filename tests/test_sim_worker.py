@@ -19,9 +19,8 @@ GOAL = [90, 90, 90, 135, 45]  # three single steps, every configuration on the w
 class GreedyKB:
     """Plans one step at a time: the first joint whose relative angle is off the goal turns by one step."""
 
-    def __init__(self, goal, accept_unseen=False, help_first=None):
+    def __init__(self, goal, help_first=None):
         self.goal = [g % 360 for g in goal]
-        self.accept_unseen = accept_unseen  # as the contract says: unseen links answered incomplete_perception
         self.help_first = help_first  # help items answered to the first perception (human_help_requested)
         self.pending = None
         self.counter = 0
@@ -62,13 +61,11 @@ class GreedyKB:
                 kb.log.append(("POST", self.path, dict(self.headers), body))
                 if self.path.endswith("/perceptions"):
                     values = body["link_orientations_deg"]
-                    if None in values and kb.accept_unseen:
+                    if None in values:  # as the service does: unseen links change nothing
                         unseen = [i + 1 for i, v in enumerate(values) if v is None]
                         self._reply(200, {"decision": "incomplete_perception", "plan_id": None, "next_action": None,
                                           "matched_expected_step": None, "unseen_links": unseen,
                                           "reason": f"links {unseen} were not seen: look again"})
-                    elif None in values:  # a service that takes complete perceptions only
-                        self._reply(422, {"detail": f"link_orientations_deg.{values.index(None)}: not a number"})
                     elif kb.help_first is not None:
                         help_items, kb.help_first = kb.help_first, None
                         self._reply(200, {"decision": "human_help_requested", "plan_id": "p1", "next_action": None,
@@ -192,6 +189,8 @@ def test_an_unseen_link_is_posted_unseen_and_never_filled_from_the_simulator(kb,
     assert summary.stop_reason == "unseen_links" and not summary.reached_goal
     assert summary.unseen_links == 3 and summary.seen_links == 12
     assert all(s.decision == "incomplete_perception" and s.looks == 3 for s in summary.steps)
+    gave_up = [b for m, path, _, b in kb.log if path == "/objects/o1/give-up"]  # and the service is told
+    assert gave_up == [{"reason": "unseen_links", "message": "links [3] not seen in 3 perceptions"}]
 
 
 def test_a_failure_is_not_retried_the_same_way_and_the_worker_gives_up_out_loud(kb, tmp_path):
@@ -226,20 +225,6 @@ def test_a_turn_goes_the_other_way_round_when_only_that_way_stays_clear():
     finally:
         scene.close()
         client.disconnect()
-
-
-def test_a_service_that_takes_unseen_links_is_asked_again_and_told_when_the_worker_gives_up(tmp_path):
-    kb = GreedyKB(GOAL, accept_unseen=True)
-    try:
-        summary = run_worker(kb.url, "o1", SceneSpec(unmarked_links=(3,)), "none", tmp_path, max_steps=10)
-    finally:
-        kb.close()
-    posted = [b["link_orientations_deg"] for m, path, _, b in kb.log if path.endswith("/perceptions")]
-    assert len(posted) == 3 and all(p[2] is None and None not in p[:2] + p[3:] for p in posted)
-    assert [s.decision for s in summary.steps] == ["incomplete_perception"] * 3
-    assert summary.stop_reason == "unseen_links"
-    gave_up = [b for m, path, _, b in kb.log if path == "/objects/o1/give-up"]
-    assert gave_up == [{"reason": "unseen_links", "message": "links [3] not seen in 3 perceptions"}]
 
 
 @pytest.mark.parametrize("helps", [True, False])
