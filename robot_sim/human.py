@@ -28,7 +28,8 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction, turn_hazard
+from planhrc.geometry import rotated
+from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction, new_hazards, turn_hazard
 
 log = logging.getLogger(__name__)
 
@@ -288,22 +289,40 @@ def assist_failed_action(human: Human, turned_link: int, held_link: int, delta_d
     return move.label
 
 
-def help_turn(human: Human, link: int, to_deg: float) -> str | None:
-    """What the robot asked for (`human_help_requested`): turn link `link` about its joint with the link before
-    it (the table for l1) until it points at `to_deg`, the shorter way unless only the longer one is safe, and
-    finish; None when it points there already or no way is safe. The human looks at the object itself."""
-    now = human.scene.link_orientations_deg()[link - 1]
-    delta = (float(to_deg) - now + 180.0) % 360.0 - 180.0
-    if abs(delta) < 1.0:
+def help_turns(human: Human, requests: Sequence[tuple[int, float]]) -> list[str] | None:
+    """What the robot asked for (`human_help_requested`): turn each link `link` about its joint with the link
+    before it (the table for l1) until it points at `to_deg`, upstream links first, and finish; the labels of
+    the moves made (empty when every link points there already), or None, nothing done, when the object would
+    end past the table's edge, inside the robot or folded. Unlike the robot, a human lifts a link over another
+    and holds the one it turns: only the end matters, and the way round that keeps clear of the robot's body.
+    The human looks at the object itself."""
+    scene = human.scene
+    base, theta = scene.configuration()
+    geometry, values = scene.spec.geometry(base), tuple(theta)
+    ordered = sorted((int(link), float(to_deg)) for link, to_deg in requests)
+    for link, to_deg in ordered:
+        geometry, values = rotated(geometry, values, link, link - 1, _shorter(to_deg - values[link - 1]))
+    harm = new_hazards(scene, geometry, values)
+    if harm:
+        log.info("human: the requested turns would end with %s; not done", harm[0].message)
         return None
-    way = safe_way(human.scene, link, link - 1, delta)
-    if way is None:
-        log.info("human: turning l%d to %g deg either way would harm the object; not done", link, to_deg)
-        return None
-    move = HumanMove(link, link - 1, way, f"human helped: l{link} to {float(to_deg) % 360.0:g} deg ({way:+.0f} deg)")
-    human.start(move)
-    human.finish()
-    return move.label
+    labels = []
+    for link, to_deg in ordered:
+        delta = _shorter(to_deg - scene.link_orientations_deg()[link - 1])
+        if abs(delta) < 1.0:
+            continue
+        other = delta - math.copysign(360.0, delta)
+        clear = turn_hazard(scene, link, link - 1, delta, hazards=("inside_robot",)) is None
+        way = delta if clear or turn_hazard(scene, link, link - 1, other, hazards=("inside_robot",)) else other
+        move = HumanMove(link, link - 1, way, f"human helped: l{link} to {to_deg % 360.0:g} deg ({way:+.0f} deg)")
+        human.start(move)
+        human.finish()
+        labels.append(move.label)
+    return labels
+
+
+def _shorter(delta_deg: float) -> float:
+    return (delta_deg + 180.0) % 360.0 - 180.0
 
 
 # -- the human's body: two hands that grasp and turn links on the physics clock --------------------------------

@@ -69,7 +69,7 @@ class SceneSpec:
     joint_friction_nm: float = 1.0  # stiff enough that the links beyond a turned one move with it (A1)
     joint_damping: float = 0.05
     unmarked_links: tuple[int, ...] = ()  # links whose marker is painted over (the camera cannot see them)
-    table_friction: float = 0.3  # Bullet multiplies the two bodies' coefficients: the links have 1.0
+    table_friction: float = 0.15  # Bullet multiplies the two bodies' coefficients: the links have 1.0
 
     def __post_init__(self) -> None:
         if self.n_links < 1:
@@ -319,12 +319,13 @@ HAZARDS = ("off_table", "inside_robot", "overlap")  # what a turn must not cause
 
 
 def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float,
-                increment_deg: float = 5.0, overhang_m: float = 0.03) -> Infeasibility | None:
+                increment_deg: float = 5.0, overhang_m: float = 0.03,
+                hazards: Sequence[str] = HAZARDS) -> Infeasibility | None:
     """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
     somewhere along its sweep (a link past the table's edge by more than `overhang_m`, which a bar lying on the
     table bears, inside the robot, folded onto or across another link), from the object's measured pose; None
     when the turn is safe. Problems the object already has before the turn, and links out of the robot's
-    reach, do not count."""
+    reach, do not count; `hazards` narrows what counts."""
     base, theta = scene.configuration()
     geometry, cell = scene.spec.geometry(base), scene.spec.cell()
     before = {(r.code, r.link) for r in configuration_feasible(geometry, theta, cell).reasons}
@@ -334,9 +335,19 @@ def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float
         for reason in configuration_feasible(placed, values, cell).reasons:
             if reason.code == "off_table" and reason.distance_m <= overhang_m:
                 continue
-            if reason.code in HAZARDS and (reason.code, reason.link) not in before:
+            if reason.code in hazards and (reason.code, reason.link) not in before:
                 return reason
     return None
+
+
+def new_hazards(scene: Scene, geometry: ObjectGeometry, orientations_deg: Sequence[float]) -> tuple[Infeasibility, ...]:
+    """The problems (`HAZARDS`) the object placed as `geometry` with `orientations_deg` would have that it does
+    not have now (measured)."""
+    base, theta = scene.configuration()
+    cell = scene.spec.cell()
+    before = {(r.code, r.link) for r in configuration_feasible(scene.spec.geometry(base), theta, cell).reasons}
+    return tuple(r for r in configuration_feasible(geometry, orientations_deg, cell).reasons
+                 if r.code in HAZARDS and (r.code, r.link) not in before)
 
 
 def random_orientations(

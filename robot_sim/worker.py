@@ -36,7 +36,7 @@ from pybullet_utils.bullet_client import BulletClient
 from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
 from planhrc.client import KBClient, ProtocolError
 from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action,
-                                     get_scenario, goal_differences, help_turn, safe_way)
+                                     get_scenario, goal_differences, help_turns, safe_way)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
@@ -338,10 +338,8 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                 run.stop_message = f"the robot asked for help and no human helps: {decision.reason}"
                 _give_up(kb, object_id, "no_human_help", run.stop_message)
                 return "no_human_help"
-            # upstream first: turning a link carries the ones beyond it, whose targets are absolute
-            helped = [label for item in sorted(decision.help or (), key=lambda item: int(item["link"]))
-                      if (label := help_turn(human, int(item["link"]), float(item["to_deg"]))) is not None]
-            run.records.append(StepRecord(**base, help_requested=requests, human_assist="; ".join(helped) or None))
+            helped = help_turns(human, [(int(item["link"]), float(item["to_deg"])) for item in decision.help or ()])
+            run.records.append(StepRecord(**base, help_requested=requests, human_assist="; ".join(helped or ()) or None))
             helpless = 0 if helped else helpless + 1
             if helpless >= max_unseen:
                 run.stop_message = f"the human could not do what was asked ({'; '.join(requests)})"
