@@ -74,4 +74,5 @@ def ntriples(db: sqlite3.Connection, abox_iri: str, abox_c: int, static_fact_of:
     subjects = sorted(reachable(db, abox_c, roots + statics) | set(ontology))
     for i in range(0, len(subjects), _CHUNK):
         chunk: list[Any] = subjects[i:i + _CHUNK]
-        yield from ntriple_lines(db, f"t.c = ? AND t.s IN ({','.join('?' * len(chunk))})", [abox_c] + chunk)
+        yield from ntriple_lines(db, f"t.c = ? AND t.s IN ({','.join('?' * len(chunk))})", [abox_c] + chunk,
+                                 by_subject=True)
