@@ -10,8 +10,11 @@ import logging
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, FastAPI, Header, Query, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match, Route
 
 import planhrc
 from planhrc.translator.errors import TranslationError
@@ -64,6 +67,20 @@ NEXT_ACTION_MOVED = ("GET /objects/{object_id}/next-action was removed (a GET mu
 router = APIRouter(responses={401: ERRORS[401], 404: ERRORS[404], 422: ERRORS[422]})
 
 
+def links(status: int, targets: dict[str, tuple[str, str, dict[str, str]]]) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI links of a success response: name -> (path, method, {parameter: runtime expression}), so a client
+    (and the contract test's stateful phase) knows which answer feeds which request."""
+    def ref(path: str, method: str) -> str:
+        return "#/paths/" + path.replace("~", "~0").replace("/", "~1") + "/" + method
+    return {status: {"links": {name: {"operationRef": ref(path, method), "parameters": parameters}
+                               for name, (path, method, parameters) in targets.items()}}}
+
+
+OBJECT = "/objects/{object_id}"
+NEW_OBJECT = {"object_id": "$response.body#/id"}
+SAME_OBJECT = {"object_id": "$request.path.object_id"}
+
+
 # -- dependencies -----------------------------------------------------------------------------------------
 def get_orchestrator(request: Request) -> Orchestrator:
     return request.app.state.orchestrator
@@ -81,7 +98,13 @@ WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for stat
 
 # -- objects ------------------------------------------------------------------------------------------------
 @router.post("/objects", status_code=201, response_model=ObjectPublic, dependencies=Writer,
-             responses=WRITE_ERRORS, tags=["objects"])
+             responses={**WRITE_ERRORS, **links(201, {
+                 "read": (OBJECT, "get", NEW_OBJECT), "set_goal": (f"{OBJECT}/goal", "put", NEW_OBJECT),
+                 "perceive": (f"{OBJECT}/perceptions", "post", NEW_OBJECT),
+                 "take_next_action": (f"{OBJECT}/actions/next", "post", NEW_OBJECT),
+                 "events": (f"{OBJECT}/events", "get", NEW_OBJECT),
+                 "pddl_domain": (f"{OBJECT}/pddl/domain", "get", NEW_OBJECT)})},
+             tags=["objects"])
 def create_object(body: ObjectCreate, orch: Orch) -> dict[str, Any]:
     """Create an articulated object in the ABox."""
     links = body.links if isinstance(body.links, int) else [link.length_m for link in body.links]
@@ -102,7 +125,8 @@ def read_object(object_id: str, orch: Orch) -> dict[str, Any]:
 
 
 @router.put("/objects/{object_id}/goal", response_model=GoalPublic, dependencies=Writer,
-            responses=WRITE_ERRORS, tags=["cooperation"])
+            responses={**WRITE_ERRORS, **links(200, {"perceive": (f"{OBJECT}/perceptions", "post", SAME_OBJECT)})},
+            tags=["cooperation"])
 def update_goal(object_id: str, body: GoalUpdate, orch: Orch) -> dict[str, Any]:
     """Set the goal configuration.
 
@@ -117,7 +141,13 @@ def update_goal(object_id: str, body: GoalUpdate, orch: Orch) -> dict[str, Any]:
 
 
 @router.post("/objects/{object_id}/perceptions", response_model=DecisionPublic, dependencies=Writer,
-             responses=WRITE_ERRORS, tags=["cooperation"])
+             responses={**WRITE_ERRORS, **links(200, {
+                 "take_next_action": (f"{OBJECT}/actions/next", "post", SAME_OBJECT),
+                 "read_object_plan": (f"{OBJECT}/plan", "get", SAME_OBJECT),
+                 "pddl_problem": (f"{OBJECT}/pddl/problem", "get", SAME_OBJECT),
+                 "read_plan": ("/plans/{plan_id}", "get", {"plan_id": "$response.body#/plan_id"}),
+                 "read_state": ("/states/{state_id}", "get", {"state_id": "$response.body#/perceived_state_id"})})},
+             tags=["cooperation"])
 def create_perception(
     object_id: str,
     body: PerceptionCreate,
@@ -132,7 +162,10 @@ def create_perception(
 
 
 @router.post("/objects/{object_id}/actions/next", response_model=NextActionPublic | None, dependencies=Writer,
-             responses=WRITE_ERRORS, tags=["cooperation"])
+             responses={**WRITE_ERRORS, **links(200, {"feedback": (
+                 f"{OBJECT}/actions/{{action_id}}/feedback", "post",
+                 {**SAME_OBJECT, "action_id": "$response.body#/id"})})},
+             tags=["cooperation"])
 def take_next_action(object_id: str, orch: Orch) -> dict[str, Any] | None:
     """For workers: take the action to execute now, which is marked dispatched (taking it again returns the same
     action); null when there is none (no plan, goal reached, or the last action is done and a perception is due).
@@ -173,7 +206,8 @@ def create_give_up(object_id: str, body: GiveUpCreate, orch: Orch) -> dict[str, 
 
 
 # -- stored records -------------------------------------------------------------------------------------
-@router.get("/objects/{object_id}/plan", response_model=PlanPublic, tags=["records"])
+@router.get("/objects/{object_id}/plan", response_model=PlanPublic, tags=["records"], responses=links(200, {
+    "read_problem": ("/problems/{problem_id}", "get", {"problem_id": "$response.body#/problem_id"})}))
 def read_object_plan(object_id: str, orch: Orch) -> dict[str, Any]:
     """The plan being followed (or, when none is, the latest one), with its expected states."""
     return orch.current_plan(object_id)
@@ -290,6 +324,21 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ConflictError, handler(409))
     app.add_exception_handler(AuthError, handler(401))
     app.add_exception_handler(RequestValidationError, _request_validation_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+
+
+async def _http_error(request: Request, exc: Exception) -> Response:
+    """FastAPI's own answer, except that a 405's `Allow` lists every method of the path: the router names only
+    the methods of the first route whose path matched (`OPTIONS /objects` said `Allow: POST`, not `GET, POST`).
+    The service's routes are this module's router's (included without a prefix) and the app's own pages."""
+    assert isinstance(exc, StarletteHTTPException)  # registered for that type only
+    if exc.status_code == 405:
+        allowed = {method for route in (*router.routes, *request.app.router.routes)
+                   if isinstance(route, Route) and route.methods and route.matches(request.scope)[0] is not Match.NONE
+                   for method in route.methods}
+        exc = StarletteHTTPException(405, exc.detail, headers={**(exc.headers or {}),
+                                                             "Allow": ", ".join(sorted(allowed))})
+    return await http_exception_handler(request, exc)
 
 
 async def _request_validation_error(request: Request, exc: Exception) -> JSONResponse:

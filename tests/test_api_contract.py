@@ -1,13 +1,19 @@
 """The API contract is the API behaviour: schemathesis fuzzes every operation of a real `planhrc serve` process
 (token set) from its own `/openapi.json` and finds no 5xx and no answer outside the documented schemas.
 
-The path parameter `object_id` is pinned to a stored object with a goal, so generated goals and perceptions reach
-the cooperation model (and the planner) instead of stopping at a 404. A few examples per operation keep the run
-short; `PLANHRC_FUZZ_EXAMPLES` asks for more.
+Two runs. The first drives schemathesis's generator from Python with the path parameter `object_id` pinned to a
+stored object with a goal, so generated goals and perceptions reach the cooperation model (and the planner)
+instead of stopping at a 404. The second is the `schemathesis run` command with all four phases (the schema's
+examples, coverage of boundaries and invalid values, fuzzing, and stateful sequences that follow the OpenAPI
+links from `POST /objects` to the routes taking its id). A few examples per operation keep each run short;
+`PLANHRC_FUZZ_EXAMPLES` asks for more.
 """
 from __future__ import annotations
 
+import json
 import os
+import re
+import subprocess
 import sys
 from pathlib import Path
 from typing import Iterator
@@ -123,3 +129,71 @@ def test_error_bodies_are_the_documented_schema(service):
         assert r.status_code == status, (status, r.text)
         assert r.headers["content-type"].startswith("application/json")
         assert set(r.json()) == {"detail"} and r.json()["detail"], (status, r.text)
+
+
+# Every check of `schemathesis run` except `positive_data_acceptance`, which expects every schema-valid request to
+# be accepted: the service refuses some with a 422 naming the field for rules that hold between values and a JSON
+# schema cannot state (a perception has one value per link of *that* object, 360 must be divisible by K, a goal
+# gives exactly one of its two forms, `history=all` is for every object).
+CLI_EXCLUDED_CHECKS = ["positive_data_acceptance"]
+CLI_PHASES = ["examples", "coverage", "fuzzing", "stateful"]
+CLI_CONFIG = f"""
+generation.max-examples = {max(1, EXAMPLES // 2)}
+
+# Sequences are cheap (most requests are refused early): more of them, so that some reach a plan.
+[phases.stateful]
+max-steps = 10
+generation.max-examples = {5 * EXAMPLES}
+
+# The stateful phase follows the links the OpenAPI declares, not links schemathesis guesses from parameter names
+# (a guessed `POST /objects` -> `GET /objects/{{object_id}}/plan` expects a plan from a bare object).
+[phases.stateful.inference]
+algorithms = []
+
+[[operations]]
+include-path = "/objects/{{object_id}}/events/stream"
+parameters = {{ "query.timeout_s" = 0.2 }}  # a live stream must end: ask for a short one
+"""
+
+
+def test_every_schemathesis_phase_finds_nothing(tmp_path):
+    """`schemathesis run` over a fresh service: examples, coverage, fuzzing and stateful phases all pass, with
+    every check but one (see CLI_EXCLUDED_CHECKS); the stateful phase follows the declared links."""
+    (tmp_path / "schemathesis.toml").write_text(CLI_CONFIG)
+    report = tmp_path / "report.json"
+    with running_server(tmp_path / "kb.sqlite3", token=TOKEN) as client:
+        run = subprocess.run(
+            [str(Path(sys.executable).with_name("schemathesis")), "--config-file", str(tmp_path / "schemathesis.toml"),
+             "run", f"{client.base_url}/openapi.json", "--header", f"Authorization: Bearer {TOKEN}",
+             "--phases", ",".join(CLI_PHASES), "--checks", "all", "--exclude-checks", ",".join(CLI_EXCLUDED_CHECKS),
+             "--seed", "7", "--workers", "1", "--request-timeout", "60",
+             "--continue-on-failure", "--report", "json", "--report-json-path", str(report)],
+            cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    summary = json.loads(report.read_text())
+    output = run.stdout[-6000:] + run.stderr[-2000:]
+    assert run.returncode == 0 and not summary["failures"] and not summary["errors"], output
+    assert {name: phase["status"] for name, phase in summary["phases"].items()} == dict.fromkeys(CLI_PHASES, "success"), output
+    assert summary["operations"]["tested"] == summary["operations"]["total"] >= 15, summary["operations"]
+    covered = re.search(r"API Links:\s+(\d+) covered", run.stdout)  # the stateful phase followed links
+    assert covered and int(covered.group(1)) >= 3, output
+
+
+def test_the_openapi_links_lead_from_a_new_object_to_its_routes(service):
+    client, _ = service
+    doc = client.get("/openapi.json").json()
+    created = doc["paths"]["/objects"]["post"]["responses"]["201"]["links"]
+    taken = doc["paths"]["/objects/{object_id}/actions/next"]["post"]["responses"]["200"]["links"]
+    assert {"set_goal", "perceive", "take_next_action"} <= set(created)
+    assert taken["feedback"]["parameters"] == {"object_id": "$request.path.object_id", "action_id": "$response.body#/id"}
+    for link in (*created.values(), *taken.values()):
+        path, method = link["operationRef"].removeprefix("#/paths/").rsplit("/", 1)
+        assert method in doc["paths"][path.replace("~1", "/").replace("~0", "~")], link
+
+
+def test_a_405_names_every_method_of_the_path(service):
+    """A schemathesis finding: the router named only the first matching route's methods in `Allow`."""
+    client, oid = service
+    for method, path, allowed in (("OPTIONS", "/objects", "GET, POST"), ("DELETE", f"/objects/{oid}", "GET"),
+                                  ("GET", f"/objects/{oid}/actions/a1/feedback", "POST")):
+        r = client.request(method, path)
+        assert (r.status_code, r.headers.get("allow"), r.json()) == (405, allowed, {"detail": "Method Not Allowed"})
