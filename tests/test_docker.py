@@ -1,6 +1,8 @@
 """The images, checked without a Docker engine: dependency layers before sources, pinned by constraints.txt, a
 non-editable install, an unprivileged user, a build context without the checkout's clutter, and a service
-image without the simulator. hadolint and `docker compose config` run where they are installed."""
+image without the simulator. hadolint lints the Dockerfiles and check-jsonschema validates the compose file
+against the compose specification's schema (both from the test extra, offline); `docker compose config` runs too
+where the compose plugin is installed."""
 from __future__ import annotations
 
 import re
@@ -96,6 +98,27 @@ def test_hadolint_finds_nothing():
     result = subprocess.run([hadolint(), "--no-color", *(str(DOCKER / f"{i}.Dockerfile") for i in sorted(IMAGES))],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def compose_spec_errors(path: Path) -> subprocess.CompletedProcess[str]:
+    """check-jsonschema (test extra) with the compose-spec JSON schema it ships (`vendor.compose-spec`): nothing
+    is fetched."""
+    return subprocess.run([sys.executable, "-m", "check_jsonschema", "--builtin-schema", "vendor.compose-spec",
+                           "--no-cache", str(path)], capture_output=True, text=True, timeout=60)
+
+
+def test_the_compose_file_follows_the_compose_spec(tmp_path):
+    """`docker compose config` offline: the compose file against the compose specification's schema; a copy with
+    a misspelt key and a condition the spec does not know is refused, naming both."""
+    pytest.importorskip("check_jsonschema", reason="check-jsonschema (test extra) validates the compose file")
+    result = compose_spec_errors(DOCKER / "compose.yaml")
+    assert result.returncode == 0, result.stdout + result.stderr
+    broken = tmp_path / "compose.yaml"
+    broken.write_text((DOCKER / "compose.yaml").read_text().replace("read_only: true", "readonly: true", 1)
+                      .replace("condition: service_healthy", "condition: service_ready"))
+    result = compose_spec_errors(broken)
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "readonly" in result.stdout and "service_ready" in result.stdout, result.stdout
 
 
 def compose_available() -> bool:

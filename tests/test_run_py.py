@@ -111,3 +111,54 @@ def test_a_folder_that_is_not_a_venv_is_not_deleted(run_py):
     with pytest.raises(run_py.SetupError, match="does not look like a virtual environment"):
         run_py.ensure_environment()
     assert (run_py.VENV / "notes.txt").read_text() == "mine"
+
+
+def _pins() -> dict[str, str]:
+    from packaging.utils import canonicalize_name
+
+    out = {}
+    for line in (REPO / "constraints.txt").read_text().splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            name, _, version = line.partition("==")
+            out[canonicalize_name(name)] = version.strip()
+    return out
+
+
+def _required(extras: set[str]) -> dict[str, str]:
+    """Every distribution `planhrc[extras]` pulls in, with its installed version (read from the installed
+    distributions' metadata: the closure pip resolved)."""
+    from importlib import metadata
+
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    found: dict[str, str] = {}
+    todo = [("planhrc", frozenset(extras))]
+    done: set[tuple[str, frozenset[str]]] = set()
+    while todo:
+        name, wanted = todo.pop()
+        if (name, wanted) in done:
+            continue
+        done.add((name, wanted))
+        dist = metadata.distribution(name)
+        if name != "planhrc":
+            found[name] = dist.version
+        for text in dist.requires or []:
+            req = Requirement(text)
+            if req.marker and not any(req.marker.evaluate({"extra": e}) for e in (*wanted, "")):
+                continue
+            todo.append((canonicalize_name(req.name), frozenset(req.extras)))
+    return found
+
+
+def test_constraints_pin_everything_the_environment_installs():
+    """constraints.txt pins every distribution that planhrc with run.py's extras pulls in (mypy, schemathesis and
+    the linters of the test extra too), at the version installed here: a fresh `run.py setup` resolves nothing
+    new. `python3 ./run.py lock` rewrites the file."""
+    extras = set(load_run_py(REPO).EXTRAS.split(",")) | {"sim", "reasoner", "bench"}  # `all` names these
+    pins, required = _pins(), _required(extras)
+    missing = sorted(set(required) - set(pins))
+    assert not missing, f"not pinned in constraints.txt: {missing} (run `python3 ./run.py lock`)"
+    differ = {name: (pins[name], version) for name, version in required.items() if pins[name] != version}
+    assert not differ, f"constraints.txt pins other versions than installed: {differ}"
