@@ -12,8 +12,9 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validat
 from planhrc.model import Formulation
 from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason
 
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-TableCoordinate = Annotated[float, Field(allow_inf_nan=False, ge=-10.0, le=10.0)]  # metres from the robot
+# strict: a JSON number, as documented (pydantic's lax mode took `false` for 0.0 and "1.5" for 1.5)
+FiniteFloat = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+TableCoordinate = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-10.0, le=10.0)]  # metres from the robot
 MIN_LINKS, MAX_LINKS = 2, 200  # one bound for both forms of ObjectCreate.links
 SQLITE_MAX_INT = 2**63 - 1  # the largest integer the store (SQLite INTEGER) can hold: the bound of every count and seq
 

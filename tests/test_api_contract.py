@@ -197,3 +197,19 @@ def test_a_405_names_every_method_of_the_path(service):
                                   ("GET", f"/objects/{oid}/actions/a1/feedback", "POST")):
         r = client.request(method, path)
         assert (r.status_code, r.headers.get("allow"), r.json()) == (405, allowed, {"detail": "Method Not Allowed"})
+
+
+def test_numbers_are_json_numbers(service):
+    """A schemathesis finding: pydantic's lax mode took `false` for 0.0 (and "90" for 90.0) where the schema says
+    number, so a schema-violating body created an object."""
+    client, oid = service
+    before = client.get("/objects").json()
+    for path, body, field in (
+            ("/objects", {"links": 3, "orientations": 4, "formulation": "relative", "base_point_xy": [False, 0.0]},
+             "base_point_xy"),
+            ("/objects", {"links": [{"name": "l", "length_m": "0.1"}] * 3, "orientations": 4,
+                          "formulation": "relative"}, "links"),
+            (f"/objects/{oid}/perceptions", {"link_orientations_deg": ["90", 0, 0]}, "link_orientations_deg")):
+        r = client.post(path, json=body)
+        assert r.status_code == 422 and r.json()["detail"].startswith(field), (body, r.text)
+    assert client.get("/objects").json() == before
