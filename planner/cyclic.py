@@ -31,6 +31,7 @@ from typing import Any, Callable, Iterable, Mapping
 
 from planhrc.model import natural_key
 
+from .deadline import check as check_deadline
 from .pddl import Atom, format_sexpr
 from .recognise import Axis, CyclicTask
 from .result import PlanResult, PlanStatus
@@ -384,6 +385,7 @@ class GroundTask:
         dp: dict[int, int] = {0: 0}
         back: list[dict[int, tuple[int, tuple[int, int], int]]] = []
         for i in range(m):
+            check_deadline("planning (chain dynamic programme)")
             pair_dist, _ = search(tuple(sorted(pairs[i])), 2) if pairs[i] else zero_pair
             single_dist, _ = search(tuple(sorted(singles[i])), 1)
             new: dict[int, int] = {}
@@ -566,6 +568,7 @@ def _breadth_first(moves: tuple[tuple[int, ...], ...], k: int, dims: int) -> tup
     parent: dict[tuple[int, ...], tuple[tuple[int, ...], tuple[int, ...]] | None] = {start: None}
     frontier = [start]
     while frontier:
+        check_deadline("planning (breadth-first search over Z_K)")
         nxt = []
         for s in frontier:
             for mv in moves:

@@ -25,6 +25,7 @@ import logging
 from dataclasses import dataclass
 from typing import Iterator, Mapping
 
+from .deadline import check as check_deadline
 from .errors import PlannerError
 from .operators import EQUALITY, EffectBlock, Literal, Operator, normalise_domain
 from .pddl import Atom, Domain, Problem, format_sexpr
@@ -321,6 +322,7 @@ def _ground_operator(op: Operator, by_name: Mapping[str, StateVariablePredicate]
                        tuple(lit for lit in block.condition if _left(lit, values, by_name)), block))
     pre = tuple(lit for lit in op.precondition if _left(lit, values, by_name))
     for binding in plan.run(facts, {}):
+        check_deadline(f"grounding {where}")
         effects: list[GroundEffect] = []
         for block_plan, block_values, left, block in blocks:
             for inner in block_plan.run(facts, dict(binding)):

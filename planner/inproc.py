@@ -19,6 +19,7 @@ import time
 from functools import lru_cache
 
 from .cyclic import NAME, GroundTask
+from .deadline import DeadlineExceeded, within
 from .errors import PlannerError
 from .ground import LiftedTask, OutsideFamilyError, analyse, ground_lifted, owner_values
 from .pddl import Atom, Domain, Problem, parse_domain, parse_problem
@@ -84,10 +85,14 @@ class InprocPlanner:
     def solve(self, domain: str, problem: str, timeout_s: float) -> PlanResult:
         start = time.perf_counter()
         try:
-            task = cached_ground_task(domain, problem)
+            with within(timeout_s):  # grounding and solving check the clock (planner.deadline)
+                task = cached_ground_task(domain, problem)
+                result = task.solve_problem()
+        except DeadlineExceeded as exc:
+            elapsed = time.perf_counter() - start
+            return PlanResult(PlanStatus.TIMEOUT, (), elapsed, NAME, f"{exc} ({elapsed:.3f} s > {timeout_s} s)")
         except PlannerError as exc:
             return PlanResult(PlanStatus.ERROR, (), time.perf_counter() - start, NAME, str(exc))
-        result = task.solve_problem()
         elapsed = time.perf_counter() - start
         if elapsed > timeout_s:
             return PlanResult(PlanStatus.TIMEOUT, (), elapsed, NAME, f"took {elapsed:.3f} s > {timeout_s} s")

@@ -23,6 +23,7 @@ from typing import Mapping, Sequence
 
 from planhrc.model import natural_key
 
+from .deadline import check as check_deadline
 from .ground import GroundAction, GroundedProblem, OutsideFamilyError, StateVariablePredicate
 from .operators import EQUALITY, Literal
 from .pddl import Atom, format_sexpr
@@ -88,6 +89,7 @@ def recognise(grounded: GroundedProblem, init: frozenset[Atom]) -> CyclicTask:
     context = _Context(grounded, by_name, index, cycle, rotations)
     axes = []
     for action in grounded.actions:
+        check_deadline("recognising the ground actions")
         try:
             axis = context.axis(action)
         except _Never:

@@ -3,6 +3,10 @@
 The texts are written to a fresh temporary directory that is removed afterwards. A first, quiet run
 decides validity; only a failed plan is checked again verbosely to extract VAL's reason (the failing
 step, "Goal not satisfied", and its plan repair advice), so valid plans cost one quick call.
+
+`validate_pieces` checks several (problem, plan) pairs against one domain with one VAL process each, all at
+once: the pipeline cuts a long plan into pieces, each from an expected state to the next piece's start as an
+exact goal, so that the pieces together say what one run on the whole plan says (see `pipeline.validate`).
 """
 from __future__ import annotations
 
@@ -10,6 +14,7 @@ import logging
 import os
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -38,7 +43,7 @@ def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: flo
     binary = validate_binary()
     env = dict(os.environ)
     env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (str(binary.parent), env.get("LD_LIBRARY_PATH", "")) if p)
-    with tempfile.TemporaryDirectory(prefix="planhrc-val-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="planhrc-val-", dir=scratch_dir()) as tmp:
         d, p, pl = Path(tmp, "domain.pddl"), Path(tmp, "problem.pddl"), Path(tmp, "plan.txt")
         d.write_text(domain)
         p.write_text(problem)
@@ -51,6 +56,18 @@ def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: flo
             quiet.stdout + "\n" + quiet.stderr) or f"VAL exit code {quiet.returncode}"
     log.debug("VAL rejected the plan: %s", reason)
     return ValidationResult(False, reason, time.perf_counter() - start)
+
+
+def scratch_dir() -> str | None:
+    """Where VAL's three small files go: the temporary directory a caller chose (`tempfile.tempdir`), else
+    memory (`/dev/shm`) when there is one, else the system's default. On the development machines creating and
+    removing a directory on the disk costs 1-4 ms, in memory 0.02 ms: a tenth of a relative re-plan."""
+    if tempfile.tempdir is None and os.path.isdir(SHM) and os.access(SHM, os.W_OK | os.X_OK):
+        return SHM
+    return None
+
+
+SHM = "/dev/shm"
 
 
 def _run(cmd: list[str], env: dict[str, str], cwd: str, timeout_s: float) -> ProcessOutcome:
@@ -89,3 +106,21 @@ def extract_reason(output: str) -> str:
         if line not in seen:
             seen.append(line)
     return "\n".join(seen)
+
+
+def validate_pieces(domain: str, pieces: Sequence[tuple[str, Sequence[str]]], timeout_s: float = 60.0
+                    ) -> ValidationResult:
+    """VAL on every (problem, plan) piece at once, one process each (threads only wait for them): valid when
+    every piece is; otherwise the reason of the first piece, in order, that VAL refused, naming the piece."""
+    if not pieces:
+        raise PlannerError("pieces: nothing to validate")
+    start = time.perf_counter()
+    if len(pieces) == 1:
+        return validate_plan(domain, pieces[0][0], pieces[0][1], timeout_s)
+    with ThreadPoolExecutor(max_workers=len(pieces), thread_name_prefix="planhrc-val") as pool:
+        futures = [pool.submit(validate_plan, domain, problem, plan, timeout_s) for problem, plan in pieces]
+        results = [f.result() for f in futures]
+    for i, result in enumerate(results, start=1):
+        if not result.valid:
+            return ValidationResult(False, f"piece {i} of {len(pieces)}: {result.reason}", time.perf_counter() - start)
+    return ValidationResult(True, "Plan valid", time.perf_counter() - start)
