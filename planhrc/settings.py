@@ -39,6 +39,21 @@ class Settings(BaseSettings):
     )
     planner_timeout_s: float = Field(default=5.0, gt=0, description="Time limit of one planner call.")
     validate_plans: bool = Field(default=True, description="Check every plan with VAL before storing it.")
+    planning_deadline_s: float = Field(
+        default=10.0, gt=0, le=3600,
+        description="Time one request may spend planning and validating (VAL) a plan; a task that needs more "
+        "answers 503 with the reason instead of holding its object for minutes.",
+    )
+    val_pieces: int = Field(
+        default=2, ge=1, le=16,
+        description="VAL checks a long plan in this many pieces at once (one process each; each piece ends in "
+        "an exact expected state, so together they say what one run says); 1: one run on the whole plan.",
+    )
+    max_task_size: int = Field(
+        default=14_400, ge=4, le=1_000_000,
+        description="Largest planning task an object may pose, as links x orientations (200 x 72 by default); "
+        "a larger object is refused when it is created.",
+    )
     merge_macro_steps: bool = Field(
         default=True,
         description="Dispatch consecutive steps of one joint in one direction as one motion (the paper's "
