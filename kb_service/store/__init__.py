@@ -12,13 +12,13 @@
 | `records`, `errors` | the immutable records the store hands out and its typed errors (root `KBError`) |
 """
 from .abox import ABOX_IRI, PREDICATES, TBOX_IRI, atom_fragment
-from .errors import ConflictError, KBError, NotFoundError, ReasonerError, ValidationError
+from .errors import ConflictError, DeadlineError, KBError, NotFoundError, ReasonerError, ValidationError
 from .knowledge_base import KnowledgeBase
 from .records import (STATE_KINDS, ActionSpec, CondEffect, Execution, StoredAction, StoredEvent, StoredPlan,
                       StoredProblem, StoredState)
 
 __all__ = [
-    "ABOX_IRI", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec", "CondEffect", "ConflictError", "Execution",
+    "ABOX_IRI", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec", "CondEffect", "ConflictError", "DeadlineError", "Execution",
     "KBError", "KnowledgeBase", "NotFoundError", "ReasonerError", "StoredAction", "StoredEvent", "StoredPlan",
     "StoredProblem", "StoredState", "ValidationError", "atom_fragment",
 ]

@@ -21,6 +21,7 @@ import logging
 import threading
 import time
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Self, Sequence, TypeVar
 
@@ -271,10 +272,14 @@ class Abox:
         return self._q.data(sid, self._t[prop])
 
     def _next_counter(self, name: str) -> int:
+        return self._reserve_counter(name, 1)
+
+    def _reserve_counter(self, name: str, count: int) -> int:
+        """Take `count` consecutive values of a counter at once (two statements, whatever `count`); the first."""
         row = self._q.execute("SELECT value FROM planhrc_counter WHERE name=?", (name,)).fetchone()
-        value = (row[0] if row else 0) + 1
-        self._q.execute("INSERT OR REPLACE INTO planhrc_counter VALUES (?, ?)", (name, value))
-        return value
+        first = (row[0] if row else 0) + 1
+        self._q.execute("INSERT OR REPLACE INTO planhrc_counter VALUES (?, ?)", (name, first + count - 1))
+        return first
 
     def _flush(self, batch: _Batch) -> None:
         """Allocate storids for the new individuals and insert every triple (inside the open transaction)."""
@@ -580,24 +585,21 @@ class Abox:
     def _add_state_triples(
         self, b: _Batch, info: _ObjectInfo, kind: str, atoms: frozenset[Atom],
         observation: Perception | None, step: int | None, created_at: float,
+        state_id: str | None = None, order: _StateOrder | None = None,
     ) -> str:
         obj = info.obj
-        state_id = f"{obj.ident}_state_{self._next_counter(obj.ident + ':state')}"
+        state_id = state_id or f"{obj.ident}_state_{self._next_counter(obj.ident + ':state')}"
         s = b.individual(state_id, STATE_CLASSES[kind])
         b.rel(s, "stateOf", obj.ident)
         b.data(s, "createdAt", created_at)
         if step is not None:
             b.data(s, "stepIndex", step)
-        # A state with all of its object's static facts lists only the rest: the static facts are linked to the
-        # object once (staticFactOf) and the TBox's SWRL rule derives the state's madeof links to them.
-        compact = info.static <= atoms
+        compact, linked = order or _state_order(info, atoms)
         if compact:
             b.data(s, "includesStaticFacts", True)
-        for atom in sorted(atoms):
+        for atom in linked:
             if atom[0] == HAS_ORIENTATION:
                 pred = self._shared_predicate(b, info, atom)
-            elif compact:
-                continue
             else:
                 pred = info.static_fragment[atom]
             b.rel(s, "madeof", pred)
@@ -812,8 +814,7 @@ class Abox:
             atoms = getattr(spec, part)
             if not isinstance(atoms, (set, frozenset)):
                 raise ValidationError(f"{field}.{part}: expected a frozenset of atoms")
-            for atom in sorted(atoms, key=repr):
-                self._check_atom(info, atom, f"{field}.{part}")
+            self._check_atoms(info, atoms, f"{field}.{part}")
         if not isinstance(spec.cond_eff, tuple):
             raise ValidationError(f"{field}.cond_eff: expected a tuple of CondEffect")
         for c, ce in enumerate(spec.cond_eff):
@@ -823,8 +824,26 @@ class Abox:
                 atoms = getattr(ce, part)
                 if not isinstance(atoms, (set, frozenset)):
                     raise ValidationError(f"{field}.cond_eff[{c}].{part}: expected a frozenset of atoms")
-                for atom in sorted(atoms, key=repr):
-                    self._check_atom(info, atom, f"{field}.cond_eff[{c}].{part}")
+                self._check_atoms(info, atoms, f"{field}.cond_eff[{c}].{part}")
+
+    def _check_atoms(self, info: _ObjectInfo, atoms: set[Any] | frozenset[Any], field: str) -> None:
+        """`_check_atom` on each atom that is not one of the object's known facts (its static facts and its
+        well-formed hasorientation atoms, valid by construction), in a fixed order (the first error is the same
+        on every run)."""
+        rest = [a for a in atoms if a not in info.static and a not in info.orientation_atom_name]
+        for atom in sorted(rest, key=repr):
+            self._check_atom(info, atom, field)
+
+    def check_plan(self, object_id: str, actions: Sequence[ActionSpec],
+                   expected_states: Sequence[frozenset[Atom]]) -> CheckedPlan:
+        """Validate a plan of an object and put its atoms in writing order: the part of `add_plan` that needs
+        neither the database nor the store's lock, so a caller can do it while something else runs (the
+        service: while VAL checks the plan). Hand the result to `add_plan(..., checked=...)` with the same
+        `actions` and `expected_states` objects."""
+        with self._lock:  # only to look the object up
+            self._check_open()
+            info = self._info(object_id, "object_id")
+        return _check_plan(self, info, tuple(actions), tuple(expected_states))
 
     def add_plan(
         self,
@@ -832,6 +851,7 @@ class Abox:
         planner: str,
         actions: Sequence[ActionSpec],
         expected_states: Sequence[frozenset[Atom]],
+        checked: CheckedPlan | None = None,
     ) -> StoredPlan:
         with self._lock:
             self._check_open()
@@ -844,21 +864,17 @@ class Abox:
                 raise ValidationError("planner: must be a non-empty string")
             actions = tuple(actions)
             expected_states = tuple(expected_states)
-            if len(expected_states) != len(actions) + 1:
-                raise ValidationError(
-                    f"expected_states: a plan of {len(actions)} actions needs {len(actions) + 1} expected states "
-                    f"(s^e_1 .. s^e_N+1), got {len(expected_states)}"
-                )
-            for i, spec in enumerate(actions):
-                self._check_action(info, i, spec)
-            for i, atoms in enumerate(expected_states):
-                self._check_state_atoms(info, "expected", atoms, f"expected_states[{i}]")
+            if (checked is None or checked.object_id != info.obj.ident or checked.actions is not actions
+                    or checked.expected_states is not expected_states):
+                checked = _check_plan(self, info, actions, expected_states)
             created = time.time()
             ident = info.obj.ident
+            plan_checked = checked
 
             def fill() -> tuple[str, tuple[StoredAction, ...], tuple[str, ...]]:
                 b = _Batch(self)
                 plan_id = f"{ident}_plan_{self._next_counter(ident + ':plan')}"
+                first_state = self._reserve_counter(ident + ":state", len(expected_states))
                 b.individual(plan_id, "Plan")
                 b.rel(plan_id, "aboutObject", ident)
                 b.rel(plan_id, "solves", problem_id)
@@ -866,17 +882,19 @@ class Abox:
                 b.data(plan_id, "createdAt", created)
                 stored = []
                 previous = None
-                for step, spec in enumerate(actions, start=1):
+                for step, (spec, order) in enumerate(zip(actions, plan_checked.action_orders), start=1):
                     aid = f"{plan_id}_a{step}"
-                    self._add_action_triples(b, info, aid, step, spec)
+                    self._add_action_triples(b, info, aid, step, spec, order)
                     b.rel(plan_id, "madeof", aid)
                     if previous:
                         b.rel(previous, "nextAction", aid)
                     previous = aid
                     stored.append(StoredAction(aid, step, spec))
                 state_ids = []
-                for step, atoms in enumerate(expected_states, start=1):
-                    sid = self._add_state_triples(b, info, "expected", frozenset(atoms), None, step, created)
+                for step, (atoms, state_order) in enumerate(zip(expected_states, plan_checked.state_orders),
+                                                            start=1):
+                    sid = self._add_state_triples(b, info, "expected", atoms, None, step, created,
+                                                  f"{ident}_state_{first_state + step - 1}", state_order)
                     b.rel(plan_id, "expectedState", sid)
                     state_ids.append(sid)
                 self._flush(b)
@@ -891,7 +909,8 @@ class Abox:
             self._plans[plan_id] = record
             return record
 
-    def _add_action_triples(self, b: _Batch, info: _ObjectInfo, aid: str, step: int, spec: ActionSpec) -> None:
+    def _add_action_triples(self, b: _Batch, info: _ObjectInfo, aid: str, step: int, spec: ActionSpec,
+                            order: _ActionOrder | None = None) -> None:
         b.individual(aid, ACTION_CLASSES[spec.name])
         b.data(aid, "stepIndex", step)
         b.data(aid, "paramList", " ".join(spec.params))
@@ -908,18 +927,18 @@ class Abox:
                 name = made[atom] = self._add_predicate(b, info, atom_fragment(info.obj, aid, atom), atom)
             return name
 
-        for part, prop in (("pre", "pre"), ("eff_neg", "effNeg"), ("eff_pos", "effPos")):
-            for atom in sorted(getattr(spec, part)):
+        parts, conds = order or _action_order(spec)
+        for atoms, prop in zip(parts, ("pre", "effNeg", "effPos")):
+            for atom in atoms:
                 b.rel(aid, prop, pred(atom))
-        for c, ce in enumerate(spec.cond_eff, start=1):
+        for c, (quantified, ce_parts) in enumerate(conds, start=1):
             cid = b.individual(f"{aid}_ce{c}", "CondPredicate")
             b.data(cid, "position", c)
             b.rel(aid, "condEff", cid)
-            quantified = {a for atom in ce.eff_neg | ce.eff_pos for a in atom[1:]} - set(spec.params)
-            for name in sorted(quantified):
+            for name in quantified:
                 b.rel(cid, "forall", name)
-            for part, prop in (("when", "when"), ("eff_neg", "effNeg_a"), ("eff_pos", "effPos_a")):
-                for atom in sorted(getattr(ce, part)):
+            for atoms, prop in zip(ce_parts, ("when", "effNeg_a", "effPos_a")):
+                for atom in atoms:
                     b.rel(cid, prop, pred(atom))
 
     def _load_action(self, action_id: str) -> StoredAction | None:
@@ -1001,3 +1020,55 @@ class Abox:
         """Objects stored (kept by every commit: no scan, no lock)."""
         self._check_open()
         return self._n_objects
+
+
+# Writing order of a state: (lists only its non-static atoms?, the atoms it links with madeof, sorted).
+_StateOrder = tuple[bool, tuple[Atom, ...]]
+# Writing order of an action: its pre, eff-, eff+ sorted, and per conditional effect (forall names, (when, eff-,
+# eff+) sorted).
+_ActionOrder = tuple[tuple[tuple[Atom, ...], ...],
+                     tuple[tuple[tuple[str, ...], tuple[tuple[Atom, ...], ...]], ...]]
+
+
+def _state_order(info: _ObjectInfo, atoms: frozenset[Atom]) -> _StateOrder:
+    # A state with all of its object's static facts lists only the rest: the static facts are linked to the
+    # object once (staticFactOf) and the TBox's SWRL rule derives the state's madeof links to them.
+    compact = info.static <= atoms
+    return compact, tuple(sorted(a for a in atoms if a[0] == HAS_ORIENTATION or not compact))
+
+
+def _action_order(spec: ActionSpec) -> _ActionOrder:
+    parts = tuple(tuple(sorted(getattr(spec, part))) for part in ("pre", "eff_neg", "eff_pos"))
+    params = set(spec.params)
+    conds = tuple((tuple(sorted({a for atom in ce.eff_neg | ce.eff_pos for a in atom[1:]} - params)),
+                   tuple(tuple(sorted(getattr(ce, part))) for part in ("when", "eff_neg", "eff_pos")))
+                  for ce in spec.cond_eff)
+    return parts, conds
+
+
+@dataclass(frozen=True)
+class CheckedPlan:
+    """A plan's actions and expected states, validated against their object and in writing order
+    (`Abox.check_plan`)."""
+
+    object_id: str
+    actions: tuple[ActionSpec, ...]
+    expected_states: tuple[frozenset[Atom], ...]
+    action_orders: tuple[_ActionOrder, ...]
+    state_orders: tuple[_StateOrder, ...]
+
+
+def _check_plan(abox: Abox, info: _ObjectInfo, actions: tuple[ActionSpec, ...],
+                expected_states: tuple[frozenset[Atom], ...]) -> CheckedPlan:
+    """Every check `add_plan` makes on the actions and states (pure: reads only `info`)."""
+    if len(expected_states) != len(actions) + 1:
+        raise ValidationError(
+            f"expected_states: a plan of {len(actions)} actions needs {len(actions) + 1} expected states "
+            f"(s^e_1 .. s^e_N+1), got {len(expected_states)}"
+        )
+    for i, spec in enumerate(actions):
+        abox._check_action(info, i, spec)
+    for i, atoms in enumerate(expected_states):
+        abox._check_state_atoms(info, "expected", atoms, f"expected_states[{i}]")
+    return CheckedPlan(info.obj.ident, actions, expected_states, tuple(_action_order(a) for a in actions),
+                       tuple(_state_order(info, frozenset(atoms)) for atoms in expected_states))

@@ -19,3 +19,7 @@ class ConflictError(KBError):
 
 class ReasonerError(KBError):
     """The DL reasoner could not run (no Java, Java error, timeout)."""
+
+
+class DeadlineError(KBError):
+    """The request's planning (with VAL) did not finish within its deadline; nothing was stored."""
