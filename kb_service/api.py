@@ -1,8 +1,9 @@
 """HTTP routes of the knowledge-base service. The only module that chooses HTTP status codes:
 
 NotFoundError -> 404, ValidationError / ModelError / TranslationError / bad request body -> 422 (the message
-names the field), ConflictError -> 409, AuthError -> 401. Handlers are plain `def`s: FastAPI runs them in its
-thread pool, and the orchestrator's per-object locks serialize what touches one object.
+names the field), ConflictError -> 409, AuthError -> 401, DeadlineError (planning past its deadline) -> 503.
+Handlers are plain `def`s: FastAPI runs them in its thread pool, and the orchestrator's per-object locks
+serialize what touches one object.
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from planhrc.translator.errors import TranslationError
 from .auth import AuthError, check_bearer
 from .events import stream_events
 from .orchestrator import Orchestrator
-from .store import ConflictError, NotFoundError, ValidationError
+from .store import ConflictError, DeadlineError, NotFoundError, ValidationError
 from .store.knowledge_base import MAX_EVENTS_PAGE
 from .schemas import (
     DecisionPublic,
@@ -55,6 +56,8 @@ ERRORS: dict[int | str, dict[str, Any]] = {
     409: {"model": ErrorPublic, "description": "Conflicts with what is stored."},
     413: {"model": ErrorPublic, "description": "The request body is over the service's size limit."},
     422: {"model": ErrorPublic, "description": "Bad input; the message names the field."},
+    503: {"model": ErrorPublic, "description": "Planning (with VAL) did not finish within the service's planning "
+          "deadline; nothing was stored (the message says why; retry later or use a smaller object)."},
 }
 ERROR_JSON = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorPublic"}}}
 TEXT_ERRORS: dict[int | str, dict[str, Any]] = {  # routes answering text/plain still send their errors as JSON
@@ -141,7 +144,7 @@ def update_goal(object_id: str, body: GoalUpdate, orch: Orch) -> dict[str, Any]:
 
 
 @router.post("/objects/{object_id}/perceptions", response_model=DecisionPublic, dependencies=Writer,
-             responses={**WRITE_ERRORS, **links(200, {
+             responses={**WRITE_ERRORS, 503: ERRORS[503], **links(200, {
                  "take_next_action": (f"{OBJECT}/actions/next", "post", SAME_OBJECT),
                  "read_object_plan": (f"{OBJECT}/plan", "get", SAME_OBJECT),
                  "pddl_problem": (f"{OBJECT}/pddl/problem", "get", SAME_OBJECT),
@@ -323,6 +326,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(TranslationError, handler(422))
     app.add_exception_handler(ConflictError, handler(409))
     app.add_exception_handler(AuthError, handler(401))
+    app.add_exception_handler(DeadlineError, handler(503))
     app.add_exception_handler(RequestValidationError, _request_validation_error)
     app.add_exception_handler(StarletteHTTPException, _http_error)
 

@@ -27,14 +27,14 @@ import os
 import signal
 import threading
 from dataclasses import dataclass, field, replace
-from typing import Any, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from planhrc import pipeline
 from planhrc.cooperation import Decision, FailureHistory, PlanView, decide, escalate
 from planhrc.geometry import GeometryError, ObjectGeometry, configuration_feasible, link_centres, reach_shortfall
 from planhrc.ordering import HelpItem, Move, Placement, help_for
-from .store import (ConflictError, Execution, KnowledgeBase, NotFoundError, StoredAction, StoredEvent, StoredPlan,
-                    StoredState, ValidationError)
+from .store import (ConflictError, DeadlineError, Execution, KnowledgeBase, NotFoundError, StoredAction, StoredEvent,
+                    StoredPlan, StoredState, ValidationError)
 from planhrc.model import ArticulatedObject, Formulation, ModelError, Perception, State, make_object, perceive, snap_angle
 from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps, move_of
 from planhrc.settings import Settings
@@ -43,6 +43,7 @@ from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, Fa
                                 one_of)
 
 from .locks import ObjectLocks
+from .store.abox import CheckedPlan
 from .store.knowledge_base import MAX_EVENTS_PAGE
 from .public import (event_public, execution_public, object_public, plan_public, problem_public,
                      state_public)
@@ -84,8 +85,15 @@ class Orchestrator:
     def create_object(self, name: str, links: int | Sequence[float], orientations: int,
                       formulation: str, base_point_xy: Sequence[float] | None = None) -> ArticulatedObject:
         """Create an object; with `base_point_xy` it is placed in the cell (kept in its `object_created` event,
-        which the log keeps whole), and its goals and plans are checked geometrically."""
+        which the log keeps whole), and its goals and plans are checked geometrically. Its planning task
+        (links x orientations) is bounded by the setting `max_task_size`."""
         probe = make_object("probe", formulation, links, orientations, name)  # ModelError before an id is taken
+        size = probe.n_links * probe.orientations
+        if size > self.settings.max_task_size:
+            raise ValidationError(
+                f"links, orientations: {probe.n_links} links x {probe.orientations} orientations = {size} is over "
+                f"the largest planning task this service takes ({self.settings.max_task_size}, "
+                "PLANHRC_MAX_TASK_SIZE)")
         base = None
         if base_point_xy is not None:
             try:
@@ -175,7 +183,13 @@ class Orchestrator:
                           idempotency_key: str | None = None) -> dict[str, Any]:
         """Decide on one perception and store all it leads to in one write: the perceived state and, after a
         re-plan, its problem, plan and expected states, then the execution, the decision's event and the
-        idempotent response. A refused or failed write stores none of it."""
+        idempotent response. A refused or failed write stores none of it.
+
+        Planning and VAL run under the object's lock only, before the write: the store (shared by every object)
+        is held just for the write. While VAL checks a new plan (its own processes), the plan is validated for
+        the store and put in writing order (`check_plan`), so the write itself is short. A plan VAL refuses is
+        never stored; a re-plan that does not finish within the planning deadline raises DeadlineError and
+        stores nothing."""
         with self.locks.hold(object_id):
             obj = self.kb.get_object(object_id)
             fingerprint = _fingerprint({"perception": list(link_orientations_deg)})
@@ -194,44 +208,32 @@ class Orchestrator:
             plan, view = self._plan_view(execution.plan_id)
             decision = None
             outcome = None
+            checked = None
             if goal is not None:
                 decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
                 decision = self._escalate(obj, plan, perception, decision, memo)
                 if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
-                    outcome = self._plan_for(obj, perception, goal.atoms, plan, decision, memo)
-            # VAL checks a new plan while the store writes it; the write commits only once VAL has accepted it.
-            checked = self.planning.validate and outcome is not None and outcome.solved and bool(outcome.actions)
-            validation = _Validation(outcome) if checked and outcome is not None else None
+                    outcome, checked = self._plan_for(obj, perception, goal.atoms, plan, decision, memo)
+                    if outcome.status is PlanningStatus.TIMEOUT:
+                        raise DeadlineError(f"planning: {outcome.message}")
             new_view = None
-            try:
-                with self.kb.transaction():
-                    perceived = self.kb.add_perception(perception)
-                    extra: dict[str, Any] = {}
-                    if goal is None or decision is None:
-                        answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
-                                         "no goal is set: PUT /objects/{id}/goal first")
-                    else:
-                        extra["goal_state_id"] = goal.id
-                        if decision.remedy is not None:
-                            extra["remedy"] = decision.remedy
-                        if outcome is None:
-                            answer = self._follow(obj, perceived, execution, plan, decision, extra)
-                        else:
-                            answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra,
-                                                           validation)
-                    self._log_decision(object_id, answer, extra)
-                    self._remember(object_id, idempotency_key, fingerprint, answer)
-                    self._crash_point()
-            except _Refused as refused:  # VAL refused the new plan: the same perception, without it
-                assert goal is not None and decision is not None
-                with self.kb.transaction():
-                    perceived = self.kb.add_perception(perception)
-                    extra = {"goal_state_id": goal.id}
+            with self.kb.transaction():
+                perceived = self.kb.add_perception(perception)
+                extra: dict[str, Any] = {}
+                if goal is None or decision is None:
+                    answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
+                                     "no goal is set: PUT /objects/{id}/goal first")
+                else:
+                    extra["goal_state_id"] = goal.id
                     if decision.remedy is not None:
                         extra["remedy"] = decision.remedy
-                    answer, new_view = self._adopt(obj, perceived, goal, decision, refused.outcome, extra, None)
-                    self._log_decision(object_id, answer, extra)
-                    self._remember(object_id, idempotency_key, fingerprint, answer)
+                    if outcome is None:
+                        answer = self._follow(obj, perceived, execution, plan, decision, extra)
+                    else:
+                        answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra, checked)
+                self._log_decision(object_id, answer, extra)
+                self._remember(object_id, idempotency_key, fingerprint, answer)
+                self._crash_point()
             if new_view is not None:
                 self._keep_view(*new_view)
             return answer
@@ -277,10 +279,34 @@ class Orchestrator:
             return None
         return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg))
 
-    def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State,
-                      placement: Placement | None = None) -> PlanOutcome:
+    def _validate_and_check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float
+                            ) -> tuple[PlanOutcome, CheckedPlan | None]:
+        """VAL on a new plan (in a thread: it waits for its own processes) beside the store's checks of the plan
+        (`check_plan`, outside the store's lock), both before the perception's write. The plan is usable only
+        when VAL accepted it (`validated`)."""
+        if not (outcome.solved and outcome.actions):
+            return outcome, None
+        checked_outcome: list[PlanOutcome] = []
+        val = None
+        if self.planning.validate and not outcome.validated:
+            val = threading.Thread(target=lambda: checked_outcome.append(self._guarded(
+                obj, lambda: pipeline.validate(outcome, obj, self.planning, deadline_at))), name="planhrc-val")
+            val.start()
         try:
-            return pipeline.plan(obj, init, goal, self.planning, defer_validation=True, placement=placement)
+            checked = self.kb.check_plan(obj.ident, outcome.actions, outcome.expected_states)
+        finally:
+            if val is not None:
+                val.join()
+        return (checked_outcome[0] if val is not None else outcome), checked
+
+    def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State,
+                      placement: Placement | None = None, deadline_at: float | None = None) -> PlanOutcome:
+        return self._guarded(obj, lambda: pipeline.plan(obj, init, goal, self.planning, defer_validation=True,
+                                                        placement=placement, deadline_at=deadline_at))
+
+    def _guarded(self, obj: ArticulatedObject, stage: Callable[[], PlanOutcome]) -> PlanOutcome:
+        try:
+            return stage()
         except Exception as exc:  # a crashing stage must not leave the perception without a decision
             log.exception("planning failed for %s", obj.ident)
             return PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", self.planning.planner)
@@ -311,9 +337,16 @@ class Orchestrator:
         return all(reach_shortfall(centres[k - 1]) <= 1e-9 for k in links if k >= 1)
 
     def _plan_for(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
-                  decision: Decision, memo: _ObjectMemo) -> PlanOutcome:
+                  decision: Decision, memo: _ObjectMemo) -> tuple[PlanOutcome, CheckedPlan | None]:
         """The new plan a decision asks for: the current plan's rest with the failing joint turned the other way
-        round (remedy other_way), else the planner's (ordered on the table for a placed object)."""
+        round (remedy other_way), else the planner's (ordered on the table for a placed object); checked by VAL
+        and by the store (`_validate_and_check`), all within the planning deadline."""
+        deadline_at = pipeline.deadline_from(self.planning)
+        return self._validate_and_check(obj, self._new_plan(obj, perception, goal, plan, decision, memo, deadline_at),
+                                        deadline_at)
+
+    def _new_plan(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
+                  decision: Decision, memo: _ObjectMemo, deadline_at: float) -> PlanOutcome:
         placement = self._placement(obj, perception)
         if (decision.remedy == Remedy.OTHER_WAY and plan is not None and memo.failure is not None
                 and decision.matched_expected_step is not None):
@@ -325,7 +358,7 @@ class Orchestrator:
                                                placement=placement, defer_validation=True)
                 except Exception as exc:  # the composed plan does not hold: let the planner try
                     log.warning("the other way round failed for %s: %s", obj.ident, exc)
-        return self._run_pipeline(obj, perception.atoms, goal, placement)
+        return self._run_pipeline(obj, perception.atoms, goal, placement, deadline_at)
 
     def _follow(self, obj: ArticulatedObject, perceived: StoredState, execution: Execution,
                 plan: StoredPlan | None, decision: Decision, extra: dict[str, Any]) -> dict[str, Any]:
@@ -366,18 +399,13 @@ class Orchestrator:
                        decision.matched_expected_step, decision.reason)
 
     def _adopt(self, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
-               outcome: PlanOutcome, extra: dict[str, Any], validation: _Validation | None
+               outcome: PlanOutcome, extra: dict[str, Any], checked: CheckedPlan | None = None
                ) -> tuple[dict[str, Any], tuple[StoredPlan, PlanView] | None]:
-        """Store the re-planning's problem and, when solved, its plan with expected states; move the execution.
-        A plan still being checked (`validation`) is kept only if VAL accepts it; else `_Refused` is raised, which
-        rolls the write back."""
+        """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL), its plan with
+        expected states; move the execution."""
         problem = self.kb.add_problem(obj.ident, perceived.id, goal.id)
         if outcome.solved and outcome.actions:
-            plan = self.kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states)
-            if validation is not None:
-                outcome = validation.result()
-                if not outcome.validated:
-                    raise _Refused(outcome)
+            plan = self.kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states, checked)
             self.kb.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
         extra.update({"planning_status": outcome.status, "problem_id": problem.id,
                       "timings": {k: round(v, 6) for k, v in outcome.timings.items()}})
@@ -756,34 +784,3 @@ def _goal_atoms(obj: ArticulatedObject, link_orientations_deg: Sequence[float] |
         return obj.configuration_atoms(values)
     assert joint_angles_deg is not None
     return obj.partial_configuration_atoms(joint_angles_deg, field="joint_angles_deg")
-
-
-class _Refused(Exception):
-    """VAL refused a plan while the store was writing it (carries the invalid outcome)."""
-
-    def __init__(self, outcome: PlanOutcome) -> None:
-        super().__init__(outcome.message)
-        self.outcome = outcome
-
-
-class _Validation:
-    """`pipeline.validate(outcome)` running in a thread (VAL is a separate process) while the store writes."""
-
-    def __init__(self, outcome: PlanOutcome) -> None:
-        self._outcome = outcome
-        self._checked: PlanOutcome | None = None
-        self._thread = threading.Thread(target=self._run, name="planhrc-val", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        try:
-            self._checked = pipeline.validate(self._outcome)
-        except Exception as exc:  # VAL could not run: the plan is not accepted
-            log.exception("VAL failed on a plan of %s", self._outcome.planner)
-            self._checked = PlanOutcome(PlanningStatus.ERROR, f"VAL could not run: {type(exc).__name__}: {exc}",
-                                        self._outcome.planner, timings=self._outcome.timings)
-
-    def result(self) -> PlanOutcome:
-        self._thread.join()
-        assert self._checked is not None
-        return self._checked
