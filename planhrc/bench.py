@@ -325,8 +325,11 @@ def measure_fast_downward(formulation: str, links: int = 20, orientations: int =
 
 
 def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7) -> dict:
-    """A re-planning `POST /objects/{id}/perceptions` to a real `planhrc serve` process, request to answer."""
+    """A re-planning `POST /objects/{id}/perceptions` to a real `planhrc serve` process, request to answer; and,
+    meanwhile, `GET /health` from another connection every 20 ms (its slowest answer: does a re-plan stall the
+    service?)."""
     import tempfile
+    import threading
 
     import httpx
 
@@ -339,14 +342,35 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
         ident = create_object(client, links, orientations, formulation, f"bench-{formulation}")
         set_goal(client, ident, random_angles(rng, links, orientations))
         replanning_latencies(client, ident, links, orientations, 3, rng)  # the first one grounds the task
-        times = replanning_latencies(client, ident, links, orientations, runs, rng)
-    return {"formulation": formulation, "links": links, "orientations": orientations, **stats_ms(times)}
+        health: list[float] = []
+        done = threading.Event()
+
+        def poll() -> None:
+            with httpx.Client(base_url=server.base, timeout=120) as other:
+                while not done.wait(0.02):
+                    t = time.perf_counter()
+                    other.get("/health").raise_for_status()
+                    health.append(time.perf_counter() - t)
+
+        poller = threading.Thread(target=poll, daemon=True)
+        poller.start()
+        try:
+            times = replanning_latencies(client, ident, links, orientations, runs, rng)
+        finally:
+            done.set()
+            poller.join(10)
+    return {"formulation": formulation, "links": links, "orientations": orientations, **stats_ms(times),
+            "health_during": {"n": len(health), **stats_ms(health),
+                              "max_ms": round(max(health) * 1000, 3) if health else None}}
 
 
 def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10, seed: int = 7) -> dict:
-    """The library pipeline in this process: a new perceived state -> translation -> planning -> VAL ->
-    expected states, then what the service writes after a re-plan (perceived state, problem, plan and
-    expected states) in one transaction; medians per stage."""
+    """The library pipeline in this process: a new perceived state -> translation -> planning -> expected
+    states -> VAL (in pieces where the service cuts them), then what the service writes after a re-plan
+    (perceived state, problem, plan and expected states) in one transaction, on a SQLite file like the
+    service's; medians per stage."""
+    import tempfile
+
     from planhrc.kb_service.store import KnowledgeBase
     from planhrc.pipeline import config_from_settings, plan
     from planhrc.settings import make_settings
@@ -356,7 +380,8 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
     step = 360 // orientations
     n_values = links if formulation == "absolute" else links - 1
     out: dict = {"formulation": formulation, "links": links, "orientations": orientations}
-    with KnowledgeBase(None, tbox) as kb:
+    with tempfile.TemporaryDirectory(prefix="planhrc-bench-kb-") as tmp, \
+            KnowledgeBase(str(Path(tmp) / "kb.sqlite3"), tbox) as kb:
         ident = kb.new_object_id()
         obj = make_object(ident, formulation, links, orientations)
         kb.create_object(obj)
@@ -405,8 +430,9 @@ def replan_report(formulations: Sequence[str], runs: int, fd_runs: int, fd_timeo
 def replan_table(report: dict) -> str:
     lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; "
              f"{report['links']} links x {report['orientations']} orientations; medians (p90) in ms",
-             "| formulation | ground (once) | plan | VAL | in-process loop | pipeline (KB) | "
-             "Fast Downward process | HTTP perception |", "|---|---|---|---|---|---|---|---|"]
+             "| formulation | ground (once) | plan | VAL | in-process loop | pipeline (KB) | its VAL | its store | "
+             "Fast Downward process | HTTP perception | /health meanwhile, max |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for f, row in report["formulations"].items():
         p = row["planner"]
         fd = row.get("fast_downward")
@@ -414,12 +440,16 @@ def replan_table(report: dict) -> str:
             f"{fd['median_ms']} ({fd['p90_ms']}), {fd['runs']} runs" if not fd.get("note")
             else f"timeout at {fd['time_limit_s']} s")
         http = row.get("http")
+        stages = row["pipeline"].get("stage_medians_ms", {})
+        health = (http or {}).get("health_during") or {}
         lines.append(
             f"| {f} | {p['ground_ms']} | {p['plan']['median_ms']} ({p['plan']['p90_ms']}) | "
             f"{p['validate']['median_ms']} ({p['validate']['p90_ms']}) | "
             f"{p['inproc_loop']['median_ms']} ({p['inproc_loop']['p90_ms']}) | "
-            f"{row['pipeline']['median_ms']} ({row['pipeline']['p90_ms']}) | {fd_text} | "
-            + (f"{http['median_ms']} ({http['p90_ms']}) |" if http else "- |"))
+            f"{row['pipeline']['median_ms']} ({row['pipeline']['p90_ms']}) | {stages.get('validate', '-')} | "
+            f"{stages.get('store', '-')} | {fd_text} | "
+            + (f"{http['median_ms']} ({http['p90_ms']}) |" if http else "- |")
+            + (f" {health['max_ms']} |" if health.get("max_ms") is not None else " - |"))
     return "\n".join(lines)
 
 
