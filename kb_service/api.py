@@ -8,7 +8,7 @@ serialize what touches one object.
 from __future__ import annotations
 
 import logging
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Iterable, Iterator, Literal
 
 from fastapi import APIRouter, Depends, FastAPI, Header, Query, Request
 from fastapi.exception_handlers import http_exception_handler
@@ -264,7 +264,7 @@ def read_ontology(
     media = _rdf_media_type(accept)
     if RDF_TYPES[media] == "nt":
         lines = orch.export_ntriples(history, object_id)
-        return StreamingResponse((line.encode("utf-8") for line in lines), media_type=media)
+        return StreamingResponse(_in_pieces(lines), media_type=media)
     return Response(orch.export_ontology(RDF_TYPES[media], history, object_id), media_type=media)
 
 
@@ -366,6 +366,19 @@ def _field_path(loc: tuple | list) -> str:
 
 
 # -- conversions ----------------------------------------------------------------------------------------
+def _in_pieces(lines: Iterable[str], size: int = 64 * 1024) -> Iterator[bytes]:
+    """Lines joined into pieces of about `size` bytes: the stream still starts at once and holds one piece, but
+    it no longer hops to the thread pool once per triple (the current ABox's 2,500 lines took 0.5-1 s)."""
+    piece: list[str] = []
+    length = 0
+    for line in lines:
+        piece.append(line)
+        length += len(line)
+        if length >= size:
+            yield "".join(piece).encode("utf-8")
+            piece, length = [], 0
+    if piece:
+        yield "".join(piece).encode("utf-8")
 def _rdf_media_type(accept: str | None) -> str:
     """The first of RDF/XML, Turtle and N-Triples named by the Accept header; RDF/XML when none is."""
     if accept:
