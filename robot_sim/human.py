@@ -306,14 +306,18 @@ def help_turns(human: Human, requests: Sequence[tuple[int, float]]) -> list[str]
     if harm:
         log.info("human: the requested turns would end with %s; not done", harm[0].message)
         return None
-    labels = []
+    labels: list[str] = []
     for link, to_deg in ordered:
         delta = _shorter(to_deg - scene.link_orientations_deg()[link - 1])
         if abs(delta) < 1.0:
             continue
-        other = delta - math.copysign(360.0, delta)
-        clear = turn_hazard(scene, link, link - 1, delta, hazards=("inside_robot",)) is None
-        way = delta if clear or turn_hazard(scene, link, link - 1, other, hazards=("inside_robot",)) else other
+        ways = [d for d in (delta, delta - math.copysign(360.0, delta))
+                if turn_hazard(scene, link, link - 1, d, hazards=("inside_robot",)) is None]
+        if not ways:
+            log.info("human: turning l%d to %g deg either way would sweep links through the robot; stopped", link,
+                     to_deg)
+            return labels or None
+        way = ways[0]
         move = HumanMove(link, link - 1, way, f"human helped: l{link} to {to_deg % 360.0:g} deg ({way:+.0f} deg)")
         human.start(move)
         human.finish()

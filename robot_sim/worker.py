@@ -300,7 +300,8 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         seen = _perceive(perceiver)
         t1 = time.perf_counter()
         values = seen.link_orientations_deg
-        decision = kb.post_perception(object_id, values)
+        # nothing seen at all says nothing the service could store: it is an incomplete perception here
+        decision = kb.post_perception(object_id, values) if any(v is not None for v in values) else None
         t2 = time.perf_counter()
         frame = seen.frame if seen.frame is not None or not record_frames else camera.render()
         if frame is not None:
@@ -309,14 +310,15 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         base_xy, theta = scene.configuration()
         run.configurations.append(tuple(round(v, 3) for v in theta))
         run.base_points.append(base_xy)
-        kind = str(decision.decision)
+        kind = "incomplete_perception" if decision is None else str(decision.decision)
         run.labels.append(f"{step}: {kind}")
         base: dict[str, Any] = dict(step=step, human_before=tuple(human_before),
                     perceived_deg=tuple(None if v is None else round(v, 2) for v in values),
                     true_deg=tuple(round(v, 2) for v in theta), missing_links=seen.missing_links,
-                    decision=kind, reason=decision.reason, looks=seen.looks,
-                    matched_expected_step=decision.matched_expected_step, perception_s=t1 - t0, service_s=t2 - t1)
-        if decision.decision == "incomplete_perception":
+                    decision=kind, reason="no link seen (not posted)" if decision is None else decision.reason,
+                    looks=seen.looks, matched_expected_step=None if decision is None else decision.matched_expected_step,
+                    perception_s=t1 - t0, service_s=t2 - t1)
+        if decision is None or decision.decision == "incomplete_perception":
             # the head has turned to look again already; nothing is filled in from elsewhere
             unseen_in_a_row += 1
             run.records.append(StepRecord(**base))

@@ -193,6 +193,14 @@ def test_an_unseen_link_is_posted_unseen_and_never_filled_from_the_simulator(kb,
     assert gave_up == [{"reason": "unseen_links", "message": "links [3] not seen in 3 perceptions"}]
 
 
+def test_a_perception_that_saw_nothing_is_not_posted_and_the_worker_gives_up_after_looking_again(kb, tmp_path):
+    summary = run_worker(kb.url, "o1", SceneSpec(unmarked_links=(1, 2, 3, 4, 5)), "none", tmp_path, max_steps=10)
+    assert not [path for m, path, _, b in kb.log if path.endswith("/perceptions")]  # nothing to tell
+    assert [s.decision for s in summary.steps] == ["incomplete_perception"] * 3 and summary.seen_links == 0
+    assert summary.stop_reason == "unseen_links"
+    assert [b["reason"] for m, path, _, b in kb.log if path == "/objects/o1/give-up"] == ["unseen_links"]
+
+
 def test_a_failure_is_not_retried_the_same_way_and_the_worker_gives_up_out_loud(kb, tmp_path):
     # short links in the table's far left corner: the camera sees them, no arm reaches them
     spec = SceneSpec(link_length_m=0.06, base_point_xy=(0.87, 0.62))
