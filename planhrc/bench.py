@@ -347,6 +347,7 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
 
         def poll() -> None:
             with httpx.Client(base_url=server.base, timeout=120) as other:
+                other.get("/health").raise_for_status()  # the connection's first request is not the service's
                 while not done.wait(0.02):
                     t = time.perf_counter()
                     other.get("/health").raise_for_status()
