@@ -64,6 +64,7 @@ class _ObjectMemo:
     base_point_xy: tuple[float, float] | None = None  # set: the object is placed in the cell (geometric checks)
     failure: FailureHistory | None = None  # the motion failing since the last success, and the remedies tried
     split_plans: set[str] = field(default_factory=set)  # plans whose macro steps are dispatched step by step
+    last_decision: str | None = None  # the kind of the last decision logged
 
 
 class Orchestrator:
@@ -163,19 +164,22 @@ class Orchestrator:
 
     def _goal_links(self, obj: ArticulatedObject, memo: _ObjectMemo, atoms: frozenset,
                     link_orientations_deg: Sequence[float] | None) -> tuple[int, ...] | None:
-        """Every link's absolute orientation in a complete goal: as given, or from the joints (relative: l1 as last
-        perceived); None when the goal leaves a joint free or l1 is not known."""
-        if link_orientations_deg is not None:
-            return tuple(int(float(v)) % 360 for v in link_orientations_deg)
+        """Every link's absolute orientation in a complete goal. Absolute formulation: as given. Relative: the goal
+        holds only the angles between links and the robot turns downstream links, so l1 stays where it was last
+        perceived (where it is given, before the first perception); None when the goal leaves a joint free or l1
+        is not known."""
         values = obj.joint_values_of(atoms)
         if len(values) != obj.n_joints:
             return None
         if obj.formulation is Formulation.ABSOLUTE:
             return tuple(values[k] for k in obj.joint_indices)
-        if memo.perceived_state_id is None:
+        perceived = self.kb.get_state(memo.perceived_state_id) if memo.perceived_state_id is not None else None
+        if perceived is not None and perceived.link_orientations_deg:
+            first = snap_angle(perceived.link_orientations_deg[0], obj.orientations)
+        elif link_orientations_deg is not None:
+            first = int(float(link_orientations_deg[0])) % 360
+        else:
             return None
-        perceived = self.kb.get_state(memo.perceived_state_id)
-        first = snap_angle(perceived.link_orientations_deg[0], obj.orientations) if perceived.link_orientations_deg else 0
         return obj.link_orientations_of(atoms, first)
 
     # -- perception ---------------------------------------------------------------------------------------
@@ -316,7 +320,8 @@ class Orchestrator:
         """`cooperation.escalate` for the motion the decision would dispatch: after a failure of that motion (or
         while the human is asked for it) it is not dispatched identically again."""
         failure = memo.failure
-        asked = failure is not None and Remedy.ASK_HUMAN in failure.tried
+        asked = (failure is not None and Remedy.ASK_HUMAN in failure.tried
+                 and memo.last_decision == DecisionKind.HUMAN_HELP_REQUESTED)  # still waiting for the human
         fresh = memo.last_outcome in (ActionOutcome.FAILED, ActionOutcome.PARTIAL)
         if failure is None or plan is None or decision.next_step is None or not (fresh or asked):
             return decision
@@ -650,6 +655,7 @@ class Orchestrator:
             elif event.kind in set(DecisionKind):
                 memo.perceived_state_id = event.data.get("perceived_state_id") or memo.perceived_state_id
                 memo.last_outcome = None  # a feedback informs only the next decision
+                memo.last_decision = event.kind
                 remedy = event.data.get("remedy")
                 if remedy and memo.failure is not None:
                     memo.failure = replace(memo.failure, tried=memo.failure.tried + (Remedy(remedy),))

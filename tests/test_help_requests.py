@@ -226,3 +226,22 @@ def test_the_client_reaches_all_of_it_over_http(tmp_path):
         event = kb.read_events(oid)[-1]
         assert (event["data"]["reason"], event["data"]["measured_deg"]) == ("slip", 70.0)
         assert kb.give_up(oid, "repeated_failure", "stopped")["event_seq"] == event["seq"] + 1
+
+
+def test_a_restarted_service_remembers_the_placement_the_failures_and_the_split(tmp_path):
+    settings = make_settings(db_path=str(tmp_path / "kb.sqlite3"), token=None, validate_plans=True)
+    with TestClient(create_app(settings)) as first:
+        oid = placed(first)
+        first.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 0]})
+        first.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT})
+        action = first.post(f"/objects/{oid}/actions/next").json()
+        first.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "failed", "reason": "stall"})
+        split = first.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+        assert split["next_action"]["macro_steps"] == 1
+    with TestClient(create_app(settings)) as again:
+        assert again.get(f"/objects/{oid}").json()["base_point_xy"] == [0.6, 0.39]
+        action = again.post(f"/objects/{oid}/actions/next").json()
+        assert (action["delta_deg"], action["macro_steps"]) == (-45, 1)  # still split
+        again.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "failed", "reason": "stall"})
+        answer = again.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+        assert again.get(f"/objects/{oid}/events").json()[-1]["data"]["remedy"] == "other_way", answer
