@@ -24,7 +24,10 @@ def run(links: int = 20, episodes: int = 50, orientations: int = 12, link_m: flo
     geometry = ObjectGeometry((link_m,) * links, (0.5, 0.55))
     start = (90.0,) * links
     rng = random.Random(seed)
-    times, lengths, checks, found = [], [], [], 0
+    times: list[float] = []
+    lengths: list[int] = []
+    checks: list[int] = []
+    found = 0
     while len(times) < episodes:
         goal = [90.0]
         for _ in range(links - 1):
