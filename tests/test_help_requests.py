@@ -19,6 +19,7 @@ from planhrc.kb_service.app import create_app
 from planhrc.settings import make_settings
 from planhrc.vocabulary import DecisionKind, FailureReason, Remedy
 from tests.servers import serving
+from tests.test_service_api import move
 
 PLACED = {"name": "rod", "links": 5, "orientations": 8, "base_point_xy": [0.6, 0.39]}
 STRAIGHT = [90, 90, 90, 90, 90]
@@ -245,3 +246,26 @@ def test_a_restarted_service_remembers_the_placement_the_failures_and_the_split(
         again.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "failed", "reason": "stall"})
         answer = again.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
         assert again.get(f"/objects/{oid}/events").json()[-1]["data"]["remedy"] == "other_way", answer
+
+
+def test_the_other_way_round_is_a_valid_plan_that_reaches_the_goal(client):
+    oid = client.post("/objects", json={"name": "rod", "links": 3, "orientations": 4,
+                                        "formulation": "relative"}).json()["id"]  # abstract: no geometry
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 0, 90]})
+    links = [0, 0, 0]
+    client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links})
+    action = client.post(f"/objects/{oid}/actions/next").json()
+    assert (action["turned_link_index"], action["delta_deg"], action["macro_steps"]) == (3, 90, 1)
+    client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "failed", "reason": "collision"})
+    decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).json()
+    assert decision["decision"] == "replan" and "other way round" in decision["reason"]
+    plan = client.get(f"/objects/{oid}/plan").json()
+    assert plan["planner"] == "other_way" and [s["delta_deg"] for s in plan["steps"]] == [-90, -90, -90]
+    for _ in range(5):
+        action = client.post(f"/objects/{oid}/actions/next").json()
+        if action is None:
+            break
+        links = move(links, action)
+        client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"})
+        decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).json()
+    assert decision["decision"] == "goal_reached" and [v % 360 for v in links] == [0, 0, 90]
