@@ -28,7 +28,7 @@ from planhrc.planner.fast_downward import has_conditional_effects
 from planhrc.planner.result import PlannerAttempt, PlanResult
 from planhrc.planner.validate import ValidationResult, validate_pieces, validate_plan
 from planhrc.settings import Settings, get_settings
-from planhrc.transition import TransitionError, apply, ground_action, parse_step, replay
+from planhrc.transition import ReplayDeadline, StateIndex, TransitionError, apply, ground_action, parse_step, replay
 from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
 from planhrc.vocabulary import PlanningStatus
@@ -152,7 +152,10 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
 
     t = time.perf_counter()
     try:
-        actions, states = replay(model, init, result.plan)
+        actions, states = replay(model, init, result.plan, deadline_at)
+    except ReplayDeadline:
+        return _over_deadline(config, f"while replaying the plan of {len(result.plan)} steps", result.planner,
+                              timings, task)
     except TransitionError as exc:
         return PlanOutcome(PlanningStatus.INVALID, f"plan does not replay: {exc}", result.planner,
                            timings=timings, task=task)
@@ -250,13 +253,15 @@ def move_of(obj: ArticulatedObject, step: str | ActionSpec) -> Move:
 def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves: Sequence[Move]) -> tuple[str, ...]:
     """PDDL steps for `moves` in this order from `init`: each from the joint's orientation at that point."""
     state, steps = frozenset(init), []
+    index = StateIndex(state)
     for move in moves:
         joint = obj.joint(move.joint)
         now = next(int(a[1].split("_", 1)[1]) for a in state if a[0] == HAS_ORIENTATION and a[2] == joint)
         after = (now + (obj.step if move.name == "rotateclockwise" else -obj.step)) % 360
         step = (f"({move.name} {obj.link(move.turned)} {obj.link(move.held)} {joint} {orientation_name(now)} "
                 f"{orientation_name(after)})")
-        state = apply(state, ground_action(model, step, state))
+        state = apply(state, ground_action(model, step, state, index))
+        index.moved(state)
         steps.append(step)
     return tuple(steps)
 

@@ -7,6 +7,7 @@ s^e_1 .. s^e_{N+1} of a plan. Inputs are never changed: states are frozensets.
 """
 from __future__ import annotations
 
+import time
 from typing import Iterator, Mapping, Sequence
 
 from planhrc.errors import PlanhrcError
@@ -15,6 +16,10 @@ from planhrc.model import ActionSchemaSpec, ActionSpec, Atom, CondEffect, Domain
 
 class TransitionError(PlanhrcError):
     """A plan step does not match a schema or is not applicable in the state it is applied to."""
+
+
+class ReplayDeadline(TransitionError):
+    """The replay of a plan did not finish by its deadline (the plan is neither accepted nor refused)."""
 
 
 def parse_step(step: str) -> tuple[str, tuple[str, ...]]:
@@ -40,25 +45,74 @@ def _holds(lit: Literal, binding: Mapping[str, str], state: State) -> bool:
     return value != lit.negated
 
 
+class StateIndex:
+    """The atoms of a state by predicate and by (predicate, argument position, value), for the joins of
+    `_bindings`; `moved` updates it by what one action changed instead of indexing the next state anew."""
+
+    def __init__(self, state: State) -> None:
+        self.state = state
+        self._by_pred: dict[str, set[Atom]] = {}
+        self._by_arg: dict[tuple[str, int, str], set[Atom]] = {}
+        for atom in state:
+            self._add(atom)
+
+    def _add(self, atom: Atom) -> None:
+        self._by_pred.setdefault(atom[0], set()).add(atom)
+        for pos, value in enumerate(atom[1:]):
+            self._by_arg.setdefault((atom[0], pos, value), set()).add(atom)
+
+    def _discard(self, atom: Atom) -> None:
+        self._by_pred.get(atom[0], set()).discard(atom)
+        for pos, value in enumerate(atom[1:]):
+            self._by_arg.get((atom[0], pos, value), set()).discard(atom)
+
+    def moved(self, state: State) -> "StateIndex":
+        """This index, changed in place to describe `state` (which differs from the old one by few atoms)."""
+        for atom in self.state - state:
+            self._discard(atom)
+        for atom in state - self.state:
+            self._add(atom)
+        self.state = state
+        return self
+
+    def candidates(self, lit: Literal, binding: Mapping[str, str]) -> set[Atom] | frozenset[Atom]:
+        """The atoms `lit` may match under `binding`: the one atom it names when every argument is bound, else
+        those agreeing with its most selective bound argument."""
+        if all(var in binding for var in lit.args):
+            atom = (lit.predicate,) + tuple(binding[var] for var in lit.args)
+            return frozenset((atom,)) if atom in self.state else frozenset()
+        best: set[Atom] | None = None
+        for pos, var in enumerate(lit.args):
+            if var in binding:
+                found = self._by_arg.get((lit.predicate, pos, binding[var]))
+                if found is None:
+                    return frozenset()
+                if best is None or len(found) < len(best):
+                    best = found
+        return best if best is not None else self._by_pred.get(lit.predicate, frozenset())
+
+
 def _bindings(
-    literals: Sequence[Literal], variables: Sequence[str], binding: dict[str, str], state: State
+    literals: Sequence[Literal], variables: Sequence[str], binding: dict[str, str], index: StateIndex
 ) -> Iterator[dict[str, str]]:
-    """Every extension of `binding` to `variables` under which all `literals` hold in `state`.
+    """Every extension of `binding` to `variables` under which all `literals` hold in the indexed state.
 
-    Positive non-equality literals are matched against the state's atoms first (a join); the remaining
-    literals are then checked. This enumerates exactly the satisfying bindings of a `when` condition."""
+    Positive non-equality literals are matched against the state's atoms first (a join that takes next the
+    literal with the fewest candidates under the variables bound so far); the remaining literals are then
+    checked. This enumerates exactly the satisfying bindings of a `when` condition, each once: a binding of
+    every literal's variables determines the atoms its positive literals match."""
     positives = [lit for lit in literals if not lit.negated and lit.predicate != "="]
-    by_pred: dict[str, list[Atom]] = {}
-    for atom in state:
-        by_pred.setdefault(atom[0], []).append(atom)
+    state = index.state
 
-    def extend(i: int, current: dict[str, str]) -> Iterator[dict[str, str]]:
-        if i == len(positives):
+    def extend(todo: tuple[int, ...], current: dict[str, str]) -> Iterator[dict[str, str]]:
+        if not todo:
             if all(v in current for v in variables) and all(_holds(lit, current, state) for lit in literals):
                 yield dict(current)
             return
-        lit = positives[i]
-        for atom in by_pred.get(lit.predicate, ()):
+        pick, atoms = min(((i, index.candidates(positives[i], current)) for i in todo), key=lambda c: len(c[1]))
+        lit = positives[pick]
+        rest = tuple(i for i in todo if i != pick)
+        for atom in atoms:
             if len(atom) != len(lit.args) + 1:
                 continue
             new = dict(current)
@@ -68,9 +122,9 @@ def _bindings(
                     ok = False
                     break
             if ok:
-                yield from extend(i + 1, new)
+                yield from extend(rest, new)
 
-    yield from extend(0, dict(binding))
+    yield from extend(tuple(range(len(positives))), dict(binding))
 
 
 def find_schema(domain: DomainModelSpec, name: str) -> ActionSchemaSpec:
@@ -80,8 +134,9 @@ def find_schema(domain: DomainModelSpec, name: str) -> ActionSchemaSpec:
     raise TransitionError(f"action {name!r} is not a schema of domain {domain.name}")
 
 
-def ground_action(domain: DomainModelSpec, step: str, state: State) -> ActionSpec:
-    """The ground action of a plan step in `state`; raises TransitionError when it is not applicable."""
+def ground_action(domain: DomainModelSpec, step: str, state: State, index: StateIndex | None = None) -> ActionSpec:
+    """The ground action of a plan step in `state`; raises TransitionError when it is not applicable.
+    `index` (of this very state) saves indexing it again, e.g. along a plan (`replay`)."""
     name, args = parse_step(step)
     schema = find_schema(domain, name)
     if len(args) != len(schema.parameters):
@@ -94,9 +149,11 @@ def ground_action(domain: DomainModelSpec, step: str, state: State) -> ActionSpe
     eff_neg = frozenset(_instantiate(lit, binding) for lit in schema.effects if lit.negated)
     eff_pos = frozenset(_instantiate(lit, binding) for lit in schema.effects if not lit.negated)
     conds = []
+    atoms = index if index is not None and index.state is state else None
     for ce in schema.conditional_effects:
         variables = [v for v, _ in ce.variables]
-        for b in _bindings(ce.when, variables, binding, state):
+        atoms = atoms or StateIndex(state)
+        for b in _bindings(ce.when, variables, binding, atoms):
             conds.append(
                 CondEffect(
                     when=frozenset(_instantiate(lit, b) for lit in ce.when if lit.predicate != "=" and not lit.negated),
@@ -123,12 +180,19 @@ def apply(state: State, action: ActionSpec) -> State:
     return frozenset((state - neg) | pos)
 
 
-def replay(domain: DomainModelSpec, init: State, plan: Sequence[str]) -> tuple[tuple[ActionSpec, ...], tuple[State, ...]]:
-    """Ground every step in turn and return the actions and the expected states s^e_1 .. s^e_{N+1}."""
+def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_at: float | None = None
+           ) -> tuple[tuple[ActionSpec, ...], tuple[State, ...]]:
+    """Ground every step in turn and return the actions and the expected states s^e_1 .. s^e_{N+1}; past
+    `deadline_at` (`time.monotonic()`) a `ReplayDeadline` is raised instead."""
     states = [frozenset(init)]
     actions = []
-    for step in plan:
-        action = ground_action(domain, step, states[-1])
+    index = StateIndex(states[0]) if any(s.conditional_effects for s in domain.actions) else None
+    for k, step in enumerate(plan, 1):
+        if deadline_at is not None and time.monotonic() > deadline_at:
+            raise ReplayDeadline(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
+        action = ground_action(domain, step, states[-1], index)
         actions.append(action)
         states.append(apply(states[-1], action))
+        if index is not None:
+            index.moved(states[-1])
     return tuple(actions), tuple(states)

@@ -1,11 +1,15 @@
 """The paper's transition equations, replayed from the TBox's schemas."""
+import itertools
+import random
+import time
+
 import pytest
 
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import action_motion, merge_macro_steps
 from planhrc.kb_service.store.records import ActionSpec, StoredAction
-from planhrc.transition import TransitionError, apply, replay
+from planhrc.transition import ReplayDeadline, StateIndex, TransitionError, _bindings, apply, replay
 from planhrc.translator.domain import read_domain_model
 
 
@@ -73,3 +77,56 @@ def test_macro_steps_merge_consecutive_same_joint_same_direction():
     assert [(m.first_step, m.last_step, m.delta_deg) for m in merged] == [(1, 2, 90), (3, 3, -45), (4, 4, 45)]
     assert merged[0].expected_state_step == 3
     assert merged[0].action_ids == ("a1", "a2")
+
+
+def _brute_force_bindings(literals, variables, binding, state, objects):
+    """Every binding of `variables` over `objects` under which the literals hold, the slow obvious way."""
+    from planhrc.transition import _holds
+    found = []
+    for values in itertools.product(objects, repeat=len(variables)):
+        b = {**binding, **dict(zip(variables, values))}
+        if all(_holds(lit, b, state) for lit in literals):
+            found.append(b)
+    return found
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_indexed_join_finds_exactly_the_brute_force_bindings(seed):
+    rng = random.Random(seed)
+    obj = make_object("o", "absolute", 5, 4)
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    state = obj.state([rng.choice([0, 90, 180, 270]) for _ in range(5)])
+    objects = sorted({arg for atom in state for arg in atom[1:]})
+    index = StateIndex(state)
+    for schema in domain.actions:
+        for ce in schema.conditional_effects:
+            variables = [v for v, _ in ce.variables]
+            for l1, j1 in [("o_l2", "o_j2"), ("o_l3", "o_j3"), ("o_l1", "o_j1")]:
+                binding = {"?l1": l1, "?j1": j1}
+                fast = list(_bindings(ce.when, variables, binding, index))
+                slow = _brute_force_bindings(ce.when, variables, binding, state, objects)
+                key = lambda b: sorted(b.items())  # noqa: E731
+                assert sorted(fast, key=key) == sorted(slow, key=key) and slow
+
+
+def test_a_moved_index_equals_a_fresh_one_along_a_plan():
+    obj = make_object("o", "absolute", 6, 8)
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    steps = ["(rotateclockwise o_l3 o_l2 o_j3 deg_0 deg_45)", "(rotateclockwise o_l5 o_l4 o_j5 deg_45 deg_90)",
+             "(rotateanticlockwise o_l2 o_l1 o_j2 deg_0 deg_315)"]
+    _, states = replay(domain, obj.state([0] * 6), steps)
+    index = StateIndex(states[0])
+    for later in states[1:]:
+        index.moved(later)
+        fresh = StateIndex(later)
+        for mine, theirs in ((index._by_pred, fresh._by_pred), (index._by_arg, fresh._by_arg)):
+            assert {k: v for k, v in mine.items() if v} == theirs
+    assert obj.joint_values_of(states[-1]) == {1: 0, 2: 315, 3: 0, 4: 0, 5: 45, 6: 45}
+
+
+def test_replay_stops_at_its_deadline_without_a_result():
+    obj = make_object("o", "absolute", 3, 4)
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    with pytest.raises(ReplayDeadline, match="after 0 of 1 steps"):
+        replay(domain, obj.state([0, 0, 0]), ["(rotateclockwise o_l2 o_l1 o_j2 deg_0 deg_90)"],
+               deadline_at=time.monotonic() - 1.0)
