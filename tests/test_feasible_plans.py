@@ -134,3 +134,19 @@ def test_an_abstract_object_is_not_checked(client):
     assert client.get(f"/objects/{oid}").json()["base_point_xy"] is None
     answer = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 180, 180, 0]})
     assert answer.status_code == 200 and answer.json()["warnings"] == []
+
+
+def test_help_names_every_changed_link_when_the_named_one_alone_would_fold_the_object():
+    from planhrc.geometry import Feasibility, Infeasibility
+    from planhrc.ordering import help_for
+    moves = [turn(4, -45), turn(4, -45), turn(5, -45), turn(5, -45)]  # l4 to 0 (l5 with it), then l5 to 270
+    blocked = Feasibility(False, (Infeasibility("out_of_reach", 5, "link 5 unreachable: 0.05 m beyond reach", 0.05),))
+    asked = help_for(Placement(FIVE, STRAIGHT), moves, blocked)
+    # l5 alone at 270 beside l4 still at 90 would lie folded back onto l4: the plan's end is asked for instead
+    assert not configuration_feasible(FIVE, (90, 90, 90, 90, 270), reach_links=()).ok
+    assert configuration_feasible(FIVE, (90, 90, 90, 0, 270), reach_links=()).ok
+    assert [(h.link, h.to_deg) for h in asked] == [(4, 0), (5, 270)]
+    assert all("link 5 unreachable" in h.sentence for h in asked)
+    # a named link that can be turned alone safely is asked for alone
+    alone = help_for(Placement(FIVE, STRAIGHT), [turn(5, 45), turn(5, 45)], blocked)
+    assert [(h.link, h.to_deg) for h in alone] == [(5, 180)]
