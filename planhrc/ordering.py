@@ -211,10 +211,11 @@ def final_configuration(placement: Placement, moves: Sequence[Move]) -> tuple[Ob
 def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility | None,
              why: str | None = None) -> tuple[HelpItem, ...]:
     """What to ask the human when the robot cannot carry the moves out: the links the plan turns and the
-    obstacle names (else the links the plan turns), each to its orientation at the plan's end, the others left
-    where they lie; when that would leave the object folded or off the table, every link the plan changes, so
-    the items together describe the plan's end, which is feasible. `why` (else the obstacle) is said in each
-    sentence."""
+    obstacle names (else the links the plan turns), each to its orientation at the plan's end. A human turns a
+    link about its joint with the link before it, carrying the links beyond (assumption A1), upstream first;
+    when the named turns would leave the object folded or off the table, every link from the first one the plan
+    changes to the last is asked for, so that, done in that order, they bring the object to the plan's end,
+    which is feasible. `why` (else the obstacle) is said in each sentence."""
     if not moves:
         return ()
     _, final = final_configuration(placement, moves)
@@ -222,8 +223,8 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
     changed = [k for k in range(1, len(final) + 1) if round(final[k - 1]) % 360 != round(start[k - 1]) % 360]
     named = [k for k in (problem.links if problem is not None else ()) if k in changed]
     links = named or [m.turned for m in dict.fromkeys(moves) if m.turned in changed] or changed
-    if not _safe_for_a_human(placement, start, final, links):
-        links = changed
+    if changed and not _safe_for_a_human(placement, final, links):
+        links = list(range(min(changed), len(final) + 1))
     why = f" ({why})" if why else f" ({problem.sentence()})" if problem is not None else ""
     items = []
     for k in dict.fromkeys(links):
@@ -232,12 +233,15 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
     return tuple(items)
 
 
-def _safe_for_a_human(placement: Placement, start: Sequence[float], final: Sequence[float],
-                      links: Sequence[int]) -> bool:
-    """Whether the object lies on the table, clear of the robot and unfolded once `links` point as at the plan's
-    end and the other links as they lie now (a human is not bound by the robot's reach)."""
-    angles = [final[k - 1] if k in links else start[k - 1] for k in range(1, len(start) + 1)]
-    return configuration_feasible(placement.geometry, angles, placement.cell, reach_links=()).ok
+def _safe_for_a_human(placement: Placement, final: Sequence[float], links: Sequence[int]) -> bool:
+    """Whether the object lies on the table, clear of the robot and unfolded once a human has turned each of
+    `links`, upstream first, to its orientation in `final`, carrying the links beyond (a human is not bound by
+    the robot's reach)."""
+    geometry, angles = placement.geometry, tuple(float(a) for a in placement.link_deg)
+    for k in sorted(set(links)):
+        delta = (final[k - 1] - angles[k - 1] + 180.0) % 360.0 - 180.0
+        geometry, angles = rotated(geometry, angles, k, k - 1, delta)
+    return configuration_feasible(geometry, angles, placement.cell, reach_links=()).ok
 
 
 def _baseline(placement: Placement) -> frozenset[tuple[str, int]]:

@@ -136,17 +136,22 @@ def test_an_abstract_object_is_not_checked(client):
     assert answer.status_code == 200 and answer.json()["warnings"] == []
 
 
-def test_help_names_every_changed_link_when_the_named_one_alone_would_fold_the_object():
+def test_help_asks_for_the_plans_end_when_the_named_turn_alone_would_harm_the_object():
     from planhrc.geometry import Feasibility, Infeasibility
     from planhrc.ordering import help_for
     moves = [turn(4, -45), turn(4, -45), turn(5, -45), turn(5, -45)]  # l4 to 0 (l5 with it), then l5 to 270
     blocked = Feasibility(False, (Infeasibility("out_of_reach", 5, "link 5 unreachable: 0.05 m beyond reach", 0.05),))
     asked = help_for(Placement(FIVE, STRAIGHT), moves, blocked)
-    # l5 alone at 270 beside l4 still at 90 would lie folded back onto l4: the plan's end is asked for instead
+    # l5 alone at 270 beside l4 still at 90 would lie folded back onto l4: the plan's end is asked for instead,
+    # every link from the first the plan changes, upstream first
     assert not configuration_feasible(FIVE, (90, 90, 90, 90, 270), reach_links=()).ok
     assert configuration_feasible(FIVE, (90, 90, 90, 0, 270), reach_links=()).ok
     assert [(h.link, h.to_deg) for h in asked] == [(4, 0), (5, 270)]
     assert all("link 5 unreachable" in h.sentence for h in asked)
+    # a link the plan leaves as it was but a requested turn upstream carries is asked back to where it was
+    bent = help_for(Placement(FIVE, STRAIGHT), [turn(2, -45), turn(2, -45), turn(3, 45), turn(3, 45)],
+                    Feasibility(False, (Infeasibility("out_of_reach", 2, "link 2 unreachable", 0.05),)))
+    assert [(h.link, h.to_deg) for h in bent] == [(2, 0), (3, 90), (4, 90), (5, 90)]
     # a named link that can be turned alone safely is asked for alone
     alone = help_for(Placement(FIVE, STRAIGHT), [turn(5, 45), turn(5, 45)], blocked)
     assert [(h.link, h.to_deg) for h in alone] == [(5, 180)]
