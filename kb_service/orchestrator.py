@@ -297,7 +297,7 @@ class Orchestrator:
                 obj, lambda: pipeline.validate(outcome, obj, self.planning, deadline_at))), name="planhrc-val")
             val.start()
         try:
-            checked = self.kb.check_plan(obj.ident, outcome.actions, outcome.expected_states)
+            checked = self.kb.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at)
         finally:
             if val is not None:
                 val.join()

@@ -51,3 +51,17 @@ def test_check_plan_refuses_bad_input_and_a_mismatched_check_is_redone():
         other = kb.check_plan("obj1", actions, list(states))  # not the objects add_plan is given: checked again
         plan = kb.add_plan(problem.id, "inproc", actions, states, other)
         assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == list(states)
+
+
+def test_a_plan_check_past_its_deadline_stops_with_a_deadline_error():
+    import time
+
+    from planhrc.kb_service.store.errors import DeadlineError
+    with KnowledgeBase(None, default_tbox_path()) as kb:
+        obj = make_object("obj1", "absolute", 4, 4)
+        kb.create_object(obj)
+        init = obj.state([0, 90, 180, 270])
+        actions, states = plan_for(obj, init, [(1, True), (3, False)])
+        with pytest.raises(DeadlineError, match="expected state 1 of 3"):
+            kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() - 1.0)
+        assert kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() + 60.0).expected_states == tuple(states)

@@ -41,7 +41,7 @@ from planhrc.model import (
     perceive,
 )
 
-from .errors import ConflictError, KBError, NotFoundError, ValidationError
+from .errors import ConflictError, DeadlineError, KBError, NotFoundError, ValidationError
 from .owl import NAMED_INDIVIDUAL, RDF_TYPE, QuadStore, World
 from .records import (
     STATE_KINDS,
@@ -835,15 +835,16 @@ class Abox:
             self._check_atom(info, atom, field)
 
     def check_plan(self, object_id: str, actions: Sequence[ActionSpec],
-                   expected_states: Sequence[frozenset[Atom]]) -> CheckedPlan:
+                   expected_states: Sequence[frozenset[Atom]], deadline_at: float | None = None) -> CheckedPlan:
         """Validate a plan of an object and put its atoms in writing order: the part of `add_plan` that needs
         neither the database nor the store's lock, so a caller can do it while something else runs (the
         service: while VAL checks the plan). Hand the result to `add_plan(..., checked=...)` with the same
-        `actions` and `expected_states` objects."""
+        `actions` and `expected_states` objects. Past `deadline_at` (`time.monotonic()`) a DeadlineError is
+        raised: a caller's request deadline bounds the check of a huge plan too."""
         with self._lock:  # only to look the object up
             self._check_open()
             info = self._info(object_id, "object_id")
-        return _check_plan(self, info, tuple(actions), tuple(expected_states))
+        return _check_plan(self, info, tuple(actions), tuple(expected_states), deadline_at)
 
     def add_plan(
         self,
@@ -1059,8 +1060,9 @@ class CheckedPlan:
 
 
 def _check_plan(abox: Abox, info: _ObjectInfo, actions: tuple[ActionSpec, ...],
-                expected_states: tuple[frozenset[Atom], ...]) -> CheckedPlan:
-    """Every check `add_plan` makes on the actions and states (pure: reads only `info`)."""
+                expected_states: tuple[frozenset[Atom], ...], deadline_at: float | None = None) -> CheckedPlan:
+    """Every check `add_plan` makes on the actions and states (pure: reads only `info`), stopped with a
+    DeadlineError once `deadline_at` has passed."""
     if len(expected_states) != len(actions) + 1:
         raise ValidationError(
             f"expected_states: a plan of {len(actions)} actions needs {len(actions) + 1} expected states "
@@ -1068,7 +1070,12 @@ def _check_plan(abox: Abox, info: _ObjectInfo, actions: tuple[ActionSpec, ...],
         )
     for i, spec in enumerate(actions):
         abox._check_action(info, i, spec)
+    orders = []
     for i, atoms in enumerate(expected_states):
+        if deadline_at is not None and time.monotonic() > deadline_at:
+            raise DeadlineError(f"planning: the deadline passed while the store checked expected state {i + 1} of "
+                                f"{len(expected_states)}")
         abox._check_state_atoms(info, "expected", atoms, f"expected_states[{i}]")
+        orders.append(_state_order(info, frozenset(atoms)))
     return CheckedPlan(info.obj.ident, actions, expected_states, tuple(_action_order(a) for a in actions),
-                       tuple(_state_order(info, frozenset(atoms)) for atoms in expected_states))
+                       tuple(orders))
