@@ -5,10 +5,11 @@ import os
 import socket
 import subprocess
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import httpx
 
@@ -66,3 +67,23 @@ def serving(db: Path, port: int | None = None, args: Sequence[str] = (),
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+def timed_beside(slow_call: Callable[[], Any], started: threading.Event,
+                 calls: Sequence[tuple[str, Callable[[], Any]]]) -> tuple[Any, dict[str, float], float]:
+    """Run `slow_call` in a thread and, once `started` says its slow stage has begun, each named call in turn,
+    each of which must answer 200. Returns the slow call's answer, each call's seconds, and the seconds from the
+    start of the slow call until the last call answered."""
+    result: dict[str, Any] = {}
+    worker = threading.Thread(target=lambda: result.update(r=slow_call()))
+    t0 = time.perf_counter()
+    worker.start()
+    assert started.wait(10)
+    timings = {}
+    for name, call in calls:
+        t = time.perf_counter()
+        assert call().status_code == 200, name
+        timings[name] = time.perf_counter() - t
+    done_before = time.perf_counter() - t0
+    worker.join(30)
+    return result["r"], timings, done_before

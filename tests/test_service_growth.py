@@ -13,6 +13,7 @@ from planhrc.kb_service.app import create_app
 from planhrc.kb_service.store import KnowledgeBase
 from planhrc.kb_service.store.knowledge_base import MAX_EVENTS_PAGE, MAX_SEQ
 from planhrc.settings import make_settings
+from tests.servers import timed_beside
 
 
 @pytest.fixture
@@ -167,27 +168,17 @@ def test_a_slow_plan_on_one_object_stalls_neither_another_object_nor_reads(clien
         client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
     client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 90, 0]})  # the planner's imports
     monkeypatch.setattr(pipeline, "plan", plan)
-    result: dict = {}
-    worker = threading.Thread(target=lambda: result.update(r=client.post(
-        f"/objects/{slow}/perceptions", json={"link_orientations_deg": [0, 0, 0]})))
-    t0 = time.perf_counter()
-    worker.start()
-    assert started.wait(10)
-    timings = {}
-    for name, call in (
-        ("perception", lambda: client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 0, 0]})),
-        ("replan", lambda: client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [90, 0, 0]})),
-        ("health", lambda: client.get("/health")),
-        ("object", lambda: client.get(f"/objects/{fast}")),
-        ("events", lambda: client.get(f"/objects/{fast}/events")),
-        ("ontology", lambda: client.get("/ontology", params={"object": fast}, headers=NT)),
-        ("health_again", lambda: client.get("/health")),
-    ):
-        t = time.perf_counter()
-        assert call().status_code == 200, name
-        timings[name] = time.perf_counter() - t
-    done_before = time.perf_counter() - t0
-    worker.join(30)
-    assert result["r"].status_code == 200 and result["r"].json()["decision"] == "replan"
+    slow_answer, timings, done_before = timed_beside(
+        lambda: client.post(f"/objects/{slow}/perceptions", json={"link_orientations_deg": [0, 0, 0]}),
+        started, (
+            ("perception", lambda: client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 0, 0]})),
+            ("replan", lambda: client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [90, 0, 0]})),
+            ("health", lambda: client.get("/health")),
+            ("object", lambda: client.get(f"/objects/{fast}")),
+            ("events", lambda: client.get(f"/objects/{fast}/events")),
+            ("ontology", lambda: client.get("/ontology", params={"object": fast}, headers=NT)),
+            ("health_again", lambda: client.get("/health")),
+        ))
+    assert slow_answer.status_code == 200 and slow_answer.json()["decision"] == "replan"
     assert done_before < 3.0, (done_before, timings)  # everything on B answered while A was still planning
     assert max(timings["health"], timings["health_again"]) < 0.25, timings
