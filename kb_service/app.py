@@ -16,6 +16,7 @@ from .console import install_console
 from .guard import GuardPolicy, RequestGuard
 from .locks import ObjectLocks
 from .orchestrator import Orchestrator
+from .planning_pool import PlanningPool
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +49,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         kb = open_knowledge_base(settings)
         app.state.kb = kb
-        app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks())
+        pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
+        app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks(), pool)
         log.info("knowledge base open: %s", settings.db_path or "in memory")
         stop = threading.Event()
         compactor = None
@@ -62,6 +64,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             stop.set()
             if compactor is not None:
                 compactor.join(timeout=60)
+            pool.close()
             kb.close()
             log.info("knowledge base closed")
 

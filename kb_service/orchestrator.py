@@ -43,6 +43,7 @@ from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, Fa
                                 one_of)
 
 from .locks import ObjectLocks
+from .planning_pool import PlanningJob, PlanningPool
 from .store.abox import CheckedPlan
 from .store.knowledge_base import MAX_EVENTS_PAGE
 from .public import (event_public, execution_public, object_public, plan_public, problem_public,
@@ -70,8 +71,10 @@ class _ObjectMemo:
 class Orchestrator:
     """Runs the cooperation loop of every object against one knowledge base."""
 
-    def __init__(self, kb: KnowledgeBase, settings: Settings, locks: ObjectLocks | None = None) -> None:
+    def __init__(self, kb: KnowledgeBase, settings: Settings, locks: ObjectLocks | None = None,
+                 pool: PlanningPool | None = None) -> None:
         self.kb = kb
+        self.pool = pool  # large tasks are planned there (see planning_pool), the rest in this process
         self.settings = settings
         self.planning = config_from_settings(settings)
         self.merge_macro_steps = settings.merge_macro_steps
@@ -305,6 +308,13 @@ class Orchestrator:
 
     def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State,
                       placement: Placement | None = None, deadline_at: float | None = None) -> PlanOutcome:
+        """The pipeline up to VAL (left to `_validate_and_check`): in a worker of the planning pool for a large
+        task, else here."""
+        pool = self.pool
+        if pool is not None and pool.takes(obj):
+            job = PlanningJob(obj, init, goal, self.planning, placement,
+                              pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at)
+            return self._guarded(obj, lambda: pool.plan(job))
         return self._guarded(obj, lambda: pipeline.plan(obj, init, goal, self.planning, defer_validation=True,
                                                         placement=placement, deadline_at=deadline_at))
 

@@ -49,6 +49,18 @@ class Settings(BaseSettings):
         description="VAL checks a long plan in this many pieces at once (one process each; each piece ends in "
         "an exact expected state, so together they say what one run says); 1: one run on the whole plan.",
     )
+    planning_workers: int = Field(
+        default=2, ge=0, le=16,
+        description="Worker processes of the service's planning pool (started on the first large task, stopped "
+        "with the service): a large task's translation, planning and replay run there, not in the service's "
+        "interpreter; 0: every task is planned in the service's process.",
+    )
+    planning_pool_min_atoms: int = Field(
+        default=150, ge=1,
+        description="A task goes to the planning pool when a state of its object holds at least this many atoms "
+        "(static facts and orientations: relative 20 x 12: 69, absolute 20 x 12: 282); smaller tasks cost less "
+        "than the trip and are planned in the service's process.",
+    )
     max_task_size: int = Field(
         default=14_400, ge=4, le=1_000_000,
         description="Largest planning task an object may pose, as links x orientations (200 x 72 by default); "

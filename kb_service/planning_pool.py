@@ -1,0 +1,324 @@
+"""Planning worker processes owned by the service, so a large task's planning does not hold its interpreter.
+
+The pipeline (translate -> plan -> order -> expected states -> VAL, `pipeline.plan`) is mostly Python: while it
+runs in the service's process it holds the interpreter lock in turns with every request, and its memoised
+grounding stays in the service's heap, which every full garbage collection then walks. `PlanningPool` runs it in
+a few worker processes instead: the service hands a worker a value (`PlanningJob`: the object, the states, the
+planning configuration, the deadline) and gets back the `PlanOutcome`, checked by VAL (VAL's processes are the
+worker's, so they end with it). The store's checks of the plan stay with the caller: they need the store.
+
+* **Which tasks.** Only tasks whose states hold at least `min_atoms` atoms go to a worker (`takes`): a small
+  task's pipeline costs less than the trip (the relative 20 x 12 re-plan is tens of milliseconds).
+* **The deadline.** A worker runs the pipeline with the job's deadline (`time.monotonic()` is the same clock in
+  every process of the machine) and answers by it; one that has not answered `grace_s` after it is stopped
+  (SIGTERM, then SIGKILL) and replaced, and the job ends `timeout`. A worker that dies ends its job `error` and is
+  replaced too. A job waits for a free worker (or one starting) only until its deadline.
+* **What comes back.** The outcome's expected states share most atoms (every state carries the object's static
+  facts): a worker sends the first state once and, for each state, the atoms it lacks and adds against it; the
+  service builds each state as one set operation on the first. The outcome travels in several frames (header,
+  actions, states in chunks) so that no single unpickling holds the service's interpreter for long.
+* **Life.** The service makes the pool in its lifespan and closes it at shutdown; a worker starts when a job
+  first needs it (about 1.5 s: importing the pipeline), up to `workers`, and stays. A worker ignores SIGINT
+  (the service stops it), stops on SIGTERM with the VAL or planner processes it started, and watches its parent:
+  when the parent is gone (SIGKILL included) it stops the same way.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import pickle
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, replace
+from multiprocessing.connection import Connection
+from typing import Any, Iterator
+
+from planhrc.model import Atom, ArticulatedObject, State
+from planhrc.ordering import Placement
+from planhrc.pipeline import PlanningConfig, PlanOutcome
+from planhrc.vocabulary import PlanningStatus
+
+log = logging.getLogger(__name__)
+
+ATOMS_PER_FRAME = 5_000  # a few milliseconds of unpickling in the service per frame
+EFFECTS_PER_FRAME = 1_000  # actions' conditional effects per frame (absolute 200 links: about 200 an action)
+_PARENT_POLL_S = 0.2
+_STOP_WAIT_S = 1.0
+
+
+@dataclass(frozen=True)
+class PlanningJob:
+    """One pipeline run, as a value: `pipeline.plan(obj, init, goal, config, placement=..., deadline_at=...)`, VAL
+    included when `config.validate`."""
+
+    obj: ArticulatedObject
+    init: State
+    goal: State
+    config: PlanningConfig
+    placement: Placement | None
+    deadline_at: float  # time.monotonic()
+
+
+def state_size(obj: ArticulatedObject) -> int:
+    """Atoms in a complete state of the object (its static facts and one orientation per joint): what a
+    re-plan's replay, expected states and checks grow with."""
+    return len(obj.state([0] * obj.n_joints))
+
+
+# -- the outcome on the wire ----------------------------------------------------------------------------------
+def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
+    """The outcome as frames: a header (the outcome without actions and states, and how many frames follow),
+    the actions in chunks, the first expected state, then each further state as (missing, added) atoms against
+    the first, in chunks of about `ATOMS_PER_FRAME` atoms."""
+    states, actions = outcome.expected_states, outcome.actions
+    action_chunks: list[list[Any]] = []
+    weight = EFFECTS_PER_FRAME
+    for action in actions:
+        if weight >= EFFECTS_PER_FRAME:
+            action_chunks.append([])
+            weight = 0
+        action_chunks[-1].append(action)
+        weight += 1 + len(action.cond_eff)
+    state_chunks: list[list[tuple[frozenset[Atom], frozenset[Atom]]]] = []
+    if states:
+        base = states[0]
+        chunk: list[tuple[frozenset[Atom], frozenset[Atom]]] = []
+        size = 0
+        for state in states[1:]:
+            diff = (base - state, state - base)
+            chunk.append(diff)
+            size += len(diff[0]) + len(diff[1]) + 1
+            if size >= ATOMS_PER_FRAME:
+                state_chunks.append(chunk)
+                chunk, size = [], 0
+        if chunk:
+            state_chunks.append(chunk)
+        atoms = list(base)
+        base_frames = [atoms[i:i + ATOMS_PER_FRAME] for i in range(0, len(atoms), ATOMS_PER_FRAME)]
+    else:
+        base_frames = []
+    bare = replace(outcome, actions=(), expected_states=())
+    yield pickle.dumps((bare, len(action_chunks), len(base_frames), len(state_chunks)), pickle.HIGHEST_PROTOCOL)
+    for part in (*action_chunks, *base_frames, *state_chunks):
+        yield pickle.dumps(part, pickle.HIGHEST_PROTOCOL)
+
+
+def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
+    """The outcome `pack_outcome` sent, each state one set operation on the first."""
+    bare, n_actions, n_base, n_states = pickle.loads(next(frames))
+    actions: list[Any] = []
+    for _ in range(n_actions):
+        actions.extend(pickle.loads(next(frames)))
+    base_atoms: list[Atom] = []
+    for _ in range(n_base):
+        base_atoms.extend(pickle.loads(next(frames)))
+    states: list[State] = [frozenset(base_atoms)] if n_base else []
+    for _ in range(n_states):
+        for missing, added in pickle.loads(next(frames)):
+            states.append((states[0] - missing) | added)
+    return replace(bare, actions=tuple(actions), expected_states=tuple(states))
+
+
+# -- the pool (in the service) --------------------------------------------------------------------------------
+class _Worker:
+    def __init__(self) -> None:
+        parent_end, child_end = socket.socketpair()
+        code = "from planhrc.kb_service.planning_pool import run_worker; run_worker()"
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", code, str(child_end.fileno()), str(os.getpid())],
+            pass_fds=(child_end.fileno(),), stdin=subprocess.DEVNULL, start_new_session=True)
+        child_end.close()
+        self.conn = Connection(parent_end.detach())
+        self.last_object: str | None = None
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def stop(self, wait_s: float = _STOP_WAIT_S) -> None:
+        """SIGTERM (the worker stops the processes it started), then SIGKILL if it is still there. The connection
+        is left to the thread using it, which reads the end of it."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(wait_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+    def close(self) -> None:
+        try:
+            self.conn.close()
+        except OSError:
+            pass
+
+
+class PlanningPool:
+    """Up to `workers` planning processes, started when a job first needs one and kept until `close`;
+    `plan(job)` runs a job on a free one (the one that last planned the same object when it is free: its memoised
+    grounding is warm) and returns the outcome by the job's deadline and its grace."""
+
+    def __init__(self, workers: int, min_atoms: int, grace_s: float = 1.0) -> None:
+        self.size = workers
+        self.min_atoms = min_atoms
+        self.grace_s = grace_s
+        self._idle: list[_Worker] = []
+        self._all: set[_Worker] = set()
+        self._cond = threading.Condition()
+        self._closed = False
+        self._sizes: dict[str, int] = {}  # object id -> state_size (objects never change)
+
+    def close(self) -> None:
+        """Stop every worker (a job still running ends `error`)."""
+        with self._cond:
+            self._closed = True
+            workers, idle = list(self._all), list(self._idle)
+            self._all.clear()
+            self._idle.clear()
+            self._cond.notify_all()
+        for worker in workers:
+            worker.stop()
+        for worker in idle:
+            worker.close()
+
+    def __enter__(self) -> "PlanningPool":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def pids(self) -> tuple[int, ...]:
+        with self._cond:
+            return tuple(sorted(w.pid for w in self._all))
+
+    def takes(self, obj: ArticulatedObject) -> bool:
+        """Whether a task on `obj` is worth a worker (large enough, and the pool open)."""
+        if self.size == 0 or self._closed:
+            return False
+        size = self._sizes.get(obj.ident)
+        if size is None:
+            size = self._sizes.setdefault(obj.ident, state_size(obj))
+        return size >= self.min_atoms
+
+    def plan(self, job: PlanningJob) -> PlanOutcome:
+        """The job's outcome: the worker's, or `timeout` / `error` when no worker answered in time or it died."""
+        worker = self._take(job.obj.ident, job.deadline_at)
+        if worker is None:
+            if self._closed:
+                return _outcome(job, PlanningStatus.ERROR, "the service is stopping: no planning worker")
+            return _outcome(job, PlanningStatus.TIMEOUT, f"planning deadline of {job.config.deadline_s:g} s "
+                            "exceeded while waiting for a free planning worker")
+        healthy = False
+        try:
+            worker.conn.send(job)
+            frames = self._frames(worker, job.deadline_at + self.grace_s)
+            outcome = unpack_outcome(frames)
+            healthy = True
+            return outcome
+        except _Overrun:
+            log.warning("planning worker %d overran the deadline of %s: stopped", worker.pid, job.obj.ident)
+            return _outcome(job, PlanningStatus.TIMEOUT, f"planning deadline of {job.config.deadline_s:g} s "
+                            "exceeded (the planning worker was stopped)")
+        except (EOFError, OSError, pickle.UnpicklingError) as exc:
+            code = worker.proc.poll()
+            log.error("planning worker %d failed on %s (%s, exit code %s)", worker.pid, job.obj.ident,
+                      type(exc).__name__, code)
+            return _outcome(job, PlanningStatus.ERROR, f"the planning worker stopped (exit code {code})")
+        finally:
+            self._give_back(worker, healthy)
+
+    def _frames(self, worker: _Worker, until: float) -> Iterator[bytes]:
+        while True:
+            if not worker.conn.poll(max(0.0, until - time.monotonic())):
+                raise _Overrun()
+            yield worker.conn.recv_bytes()
+
+    def _take(self, object_id: str, deadline_at: float) -> _Worker | None:
+        """A free worker (started here while the pool has fewer than `size`), waiting for one until the job's
+        deadline; None when none came or the pool is closed."""
+        with self._cond:
+            while not self._closed:
+                if self._idle:
+                    worker = next((w for w in self._idle if w.last_object == object_id), self._idle[0])
+                    self._idle.remove(worker)
+                    break
+                if len(self._all) < self.size:
+                    worker = _Worker()
+                    self._all.add(worker)
+                    log.info("planning worker %d started", worker.pid)
+                    break
+                left = deadline_at - time.monotonic()
+                if left <= 0:
+                    return None
+                self._cond.wait(left)
+            else:
+                return None
+            worker.last_object = object_id
+            return worker
+
+    def _give_back(self, worker: _Worker, healthy: bool) -> None:
+        """A worker back to the idle ones; a failed one is stopped (off this thread) and its place freed."""
+        with self._cond:
+            if healthy and not self._closed:
+                self._idle.append(worker)
+                self._cond.notify()
+                return
+            self._all.discard(worker)
+            self._cond.notify()
+        worker.close()
+        threading.Thread(target=worker.stop, name="planhrc-pool-stop", daemon=True).start()
+
+
+class _Overrun(Exception):
+    """A worker did not answer by the job's deadline and its grace."""
+
+
+def _outcome(job: PlanningJob, status: PlanningStatus, message: str) -> PlanOutcome:
+    return PlanOutcome(status, message, job.config.planner)
+
+
+# -- the worker (its own process) -----------------------------------------------------------------------------
+def run_worker() -> None:
+    """A worker's life: `python -c ... FD PARENT_PID`; runs jobs from the connection on FD until it closes or the
+    parent is gone."""
+    fd, parent = int(sys.argv[1]), int(sys.argv[2])
+    logging.basicConfig(level=logging.WARNING, format="planning worker %(process)d: %(levelname)s %(message)s")
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the service stops its workers itself
+    signal.signal(signal.SIGTERM, _stop)
+    threading.Thread(target=_watch_parent, args=(parent,), name="planhrc-parent-watch", daemon=True).start()
+    from planhrc import pipeline
+
+    conn = Connection(fd)
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            outcome = pipeline.plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
+                                    deadline_at=job.deadline_at)
+        except Exception as exc:  # the service gets an outcome whatever happens
+            log.exception("planning failed for %s", job.obj.ident)
+            outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)
+        try:
+            for frame in pack_outcome(outcome):
+                conn.send_bytes(frame)
+        except OSError:
+            return
+
+
+def _stop(signum: int, frame: object) -> None:
+    raise SystemExit(0)  # unwinds through `run_limited`, which kills the planner or VAL process group it runs
+
+
+def _watch_parent(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(_PARENT_POLL_S)
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(_STOP_WAIT_S)
+    os._exit(1)
+

@@ -1,0 +1,139 @@
+"""A large task plans in the service's planning pool: another object's perceptions and `/health` answer meanwhile,
+and no worker process outlives `planhrc serve` (SIGTERM, SIGINT, SIGKILL)."""
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.servers import free_port, serve_command, serve_env, serving, timed_beside
+
+pytestmark = pytest.mark.slow
+
+
+def _object(client: httpx.Client, links: int, formulation: str) -> str:
+    r = client.post("/objects", json={"name": "rod", "links": links, "orientations": 12,
+                                      "formulation": formulation})
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+def _angles(rng: random.Random, n: int) -> list[int]:
+    return [30 * rng.randrange(12) for _ in range(n)]
+
+
+def test_a_large_task_plans_while_another_object_and_health_answer(tmp_path):
+    """A 200-link x 12 absolute object's perception plans into its 4 s deadline (503); meanwhile an 8-link
+    object's re-planning perceptions answer in well under a second and `/health` within 50 ms each time: the
+    large task's grounding and replay run in a worker process, not in the service's interpreter."""
+    rng = random.Random(3)
+    with serving(tmp_path / "kb.sqlite3", env={"PLANHRC_PLANNING_DEADLINE_S": "4"}) as base, \
+            httpx.Client(base_url=base, timeout=60) as client, httpx.Client(base_url=base, timeout=60) as other:
+        big, small = _object(client, 200, "absolute"), _object(client, 8, "relative")
+        assert client.put(f"/objects/{big}/goal", json={"link_orientations_deg": _angles(rng, 200)}).is_success
+        assert client.put(f"/objects/{small}/goal", json={"link_orientations_deg": _angles(rng, 8)}).is_success
+        other.get("/health")  # the connection's first answer is not the service's
+        started = threading.Event()
+
+        def plan_big() -> httpx.Response:
+            with httpx.Client(base_url=base, timeout=60) as c:
+                started.set()
+                return c.post(f"/objects/{big}/perceptions", json={"link_orientations_deg": [0] * 200})
+
+        calls = []
+        for i in range(25):
+            angles = _angles(rng, 8)
+            calls.append((f"small-{i}", lambda a=angles: other.post(f"/objects/{small}/perceptions",
+                                                                     json={"link_orientations_deg": a})))
+            calls.append((f"health-{i}", lambda: other.get("/health")))
+        big_answer, timings, done_before = timed_beside(plan_big, started, calls)
+        assert big_answer.status_code == 503 and "deadline of 4 s" in big_answer.json()["detail"], big_answer.text
+        small_times = sorted(v for k, v in timings.items() if k.startswith("small"))
+        health_times = sorted(v for k, v in timings.items() if k.startswith("health"))
+        assert done_before < 4.0, done_before  # the calls ran while the large task planned
+        assert small_times[-1] < 0.5, small_times[-5:]
+        assert health_times[-1] < 0.05, health_times[-5:]
+
+
+def _children(pid: int) -> set[int]:
+    out: set[int] = set()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            out.update(int(c) for c in (task / "children").read_text().split())
+        except OSError:
+            pass
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL], ids=lambda s: s.name)
+def test_no_planning_worker_outlives_the_service(tmp_path, sig):
+    """The service's planning workers (started by an absolute 20-link re-plan; one of them busy with a 200-link
+    task when the signal comes) are gone within seconds of `planhrc serve` stopping, however it stops."""
+    port = free_port()
+    log_path = tmp_path / "serve.log"
+    with open(log_path, "w") as log_file:
+        proc = subprocess.Popen(serve_command(port, tmp_path / "kb.sqlite3"), cwd=tmp_path, env=serve_env(),
+                                stdout=log_file, stderr=subprocess.STDOUT)
+    base = f"http://127.0.0.1:{port}"
+    workers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            assert proc.poll() is None, log_path.read_text()
+            try:
+                if httpx.get(f"{base}/health", timeout=1).status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            assert time.monotonic() < deadline, "planhrc serve did not answer /health"
+            time.sleep(0.1)
+        rng = random.Random(5)
+        with httpx.Client(base_url=base, timeout=60) as client:
+            big, mid = _object(client, 200, "absolute"), _object(client, 20, "absolute")
+            client.put(f"/objects/{big}/goal", json={"link_orientations_deg": _angles(rng, 200)}).raise_for_status()
+            client.put(f"/objects/{mid}/goal", json={"link_orientations_deg": [90] * 20}).raise_for_status()
+            busy = threading.Thread(target=lambda: _quietly(lambda: httpx.post(
+                f"{base}/objects/{big}/perceptions", json={"link_orientations_deg": _angles(rng, 200)}, timeout=60)))
+            busy.start()
+            time.sleep(0.5)
+            r = client.post(f"/objects/{mid}/perceptions", json={"link_orientations_deg": [0] * 20})
+            assert r.status_code == 200 and r.json()["decision"] == "replan", r.text
+            workers = _children(proc.pid)
+            assert len(workers) == 2, workers  # the pool's two workers, one planning the large task
+            assert busy.is_alive()
+        proc.send_signal(sig)
+        proc.wait(30)
+        until = time.monotonic() + 10
+        while any(_alive(p) for p in workers) and time.monotonic() < until:
+            time.sleep(0.1)
+        assert not [p for p in workers if _alive(p)], log_path.read_text()[-2000:]
+        busy.join(60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for p in workers:
+            if _alive(p):
+                os.kill(p, signal.SIGKILL)
+
+
+def _quietly(call) -> None:
+    try:
+        call()
+    except httpx.HTTPError:
+        pass  # the service was stopped under the request

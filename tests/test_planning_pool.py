@@ -1,0 +1,134 @@
+"""The planning pool's worker processes: the same outcome as the pipeline in process, and a pool that stays usable
+after a worker crashes, after a deadline the worker keeps, and after one it does not."""
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import threading
+import time
+from dataclasses import replace
+
+import pytest
+
+from planhrc import pipeline
+from planhrc.kb_service.planning_pool import (ATOMS_PER_FRAME, PlanningJob, PlanningPool, pack_outcome, state_size,
+                                              unpack_outcome)
+from planhrc.model import make_object
+from planhrc.settings import make_settings
+from planhrc.vocabulary import PlanningStatus
+
+
+@pytest.fixture(scope="module")
+def config():
+    return pipeline.config_from_settings(make_settings())
+
+
+def _job(config, obj, start, goal, deadline_s=10.0):
+    return PlanningJob(obj, obj.state(start), obj.configuration_atoms(goal), config, None,
+                       time.monotonic() + deadline_s)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_a_worker_gives_the_outcome_the_pipeline_gives_in_process(config):
+    rod = make_object("rod", "absolute", 12, 12)
+    start, goal = [30 * (i % 12) for i in range(12)], [(90 + 60 * i) % 360 for i in range(12)]
+    here = pipeline.plan(rod, rod.state(start), rod.configuration_atoms(goal), config, defer_validation=True)
+    with PlanningPool(1, 1) as pool:
+        there = pool.plan(_job(config, rod, start, goal))
+    assert there.status is PlanningStatus.SOLVED and here.actions
+    assert there.validated and not here.validated  # VAL ran in the worker
+    assert (there.actions, there.expected_states, there.steps, there.task) == (
+        here.actions, here.expected_states, here.steps, here.task)
+
+
+def test_states_travel_as_the_first_and_differences_in_small_frames(config):
+    rod = make_object("rod", "absolute", 120, 12)  # 7,500 atoms a state, most of them static
+    start, goal = [0] * 120, [30 * (i % 12) for i in range(120)]
+    outcome = pipeline.plan(rod, rod.state(start), rod.configuration_atoms(goal), config, defer_validation=True)
+    frames = list(pack_outcome(outcome))
+    back = unpack_outcome(iter(frames))
+    assert (back.expected_states, back.actions, back.steps) == (outcome.expected_states, outcome.actions, outcome.steps)
+    states_only = list(pack_outcome(replace(outcome, actions=())))
+    assert sum(map(len, states_only)) < 0.5 * len(pickle.dumps(outcome.expected_states))
+    assert len(frames) > 10 and max(map(len, frames)) < 100 * ATOMS_PER_FRAME  # no frame unpickles for long
+
+
+def test_the_pool_survives_a_worker_that_dies_mid_plan(config):
+    big = make_object("big", "absolute", 120, 12)
+    small = make_object("small", "absolute", 4, 12)
+    with PlanningPool(1, 1) as pool:
+        assert pool.plan(_job(config, small, [0] * 4, [90, 0, 0, 30])).solved  # the worker is up
+        (pid,) = pool.pids()
+        killer = threading.Timer(1.0, os.kill, (pid, signal.SIGKILL))
+        killer.start()
+        t = time.monotonic()
+        died = pool.plan(_job(config, big, [0] * 120, [30 * (i % 12) for i in range(120)], deadline_s=30))
+        killer.join()
+        assert died.status is PlanningStatus.ERROR and "stopped" in died.message, died.message
+        assert time.monotonic() - t < 10
+        again = pool.plan(_job(config, small, [0] * 4, [0, 90, 0, 30]))
+        assert again.solved, again.message
+        assert pool.pids() and pool.pids() != (pid,)
+    assert not _alive(pid)
+
+
+def test_a_worker_keeps_the_deadline_and_stays(config):
+    """The worker's pipeline stops at the job's deadline and answers `timeout`; the same worker takes the next job."""
+    big = make_object("big", "absolute", 200, 12)
+    small = make_object("small", "absolute", 4, 12)
+    with PlanningPool(1, 1, grace_s=5.0) as pool:
+        assert pool.plan(_job(config, small, [0] * 4, [90, 0, 0, 30])).solved
+        pids = pool.pids()
+        t = time.monotonic()
+        late = pool.plan(_job(config, big, [0] * 200, [30 * (i % 12) for i in range(200)], deadline_s=1.0))
+        assert late.status is PlanningStatus.TIMEOUT, late.message
+        assert time.monotonic() - t < 1.0 + 5.0
+        assert pool.plan(_job(config, small, [0] * 4, [0, 90, 0, 30])).solved
+        assert pool.pids() == pids
+
+
+def test_a_worker_past_the_deadline_and_its_grace_is_stopped_and_replaced(config):
+    """A worker that does not answer (here: stopped with SIGSTOP) is killed once the deadline and the grace have
+    passed; the job ends `timeout` and the next job gets a new worker."""
+    small = make_object("small", "absolute", 4, 12)
+    with PlanningPool(1, 1, grace_s=0.5) as pool:
+        assert pool.plan(_job(config, small, [0] * 4, [90, 0, 0, 30])).solved
+        (pid,) = pool.pids()
+        os.kill(pid, signal.SIGSTOP)
+        t = time.monotonic()
+        stuck = pool.plan(_job(config, small, [0] * 4, [0, 90, 0, 30], deadline_s=1.0))
+        assert stuck.status is PlanningStatus.TIMEOUT and "worker was stopped" in stuck.message, stuck.message
+        assert 1.0 <= time.monotonic() - t < 3.0
+        assert pool.plan(_job(config, small, [0] * 4, [0, 90, 0, 30])).solved
+        assert pool.pids() != (pid,)
+        deadline = time.monotonic() + 5
+        while _alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _alive(pid)
+
+
+def test_a_closed_pool_has_no_process_left_and_takes_nothing(config):
+    small = make_object("small", "absolute", 4, 12)
+    pool = PlanningPool(2, 1)
+    assert pool.plan(_job(config, small, [0] * 4, [90, 0, 0, 30])).solved
+    pids = pool.pids()
+    pool.close()
+    assert pids and not any(_alive(p) for p in pids)
+    assert not pool.takes(small)
+    assert pool.plan(_job(config, small, [0] * 4, [90, 0, 0, 30])).status is PlanningStatus.ERROR
+
+
+def test_only_large_tasks_go_to_the_pool():
+    pool = PlanningPool(2, make_settings().planning_pool_min_atoms)
+    assert state_size(make_object("r", "relative", 20, 12)) == 69
+    assert not pool.takes(make_object("r", "relative", 20, 12))
+    assert pool.takes(make_object("a", "absolute", 20, 12))
+    assert not PlanningPool(0, 1).takes(make_object("a", "absolute", 20, 12))
