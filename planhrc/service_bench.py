@@ -256,10 +256,14 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
     return rows
 
 
-def bench_contention(big_links: int, big_orientations: int, small_samples: int, seed: int) -> dict[str, Any]:
-    """The worst latency of a small object's perceptions while a large absolute object plans."""
+def bench_contention(big_links: int, big_orientations: int, small_samples: int, seed: int,
+                     planning_workers: int | None = None) -> dict[str, Any]:
+    """The latency of a small object's perceptions, and of `/health` polled every 20 ms from another connection,
+    while a large absolute object plans (`planning_workers`: the service's setting, e.g. 0 to plan everything
+    in the service's process; default: the service's default)."""
     rng = random.Random(seed)
-    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server, \
+    env = {} if planning_workers is None else {"PLANHRC_PLANNING_WORKERS": str(planning_workers)}
+    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp), env) as server, \
             _client(server, 600) as client:
         small = create_object(client, 8, 12, "relative", "small")
         set_goal(client, small, random_angles(rng, 8, 12))
@@ -278,17 +282,33 @@ def bench_contention(big_links: int, big_orientations: int, small_samples: int, 
                 big_answer.update(seconds=time.perf_counter() - t, status=r.status_code,
                                   answer=r.json().get("decision") if r.is_success else r.json().get("detail"))
 
+        health: list[float] = []
+
+        def poll_health() -> None:
+            with _client(server, 600) as c:
+                c.get("/health").raise_for_status()  # a new connection's first answer is not the service's
+                while thread.is_alive():
+                    t = time.perf_counter()
+                    c.get("/health").raise_for_status()
+                    health.append(time.perf_counter() - t)
+                    time.sleep(0.02)
+
         thread = threading.Thread(target=plan_big)
+        poller = threading.Thread(target=poll_health)
         thread.start()
+        poller.start()
         busy: list[float] = []
         time.sleep(0.05)
         while thread.is_alive() and len(busy) < 10 * small_samples:
             busy.extend(replanning_latencies(client, small, 8, 12, 1, rng))
         thread.join()
+        poller.join()
         return {"big_object": f"{big_links} links x {big_orientations} orientations, absolute",
+                "planning_workers": planning_workers if planning_workers is not None else "default",
                 "big_perception_s": round(big_answer["seconds"], 2) if big_answer else None,
                 "big_status": big_answer.get("status"), "big_answer": big_answer.get("answer"),
-                "small_quiet": summary_ms(quiet), "small_while_big_plans": summary_ms(busy)}
+                "small_quiet": summary_ms(quiet), "small_while_big_plans": summary_ms(busy),
+                "health_while_big_plans": summary_ms(health)}
 
 
 def bench_refusal() -> dict[str, Any]:
@@ -331,6 +351,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return value
+
+
 def add_service_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
     p = subparsers.add_parser("service-bench", help="measure the KB service with a long history (not a test)",
                               description=__doc__.splitlines()[0] if __doc__ else None)
@@ -345,6 +375,9 @@ def add_service_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--formulation", choices=["relative", "absolute"], default="relative")
     p.add_argument("--big-links", type=_positive_int, default=200, help="links of the large object (contention)")
     p.add_argument("--big-orientations", type=_positive_int, default=12)
+    p.add_argument("--planning-workers", type=_non_negative_int, default=None,
+                   help="the service's planning pool size for the contention part (default: the service's; 0: "
+                   "plan everything in the service's process, to compare)")
     p.add_argument("--read-timeout", type=float, default=120.0, help="seconds before a read counts as a timeout")
     p.add_argument("--seed", type=int, default=7)
     p.add_argument("--out", type=Path, default=None, help="also write service-bench.json and .md here")
@@ -369,7 +402,8 @@ def run_service_bench(args: argparse.Namespace) -> int:
             report["history"] = bench_history(args.checkpoints, args.samples, args.links, args.orientations,
                                               args.formulation, args.read_timeout, args.seed)
         if "contention" in parts:
-            report["contention"] = bench_contention(args.big_links, args.big_orientations, args.samples, args.seed)
+            report["contention"] = bench_contention(args.big_links, args.big_orientations, args.samples, args.seed,
+                                                    args.planning_workers)
     except (RuntimeError, httpx.HTTPError) as exc:
         print(f"planhrc service-bench: {exc}", file=sys.stderr)
         return 1
@@ -406,7 +440,10 @@ def markdown(report: dict[str, Any]) -> str:
         lines.append(f"Contention: while a {c['big_object']} object planned ({c['big_perception_s']} s, answered "
                      f"{c.get('big_status')}: {c.get('big_answer')}), another "
                      f"object's perceptions took p50 {c['small_while_big_plans']['p50_ms']} ms, worst "
-                     f"{c['small_while_big_plans']['max_ms']} ms (alone: p50 {c['small_quiet']['p50_ms']} ms).")
+                     f"{c['small_while_big_plans']['max_ms']} ms (alone: p50 {c['small_quiet']['p50_ms']} ms); "
+                     + (f"/health meanwhile p50 {c['health_while_big_plans']['p50_ms']} ms, worst "
+                        f"{c['health_while_big_plans']['max_ms']} ms; " if c.get("health_while_big_plans") else "")
+                     + f"planning workers: {c.get('planning_workers', 'default')}.")
         lines.append("")
     if "refusal" in report:
         r = report["refusal"]

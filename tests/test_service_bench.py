@@ -39,3 +39,17 @@ def test_service_bench_refuses_bad_parts():
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2
     assert out.stderr.strip().splitlines() == ["planhrc service-bench: --parts: unknown part(s) bogus"]
+
+
+def test_service_bench_contention_reports_health_and_the_pool(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "contention",
+                          "--big-links", "30", "--samples", "3", "--planning-workers", "1", "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    c = json.loads(out.stdout)["contention"]
+    assert c["planning_workers"] == 1 and c["big_status"] == 200
+    assert c["health_while_big_plans"]["n"] >= 1 and c["health_while_big_plans"]["max_ms"] > 0
+    assert "/health meanwhile" in (tmp_path / "service-bench.md").read_text()
+    bad = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--planning-workers", "-1"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "--planning-workers" in bad.stderr and "Traceback" not in bad.stderr
