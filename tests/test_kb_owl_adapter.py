@@ -1,5 +1,7 @@
 """The owlready2 adapter: what the store relies on in owlready2 still holds, and nothing else relies on it."""
+import os
 import re
+import sqlite3
 from pathlib import Path
 
 import pytest
@@ -134,3 +136,49 @@ def test_a_replanning_perception_writes_little_to_the_log_however_long_the_histo
         frames = db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()[0][1]
         per_perception = frames * kb._q.page_size() / 10
     assert per_perception < 800_000, per_perception
+
+
+def _write_rows(store, writes: int) -> int:
+    """`writes` back-to-back commits of 100 new individuals each on a WAL store; the longest its log file got."""
+    iri = "http://planhrc.org/probe#"
+    c = store.context(iri)
+    p = store.storid(iri + "p")
+    longest = 0
+    for n in range(writes):
+        sids = store.allocate([f"{iri}n{n}_{k}" for k in range(100)])
+        store.insert_objs(c, [(a, p, b) for a, b in zip(sids, sids[1:])])
+        store.commit()
+        longest = max(longest, os.path.getsize(store.db.execute("PRAGMA database_list").fetchone()[2] + "-wal"))
+    return longest
+
+
+def test_the_log_is_copied_beside_the_writes_and_stays_short(tmp_path, monkeypatch):
+    """A file store's writer never checkpoints inside a commit (`wal_autocheckpoint` 0): a thread of its own
+    copies the log into the file after each commit. Under back-to-back writes it is always a commit behind, and
+    past `WAL_RESTART_PAGES` pages or `CATCH_UP_COMMITS` commits the writer copies the rest, so the log restarts instead of growing with the writes
+    (measured against the same writes with nothing copying the log). Closing the store stops the thread, and
+    everything written is in the file."""
+    import threading
+
+    monkeypatch.setattr(owl, "WAL_RESTART_PAGES", 64)
+    monkeypatch.setattr(owl, "CATCH_UP_COMMITS", 16)
+    monkeypatch.setattr(owl, "WAL_FILE_LIMIT", 64 * owl.PAGE_SIZE)
+    unchecked = owl.QuadStore(str(tmp_path / "unchecked.sqlite3"))
+    unchecked.use_wal()
+    unchecked._checkpointer.close()
+    unchecked._checkpointer = None  # nothing copies its log
+    grown = _write_rows(unchecked, 400)
+    unchecked.close()
+
+    path = tmp_path / "q.sqlite3"
+    store = owl.QuadStore(str(path))
+    store.use_wal()
+    assert store.db.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 0
+    longest = _write_rows(store, 400)
+    assert any(t.name == "planhrc-checkpoint" for t in threading.enumerate())
+    store.close()
+    assert not any(t.name == "planhrc-checkpoint" for t in threading.enumerate())
+    assert longest < grown / 3, (longest, grown)
+    check = sqlite3.connect(str(path))
+    assert check.execute("SELECT COUNT(*) FROM objs").fetchone()[0] >= 400 * 99
+    check.close()

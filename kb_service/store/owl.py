@@ -12,8 +12,10 @@ loudly instead of corrupting a store.
 from __future__ import annotations
 
 import io
+import logging
 import os
 import sqlite3
+import threading
 from typing import Any, Iterable, Sequence
 
 import owlready2
@@ -21,6 +23,8 @@ from owlready2 import World
 from owlready2.base import owl_named_individual, owl_ontology, rdf_type
 
 from .errors import KBError
+
+log = logging.getLogger(__name__)
 
 RDF_TYPE: int = rdf_type
 NAMED_INDIVIDUAL: int = owl_named_individual
@@ -40,6 +44,13 @@ PAGE_CACHE_KIB = 16_384  # SQLite page cache of the store's connection
 # perceptions everything the process wrote grew from 3.9 to 10 MB per perception with 32 KiB pages, and from 1.6
 # to 2.3 MB with 4 KiB pages (README, "the store's pages").
 PAGE_SIZE = 4096
+# The WAL is copied into the file by a thread of its own (`Checkpointer`), not inside a commit. Past this many
+# pages the writer copies its last commits itself so that the log restarts, and a log file longer than
+# WAL_FILE_LIMIT is cut back when it restarts.
+WAL_RESTART_PAGES = 16_384
+CATCH_UP_COMMITS = 64  # ... and at least every this many commits
+COALESCE_S = 0.02  # the thread copies the log this long after a commit woke it
+WAL_FILE_LIMIT = 64 * 1024 * 1024
 STORE_COUNTER = "current_resource"  # column of the one-row table `store`: the last storid handed out
 # owlready2's indexes on subject and on object. Queries that ask for the rows of a few individuals of the ABox
 # name them (`INDEXED BY`): left to itself, SQLite's planner (no statistics) reads such a query through the index
@@ -53,6 +64,54 @@ class OwlInternalsError(KBError):
     """The installed owlready2 no longer works the way this adapter relies on (the message says what changed)."""
 
 
+class Checkpointer:
+    """Copies a WAL store's log into its file from a connection and thread of its own, woken by each commit.
+
+    A passive checkpoint never blocks the writer or the readers, and once it has copied every frame before the
+    next write begins, that write restarts the log from its start, so the log stays short while writes leave gaps
+    between them. Under writes with no gap the thread is always a commit behind and the log grows: past
+    `WAL_RESTART_PAGES` pages, or `CATCH_UP_COMMITS` commits, the writer copies what is left itself
+    (`QuadStore.commit`; the thread has done most of it), so its next write finds the log copied and restarts
+    it."""
+
+    def __init__(self, path: str) -> None:
+        self._conn = sqlite3.connect(path, isolation_level=None, check_same_thread=False, timeout=10)
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._one = threading.Lock()
+        self.log_pages = 0  # the log's length at the last checkpoint (pages)
+        self.commits = 0  # commits since the writer last copied the log itself
+        self._thread = threading.Thread(target=self._run, name="planhrc-checkpoint", daemon=True)
+        self._thread.start()
+
+    def poke(self) -> None:
+        self._wake.set()
+
+    def checkpoint(self, conn: sqlite3.Connection | None = None) -> tuple[int, int, int]:
+        """One passive checkpoint, on the thread's connection or the writer's: (busy, pages in the log, pages
+        copied). One at a time: two at once would refuse each other."""
+        with self._one:
+            row = (conn or self._conn).execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()[0]
+        return int(row[0]), int(row[1]), int(row[2])
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(1.0)
+            if self._stop.wait(COALESCE_S):  # let a few commits gather: one copy of a page they share
+                return
+            self._wake.clear()
+            try:
+                _, self.log_pages, _ = self.checkpoint()
+            except sqlite3.Error as exc:  # the next commit tries again; the log is only longer meanwhile
+                log.warning("store: checkpoint of the WAL failed: %s", exc)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(30)
+        self._conn.close()
+
+
 class QuadStore:
     """An owlready2 World on SQLite (or in memory), read and written through its quad tables."""
 
@@ -62,6 +121,7 @@ class QuadStore:
         # to read the file while this connection writes.
         self.world = World(filename=str(path), exclusive=False) if path else World()
         self.db: sqlite3.Connection = self.world.graph.db
+        self._checkpointer: Checkpointer | None = None
         if new:
             self._use_page_size(PAGE_SIZE)
 
@@ -89,14 +149,32 @@ class QuadStore:
         # bounded here so the service's memory does not follow its history (reads stay in the OS page cache).
         self.db.execute(f"PRAGMA cache_size = -{PAGE_CACHE_KIB}")
         self.db.execute("PRAGMA mmap_size = 0")
+        # A checkpoint inside a commit copies the last ~1,000 pages into the file on the writer's time (every few
+        # perceptions, and more of them as the file grows): the copy is done beside the writes instead.
+        self.db.execute("PRAGMA wal_autocheckpoint = 0")
+        self.db.execute(f"PRAGMA journal_size_limit = {WAL_FILE_LIMIT}")
+        path = self.db.execute("PRAGMA database_list").fetchone()[2]
+        self._checkpointer = Checkpointer(path)
 
     def commit(self) -> None:
         self.world.save()
+        ckpt = self._checkpointer
+        if ckpt is not None:
+            ckpt.commits += 1
+            if ckpt.log_pages > WAL_RESTART_PAGES or ckpt.commits >= CATCH_UP_COMMITS:
+                # the thread has copied all but the last commits: copy these too, before the next write begins
+                busy, pages, copied = ckpt.checkpoint(self.db)
+                if not busy and copied == pages:
+                    ckpt.log_pages = ckpt.commits = 0
+            ckpt.poke()
 
     def rollback(self) -> None:
         self.db.rollback()
 
     def close(self) -> None:
+        if self._checkpointer is not None:
+            self._checkpointer.close()
+            self._checkpointer = None
         self.world.save()
         self.world.close()
 
