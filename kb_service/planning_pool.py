@@ -35,9 +35,9 @@ import threading
 import time
 from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection
-from typing import Any, Iterator
+from typing import Iterator
 
-from planhrc.model import Atom, ArticulatedObject, State
+from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.ordering import Placement
 from planhrc.pipeline import PlanningConfig, PlanOutcome
 from planhrc.vocabulary import PlanningStatus
@@ -75,7 +75,7 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
     the actions in chunks, the first expected state, then each further state as (missing, added) atoms against
     the first, in chunks of about `ATOMS_PER_FRAME` atoms."""
     states, actions = outcome.expected_states, outcome.actions
-    action_chunks: list[list[Any]] = []
+    action_chunks: list[list[ActionSpec]] = []
     weight = EFFECTS_PER_FRAME
     for action in actions:
         if weight >= EFFECTS_PER_FRAME:
@@ -84,6 +84,7 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         action_chunks[-1].append(action)
         weight += 1 + len(action.cond_eff)
     state_chunks: list[list[tuple[frozenset[Atom], frozenset[Atom]]]] = []
+    base_frames: list[list[Atom]] = []
     if states:
         base = states[0]
         chunk: list[tuple[frozenset[Atom], frozenset[Atom]]] = []
@@ -99,24 +100,23 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
             state_chunks.append(chunk)
         atoms = list(base)
         base_frames = [atoms[i:i + ATOMS_PER_FRAME] for i in range(0, len(atoms), ATOMS_PER_FRAME)]
-    else:
-        base_frames = []
     bare = replace(outcome, actions=(), expected_states=())
-    yield pickle.dumps((bare, len(action_chunks), len(base_frames), len(state_chunks)), pickle.HIGHEST_PROTOCOL)
+    header = (bare, len(action_chunks), bool(states), len(base_frames), len(state_chunks))
+    yield pickle.dumps(header, pickle.HIGHEST_PROTOCOL)
     for part in (*action_chunks, *base_frames, *state_chunks):
         yield pickle.dumps(part, pickle.HIGHEST_PROTOCOL)
 
 
 def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
     """The outcome `pack_outcome` sent, each state one set operation on the first."""
-    bare, n_actions, n_base, n_states = pickle.loads(next(frames))
-    actions: list[Any] = []
+    bare, n_actions, has_states, n_base, n_states = pickle.loads(next(frames))
+    actions: list[ActionSpec] = []
     for _ in range(n_actions):
         actions.extend(pickle.loads(next(frames)))
     base_atoms: list[Atom] = []
     for _ in range(n_base):
         base_atoms.extend(pickle.loads(next(frames)))
-    states: list[State] = [frozenset(base_atoms)] if n_base else []
+    states: list[State] = [frozenset(base_atoms)] if has_states else []
     for _ in range(n_states):
         for missing, added in pickle.loads(next(frames)):
             states.append((states[0] - missing) | added)
