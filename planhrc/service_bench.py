@@ -56,6 +56,24 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def cpu_seconds(pid: int) -> float:
+    """CPU time (user + system) a process has used, in seconds (Linux /proc): what a request costs the server,
+    whatever else the machine runs."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
+def _replanning_with_cpu(client: httpx.Client, server: Server, object_id: str, links: int, orientations: int,
+                         count: int, rng: random.Random) -> tuple[list[float], float]:
+    """`replanning_latencies`, and the server's CPU milliseconds per perception posted meanwhile."""
+    before = cpu_seconds(server.pid)
+    lat = replanning_latencies(client, object_id, links, orientations, count, rng)
+    return lat, round((cpu_seconds(server.pid) - before) / max(count, 1) * 1000, 2)
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -159,8 +177,9 @@ def bench_objects(counts: list[int], samples: int, links: int, orientations: int
             while stored < count:
                 create_object(client, links, orientations, "relative", f"filler{stored}")
                 stored += 1
-            lat = replanning_latencies(client, probe, links, orientations, samples, rng)
-            rows.append({"objects": count, **summary_ms(lat), "rss_mb": round(rss_mb(server.pid), 1)})
+            lat, cpu_ms = _replanning_with_cpu(client, server, probe, links, orientations, samples, rng)
+            rows.append({"objects": count, **summary_ms(lat), "server_cpu_ms": cpu_ms,
+                         "rss_mb": round(rss_mb(server.pid), 1)})
             print(f"[service-bench] objects={count}: {rows[-1]}", file=sys.stderr, flush=True)
     return rows
 
@@ -228,7 +247,7 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
             while sent < checkpoint - samples:
                 perceive(client, obj, random_angles(rng, links, orientations))
                 sent += 1
-            lat = replanning_latencies(client, obj, links, orientations, samples, rng)
+            lat, cpu_ms = _replanning_with_cpu(client, server, obj, links, orientations, samples, rng)
             sent += samples
             last_seq = _last_seq(client, obj, last_seq)
             reads: dict[str, Any] = {}
@@ -246,7 +265,8 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
                                "status": status if times[-1] != float("inf") else "timeout"}
             slowest = max(READ_ROUTES, key=lambda n: reads[n]["max_ms"])
             worst_health, _ = _health_worst_wait(server, lambda: _timed_get(client, _read_paths(obj, last_seq)[slowest]))
-            row: dict[str, Any] = {"perceptions": checkpoint, "replan": summary_ms(lat), "reads": reads,
+            row: dict[str, Any] = {"perceptions": checkpoint, "replan": {**summary_ms(lat), "server_cpu_ms": cpu_ms},
+                   "reads": reads,
                    "slowest_read": slowest, "health_worst_ms_during_slowest_read": round(worst_health * 1000, 2),
                    "rss_mb": round(rss_mb(server.pid), 1)}
             rows.append(row)
@@ -392,7 +412,8 @@ def run_service_bench(args: argparse.Namespace) -> int:
         print(f"planhrc service-bench: --parts: unknown part(s) {', '.join(sorted(unknown))}", file=sys.stderr)
         return 2
     report: dict[str, Any] = {"machine": {"cpu": _cpu_model(), "cores": os.cpu_count(),
-                                          "python": platform.python_version()}}
+                                          "python": platform.python_version(),
+                                          "load_at_start": round(os.getloadavg()[0], 2)}}
     try:
         if "refusal" in parts:
             report["refusal"] = bench_refusal()
@@ -407,6 +428,7 @@ def run_service_bench(args: argparse.Namespace) -> int:
     except (RuntimeError, httpx.HTTPError) as exc:
         print(f"planhrc service-bench: {exc}", file=sys.stderr)
         return 1
+    report["machine"]["load_at_end"] = round(os.getloadavg()[0], 2)
     text = json.dumps(report, indent=2)
     print(text)
     if args.out:
@@ -417,21 +439,26 @@ def run_service_bench(args: argparse.Namespace) -> int:
 
 
 def markdown(report: dict[str, Any]) -> str:
-    lines = [f"Machine: {report['machine']['cpu']}, {report['machine']['cores']} cores, "
-             f"Python {report['machine']['python']}.", ""]
+    m = report["machine"]
+    lines = [f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}; load average "
+             f"{m.get('load_at_start', '?')} at the start, {m.get('load_at_end', '?')} at the end. *Server CPU* is "
+             "the service process's CPU time per perception posted (user + system), which the machine's load does "
+             "not inflate.", ""]
     if "objects" in report:
-        lines += ["| objects stored | re-planning perception p50 | p95 | server RSS |", "|---|---|---|---|"]
-        lines += [f"| {r['objects']} | {r['p50_ms']} ms | {r['p95_ms']} ms | {r['rss_mb']} MB |"
-                  for r in report["objects"]]
+        lines += ["| objects stored | re-planning perception p50 | p95 | server CPU | server RSS |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {r['objects']} | {r['p50_ms']} ms | {r['p95_ms']} ms | {r.get('server_cpu_ms', '?')} ms "
+                  f"| {r['rss_mb']} MB |" for r in report["objects"]]
         lines.append("")
     if "history" in report:
         lines += ["Reads: p95 of 20 requests each (`ontology`, the current ABox as RDF/XML: the worst of 3).", "",
-                  "| perceptions on one object | re-plan p50 | p95 | " + " | ".join(READ_ROUTES)
-                  + " | /health worst wait | RSS |", "|---" * (5 + len(READ_ROUTES)) + "|"]
+                  "| perceptions on one object | re-plan p50 | p95 | server CPU | " + " | ".join(READ_ROUTES)
+                  + " | /health worst wait | RSS |", "|---" * (6 + len(READ_ROUTES)) + "|"]
         for r in report["history"]:
             reads = " | ".join(f"{r['reads'][n].get('p95_ms', r['reads'][n]['max_ms'])} ms" if n != "ontology"
                                else f"{r['reads'][n]['max_ms']} ms" for n in READ_ROUTES)
-            lines.append(f"| {r['perceptions']} | {r['replan']['p50_ms']} ms | {r['replan']['p95_ms']} ms | {reads} "
+            lines.append(f"| {r['perceptions']} | {r['replan']['p50_ms']} ms | {r['replan']['p95_ms']} ms "
+                         f"| {r['replan'].get('server_cpu_ms', '?')} ms | {reads} "
                          f"| {r['health_worst_ms_during_slowest_read']} ms | {r['rss_mb']} MB |")
         lines.append("")
     lines += [f"* {line}" for line in targets(report)] + [""]
@@ -461,9 +488,14 @@ def targets(report: dict[str, Any]) -> list[str]:
     if report.get("objects"):
         first, last = report["objects"][0], report["objects"][-1]
         out.append(f"re-planning p95, {first['objects']} -> {last['objects']} objects: {first['p95_ms']} -> "
-                   f"{last['p95_ms']} ms ({last['p95_ms'] / first['p95_ms'] - 1:+.0%}; target < +20 %)")
+                   f"{last['p95_ms']} ms ({last['p95_ms'] / first['p95_ms'] - 1:+.0%}; target < +20 %); server CPU "
+                   f"per perception {_growth(first.get('server_cpu_ms'), last.get('server_cpu_ms'))}")
     if report.get("history"):
         first, last = report["history"][0], report["history"][-1]
+        a, b = first["replan"], last["replan"]
+        out.append(f"re-planning p95, {first['perceptions']} -> {last['perceptions']} perceptions: {a['p95_ms']} -> "
+                   f"{b['p95_ms']} ms ({b['p95_ms'] / a['p95_ms'] - 1:+.0%}; target < +20 %); server CPU per "
+                   f"perception {_growth(a.get('server_cpu_ms'), b.get('server_cpu_ms'))}")
         out.append(f"RSS, {first['perceptions']} -> {last['perceptions']} perceptions: {first['rss_mb']} -> "
                    f"{last['rss_mb']} MB ({last['rss_mb'] / first['rss_mb']:.2f}x; target <= 1.5x)")
         reads = {n: v for n, v in last["reads"].items() if n != "ontology"}
@@ -473,6 +505,12 @@ def targets(report: dict[str, Any]) -> list[str]:
                    f"export {last['reads']['ontology']['max_ms']} ms (target < 1 s); /health's worst wait during "
                    f"the slowest read {last['health_worst_ms_during_slowest_read']} ms (target < 50 ms)")
     return out
+
+
+def _growth(first: float | None, last: float | None) -> str:
+    if not first or not last:
+        return "not measured"
+    return f"{first} -> {last} ms ({last / first - 1:+.0%})"
 
 
 def _cpu_model() -> str:

@@ -29,8 +29,12 @@ def test_service_bench_reports_numbers(tmp_path):
     assert report["refusal"]["token_over_limit"]["status"] == 413
     assert [row["objects"] for row in report["objects"]] == [1, 3]
     assert all(row["p50_ms"] > 0 and row["rss_mb"] > 0 for row in report["objects"])
+    # the server's CPU per perception, read from /proc (10 ms ticks: a few tiny perceptions may round to 0)
+    assert all(0 <= row["server_cpu_ms"] < 60_000 for row in report["objects"])
+    assert report["machine"]["load_at_start"] >= 0 and report["machine"]["load_at_end"] >= 0
     (row,) = report["history"]
     assert row["perceptions"] == 4 and set(row["reads"]) == {"object", "plan", "events", "pddl_problem", "ontology"}
+    assert 0 <= row["replan"]["server_cpu_ms"] < 60_000
     assert (tmp_path / "service-bench.md").read_text().count("|") > 10
 
 
