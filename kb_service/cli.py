@@ -133,6 +133,9 @@ def add_compact_parser(subparsers: argparse._SubParsersAction) -> argparse.Argum
     p.add_argument("--keep", type=int, default=None,
                    help="perceived states kept per object (default 100, env PLANHRC_KEEP_PERCEIVED)")
     p.add_argument("--tbox", type=tbox_file, default=None, help="TBox OWL file (default: the repository's)")
+    p.add_argument("--vacuum", action="store_true",
+                   help="then rewrite the file: the space the dropped history held goes back to the file system, "
+                   "and a store made before stores had 4 KiB pages gets them")
     p.set_defaults(func=run_compact)
     return p
 
@@ -160,11 +163,15 @@ def run_compact(args: argparse.Namespace) -> int:
     try:
         with KnowledgeBase(settings.db_path, settings.tbox_path) as kb:
             done = kb.compact(settings.keep_perceived)
+            print(f"compacted {settings.db_path}: {done.individuals} individuals and {done.triples} triples dropped "
+                  f"from {done.objects} objects (the last {settings.keep_perceived} perceived states of each kept)",
+                  flush=True)
+            if args.vacuum:
+                before, after = kb.rewrite()
+                print(f"rewrote {settings.db_path}: {before / 1e6:.1f} MB -> {after / 1e6:.1f} MB")
     except KBError as exc:
         print(f"planhrc compact: {exc}", file=sys.stderr)
         return 1
-    print(f"compacted {settings.db_path}: {done.individuals} individuals and {done.triples} triples dropped from "
-          f"{done.objects} objects (the last {settings.keep_perceived} perceived states of each kept)")
     return 0
 
 

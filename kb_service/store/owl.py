@@ -135,6 +135,30 @@ class QuadStore:
     def page_size(self) -> int:
         return int(self.db.execute("PRAGMA page_size").fetchone()[0])
 
+    def rewrite(self, page_size: int = PAGE_SIZE) -> None:
+        """Rewrite a WAL file store (VACUUM) with pages of `page_size` bytes: the pages deletions freed go back to
+        the file system, and a file made with owlready2's 32 KiB pages gets this adapter's. The file must have no
+        other connection (the checkpointer's is closed here and opened again after)."""
+        if self._checkpointer is not None:
+            self._checkpointer.close()
+            self._checkpointer = None
+        self.db.commit()
+        try:
+            try:
+                mode = self.db.execute("PRAGMA journal_mode=DELETE").fetchone()[0]
+            except sqlite3.OperationalError:
+                mode = None
+            if str(mode).lower() != "delete":
+                raise KBError("store: another process has the file open (a running service?); stop it before "
+                              "rewriting the file")
+            self.db.execute(f"PRAGMA page_size = {int(page_size)}")
+            try:
+                self.db.execute("VACUUM")
+            except sqlite3.Error as exc:
+                raise KBError(f"store: the file could not be rewritten ({exc}); it is unchanged") from None
+        finally:
+            self.use_wal()
+
     # -- SQL on the same connection (the store's own side tables live in this database too) ------------------
     def execute(self, sql: str, params: Sequence[Any] = ()) -> sqlite3.Cursor:
         return self.db.execute(sql, params)
