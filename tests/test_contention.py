@@ -159,3 +159,37 @@ def test_the_service_leaves_its_start_up_heap_out_of_full_collections(tmp_path):
         assert frozen > 10_000, frozen
         assert not any(o is kb for o in gc.get_objects(generation=2))  # frozen: no full pass walks it
     assert gc.get_freeze_count() == 0
+
+
+def test_a_perception_whose_planning_worker_dies_answers_and_the_next_one_plans(tmp_path):
+    """The worker planning an object's perception is killed: that perception still answers (no plan, the reason
+    named, nothing planned stored) and the next perception on a pooled task gets a plan from a new worker."""
+    settings = make_settings(db_path=str(tmp_path / "kb.sqlite3"), token=None, planning_deadline_s=60)
+    app = create_app(settings)
+    with TestClient(app) as client:
+        big = client.post("/objects", json={"name": "big", "links": 200, "orientations": 12,
+                                            "formulation": "absolute"}).json()["id"]
+        mid = client.post("/objects", json={"name": "mid", "links": 20, "orientations": 12,
+                                            "formulation": "absolute"}).json()["id"]
+        rng = random.Random(11)
+        client.put(f"/objects/{big}/goal", json={"link_orientations_deg": _angles(rng, 200)}).raise_for_status()
+        client.put(f"/objects/{mid}/goal", json={"link_orientations_deg": [90] * 20}).raise_for_status()
+        pool = app.state.orchestrator.pool
+        answer: dict = {}
+        worker = threading.Thread(target=lambda: answer.update(r=client.post(
+            f"/objects/{big}/perceptions", json={"link_orientations_deg": _angles(rng, 200)})))
+        worker.start()
+        until = time.monotonic() + 20
+        while not pool.pids() and time.monotonic() < until:
+            time.sleep(0.05)
+        (pid,) = pool.pids()
+        time.sleep(2.0)  # well into its grounding
+        os.kill(pid, signal.SIGKILL)
+        worker.join(60)
+        r = answer["r"]
+        assert r.status_code == 200 and r.json()["decision"] == "no_plan", r.text
+        assert "planning worker stopped" in r.json()["reason"], r.text
+        assert client.get(f"/objects/{big}/plan").status_code == 404
+        r = client.post(f"/objects/{mid}/perceptions", json={"link_orientations_deg": [0] * 20})
+        assert r.status_code == 200 and r.json()["decision"] == "replan", r.text
+        assert pool.pids() and pid not in pool.pids()
