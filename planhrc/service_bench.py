@@ -276,6 +276,53 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
     return rows
 
 
+@dataclass
+class _Side:
+    """One service of the side-by-side part and what was measured on it."""
+
+    server: Server
+    client: httpx.Client
+    object_id: str
+    history: int
+    latencies: list[float]
+    cpu_s: float = 0.0
+    posted: int = 0
+
+
+def bench_history_side_by_side(short: int, long: int, samples: int, links: int, orientations: int,
+                               formulation: str, seed: int, round_size: int = 20) -> dict[str, Any]:
+    """The history part's growth figure with the machine's load taken out: two services side by side, one object
+    each, one given `short` perceptions and the other `long`; then re-planning perceptions in alternating rounds
+    of `round_size` on each, until each has `samples`, so whatever else the machine runs falls on both alike."""
+    rng = random.Random(seed)
+    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp_a, \
+            tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp_b, \
+            running_service(Path(tmp_a)) as server_a, running_service(Path(tmp_b)) as server_b, \
+            _client(server_a, 120) as client_a, _client(server_b, 120) as client_b:
+        sides = []
+        for server, client, history in ((server_a, client_a, short), (server_b, client_b, long)):
+            obj = create_object(client, links, orientations, formulation, "history")
+            set_goal(client, obj, random_angles(rng, links, orientations))
+            for _ in range(history):
+                perceive(client, obj, random_angles(rng, links, orientations))
+            sides.append(_Side(server, client, obj, history, []))
+        while any(side.posted < samples for side in sides):
+            for side in sides:
+                count = min(round_size, samples - side.posted)
+                if count <= 0:
+                    continue
+                lat, cpu_ms = _replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
+                                                   count, rng)
+                side.latencies += lat
+                side.cpu_s += cpu_ms * count / 1000
+                side.posted += count
+        rows = [{"perceptions": side.history, **summary_ms(side.latencies),
+                 "server_cpu_ms": round(side.cpu_s / side.posted * 1000, 2),
+                 "rss_mb": round(rss_mb(side.server.pid), 1)} for side in sides]
+    print(f"[service-bench] side by side: {rows}", file=sys.stderr, flush=True)
+    return {"round_size": round_size, "rows": rows}
+
+
 def bench_contention(big_links: int, big_orientations: int, small_samples: int, seed: int,
                      planning_workers: int | None = None) -> dict[str, Any]:
     """The latency of a small object's perceptions, and of `/health` polled every 20 ms from another connection,
@@ -385,7 +432,8 @@ def add_service_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
     p = subparsers.add_parser("service-bench", help="measure the KB service with a long history (not a test)",
                               description=__doc__.splitlines()[0] if __doc__ else None)
     p.add_argument("--parts", default="objects,history,contention,refusal",
-                   help="comma-separated: objects, history, contention, refusal")
+                   help="comma-separated: objects, history, side-by-side, contention, refusal (side-by-side: the "
+                   "first and last --checkpoints on two services at once, measured in alternating rounds)")
     p.add_argument("--objects", type=_int_list, default=[1, 200, 1000], help="stored-object counts (1,200,1000)")
     p.add_argument("--checkpoints", type=_int_list, default=[100, 1000, 10000],
                    help="perception counts on one object at which to measure (100,1000,10000)")
@@ -407,7 +455,7 @@ def add_service_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run_service_bench(args: argparse.Namespace) -> int:
     parts = {p.strip() for p in args.parts.split(",") if p.strip()}
-    unknown = parts - {"objects", "history", "contention", "refusal"}
+    unknown = parts - {"objects", "history", "side-by-side", "contention", "refusal"}
     if unknown:
         print(f"planhrc service-bench: --parts: unknown part(s) {', '.join(sorted(unknown))}", file=sys.stderr)
         return 2
@@ -422,6 +470,11 @@ def run_service_bench(args: argparse.Namespace) -> int:
         if "history" in parts:
             report["history"] = bench_history(args.checkpoints, args.samples, args.links, args.orientations,
                                               args.formulation, args.read_timeout, args.seed)
+        if "side-by-side" in parts:
+            checkpoints = sorted(args.checkpoints)
+            report["side_by_side"] = bench_history_side_by_side(
+                checkpoints[0], checkpoints[-1], args.samples, args.links, args.orientations, args.formulation,
+                args.seed)
         if "contention" in parts:
             report["contention"] = bench_contention(args.big_links, args.big_orientations, args.samples, args.seed,
                                                     args.planning_workers)
@@ -460,6 +513,15 @@ def markdown(report: dict[str, Any]) -> str:
             lines.append(f"| {r['perceptions']} | {r['replan']['p50_ms']} ms | {r['replan']['p95_ms']} ms "
                          f"| {r['replan'].get('server_cpu_ms', '?')} ms | {reads} "
                          f"| {r['health_worst_ms_during_slowest_read']} ms | {r['rss_mb']} MB |")
+        lines.append("")
+    if "side_by_side" in report:
+        sbs = report["side_by_side"]
+        lines += [f"Side by side: two services at once, re-planning perceptions in alternating rounds of "
+                  f"{sbs['round_size']}, so the machine's load falls on both alike.", "",
+                  "| perceptions on the object | re-planning perception p50 | p95 | server CPU | server RSS |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {r['perceptions']} | {r['p50_ms']} ms | {r['p95_ms']} ms | {r['server_cpu_ms']} ms "
+                  f"| {r['rss_mb']} MB |" for r in sbs["rows"]]
         lines.append("")
     lines += [f"* {line}" for line in targets(report)] + [""]
     if "contention" in report:
@@ -504,6 +566,12 @@ def targets(report: dict[str, Any]) -> list[str]:
                    f"{reads[worst].get('p95_ms', reads[worst]['max_ms'])} ms (target < 50 ms); current-ABox "
                    f"export {last['reads']['ontology']['max_ms']} ms (target < 1 s); /health's worst wait during "
                    f"the slowest read {last['health_worst_ms_during_slowest_read']} ms (target < 50 ms)")
+    if report.get("side_by_side"):
+        a, b = report["side_by_side"]["rows"]
+        out.append(f"side by side, re-planning p95, {a['perceptions']} -> {b['perceptions']} perceptions: "
+                   f"{a['p95_ms']} -> {b['p95_ms']} ms ({b['p95_ms'] / a['p95_ms'] - 1:+.0%}; target < +20 %); "
+                   f"p50 {a['p50_ms']} -> {b['p50_ms']} ms; server CPU per perception "
+                   f"{_growth(a['server_cpu_ms'], b['server_cpu_ms'])}")
     return out
 
 

@@ -38,6 +38,17 @@ def test_service_bench_reports_numbers(tmp_path):
     assert (tmp_path / "service-bench.md").read_text().count("|") > 10
 
 
+def test_service_bench_side_by_side_measures_both_histories_in_one_run(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "side-by-side",
+                          "--checkpoints", "2,6", "--samples", "5", "--links", "4", "--orientations", "4",
+                          "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    rows = json.loads(out.stdout)["side_by_side"]["rows"]
+    assert [row["perceptions"] for row in rows] == [2, 6]
+    assert all(0 < row["n"] <= 5 and row["p50_ms"] > 0 and row["server_cpu_ms"] >= 0 for row in rows)
+    assert "side by side, re-planning p95, 2 -> 6 perceptions" in (tmp_path / "service-bench.md").read_text()
+
+
 def test_service_bench_refuses_bad_parts():
     out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "objects,bogus"],
                          capture_output=True, text=True, timeout=60)
