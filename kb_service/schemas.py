@@ -289,7 +289,7 @@ class FeedbackCreate(BaseModel):
         default=None,
         description="Why a failed or partial action did not do what it was asked (must be null for succeeded): "
         "unreachable, collision, slip, stall, grasp_lost or left_table. A repeated failure with reason "
-        "unreachable, collision, slip or stall is not retried identically.",
+        "unreachable, collision, slip, stall or left_table is not retried identically.",
         examples=["stall", None],
     )
     measured_deg: FiniteFloat | None = Field(
