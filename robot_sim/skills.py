@@ -21,7 +21,7 @@ import pybullet
 
 from planhrc.geometry import reach_shortfall
 from planhrc.vocabulary import ActionOutcome as Outcome
-from planhrc.vocabulary import FailureReason as Reason  # the words of a failure, shared with the service
+from planhrc.vocabulary import FailureReason  # the words of a failure, defined once, shared with the service
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
@@ -86,7 +86,7 @@ class ActionResult:
     and the turn measured after release against the commanded one (degrees, + = clockwise)."""
 
     outcome: Outcome
-    reason: Reason | None
+    reason: FailureReason | None
     message: str
     commanded_deg: float
     reached_deg: float
@@ -503,13 +503,13 @@ def execute(
     """
     if command is None or isinstance(command, Unreachable):
         message = command.message if isinstance(command, Unreachable) else "no command"
-        return ActionResult(Outcome.FAILED, Reason.UNREACHABLE, message, 0.0, 0.0)
+        return ActionResult(Outcome.FAILED, FailureReason.UNREACHABLE, message, 0.0, 0.0)
     robot = robot or Robot(scene)
     hands = _Hands(scene, robot)
     total = command.rotation_steps
     done = 0
     before = _relative_deg(scene, command.turned_link, command.held_link)
-    problem: tuple[Reason, str] | None = None
+    problem: tuple[FailureReason, str] | None = None
     arms_used = tuple(dict.fromkeys(p.arm for p in command.primitives))
     try:
         for primitive in command.primitives:
@@ -517,12 +517,12 @@ def execute(
                 if problem is not None and primitive.joint_positions != tuple(HOME_POSE[primitive.arm]):
                     continue
                 if not _drive(scene, robot, primitive.arm, primitive.joint_positions) and problem is None:
-                    problem = (Reason.STALL, f"the {primitive.arm} arm did not reach its pose")
+                    problem = (FailureReason.STALL, f"the {primitive.arm} arm did not reach its pose")
             elif isinstance(primitive, Grasp):
                 if problem is not None:
                     continue
                 if not hands.grasp(primitive.arm, primitive.link):
-                    problem = (Reason.GRASP_LOST, f"the {primitive.arm} gripper closed on nothing at link {primitive.link}")
+                    problem = (FailureReason.GRASP_LOST, f"the {primitive.arm} gripper closed on nothing at link {primitive.link}")
             elif isinstance(primitive, Release):
                 if primitive.arm in hands.held:
                     scene.step(robot.arc_steps)  # hold still until the object has stopped moving, then let go
@@ -532,20 +532,20 @@ def execute(
                 if problem is not None:
                     continue
                 if interrupt is not None and interrupt(done, total):
-                    problem = (Reason.STALL, "stopped on request")
+                    problem = (FailureReason.STALL, "stopped on request")
                     continue
                 if stop_fraction is not None and done >= stop_fraction * total:
                     hands.release(primitive.arm)
-                    problem = (Reason.GRASP_LOST, f"the {primitive.arm} gripper let go of link {command.turned_link}")
+                    problem = (FailureReason.GRASP_LOST, f"the {primitive.arm} gripper let go of link {command.turned_link}")
                     continue
                 if not _follow(scene, robot, primitive.arm, primitive.joint_positions):
-                    problem = (Reason.STALL, f"the {primitive.arm} arm could not follow the arc")
+                    problem = (FailureReason.STALL, f"the {primitive.arm} arm could not follow the arc")
                 done += 1
                 if (hit := _arm_contact(scene, robot, arms_used)) is not None:
-                    problem = (Reason.COLLISION, hit)
+                    problem = (FailureReason.COLLISION, hit)
                 elif any(hands.offset(arm) > 0.02 for arm in hands.held):
                     slipping = next(arm for arm in hands.held if hands.offset(arm) > 0.02)
-                    problem = (Reason.SLIP, f"link {hands.held[slipping][1]} slipped in the {slipping} gripper")
+                    problem = (FailureReason.SLIP, f"link {hands.held[slipping][1]} slipped in the {slipping} gripper")
                 if problem is not None:
                     hands.release_all()
     finally:
@@ -557,7 +557,7 @@ def execute(
     return _judge(scene, robot, command, before, problem)
 
 
-def _judge(scene: Scene, robot: Robot, command: Command, before: float, problem: tuple[Reason, str] | None
+def _judge(scene: Scene, robot: Robot, command: Command, before: float, problem: tuple[FailureReason, str] | None
            ) -> ActionResult:
     reached = _signed_turn(_relative_deg(scene, command.turned_link, command.held_link), before, command.delta_deg)
     commanded = command.delta_deg
@@ -565,16 +565,16 @@ def _judge(scene: Scene, robot: Robot, command: Command, before: float, problem:
     link = command.turned_link
     off = scene.off_table_links()
     if off:
-        reason, sentence = Reason.LEFT_TABLE, f"link {off[0]} left the table"
+        reason, sentence = FailureReason.LEFT_TABLE, f"link {off[0]} left the table"
     elif problem is not None:
         reason, sentence = problem
     elif abs(short) > robot.success_tolerance_deg:
-        reason = Reason.SLIP if abs(reached) > 1.0 else Reason.STALL
-        sentence = f"link {link} {'slipped' if reason is Reason.SLIP else 'did not turn'}"
+        reason = FailureReason.SLIP if abs(reached) > 1.0 else FailureReason.STALL
+        sentence = f"link {link} {'slipped' if reason is FailureReason.SLIP else 'did not turn'}"
     else:
         return ActionResult(Outcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f}",
                             commanded, reached)
-    if abs(short) <= robot.success_tolerance_deg and reason is not Reason.LEFT_TABLE:
+    if abs(short) <= robot.success_tolerance_deg and reason is not FailureReason.LEFT_TABLE:
         # the turn itself is complete; the problem (a touch on the way back) is reported with it
         return ActionResult(Outcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f} "
                             f"({sentence})", commanded, reached)

@@ -41,7 +41,8 @@ from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, P
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
 from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene, turn_hazard
-from planhrc.robot_sim.skills import ActionResult, Outcome, Reason, Robot, RotationAction, perform_action
+from planhrc.robot_sim.skills import ActionResult, Outcome, Robot, RotationAction, perform_action
+from planhrc.vocabulary import FailureReason
 
 log = logging.getLogger(__name__)
 
@@ -288,7 +289,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
     helpless = 0  # help requests in a row the human could do nothing about
     carried: list[str] = []  # human moves made while the robot idled at the goal, reported with the next step
     # signature of a failed action -> (its sentence, whether it was also tried in single steps)
-    failed: dict[tuple[int, int, float, int], tuple[str, bool, Reason | None]] = {}
+    failed: dict[tuple[int, int, float, int], tuple[str, bool, FailureReason | None]] = {}
     while step <= max_steps:
         human_before, carried = carried, []
         for index, event in _events(scenario, run, step, "before"):
@@ -479,7 +480,7 @@ def refuse_unsafe(scene: Scene, action: RotationAction) -> ActionResult | None:
     hazard = turn_hazard(scene, action.turned_link, action.held_link, action.delta_deg)
     if hazard is None:
         return None
-    reason = Reason.LEFT_TABLE if hazard.code == "off_table" else Reason.COLLISION
+    reason = FailureReason.LEFT_TABLE if hazard.code == "off_table" else FailureReason.COLLISION
     log.warning("not turning l%d by %+g deg: %s", action.turned_link, action.delta_deg, hazard.message)
     return ActionResult(Outcome.FAILED, reason, f"not started: turning link {action.turned_link} by "
                         f"{action.delta_deg:+g} deg either way round would end with {hazard.message}",
@@ -508,7 +509,7 @@ def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], 
 
 
 def _feedback(kb: KBClient, object_id: str, action_id: str, outcome: Outcome, message: str,
-              reason: Reason | None = None, measured_deg: float | None = None) -> None:
+              reason: FailureReason | None = None, measured_deg: float | None = None) -> None:
     """Post an action's outcome with its sentence and, for a failed or partial one, its reason and the turned
     link's measured orientation."""
     if outcome is Outcome.SUCCEEDED:

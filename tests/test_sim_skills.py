@@ -6,8 +6,9 @@ from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.robot_sim.perception import angle_difference_deg
 from planhrc.robot_sim.scene import SceneSpec, arm_joints, build_scene
-from planhrc.robot_sim.skills import (Command, Grasp, MoveArm, Outcome, Reason, Release, Robot, RotationAction, Turn,
+from planhrc.robot_sim.skills import (Command, Grasp, MoveArm, Outcome, Release, Robot, RotationAction, Turn,
                                       Unreachable, execute, perform_action, rotate_skill)
+from planhrc.vocabulary import FailureReason
 
 pytestmark = pytest.mark.sim
 
@@ -73,14 +74,14 @@ def test_an_object_out_of_reach_fails_with_the_link_and_the_distance_and_does_no
     planned = rotate_skill(scene, robot, RotationAction(turned_link=3, held_link=2, delta_deg=45))
     assert isinstance(planned, Unreachable) and planned.link == 2 and planned.miss_m > 0.3
     result = perform_action(scene, robot, RotationAction(turned_link=3, held_link=2, delta_deg=45))
-    assert result.outcome is Outcome.FAILED and result.reason is Reason.UNREACHABLE
+    assert result.outcome is Outcome.FAILED and result.reason is FailureReason.UNREACHABLE
     assert result.message.startswith("link 2 unreachable: ") and " m beyond reach" in result.message
     assert _close(scene.link_orientations_deg(), [90] * 5, 0.5)
 
 
 def test_a_grasp_released_mid_turn_is_partial_with_the_angle_reached(scene, robot):
     result = perform_action(scene, robot, RotationAction(turned_link=5, held_link=4, delta_deg=-90), stop_fraction=0.5)
-    assert result.outcome is Outcome.PARTIAL and result.reason is Reason.GRASP_LOST
+    assert result.outcome is Outcome.PARTIAL and result.reason is FailureReason.GRASP_LOST
     assert -60 < result.reached_deg < -30  # measured from the world after the release
     assert "short by" in result.message
     measured = angle_difference_deg(scene.link_orientations_deg()[4], 90)
@@ -89,7 +90,7 @@ def test_a_grasp_released_mid_turn_is_partial_with_the_angle_reached(scene, robo
 
 def test_a_turn_that_leaves_the_table_says_so(scene, robot):
     result = perform_action(scene, robot, RotationAction(turned_link=3, held_link=2, delta_deg=-90))  # l3-l5 forward
-    assert result.reason is Reason.LEFT_TABLE and "left the table" in result.message
+    assert result.reason is FailureReason.LEFT_TABLE and "left the table" in result.message
     assert result.outcome is Outcome.PARTIAL
 
 
