@@ -17,6 +17,12 @@ problem (a machine-readable code, the link it concerns and a sentence), checking
 
 `sweep_feasible` checks the configurations a rotation passes through, in small increments; `rotated` gives
 the configuration after one (the inertial assumption A1: every link beyond the turned one moves with it).
+
+Plans are checked as drawn (`STRICT`). A physical execution is never exactly the plan: a measured pose differs
+from the planned one by a few degrees and a centimetre or two. Whoever acts on the object (the robot's worker,
+the simulated human) judges a turn from the measured pose with `EXECUTION`, the one definition of how far a
+measured configuration may be past the table's edge or closer between links than the plan's and still be safe
+to act on: the service plans strictly, the hands tolerate what physics does to the plan.
 """
 from __future__ import annotations
 
@@ -29,6 +35,21 @@ import numpy as np
 from planhrc.model import ArticulatedObject, ModelError
 
 CODES = ("off_table", "inside_robot", "out_of_reach", "overlap")
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """How much a configuration may exceed the strict checks and still count as feasible: a link whose end lies
+    `overhang_m` past the table's edge (its centre of mass well inside: a 15.5 cm bar rests on the table), two
+    links whose centre lines come `overlap_m` closer than a link's width (bars side by side)."""
+
+    overhang_m: float = 0.0
+    overlap_m: float = 0.0
+
+
+STRICT = Tolerance()  # plans, goals and the counts of states off the table: the geometry as drawn
+# Acting on a measured pose: a few degrees of drift on a 0.78 m chain move its end by about 3 cm.
+EXECUTION = Tolerance(overhang_m=0.03, overlap_m=0.01)
 
 
 class GeometryError(ModelError):
@@ -186,11 +207,13 @@ def reach_shortfall(point_xy: Sequence[float] | np.ndarray, robot: RobotBody | N
 
 
 def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], cell: Cell | None = None,
-                           min_fold_gap_deg: float = 25.0, reach_links: Collection[int] | None = None) -> Feasibility:
+                           min_fold_gap_deg: float = 25.0, reach_links: Collection[int] | None = None,
+                           tolerance: Tolerance = STRICT) -> Feasibility:
     """Whether the object with link orientations `angles` lies on the table, clear of the robot, graspable,
     and without overlapping itself; every problem found is named (see the module's docstring).
 
     `reach_links` restricts the reach check to those links (the ones a rotation grasps); None checks every link.
+    `tolerance` (see `Tolerance`) forgives a small overhang past the table's edge and between links.
     The checks are vectorised over links and link pairs: a plan's ordering calls this thousands of times."""
     cell = cell or Cell()
     values = _check_angles(geometry, angles)
@@ -209,7 +232,7 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
     reach = set(checked)
     reasons: list[Infeasibility] = []
     for k in range(1, n + 1):
-        if off[k - 1] > 1e-9:
+        if off[k - 1] > tolerance.overhang_m + 1e-9:
             d = float(off[k - 1])
             reasons.append(Infeasibility("off_table", k, f"link {k} leaves the table: {d:.2f} m past its edge", d))
         if inside[k - 1]:
@@ -224,7 +247,8 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
     if n > 2:
         i, j = np.triu_indices(n, k=2)
         gaps = _segment_distances(a[i], b[i], a[j], b[j])
-        for pi, pj in zip(i[gaps < geometry.link_width_m], j[gaps < geometry.link_width_m]):
+        close = gaps < geometry.link_width_m - tolerance.overlap_m
+        for pi, pj in zip(i[close], j[close]):
             reasons.append(Infeasibility("overlap", int(pj) + 1, f"link {int(pj) + 1} overlaps link {int(pi) + 1}"))
     return Feasibility(not reasons, tuple(reasons))
 

@@ -31,7 +31,8 @@ from typing import Callable, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.geometry import Cell, Infeasibility, ObjectGeometry, RobotBody, Table, configuration_feasible, rotated
+from planhrc.geometry import (EXECUTION, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, configuration_feasible,
+                              rotated)
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
@@ -318,36 +319,54 @@ def is_feasible(spec: SceneSpec, orientations_deg: Sequence[float], base_point_x
 HAZARDS = ("off_table", "inside_robot", "overlap")  # what a turn must not cause; reach is the robot's matter
 
 
-def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float,
-                increment_deg: float = 5.0, overhang_m: float = 0.03,
-                hazards: Sequence[str] = HAZARDS) -> Infeasibility | None:
-    """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
-    somewhere along its sweep (a link past the table's edge by more than `overhang_m`, which a bar lying on the
-    table bears, inside the robot, folded onto or across another link), from the object's measured pose; None
-    when the turn is safe. Problems the object already has before the turn, and links out of the robot's
-    reach, do not count; `hazards` narrows what counts."""
-    base, theta = scene.configuration()
-    geometry, cell = scene.spec.geometry(base), scene.spec.cell()
-    before = {(r.code, r.link) for r in configuration_feasible(geometry, theta, cell).reasons}
+def baseline_problems(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell
+                      ) -> frozenset[tuple[str, int]]:
+    """(code, link) of the problems a configuration has already (strictly): acting on it does not cause them."""
+    return frozenset((r.code, r.link) for r in configuration_feasible(geometry, orientations_deg, cell).reasons)
+
+
+def added_hazards(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell,
+                  baseline: frozenset[tuple[str, int]], hazards: Sequence[str] = HAZARDS
+                  ) -> tuple[Infeasibility, ...]:
+    """The problems among `hazards` that the configuration has beyond `baseline`, judged with the tolerance a
+    physical execution is given (`planhrc.geometry.EXECUTION`)."""
+    result = configuration_feasible(geometry, orientations_deg, cell, tolerance=EXECUTION)
+    return tuple(r for r in result.reasons if r.code in hazards and (r.code, r.link) not in baseline)
+
+
+def sweep_hazard(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell, turned_link: int,
+                 held_link: int, delta_deg: float, baseline: frozenset[tuple[str, int]],
+                 hazards: Sequence[str] = HAZARDS, increment_deg: float = 5.0) -> Infeasibility | None:
+    """The first problem among `hazards` (beyond `baseline`) that turning `turned_link` about its joint with
+    `held_link` by `delta_deg` causes somewhere along its sweep (every `increment_deg`), or None."""
     n = max(1, math.ceil(abs(delta_deg) / increment_deg))
     for i in range(1, n + 1):
-        placed, values = rotated(geometry, theta, turned_link, held_link, delta_deg * i / n)
-        for reason in configuration_feasible(placed, values, cell).reasons:
-            if reason.code == "off_table" and reason.distance_m <= overhang_m:
-                continue
-            if reason.code in hazards and (reason.code, reason.link) not in before:
-                return reason
+        placed, values = rotated(geometry, orientations_deg, turned_link, held_link, delta_deg * i / n)
+        found = added_hazards(placed, values, cell, baseline, hazards)
+        if found:
+            return found[0]
     return None
 
 
+def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float,
+                increment_deg: float = 5.0, hazards: Sequence[str] = HAZARDS) -> Infeasibility | None:
+    """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
+    somewhere along its sweep (a link past the table's edge, inside the robot, folded onto or across another,
+    beyond `planhrc.geometry.EXECUTION`'s tolerance), from the object's measured pose; None when the turn is
+    safe. Problems the object already has before the turn, and links out of the robot's reach, do not count;
+    `hazards` narrows what counts."""
+    base, theta = scene.configuration()
+    geometry, cell = scene.spec.geometry(base), scene.spec.cell()
+    return sweep_hazard(geometry, theta, cell, turned_link, held_link, delta_deg,
+                        baseline_problems(geometry, theta, cell), hazards, increment_deg)
+
+
 def new_hazards(scene: Scene, geometry: ObjectGeometry, orientations_deg: Sequence[float]) -> tuple[Infeasibility, ...]:
-    """The problems (`HAZARDS`) the object placed as `geometry` with `orientations_deg` would have that it does
-    not have now (measured)."""
+    """The problems (`HAZARDS`, with `planhrc.geometry.EXECUTION`'s tolerance) the object placed as `geometry`
+    with `orientations_deg` would have that it does not have now (measured)."""
     base, theta = scene.configuration()
     cell = scene.spec.cell()
-    before = {(r.code, r.link) for r in configuration_feasible(scene.spec.geometry(base), theta, cell).reasons}
-    return tuple(r for r in configuration_feasible(geometry, orientations_deg, cell).reasons
-                 if r.code in HAZARDS and (r.code, r.link) not in before)
+    return added_hazards(geometry, orientations_deg, cell, baseline_problems(scene.spec.geometry(base), theta, cell))
 
 
 def random_orientations(

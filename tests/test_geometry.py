@@ -75,3 +75,19 @@ def test_bad_input_names_the_field_and_a_kb_object_has_a_geometry():
     geometry = ObjectGeometry.of(obj, (0.6, 0.3))
     assert geometry.n_links == 4 and geometry.base_point_xy == (0.6, 0.3)
     assert isinstance(configuration_feasible(geometry, np.full(4, 90.0)), Feasibility)
+
+
+def test_a_physical_execution_is_given_one_shared_tolerance_the_plan_is_not():
+    from planhrc.geometry import EXECUTION, STRICT
+
+    hanging = [90, 90, 90, 0, 10]  # link 5's end 2 cm past the far edge: the bar still rests on the table
+    strict = configuration_feasible(FIVE, hanging, reach_links=())
+    assert [(r.code, r.link) for r in strict.reasons] == [("off_table", 5)] and strict.reasons[0].distance_m < 0.03
+    assert configuration_feasible(FIVE, hanging, reach_links=(), tolerance=STRICT) == strict
+    assert configuration_feasible(FIVE, hanging, reach_links=(), tolerance=EXECUTION).ok
+    assert not configuration_feasible(FIVE, [90, 90, 0, 0, 0], tolerance=EXECUTION).ok  # 9 cm past: off
+    # two bars side by side, their centre lines 2.5 cm apart (a link is 3 cm wide): as planned, an overlap
+    u_turn = ObjectGeometry((0.155, 0.025, 0.155))
+    side_by_side = [90, 0, 270]
+    assert "overlap" in configuration_feasible(u_turn, side_by_side, min_fold_gap_deg=0).codes
+    assert configuration_feasible(u_turn, side_by_side, min_fold_gap_deg=0, tolerance=EXECUTION).ok
