@@ -10,7 +10,8 @@ the given moves in which every step is geometrically feasible (see `planhrc.geom
 * the links the step grasps (the turned and the held one) are within reach before and after it.
 
 A problem the plan's start configuration already has (a link the human left off the table) is not held against
-the plan: only problems a step adds count.
+the plan, as long as the plan does not make it worse (that link no further past the edge, or out of reach, than
+at the start): only problems a step adds or worsens count.
 
 The search is a depth-first search over the multiset of remaining moves, trying the moves in the plan's own order
 first (so a feasible plan keeps its order) and remembering the configurations from which no order works. It is
@@ -25,7 +26,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from planhrc.geometry import (Cell, Feasibility, Infeasibility, ObjectGeometry, configuration_feasible,
                               link_centres, reach_shortfall, rotated, sweep_feasible)
@@ -104,7 +105,12 @@ class _Search:
     placement: Placement
     budget: int
     checks: int = 0
-    baseline: frozenset[tuple[str, int]] = frozenset()
+    baseline: Mapping[tuple[str, int], float] = field(default_factory=dict)
+
+    def excused(self, reason: Infeasibility) -> bool:
+        """Whether `reason` is a problem of the start, no worse than there."""
+        start = self.baseline.get((reason.code, reason.link))
+        return start is not None and reason.distance_m <= start + 1e-3
 
     def step(self, geometry: ObjectGeometry, angles: tuple[float, ...], move: Move) -> Feasibility:
         """Whether `move` is feasible from this configuration (problems of the start configuration excepted)."""
@@ -115,14 +121,14 @@ class _Search:
         centres = link_centres(geometry, angles)
         for k in grasped:
             short = reach_shortfall(centres[k - 1], self.placement.cell.robot)
-            if short > 1e-9 and ("out_of_reach", k) not in self.baseline:
+            if short > 1e-9 and not self.excused(Infeasibility("out_of_reach", k, "", float(short))):
                 return Feasibility(False, (Infeasibility("out_of_reach", k, f"link {k} unreachable: {short:.2f} m "
                                                          "beyond reach", float(short)),))
         result = sweep_feasible(geometry, angles, move.turned, move.held, move.delta_deg, cell=self.placement.cell,
                                 reach_links=grasped)
         if result.ok:
             return result
-        new = tuple(r for r in result.reasons if (r.code, r.link) not in self.baseline)
+        new = tuple(r for r in result.reasons if not self.excused(r))
         if not new:  # only the start's own problems: re-check every increment with the baseline excepted
             return self._sweep_excepting(geometry, angles, move, grasped)
         return Feasibility(False, new)
@@ -133,7 +139,7 @@ class _Search:
         for i in range(1, n + 1):
             placed, values = rotated(geometry, angles, move.turned, move.held, move.delta_deg * i / n)
             result = configuration_feasible(placed, values, self.placement.cell, reach_links=grasped)
-            new = tuple(r for r in result.reasons if (r.code, r.link) not in self.baseline)
+            new = tuple(r for r in result.reasons if not self.excused(r))
             if new:
                 return Feasibility(False, new)
         return Feasibility(True)
@@ -244,9 +250,10 @@ def _safe_for_a_human(placement: Placement, final: Sequence[float], links: Seque
     return configuration_feasible(geometry, angles, placement.cell, reach_links=()).ok
 
 
-def _baseline(placement: Placement) -> frozenset[tuple[str, int]]:
+def _baseline(placement: Placement) -> dict[tuple[str, int], float]:
+    """The start's problems: (code, link) -> how far off (0 when not a distance)."""
     start = configuration_feasible(placement.geometry, placement.link_deg, placement.cell)
-    return frozenset((r.code, r.link) for r in start.reasons)
+    return {(r.code, r.link): r.distance_m for r in start.reasons}
 
 
 def _dfs(search: _Search, moves: tuple[Move, ...]) -> tuple[tuple[Move, ...] | None, bool]:

@@ -68,6 +68,16 @@ def test_problems_of_the_start_are_not_held_against_the_plan():
     assert order_moves(Placement(geometry, start), back).found
 
 
+def test_a_problem_of_the_start_may_not_get_worse():
+    start = (90.0, 90.0, 90.0, 20.0, 20.0)  # a human left link 5 just past the far edge
+    geometry = ObjectGeometry((0.155,) * 5)
+    off = {r.link: r.distance_m for r in configuration_feasible(geometry, start).reasons if r.code == "off_table"}
+    assert list(off) == [5] and off[5] < 0.01
+    further = order_moves(Placement(geometry, start), [turn(4, -20)])  # straight forward: 2.5 cm past the edge
+    assert not further.found and "link 5 leaves the table" in further.sentence()
+    assert order_moves(Placement(geometry, start), [turn(4, 25)]).found  # back towards the table
+
+
 def test_twenty_links_are_ordered_within_the_budget():
     n, step = 20, 30
     geometry = ObjectGeometry((0.05,) * n, (0.5, 0.55))
