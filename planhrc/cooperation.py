@@ -17,7 +17,7 @@ Indices follow CONVENTIONS.md: ``s^e_1`` is the state the plan starts from and `
 The function only decides; storing states, planning and dispatching belong to the service's orchestrator.
 
 `escalate` then applies what the paper asks of a repeated failure: after a failed or partial action whose reason
-says the motion itself is the problem (unreachable, stall, slip, collision), the same motion is not retried
+says the motion itself is the problem (unreachable, stall, slip, collision, left_table), the same motion is not retried
 identically. The remedies are tried in turn, one per failure of that motion: split the macro step (dispatch its
 steps one by one), turn that joint the other way round (360° - delta), re-plan; when they are spent, or the robot
 cannot reach the links at all, the human is asked (`human_help_requested`).
@@ -30,9 +30,10 @@ from planhrc.errors import PlanhrcError
 from planhrc.model import State, is_subsumed
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Remedy
 
-# Reasons that say the motion itself failed (a retry of the same motion would fail the same way).
+# Reasons that say the motion itself failed (a retry of the same motion would fail the same way); a turn the
+# worker did not start because its sweep would leave the table, as measured, is refused again the same way.
 MOTION_FAILURES = frozenset({FailureReason.UNREACHABLE, FailureReason.STALL, FailureReason.SLIP,
-                             FailureReason.COLLISION})
+                             FailureReason.COLLISION, FailureReason.LEFT_TABLE})
 
 
 class CooperationError(PlanhrcError, ValueError):

@@ -114,3 +114,16 @@ def test_inputs_are_not_changed():
     before = (perceived, GOAL, PLAN)
     decide(perceived, GOAL, PLAN, next_step=1)
     assert (perceived, GOAL, PLAN) == before
+
+
+def test_a_turn_that_would_leave_the_table_is_not_retried_the_same_way():
+    from planhrc.cooperation import FailureHistory, escalate
+    from planhrc.vocabulary import DecisionKind, FailureReason, Remedy
+
+    retry = Decision(DecisionKind.CONTINUE, 2, 2, "retry a_2")
+    history = FailureHistory(joint=1, turned=2, reason=FailureReason.LEFT_TABLE)
+    answer = escalate(retry, history, (1, 2))
+    assert answer.kind is DecisionKind.REPLAN and answer.remedy is Remedy.OTHER_WAY
+    tried = FailureHistory(joint=1, turned=2, reason=FailureReason.LEFT_TABLE, failures=3,
+                           tried=(Remedy.OTHER_WAY, Remedy.REPLAN))
+    assert escalate(retry, tried, (1, 2)).kind is DecisionKind.HUMAN_HELP_REQUESTED
