@@ -28,8 +28,10 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.geometry import rotated
-from planhrc.robot_sim.scene import TIME_STEP_S, Scene, SimError, direction, new_hazards, turn_hazard
+from planhrc.geometry import configuration_feasible, rotated
+from planhrc.robot_sim.handling import SWEEP_HAZARDS, joint_angles, shorter, turn_order, turn_path
+from planhrc.robot_sim.scene import (HAZARDS, TIME_STEP_S, Scene, SimError, baseline_problems, direction, new_hazards,
+                                    sweep_hazard, turn_hazard)
 
 log = logging.getLogger(__name__)
 
@@ -164,6 +166,18 @@ def get_scenario(name: str, n_links: int = 5) -> Scenario:
 
 
 # -- acting on the scene -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RobotTurn:
+    """The robot's rotation under way: `turned` about its joint with `held` by `delta_deg` in all, from the
+    configuration (`base_xy`, `theta`) it started from."""
+
+    turned: int
+    held: int
+    delta_deg: float
+    base_xy: tuple[float, float]
+    theta: tuple[float, ...]
+
+
 @dataclass
 class HumanContext:
     """What a simulated human knows when acting: the orientation step, the goal, the robot's current work."""
@@ -173,6 +187,7 @@ class HumanContext:
     busy_links: tuple[int, ...] = ()  # links the robot is handling now
     partial: tuple[int, int, float] | None = None  # (turned link, held link, remaining degrees) of a stopped rotation
     next_planned: tuple[int, int, float] | None = None  # (turned link, held link, degrees) of the plan's next action
+    robot_turn: RobotTurn | None = None  # the robot's rotation under way, if any
 
 
 def goal_differences(formulation: str, joint_values: Mapping[int, float | None]) -> dict[int, float]:
@@ -203,10 +218,34 @@ def _move(link: int, delta: float, what: str) -> HumanMove:
     return HumanMove(link, held, delta, f"{what} l{link} by {delta:+g} deg")
 
 
-def _feasible_after(scene: Scene, link: int, delta: float) -> bool:
-    """Whether turning `link` keeps the object on the table, clear of the robot's body and not overlapping, all
-    the way (the human reaches anywhere; whether the robot can reach afterwards is the robot's matter)."""
-    return turn_hazard(scene, link, link - 1, delta) is None
+def _feasible_after(scene: Scene, link: int, delta: float, robot_turn: RobotTurn | None = None,
+                    queued: Sequence[HumanMove] = ()) -> bool:
+    """Whether turning `link` (after the human's `queued` moves) keeps the object on the table, clear of the
+    robot's body and not overlapping, all the way (with the tolerance of a physical move,
+    `planhrc.geometry.EXECUTION`), and leaves it feasible as drawn (`planhrc.geometry.STRICT`: on the table, not
+    merely hanging over its edge), together with the robot's rotation under way (`robot_turn`: its sweep, from
+    where it started, with the human's turns made, and its end). The human reaches anywhere; whether the robot
+    can reach afterwards is the robot's matter."""
+    base, theta = scene.configuration()
+    cell = scene.spec.cell()
+    geometry, values = scene.spec.geometry(base), tuple(theta)
+    before = baseline_problems(geometry, values, cell)
+    moves = [(m.turned, m.held, m.delta_deg) for m in queued]
+    for turned, held, d in moves:
+        geometry, values = rotated(geometry, values, turned, held, d)
+    if sweep_hazard(geometry, values, cell, link, link - 1, delta, before) is not None:
+        return False
+    geometry, values = rotated(geometry, values, link, link - 1, delta)
+    if robot_turn is not None:  # the turns commute: the robot's whole sweep, with the human's turns made first
+        geometry, values = scene.spec.geometry(robot_turn.base_xy), robot_turn.theta
+        for turned, held, d in [*moves, (link, link - 1, delta)]:
+            geometry, values = rotated(geometry, values, turned, held, d)
+        if sweep_hazard(geometry, values, cell, robot_turn.turned, robot_turn.held, robot_turn.delta_deg,
+                        before) is not None:
+            return False
+        geometry, values = rotated(geometry, values, robot_turn.turned, robot_turn.held, robot_turn.delta_deg)
+    return not any(r.code in HAZARDS and (r.code, r.link) not in before
+                   for r in configuration_feasible(geometry, values, cell).reasons)
 
 
 def safe_way(scene: Scene, turned: int, held: int, delta_deg: float) -> float | None:
@@ -218,8 +257,10 @@ def safe_way(scene: Scene, turned: int, held: int, delta_deg: float) -> float | 
     return other if turn_hazard(scene, turned, held, other) is None else None
 
 
-def choose_move(scene: Scene, event: HumanEvent, context: HumanContext) -> HumanMove | None:
-    """What the human will do for `event` now, or None when there is nothing to do."""
+def choose_move(scene: Scene, event: HumanEvent, context: HumanContext,
+                queued: Sequence[HumanMove] = ()) -> HumanMove | None:
+    """What the human will do for `event` now, after the moves it has `queued` already, or None when there is
+    nothing to do."""
     n = scene.n_links
     first_free = max(context.busy_links, default=0) + 1  # links the robot does not hold and does not move
     if event.kind == "rotate":
@@ -235,7 +276,7 @@ def choose_move(scene: Scene, event: HumanEvent, context: HumanContext) -> Human
         candidates = ([link] if link >= first_free else []) + [k for k in range(first_free, n + 1) if k != link]
         for k in candidates:
             for d in (delta, -delta):
-                if _feasible_after(scene, k, d):
+                if _feasible_after(scene, k, d, context.robot_turn, queued):
                     return _move(k, d, "human turned")
         log.info("human: no move of l%d or any free link keeps the object feasible", link)
         return None
@@ -268,20 +309,47 @@ def choose_move(scene: Scene, event: HumanEvent, context: HumanContext) -> Human
 
 def apply_event(human: Human, event: HumanEvent, context: HumanContext) -> str | None:
     """Start the human's move for `event` (it happens on the physics clock); its description, or None."""
-    move = choose_move(human.scene, event, context)
+    move = choose_move(human.scene, event, context, tuple(human.queue))
     if move is None:
         return None
     human.start(move)
     return move.label
 
 
+CORRECTION_DEG = 2.0  # a human who looks at the result puts right a joint further off than this
+
+
+def human_way(scene: Scene, turned: int, held: int, delta_deg: float) -> float | None:
+    """`delta_deg`, or the same turn the other way round, whichever a human can make safely in one move (its sweep
+    keeps the object on the table and clear of the robot, see `handling`; its end adds no problem, see
+    `new_hazards`); None when neither."""
+    base, theta = scene.configuration()
+    geometry, cell = scene.spec.geometry(base), scene.spec.cell()
+    baseline = baseline_problems(geometry, theta, cell)
+    ways = (delta_deg,) if abs(delta_deg) < 1e-9 else (delta_deg, delta_deg - math.copysign(360.0, delta_deg))
+    for way in ways:
+        if sweep_hazard(geometry, theta, cell, turned, held, way, baseline, SWEEP_HAZARDS) is not None:
+            continue
+        if not new_hazards(scene, *rotated(geometry, theta, turned, held, way)):
+            return way
+    return None
+
+
 def assist_failed_action(human: Human, turned_link: int, held_link: int, delta_deg: float) -> str | None:
-    """The human performs the rotation the robot could not (the paper's cooperation model), the way round that
-    keeps the object safe, and finishes it; None (nothing done) when neither way is safe."""
-    delta = safe_way(human.scene, turned_link, held_link, delta_deg)
+    """The human performs the rotation the robot could not (the paper's cooperation model): in one move the way
+    round that keeps the object safe, else through safe intermediate configurations to the same orientations
+    (`bring_to`); None (nothing done) when there is no safe way."""
+    scene = human.scene
+    delta = human_way(scene, turned_link, held_link, delta_deg)
     if delta is None:
-        log.info("human: turning l%d by %+g deg either way would harm the object; not done", turned_link, delta_deg)
-        return None
+        base, theta = scene.configuration()
+        _, end = rotated(scene.spec.geometry(base), theta, turned_link, held_link, delta_deg)
+        done = bring_to(human, end, f"human did the robot's failed action (l{turned_link} by {delta_deg:+g} deg)")
+        if done is None:
+            log.info("human: turning l%d by %+g deg would harm the object, whichever way; not done", turned_link,
+                     delta_deg)
+            return None
+        return "; ".join(done)
     move = HumanMove(turned_link, held_link, delta,
                      f"human did the robot's failed action: l{turned_link} (holding l{held_link}) by {delta:+g} deg")
     human.start(move)
@@ -290,43 +358,71 @@ def assist_failed_action(human: Human, turned_link: int, held_link: int, delta_d
 
 
 def help_turns(human: Human, requests: Sequence[tuple[int, float]]) -> list[str] | None:
-    """What the robot asked for (`human_help_requested`): turn each link `link` about its joint with the link
-    before it (the table for l1) until it points at `to_deg`, upstream links first, and finish; the labels of
-    the moves made (empty when every link points there already), or None, nothing done, when the object would
-    end past the table's edge, inside the robot or folded. Unlike the robot, a human lifts a link over another
-    and holds the one it turns: only the end matters, and the way round that keeps clear of the robot's body.
-    The human looks at the object itself."""
+    """What the robot asked for (`human_help_requested`): each link `link` pointing at `to_deg`, the links beyond
+    carried along when a link before them turns, as if done upstream first (assumption A1); the labels of the
+    moves made (empty when every link points there already), or None, nothing done, when that end would lie
+    past the table's edge, inside the robot or folded, or there is no safe way there (see `bring_to`)."""
+    _, theta = human.scene.configuration()
+    end = tuple(theta)
+    for link, to_deg in sorted((int(link), float(to_deg)) for link, to_deg in requests):
+        end = rotated(human.scene.spec.geometry(), end, link, link - 1, shorter(to_deg - end[link - 1]))[1]
+    return bring_to(human, end, "human helped")
+
+
+def bring_to(human: Human, end: Sequence[float], what: str) -> list[str] | None:
+    """Bring the object to the link orientations `end` (its base point where it lies): the labels of the moves
+    made, or None, nothing done, when `end` would lie past the table's edge, inside the robot or folded, or no
+    safe way there is found.
+
+    The end fixes how much each joint turns; those turns commute, so the human makes them in an order, and each
+    the way round, whose sweeps keep the object on the table and clear of the robot (`handling.turn_order`), or
+    else through intermediate configurations (`handling.turn_path`). Unlike the robot, a human lifts a link
+    over another and is not bound by reach. The human looks at the object itself, turns each joint by what it
+    still lacks, and at the end puts right a joint left more than `CORRECTION_DEG` off."""
     scene = human.scene
     base, theta = scene.configuration()
+    cell = scene.spec.cell()
     geometry, values = scene.spec.geometry(base), tuple(theta)
-    ordered = sorted((int(link), float(to_deg)) for link, to_deg in requests)
-    for link, to_deg in ordered:
-        geometry, values = rotated(geometry, values, link, link - 1, _shorter(to_deg - values[link - 1]))
-    harm = new_hazards(scene, geometry, values)
+    harm = new_hazards(scene, geometry, end)
     if harm:
-        log.info("human: the requested turns would end with %s; not done", harm[0].message)
+        log.info("human: the end asked for would have %s; not done", harm[0].message)
+        return None
+    wanted = joint_angles(end)
+    now = joint_angles(values)
+    turns = {k: shorter(wanted[k - 1] - now[k - 1]) for k in range(1, len(end) + 1)}
+    turns = {k: d for k, d in turns.items() if abs(d) >= 1.0}
+    baseline = baseline_problems(geometry, values, cell)
+    moves = turn_order(geometry, values, cell, turns, baseline)
+    if moves is None:
+        moves = turn_path(geometry, values, cell, wanted, baseline)
+    if moves is None:
+        log.info("human: no way found to turn the joints %s keeping the object on the table and clear of the "
+                 "robot; not done", {k: round(d) for k, d in turns.items()})
         return None
     labels: list[str] = []
-    for link, to_deg in ordered:
-        delta = _shorter(to_deg - scene.link_orientations_deg()[link - 1])
+    target = list(now)
+    for link, way in moves:
+        target[link - 1] = (target[link - 1] + way) % 360.0
+        # what the joint still lacks now (earlier turns may have dragged it), the way round planned
+        lacks = shorter(target[link - 1] - joint_angles(scene.link_orientations_deg())[link - 1])
+        delta = min((lacks, lacks - 360.0, lacks + 360.0), key=lambda v: abs(v - way))
         if abs(delta) < 1.0:
             continue
-        ways = [d for d in (delta, delta - math.copysign(360.0, delta))
-                if turn_hazard(scene, link, link - 1, d, hazards=("inside_robot",)) is None]
-        if not ways:
-            log.info("human: turning l%d to %g deg either way would sweep links through the robot; stopped", link,
-                     to_deg)
-            return labels or None
-        way = ways[0]
-        move = HumanMove(link, link - 1, way, f"human helped: l{link} to {to_deg % 360.0:g} deg ({way:+.0f} deg)")
+        move = HumanMove(link, link - 1, delta, f"{what}: l{link} by {delta:+.0f} deg at its joint")
         human.start(move)
         human.finish()
         labels.append(move.label)
+    for _ in range(2):  # look again; put right what the turns left off, upstream first
+        for link in range(1, len(end) + 1):
+            delta = shorter(wanted[link - 1] - joint_angles(scene.link_orientations_deg())[link - 1])
+            if abs(delta) <= CORRECTION_DEG or turn_hazard(scene, link, link - 1, delta,
+                                                           hazards=SWEEP_HAZARDS) is not None:
+                continue
+            move = HumanMove(link, link - 1, delta, f"human put l{link} right ({delta:+.0f} deg at its joint)")
+            human.start(move)
+            human.finish()
+            labels.append(move.label)
     return labels
-
-
-def _shorter(delta_deg: float) -> float:
-    return (delta_deg + 180.0) % 360.0 - 180.0
 
 
 # -- the human's body: two hands that grasp and turn links on the physics clock --------------------------------

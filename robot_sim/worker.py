@@ -8,7 +8,8 @@ turning gripper may lose its grasp part-way (faults) — and posts the outcome j
 reason and a sentence. In camera mode a link the head camera does not see is posted as unseen (null); the
 simulator's truth is recorded only for evaluation (`true_deg`). A failed action is not retried the same way:
 a macro step is split into single steps; a single step that failed again is handed to the human when the
-scenario has one who helps, else the worker gives up and says so in the action's feedback.
+scenario has one who helps (when the human finds no safe way either, the failure is reported and the service
+decides anew, at most three times in a row), else the worker gives up and says so in the action's feedback.
 
 Everything is recorded in `out_dir`: `summary.json` (decisions, actions, outcomes, timings), one camera frame
 per perception (`frame_NNN.png`), `run.gif`, and `configurations.png` (top views of each successive
@@ -35,8 +36,8 @@ from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
 from planhrc.client import KBClient, ProtocolError
-from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, Scenario, apply_event, assist_failed_action,
-                                     get_scenario, goal_differences, help_turns, safe_way)
+from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, RobotTurn, Scenario, apply_event,
+                                     assist_failed_action, get_scenario, goal_differences, help_turns, safe_way)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
@@ -282,11 +283,13 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
     """Perceive -> decide -> act until the goal; returns why it stopped.
 
     A failed action is not tried again the same way: a macro step that failed is split into its single steps;
-    a single step that failed and comes again is done by the human when the scenario says the human helps,
-    else the worker gives up, and says so to the service in the feedback of that action."""
+    a single step that failed and comes again is done by the human when the scenario says the human helps (when
+    the human cannot do it safely either, the failure is reported and the next perception decides; the third
+    time in a row the worker gives up), else the worker gives up, and says so to the service in the feedback of
+    that action."""
     step = 1
     unseen_in_a_row = 0
-    helpless = 0  # help requests in a row the human could do nothing about
+    helpless = 0  # help requests (or failed actions) in a row the human could do nothing about
     carried: list[str] = []  # human moves made while the robot idled at the goal, reported with the next step
     # signature of a failed action -> (its sentence, whether it was also tried in single steps)
     failed: dict[tuple[int, int, float, int], tuple[str, bool, FailureReason | None]] = {}
@@ -295,7 +298,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         for index, event in _events(scenario, run, step, "before"):
             if (done := _act(human, run, index, event, context)) is not None:
                 human_before.append(done)
-        human.finish()  # the robot waits until the human has let go
+            human.finish()  # the robot waits until the human has let go; the next move starts from there
 
         t0 = time.perf_counter()
         seen = _perceive(perceiver)
@@ -401,6 +404,9 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
             parts = way_round(scene, action).split()  # the macro motion failed: try its single steps
         else:
             parts = None  # tried every way the robot knows: not again
+        if parts is not None:  # a human acting meanwhile takes the robot's whole rotation into account
+            context.robot_turn = RobotTurn(action.turned_link, action.held_link, sum(p.delta_deg for p in parts),
+                                           base_xy, tuple(theta))
         result = None if parts is None else _perform_parts(scene, robot, parts, interrupt,
                                                              fault.stop_fraction if fault else None)
         t4 = time.perf_counter()
@@ -409,7 +415,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
             if (what := _act(human, run, index, event, context)) is not None:
                 human_during.append(what)
         human.finish()
-        context.busy_links = ()
+        context.busy_links, context.robot_turn = (), None
         if result is None:
             # the same single step failed before: do not try it the same way again
             sentence = failed[signature][0]
@@ -428,6 +434,20 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                                               outcome_reason=reason.value if reason else None,
                                               outcome_message=message, human_during=tuple(human_during),
                                               human_assist=assist, action_s=t4 - t3))
+                helpless = 0
+                step += 1
+                continue
+            if scenario.assists_after_failures is not None and helpless + 1 < max_unseen:
+                # the object may have changed since (a human's move): say so and let the service decide anew
+                helpless += 1
+                message = f"robot did not retry ({sentence})"
+                reason = failed[signature][2]
+                if action.action_id is not None:
+                    _feedback(kb, object_id, action.action_id, Outcome.FAILED, message, reason)
+                run.records.append(StepRecord(**base, action=dict(data), outcome="failed",
+                                              outcome_reason=reason.value if reason else None,
+                                              outcome_message=message, human_during=tuple(human_during),
+                                              action_s=t4 - t3))
                 step += 1
                 continue
             run.stop_message = f"gave up on {action.name or 'the action'}: {sentence}"

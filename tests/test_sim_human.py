@@ -4,7 +4,7 @@ import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
-from planhrc.geometry import configuration_feasible
+from planhrc.geometry import configuration_feasible, rotated
 from planhrc.robot_sim.demo import random_scenario
 from planhrc.robot_sim.human import Human, HumanMove, get_scenario
 from planhrc.robot_sim.perception import angle_difference_deg
@@ -46,3 +46,49 @@ def test_random_scenarios_start_anywhere_change_several_links_and_the_human_acts
     assert len({sc.base_point_xy for sc in scenarios}) >= 5  # nor always in the same place
     links = {e.link for sc in scenarios for e in get_scenario(sc.human).events}
     assert links == {1, 2, 3, 4, 5}
+
+
+def test_a_considerate_human_leaves_the_object_on_the_table_not_hanging_over_its_edge():
+    from planhrc.robot_sim.human import HumanContext, HumanEvent, choose_move
+
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    scene = build_scene(client, SceneSpec(load_robot=False, initial_orientations_deg=(90, 90, 90, 45, 45)))
+    try:
+        base, theta = scene.configuration()
+        # turning l4 back by 45 would leave link 5's end 2.5 cm past the far edge: tolerable while acting, but
+        # not where a considerate human leaves the object
+        ahead = scene.spec.geometry(base), (90, 90, 90, 0, 0)
+        reasons = configuration_feasible(*ahead, scene.spec.cell(), reach_links=()).reasons
+        assert [r.code for r in reasons] == ["off_table"]
+        event = HumanEvent(at_step=1, when="before", link=4, direction=-1, keep_workable=True)
+        move = choose_move(scene, event, HumanContext(step_deg=45.0))
+        assert move is not None and (move.turned, move.delta_deg) != (4, -45.0)
+        _, end = rotated(scene.spec.geometry(base), theta, move.turned, move.held, move.delta_deg)
+        feasible = configuration_feasible(scene.spec.geometry(base), end, scene.spec.cell(), reach_links=())
+        assert feasible.ok, feasible.sentence()
+    finally:
+        scene.close()
+        client.disconnect()
+
+
+def test_a_human_acting_during_a_robot_turn_counts_the_rest_of_that_turn():
+    from planhrc.robot_sim.human import HumanContext, HumanEvent, RobotTurn, choose_move
+
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    scene = build_scene(client, SceneSpec(load_robot=False))  # straight, along -y
+    try:
+        event = HumanEvent(at_step=1, when="during", link=4, direction=-1, keep_workable=True)
+        alone = choose_move(scene, event, HumanContext(step_deg=45.0, busy_links=(2, 1)))
+        assert alone is not None and (alone.turned, alone.delta_deg) == (4, -45.0)  # fine on a still object
+        base, theta = scene.configuration()
+        # but the robot is turning l2 by -45 (links 2-5 with it): l4's turn then points links 4-5 off the far edge
+        turning = RobotTurn(turned=2, held=1, delta_deg=-45.0, base_xy=base, theta=tuple(theta))
+        move = choose_move(scene, event, HumanContext(step_deg=45.0, busy_links=(2, 1), robot_turn=turning))
+        assert move is not None and (move.turned, move.delta_deg) != (4, -45.0)
+        geometry, end = rotated(scene.spec.geometry(base), theta, move.turned, move.held, move.delta_deg)
+        geometry, end = rotated(geometry, end, 2, 1, -45.0)
+        feasible = configuration_feasible(geometry, end, scene.spec.cell(), reach_links=())
+        assert feasible.ok, feasible.sentence()
+    finally:
+        scene.close()
+        client.disconnect()

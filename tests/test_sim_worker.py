@@ -214,6 +214,26 @@ def test_a_failure_is_not_retried_the_same_way_and_the_worker_gives_up_out_loud(
     assert summary.failure_reasons == {"unreachable": 1}  # the robot tried once, not again the same way
 
 
+def test_when_the_human_cannot_do_a_failed_turn_safely_either_the_service_is_told_and_asked_again(tmp_path):
+    # short links along the table's far edge; the next turn swings links 4-5 past it: neither the robot nor the
+    # human does it; the worker reports that and perceives again (the service decides), twice, then gives up
+    kb = GreedyKB([90, 90, 90, 45, 135])
+    spec = SceneSpec(link_length_m=0.06, base_point_xy=(0.86, 0.3))
+    try:
+        summary = run_worker(kb.url, "o1", spec, Scenario("helping", assists_after_failures=2), tmp_path,
+                             max_steps=10, perception="fallback", record_frames=False)
+    finally:
+        kb.close()
+    feedback = [b for m, path, _, b in kb.log if path.endswith("/feedback")]
+    assert [b["outcome"] for b in feedback] == ["failed"] * 4 and {b["reason"] for b in feedback} == {"left_table"}
+    assert feedback[0]["message"].startswith("left_table: not started")
+    for again in feedback[1:3]:
+        assert again["message"].startswith("robot did not retry (") and "could not do it safely" in again["message"]
+    assert feedback[3]["message"].startswith("worker gives up: ")
+    assert summary.stop_reason == "gave_up" and len(summary.steps) == 4
+    assert summary.configurations[-1] == summary.configurations[0]  # nothing was turned
+
+
 def test_a_turn_goes_the_other_way_round_when_only_that_way_stays_clear():
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
@@ -249,7 +269,7 @@ def test_a_help_request_is_done_by_the_visible_human_or_the_worker_says_it_gives
     assert summary.help_requests == 1
     gave_up = [b for m, path, _, b in kb.log if path == "/objects/o1/give-up"]
     if helps:
-        assert first.human_assist.startswith("human helped: l4 to 135 deg")
+        assert first.human_assist.startswith("human helped: l4 by +45 deg")
         # the human turned l4 (and l5 with it) about p4; the robot then did the rest
         assert abs((summary.configurations[1][3] - 135 + 180) % 360 - 180) < 8
         assert summary.reached_goal and not gave_up
