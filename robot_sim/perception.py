@@ -57,7 +57,8 @@ class CameraSpec:
     far: float = 5.0
     # Markers are only ~20 px wide: detect on enlarged copies, trying each scale until every marker is found.
     upscales: tuple[int, ...] = (2, 1, 3)
-    look_again_pans_rad: tuple[float, ...] = (0.35, -0.35)  # head pans tried when a marker was not seen
+    # head pans tried in turn when a marker was not seen: a marker near the view's edge may need the wider turn
+    look_again_pans_rad: tuple[float, ...] = (0.35, -0.35, 0.7, -0.7)
 
 
 def circular_mean_deg(angles: list[float]) -> float:

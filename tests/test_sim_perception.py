@@ -47,8 +47,24 @@ def test_a_covered_marker_is_unseen_after_looking_again_and_nothing_fills_it_in(
     finally:
         scene.client.changeVisualShape(scene.marker_bodies[2], -1, rgbaColor=[1, 1, 1, 1])
     assert seen.missing_links == (3,) and seen.link_orientations_deg[2] is None
-    assert seen.looks == 3  # the head turned to each side to look again
+    assert seen.looks == 5  # the head turned to each side, twice as far the second time, to look again
     assert abs(scene.client.getJointState(scene.robot, scene.head_pan)[0]) < 0.02  # and turned back
+
+
+def test_a_marker_at_the_edge_of_the_view_is_seen_when_the_head_turns_far_enough():
+    # the object at the table's left edge (a random episode's state): link 2's marker lies near the image's
+    # border, too slanted to read from the head turned 0.35 rad either way; turned 0.7 rad, it is read (the
+    # pose as measured in that episode: the marker is at the limit of what the detector reads)
+    theta, base = (224.78, 315.55, 89.43, 313.43, 89.54), (0.6092265273329907, 0.38687713917710215)
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    scene = build_scene(client, SceneSpec(initial_orientations_deg=theta, base_point_xy=base))
+    try:
+        seen = CameraPerception(client, scene).look()
+    finally:
+        scene.close()
+        client.disconnect()
+    assert seen.complete, f"markers missing for links {seen.missing_links}"
+    assert all(abs(angle_difference_deg(a, b)) < 3.0 for a, b in zip(seen.link_orientations_deg, theta))
 
 
 def test_fallback_adds_seeded_noise(scene):
