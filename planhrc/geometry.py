@@ -39,17 +39,22 @@ CODES = ("off_table", "inside_robot", "out_of_reach", "overlap")
 
 @dataclass(frozen=True)
 class Tolerance:
-    """How much a configuration may exceed the strict checks and still count as feasible: a link whose end lies
-    `overhang_m` past the table's edge (its centre of mass well inside: a 15.5 cm bar rests on the table), two
-    links whose centre lines come `overlap_m` closer than a link's width (bars side by side)."""
+    """How much a configuration may differ from the strict checks and still count as feasible: a link whose end
+    lies `overhang_m` past the table's edge (its centre of mass well inside: a 15.5 cm bar rests on the table),
+    two links whose centre lines come `overlap_m` closer than a link's width (bars side by side); or, the other
+    way, the `clearance_m` every link keeps from the table's edges."""
 
     overhang_m: float = 0.0
     overlap_m: float = 0.0
+    clearance_m: float = 0.0
 
 
-STRICT = Tolerance()  # plans, goals and the counts of states off the table: the geometry as drawn
+STRICT = Tolerance()  # goals and the counts of states off the table: the geometry as drawn
 # Acting on a measured pose: a few degrees of drift on a 0.78 m chain move its end by about 3 cm.
 EXECUTION = Tolerance(overhang_m=0.03, overlap_m=0.01)
+# The configurations a plan passes through on its way to the goal keep 2 cm from the table's edges, so that a
+# physical turn ending a degree or two off (1-2 cm at the chain's end) still leaves the object on the table.
+PLANNING = Tolerance(clearance_m=0.02)
 
 
 class GeometryError(ModelError):
@@ -136,7 +141,7 @@ class Infeasibility:
     code: str
     link: int
     message: str
-    distance_m: float = 0.0  # how far off (beyond the table's edge, beyond reach); 0 when not a distance
+    distance_m: float = 0.0  # how far off (beyond the table's edge or its clearance, beyond reach); 0 when not one
 
     def __str__(self) -> str:
         return self.message
@@ -221,7 +226,7 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
     n = geometry.n_links
     half_width = geometry.link_width_m / 2.0
     a, b = points[:-1], points[1:]
-    x0, x1, y0, y1 = cell.table.bounds(margin_m=half_width)
+    x0, x1, y0, y1 = cell.table.bounds(margin_m=half_width + tolerance.clearance_m)
     outside = np.hypot(np.maximum(np.maximum(x0 - points[:, 0], 0.0), points[:, 0] - x1),
                        np.maximum(np.maximum(y0 - points[:, 1], 0.0), points[:, 1] - y1))
     off = np.maximum(outside[:-1], outside[1:])
@@ -233,8 +238,11 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
     reasons: list[Infeasibility] = []
     for k in range(1, n + 1):
         if off[k - 1] > tolerance.overhang_m + 1e-9:
-            d = float(off[k - 1])
-            reasons.append(Infeasibility("off_table", k, f"link {k} leaves the table: {d:.2f} m past its edge", d))
+            d = float(off[k - 1])  # past the edge, or past the clearance the tolerance keeps from it
+            past = d - tolerance.clearance_m
+            sentence = (f"link {k} leaves the table: {past:.2f} m past its edge" if past > 1e-9 else
+                        f"link {k} comes within {tolerance.clearance_m - d:.2f} m of the table's edge")
+            reasons.append(Infeasibility("off_table", k, sentence, d))
         if inside[k - 1]:
             reasons.append(Infeasibility("inside_robot", k, f"link {k} lies inside the robot's body"))
         if k in reach and short[k - 1] > 1e-9:

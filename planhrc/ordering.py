@@ -6,7 +6,9 @@ links 4-5 past the table's edge or through the robot, the other order not. `orde
 the given moves in which every step is geometrically feasible (see `planhrc.geometry`):
 
 * every configuration the step sweeps through (every 5°) keeps the links on the table, out of the robot's body
-  and clear of each other, and
+  and clear of each other, and the configuration it comes to rest in keeps the clearance `planhrc.geometry.PLANNING`
+  from the table's edges (2 cm: a physical turn ends a degree or two off; the plan's end, the goal, as drawn),
+  and
 * the links the step grasps (the turned and the held one) are within reach before and after it.
 
 A problem the plan's start configuration already has (a link the human left off the table) is not held against
@@ -28,8 +30,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
-from planhrc.geometry import (Cell, Feasibility, Infeasibility, ObjectGeometry, configuration_feasible,
-                              link_centres, reach_shortfall, rotated, sweep_feasible)
+from planhrc.geometry import (PLANNING, STRICT, Cell, Feasibility, Infeasibility, ObjectGeometry, Tolerance,
+                              configuration_feasible, link_centres, reach_shortfall, rotated)
 
 DEFAULT_BUDGET = 4000  # step checks per search (about 1 ms each for 20 links)
 CLOCKWISE, ANTICLOCKWISE = "rotateclockwise", "rotateanticlockwise"
@@ -105,15 +107,18 @@ class _Search:
     placement: Placement
     budget: int
     checks: int = 0
-    baseline: Mapping[tuple[str, int], float] = field(default_factory=dict)
+    baseline: Mapping[tuple[Tolerance, str, int], float] = field(default_factory=dict)
 
-    def excused(self, reason: Infeasibility) -> bool:
-        """Whether `reason` is a problem of the start, no worse than there."""
-        start = self.baseline.get((reason.code, reason.link))
+    def excused(self, reason: Infeasibility, tolerance: Tolerance = STRICT) -> bool:
+        """Whether `reason` (found with `tolerance`) is a problem of the start, no worse than there."""
+        start = self.baseline.get((tolerance, reason.code, reason.link))
         return start is not None and reason.distance_m <= start + 1e-3
 
-    def step(self, geometry: ObjectGeometry, angles: tuple[float, ...], move: Move) -> Feasibility:
-        """Whether `move` is feasible from this configuration (problems of the start configuration excepted)."""
+    def step(self, geometry: ObjectGeometry, angles: tuple[float, ...], move: Move, last: bool = False
+             ) -> Feasibility:
+        """Whether `move` is feasible from this configuration (problems of the start configuration excepted): the
+        configurations it sweeps through are checked as drawn, and where it comes to rest keeps `PLANNING`'s
+        clearance from the table's edges, unless the move ends the plan (`last`: the goal, as drawn)."""
         self.checks += 1
         if self.checks > self.budget:
             raise _OutOfBudget
@@ -124,22 +129,13 @@ class _Search:
             if short > 1e-9 and not self.excused(Infeasibility("out_of_reach", k, "", float(short))):
                 return Feasibility(False, (Infeasibility("out_of_reach", k, f"link {k} unreachable: {short:.2f} m "
                                                          "beyond reach", float(short)),))
-        result = sweep_feasible(geometry, angles, move.turned, move.held, move.delta_deg, cell=self.placement.cell,
-                                reach_links=grasped)
-        if result.ok:
-            return result
-        new = tuple(r for r in result.reasons if not self.excused(r))
-        if not new:  # only the start's own problems: re-check every increment with the baseline excepted
-            return self._sweep_excepting(geometry, angles, move, grasped)
-        return Feasibility(False, new)
-
-    def _sweep_excepting(self, geometry: ObjectGeometry, angles: tuple[float, ...], move: Move,
-                         grasped: list[int]) -> Feasibility:
         n = max(1, int(math.ceil(abs(move.delta_deg) / 5.0)))
         for i in range(1, n + 1):
             placed, values = rotated(geometry, angles, move.turned, move.held, move.delta_deg * i / n)
-            result = configuration_feasible(placed, values, self.placement.cell, reach_links=grasped)
-            new = tuple(r for r in result.reasons if not self.excused(r))
+            tolerance = PLANNING if i == n and not last else STRICT
+            result = configuration_feasible(placed, values, self.placement.cell, reach_links=grasped,
+                                            tolerance=tolerance)
+            new = tuple(r for r in result.reasons if not self.excused(r, tolerance))
             if new:
                 return Feasibility(False, new)
         return Feasibility(True)
@@ -200,7 +196,7 @@ def first_obstacle(placement: Placement, moves: Sequence[Move],
     search.budget = math.inf  # type: ignore[assignment]
     geometry, angles = placement.geometry, tuple(float(a) for a in placement.link_deg)
     for i, move in enumerate(moves, start=1):
-        result = search.step(geometry, angles, move)
+        result = search.step(geometry, angles, move, last=i == len(moves))
         if not result.ok:
             return i, result
         geometry, angles = rotated(geometry, angles, move.turned, move.held, move.delta_deg)
@@ -250,10 +246,12 @@ def _safe_for_a_human(placement: Placement, final: Sequence[float], links: Seque
     return configuration_feasible(geometry, angles, placement.cell, reach_links=()).ok
 
 
-def _baseline(placement: Placement) -> dict[tuple[str, int], float]:
-    """The start's problems: (code, link) -> how far off (0 when not a distance)."""
-    start = configuration_feasible(placement.geometry, placement.link_deg, placement.cell)
-    return {(r.code, r.link): r.distance_m for r in start.reasons}
+def _baseline(placement: Placement) -> dict[tuple[Tolerance, str, int], float]:
+    """The start's problems, as drawn and with the clearance a plan keeps: (tolerance, code, link) -> how far off
+    (0 when not a distance)."""
+    return {(tolerance, r.code, r.link): r.distance_m for tolerance in (STRICT, PLANNING)
+            for r in configuration_feasible(placement.geometry, placement.link_deg, placement.cell,
+                                            tolerance=tolerance).reasons}
 
 
 def _dfs(search: _Search, moves: tuple[Move, ...]) -> tuple[tuple[Move, ...] | None, bool]:
@@ -281,7 +279,7 @@ def _dfs(search: _Search, moves: tuple[Move, ...]) -> tuple[tuple[Move, ...] | N
         candidates = sorted((positions[g][done[g]], g) for g in range(len(groups)) if remaining[g])
         for _, g in candidates:
             move = groups[g]
-            if not search.step(geometry, angles, move).ok:
+            if not search.step(geometry, angles, move, last=sum(remaining) == 1).ok:
                 continue
             after = rotated(geometry, angles, move.turned, move.held, move.delta_deg)
             remaining[g] -= 1
