@@ -52,9 +52,9 @@ class Tolerance:
 STRICT = Tolerance()  # goals and the counts of states off the table: the geometry as drawn
 # Acting on a measured pose: a few degrees of drift on a 0.78 m chain move its end by about 3 cm.
 EXECUTION = Tolerance(overhang_m=0.03, overlap_m=0.01)
-# The configurations a plan passes through on its way to the goal keep 2 cm from the table's edges, so that a
+# The configurations a plan comes to rest in on its way to the goal keep 1.5 cm from the table's edges, so that a
 # physical turn ending a degree or two off (1-2 cm at the chain's end) still leaves the object on the table.
-PLANNING = Tolerance(clearance_m=0.02)
+PLANNING = Tolerance(clearance_m=0.015)
 
 
 class GeometryError(ModelError):

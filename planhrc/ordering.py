@@ -7,7 +7,7 @@ the given moves in which every step is geometrically feasible (see `planhrc.geom
 
 * every configuration the step sweeps through (every 5°) keeps the links on the table, out of the robot's body
   and clear of each other, and the configuration it comes to rest in keeps the clearance `planhrc.geometry.PLANNING`
-  from the table's edges (2 cm: a physical turn ends a degree or two off; the plan's end, the goal, as drawn),
+  from the table's edges (1.5 cm: a physical turn ends a degree or two off; the plan's end, the goal, as drawn),
   and
 * the links the step grasps (the turned and the held one) are within reach before and after it.
 

@@ -78,10 +78,10 @@ def test_a_problem_of_the_start_may_not_get_worse():
     assert order_moves(Placement(geometry, start), [turn(4, 25)]).found  # back towards the table
 
 
-def test_a_plan_rests_2_cm_inside_the_table_except_at_its_end():
-    geometry = ObjectGeometry((0.155,) * 3, (0.56, 0.2))
+def test_a_plan_rests_1_5_cm_inside_the_table_except_at_its_end():
+    geometry = ObjectGeometry((0.155,) * 3, (0.565, 0.2))
     start = (90.0, 90.0, 90.0)
-    plan = [turn(2, -90), turn(3, 45)]  # links 2-3 forward, to 1.5 cm from the far edge's line, then l3 back
+    plan = [turn(2, -90), turn(3, 45)]  # links 2-3 forward, to 1 cm from the far edge's line, then l3 back
     after_first = rotated(geometry, start, 2, 1, -90)[1]
     assert configuration_feasible(geometry, after_first, reach_links=()).ok  # on the table, as drawn
     step, problem = first_obstacle(Placement(geometry, start), plan)
