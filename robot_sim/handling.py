@@ -98,8 +98,9 @@ def turn_path(geometry: ObjectGeometry, theta: Sequence[float], cell: Cell, want
     goal = (0,) * n
     checks = 0
     counter = itertools.count()
-    frontier = [(sum(moves_left(k, m) for k, m in enumerate(start)), next(counter), 0, start,
-                 tuple[tuple[int, float], ...]())]
+    # (estimate, tie-break, moves so far, state, path of (link, degrees) turns)
+    frontier: list[tuple[float, int, int, tuple[int | None, ...], tuple[tuple[int, float], ...]]] = [
+        (float(sum(moves_left(k, m) for k, m in enumerate(start))), next(counter), 0, start, ())]
     closed: set[tuple[int | None, ...]] = set()
     while frontier:
         _, _, cost, state, path = heapq.heappop(frontier)
