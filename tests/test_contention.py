@@ -21,7 +21,7 @@ with warnings.catch_warnings():
 
 from planhrc.kb_service.app import create_app
 from planhrc.settings import make_settings
-from tests.servers import free_port, serve_command, serve_env, serving, timed_beside
+from tests.servers import free_port, serve_command, serve_env, serving, timed_beside, wait_until_serving
 
 pytestmark = pytest.mark.slow
 
@@ -100,16 +100,7 @@ def test_no_planning_worker_outlives_the_service(tmp_path, sig):
     base = f"http://127.0.0.1:{port}"
     workers: set[int] = set()
     try:
-        deadline = time.monotonic() + 60
-        while True:
-            assert proc.poll() is None, log_path.read_text()
-            try:
-                if httpx.get(f"{base}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            assert time.monotonic() < deadline, "planhrc serve did not answer /health"
-            time.sleep(0.1)
+        wait_until_serving(proc, base, log_path)
         rng = random.Random(5)
         with httpx.Client(base_url=base, timeout=60) as client:
             big, mid = _object(client, 200, "absolute"), _object(client, 20, "absolute")

@@ -30,7 +30,7 @@ if str(REPO / "tests") not in sys.path:
     sys.path.insert(0, str(REPO / "tests"))
 
 from test_service_api import move, noisy  # noqa: E402
-from tests.servers import free_port, serve_command  # noqa: E402
+from tests.servers import free_port, serve_command, wait_until_serving  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -56,16 +56,7 @@ class Server:
         self.proc = subprocess.Popen(serve_command(port, self.db), cwd=self.db.parent, env=env,
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         self.base = f"http://127.0.0.1:{port}"
-        deadline = time.monotonic() + 60
-        while True:
-            assert self.proc.poll() is None, f"serve exited with {self.proc.returncode}"
-            try:
-                if httpx.get(f"{self.base}/health", timeout=1).status_code == 200:
-                    return
-            except httpx.TransportError:
-                pass
-            assert time.monotonic() < deadline, "serve did not answer /health within 60 s"
-            time.sleep(0.05)
+        wait_until_serving(self.proc, self.base)
 
     def kill(self) -> None:
         if self.proc is not None and self.proc.poll() is None:
