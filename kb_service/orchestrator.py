@@ -512,7 +512,8 @@ class Orchestrator:
 
     def health(self) -> dict[str, Any]:
         """Counts kept by the store's commits: no scan and no lock, so /health answers while anything runs."""
-        return {"objects": self.kb.object_count(), "triples": self.kb.triple_count()}
+        return {"objects": self.kb.object_count(), "triples": self.kb.triple_count(),
+                "plans_to_write": self.kb.plans_to_write()}
 
     def _plan_public(self, plan: StoredPlan) -> dict[str, Any]:
         obj = self.kb.get_object(plan.object_id)

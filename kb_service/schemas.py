@@ -439,13 +439,18 @@ class EventPublic(BaseModel):
 class HealthPublic(BaseModel):
     model_config = _config(
         "Liveness of the service and size of its knowledge base.",
-        {"status": "ok", "version": "0.1.0", "objects": 2, "triples": 1520, "auth": False},
+        {"status": "ok", "version": "0.1.0", "objects": 2, "triples": 1520, "plans_to_write": 0, "auth": False},
     )
 
     status: Literal["ok"] = Field(description="Always ok when the service answers.", examples=["ok"])
     version: str = Field(description="planhrc version.", examples=["0.1.0"])
     objects: int = Field(description="Number of stored objects.", examples=[2])
-    triples: int = Field(description="Number of triples in the ABox.", examples=[1520])
+    triples: int = Field(description="Number of triples in the ABox (written ones: see plans_to_write).",
+                         examples=[1520])
+    plans_to_write: int = Field(
+        description="Plans stored (as their journal rows) whose triples the store's writer thread has not written "
+        "yet, usually for less than 0.1 s; the service answers for them meanwhile, and their triples are not in "
+        "`triples` yet.", examples=[0])
     auth: bool = Field(description="Whether writes need a bearer token.", examples=[False])
 
 

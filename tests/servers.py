@@ -77,6 +77,19 @@ def serving(db: Path, port: int | None = None, args: Sequence[str] = (),
                 proc.wait()
 
 
+def settled_health(client: Any, timeout_s: float = 10) -> dict[str, Any]:
+    """`GET /health` once the store's writer has written every stored plan's triples (`plans_to_write` 0), so
+    that its triple count can be compared."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        health = client.get("/health").json()
+        if health["plans_to_write"] == 0:
+            return health
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the store's writer left {health['plans_to_write']} plan(s) unwritten for {timeout_s:g} s")
+        time.sleep(0.02)
+
+
 def timed_beside(slow_call: Callable[[], Any], started: threading.Event,
                  calls: Sequence[tuple[str, Callable[[], Any]]]) -> tuple[Any, dict[str, float], float]:
     """Run `slow_call` in a thread and, once `started` says its slow stage has begun, each named call in turn,

@@ -18,7 +18,7 @@ from planhrc.cooperation import Decision, FailureHistory, escalate
 from planhrc.kb_service.app import create_app
 from planhrc.settings import make_settings
 from planhrc.vocabulary import DecisionKind, FailureReason, Remedy
-from tests.servers import serving
+from tests.servers import serving, settled_health
 from tests.test_service_api import move
 
 PLACED = {"name": "rod", "links": 5, "orientations": 8, "base_point_xy": [0.6, 0.39]}
@@ -128,7 +128,7 @@ def test_an_incomplete_perception_changes_nothing_and_stores_no_state(client):
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 45]})
     first = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
     before = (client.get(f"/objects/{oid}").json(), client.get(f"/objects/{oid}/plan").json(),
-              client.get("/health").json()["triples"])
+              settled_health(client)["triples"])
     answer = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [90, 90, None, 90, None]})
     assert answer.status_code == 200
     body = answer.json()
@@ -136,7 +136,7 @@ def test_an_incomplete_perception_changes_nothing_and_stores_no_state(client):
         "incomplete_perception", None, None, None)
     assert body["unseen_links"] == [3, 5] and body["reason"] == "links 3 and 5 were not seen: look again"
     after = (client.get(f"/objects/{oid}").json(), client.get(f"/objects/{oid}/plan").json(),
-             client.get("/health").json()["triples"])
+             settled_health(client)["triples"])
     assert after == before
     event = client.get(f"/objects/{oid}/events").json()[-1]
     assert event["kind"] == "incomplete_perception" and event["data"]["unseen_links"] == [3, 5]

@@ -10,6 +10,7 @@ import rdflib
 from rdflib.compare import isomorphic
 
 from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
+from planhrc.kb_service.store.journal import PlanJournal
 from planhrc.kb_service.store.records import ActionSpec, Execution
 from planhrc.kb_service.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase
 from planhrc.model import make_object, snap_angle
@@ -61,6 +62,7 @@ def _fill(kb: KnowledgeBase) -> dict:
 
 def _snapshot(kb: KnowledgeBase, w: dict) -> dict:
     plan = kb.get_plan(w["plan"].id)
+    kb.settle()  # a plan's triples follow its journal row (kb_service/store/journal.py): count them written
     return dict(
         objects=kb.list_objects(),
         states=tuple(kb.get_state(s.id) for s in w["states"]),
@@ -252,16 +254,18 @@ def test_failure_inside_a_write_rolls_everything_back(kb, monkeypatch):
     before = _snapshot(kb, w)
     a = w["objects"][0]
     actions, states = plan_for(a, w["states"][0].atoms, [(1, True), (2, True)])
-    original = KnowledgeBase._flush
+    original = PlanJournal.append
 
-    def flush_then_fail(self, batch):
-        original(self, batch)  # every triple of the plan is in the open transaction ...
+    def append_then_fail(self, entry):
+        original(self, entry)  # the plan's journal row and ids are in the open transaction ...
         raise OSError("disk full")  # ... when the write fails
 
-    monkeypatch.setattr(KnowledgeBase, "_flush", flush_then_fail)
+    monkeypatch.setattr(PlanJournal, "append", append_then_fail)
     with pytest.raises(OSError):
         kb.add_plan(w["problem"].id, "p", actions, states)
     monkeypatch.undo()
+    with pytest.raises(NotFoundError):
+        kb.get_plan("obj1_plan_2")  # not answered from memory either
     assert _snapshot(kb, w) == before
     plan = kb.add_plan(w["problem"].id, "p", actions, states)
     assert plan.id == "obj1_plan_2"

@@ -19,6 +19,7 @@ from planhrc.kb_service.app import create_app
 from planhrc.kb_service import schemas
 from planhrc.model import absolute_from_relative
 from planhrc.settings import make_settings
+from tests.servers import settled_health
 
 TOKEN = "s3cret"
 
@@ -86,7 +87,7 @@ def perceive(client, oid, links, key=None, headers=None) -> dict:
 
 def kb_size(client, oid) -> tuple[int, int]:
     """(number of events, number of triples): both unchanged when a request is refused."""
-    return len(client.get(f"/objects/{oid}/events").json()), client.get("/health").json()["triples"]
+    return len(client.get(f"/objects/{oid}/events").json()), settled_health(client)["triples"]
 
 
 def drive_to_goal(client, oid, links, formulation, max_steps=40) -> tuple[list[float], list[dict]]:

@@ -8,6 +8,7 @@ import httpx
 import pytest
 
 from planhrc.service_bench import _client, create_object, running_service, set_goal
+from tests.servers import settled_health
 
 
 def _perceive(client: httpx.Client, oid: str, links: list[float], key: str) -> httpx.Response:
@@ -30,7 +31,7 @@ def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path):
         set_goal(client, oid, [0, 90, 90])
         kept = [_perceive(client, oid, links, f"p{i}") for i, links in enumerate(([0, 0, 0], [0, 90, 0]))]
         assert [r.status_code for r in kept] == [200, 200]
-        health = client.get("/health").json()
+        health = settled_health(client)
         events = client.get(f"/objects/{oid}/events").json()
         with pytest.raises(httpx.TransportError):  # the third perception kills the service mid-write
             _perceive(client, oid, [0, 0, 90], "p2")

@@ -13,7 +13,7 @@ from planhrc.kb_service.app import create_app
 from planhrc.kb_service.store import KnowledgeBase
 from planhrc.kb_service.store.knowledge_base import MAX_EVENTS_PAGE, MAX_SEQ
 from planhrc.settings import make_settings
-from tests.servers import timed_beside
+from tests.servers import settled_health, timed_beside
 
 
 @pytest.fixture
@@ -42,7 +42,7 @@ def test_health_counts_are_kept_by_commits_and_match_a_fresh_scan(client, db):
         assert client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).status_code == 200
     refused = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0]})
     assert refused.status_code == 422
-    after = client.get("/health").json()
+    after = settled_health(client)
     assert after["objects"] == before["objects"] + 1 and after["triples"] > before["triples"]
     client.app.state.kb.close()
     with KnowledgeBase(db, make_settings().tbox_path) as kb:  # counted by a scan of the tables

@@ -42,6 +42,7 @@ from planhrc.model import (
 )
 
 from .errors import ConflictError, DeadlineError, KBError, NotFoundError, ValidationError
+from .journal import JournalEntry, PlanJournal, PlanWriter
 from .owl import NAMED_INDIVIDUAL, RDF_TYPE, QuadStore, World
 from .records import (
     STATE_KINDS,
@@ -174,6 +175,7 @@ class Abox:
                 self._q.use_wal()
             for sql in _TABLES:
                 self._q.execute(sql)
+            self._journal = PlanJournal(self._q)
             self._load_tbox()
             self._c = self._q.context(ABOX_IRI)
             self._t = {term: self._q.storid(TBOX_IRI + term) for term in _TBOX_TERMS}
@@ -193,6 +195,21 @@ class Abox:
         self._problems: dict[str, StoredProblem] = {}
         self._plans: dict[str, StoredPlan] = {}
         self._actions: dict[str, StoredAction] = {}
+        # Plans adopted but whose triples are not written yet (see `journal`): answered from here meanwhile.
+        self._held: dict[str, StoredPlan | StoredAction | StoredState] = {}
+        self._unwritten: dict[str, JournalEntry] = {}  # committed, oldest first
+        self._adopted: list[JournalEntry] = []  # journalled by the open transaction
+        try:
+            for entry in self._journal.entries():  # left by a process that stopped before writing them out
+                self._hold(entry)
+                self._unwritten[entry.plan_id] = entry
+            if self._unwritten:
+                log.info("store: writing out %d journalled plan(s) left by the last run", len(self._unwritten))
+                self.settle()
+        except Exception:
+            self._q.world.close()
+            raise
+        self._writer = PlanWriter(self._write_one)
 
     # -- life cycle -------------------------------------------------------------------------------------
     def _load_tbox(self) -> None:
@@ -207,7 +224,8 @@ class Abox:
 
     @property
     def world(self) -> World:
-        """The owlready2 world (read it under `lock`; reasoners work on copies)."""
+        """The owlready2 world (read it under `lock`; reasoners work on copies), with every plan written out."""
+        self.settle()
         return self._q.world
 
     @property
@@ -219,8 +237,15 @@ class Abox:
         return self._tbox_path
 
     def close(self) -> None:
+        writer = getattr(self, "_writer", None)
+        if writer is not None:
+            writer.close()  # before the lock: the thread may be waiting for it
         with self._lock:
             if not self._closed:
+                try:
+                    self.settle()
+                except Exception:  # the rows stay in the journal; the next open writes them out
+                    log.exception("store: writing out journalled plans at close failed")
                 self._closed = True
                 self._q.close()
 
@@ -311,6 +336,11 @@ class Abox:
         self._triples += self._pending[0]
         self._n_objects += self._pending[1]
         self._pending = [0, 0]
+        if self._adopted:
+            for entry in self._adopted:
+                self._unwritten[entry.plan_id] = entry
+            self._adopted = []
+            self._writer.poke()
         if len(self._sid_name) + len(self._states) > CACHE_LIMIT:
             self._drop_caches()  # records refill from the database on demand: memory stays flat as history grows
 
@@ -356,6 +386,9 @@ class Abox:
         # Storids handed out in a rolled-back transaction are invalid, and records cached during it were never
         # stored: drop every cache (they refill from the database on demand).
         self._pending = [0, 0]
+        for entry in self._adopted:
+            self._release(entry)
+        self._adopted = []
         self._drop_caches()
 
     def _drop_caches(self) -> None:
@@ -720,7 +753,7 @@ class Abox:
     def get_state(self, state_id: str) -> StoredState:
         with self._lock:
             self._check_open()
-            record = self._states.get(state_id)
+            record = self._states.get(state_id) or _held(self._held, state_id, StoredState)
             if record is None:
                 record = self._load_state(state_id) if isinstance(state_id, str) else None
                 if record is None:
@@ -870,45 +903,95 @@ class Abox:
                 checked = _check_plan(self, info, actions, expected_states)
             created = time.time()
             ident = info.obj.ident
-            plan_checked = checked
 
-            def fill() -> tuple[str, tuple[StoredAction, ...], tuple[str, ...]]:
-                b = _Batch(self)
+            def fill() -> JournalEntry:
                 plan_id = f"{ident}_plan_{self._next_counter(ident + ':plan')}"
                 first_state = self._reserve_counter(ident + ":state", len(expected_states))
-                b.individual(plan_id, "Plan")
-                b.rel(plan_id, "aboutObject", ident)
-                b.rel(plan_id, "solves", problem_id)
-                b.data(plan_id, "plannerName", planner)
-                b.data(plan_id, "createdAt", created)
-                stored = []
-                previous = None
-                for step, (spec, order) in enumerate(zip(actions, plan_checked.action_orders), start=1):
-                    aid = f"{plan_id}_a{step}"
-                    self._add_action_triples(b, info, aid, step, spec, order)
-                    b.rel(plan_id, "madeof", aid)
-                    if previous:
-                        b.rel(previous, "nextAction", aid)
-                    previous = aid
-                    stored.append(StoredAction(aid, step, spec))
-                state_ids = []
-                for step, (atoms, state_order) in enumerate(zip(expected_states, plan_checked.state_orders),
-                                                            start=1):
-                    sid = self._add_state_triples(b, info, "expected", atoms, None, step, created,
-                                                  f"{ident}_state_{first_state + step - 1}", state_order)
-                    b.rel(plan_id, "expectedState", sid)
-                    state_ids.append(sid)
-                self._flush(b)
-                return plan_id, tuple(stored), tuple(state_ids)
+                entry = JournalEntry(plan_id, ident, problem_id, planner, created, first_state, actions,
+                                     expected_states)
+                self._journal.append(entry)  # the triples follow (`_write_one`); the row is the plan meanwhile
+                self._adopted.append(entry)
+                return entry
 
-            plan_id, stored, state_ids = self._write(fill)
-            for sid, atoms in zip(state_ids, expected_states):
-                self._states[sid] = StoredState(sid, ident, "expected", frozenset(atoms), created)
-            for a in stored:
-                self._actions[a.id] = a
-            record = StoredPlan(plan_id, ident, problem_id, planner, stored, state_ids, created)
-            self._plans[plan_id] = record
-            return record
+            return self._hold(self._write(fill))
+
+    def _hold(self, entry: JournalEntry) -> StoredPlan:
+        """Answer for a journalled plan from memory until its triples are written."""
+        ident = entry.object_id
+        actions = tuple(StoredAction(f"{entry.plan_id}_a{step}", step, spec)
+                        for step, spec in enumerate(entry.actions, start=1))
+        state_ids = tuple(f"{ident}_state_{entry.first_state + i}" for i in range(len(entry.expected_states)))
+        for sid, atoms in zip(state_ids, entry.expected_states):
+            self._held[sid] = StoredState(sid, ident, "expected", frozenset(atoms), entry.created_at)
+        for a in actions:
+            self._held[a.id] = a
+        record = StoredPlan(entry.plan_id, ident, entry.problem_id, entry.planner, actions, state_ids,
+                            entry.created_at)
+        self._held[entry.plan_id] = record
+        return record
+
+    def _release(self, entry: JournalEntry) -> list[StoredPlan | StoredAction | StoredState]:
+        """Stop answering for a plan from memory (its triples are written, or its transaction rolled back)."""
+        ids = [entry.plan_id, *(f"{entry.plan_id}_a{step}" for step in range(1, len(entry.actions) + 1)),
+               *(f"{entry.object_id}_state_{entry.first_state + i}" for i in range(len(entry.expected_states)))]
+        return [r for r in (self._held.pop(i, None) for i in ids) if r is not None]
+
+    def settle(self) -> None:
+        """Write out every journalled plan's triples now (readers of the triples themselves call this first).
+        Inside an open transaction it does nothing: the plans it adopted are written after it commits."""
+        with self._lock:
+            if self._depth:
+                return
+            while self._unwritten:
+                self._materialise(next(iter(self._unwritten.values())))
+
+    def _write_one(self) -> bool:
+        """The writer thread's step: write out the oldest journalled plan; whether more are left."""
+        with self._lock:
+            if self._closed or self._depth or not self._unwritten:
+                return False
+            self._materialise(next(iter(self._unwritten.values())))
+            return bool(self._unwritten)
+
+    def _materialise(self, entry: JournalEntry) -> None:
+        """A journalled plan's triples, and its journal row deleted, in one transaction. The plan was checked
+        when it was adopted (`add_plan`); here its atoms are only put in writing order."""
+        info = self._info(entry.object_id)
+        action_orders = [_action_order(spec) for spec in entry.actions]
+        state_orders = [_state_order(info, frozenset(atoms)) for atoms in entry.expected_states]
+        plan_id, created = entry.plan_id, entry.created_at
+
+        def fill() -> None:
+            b = _Batch(self)
+            b.individual(plan_id, "Plan")
+            b.rel(plan_id, "aboutObject", entry.object_id)
+            b.rel(plan_id, "solves", entry.problem_id)
+            b.data(plan_id, "plannerName", entry.planner)
+            b.data(plan_id, "createdAt", created)
+            previous = None
+            for step, (spec, order) in enumerate(zip(entry.actions, action_orders), start=1):
+                aid = f"{plan_id}_a{step}"
+                self._add_action_triples(b, info, aid, step, spec, order)
+                b.rel(plan_id, "madeof", aid)
+                if previous:
+                    b.rel(previous, "nextAction", aid)
+                previous = aid
+            for step, (atoms, state_order) in enumerate(zip(entry.expected_states, state_orders), start=1):
+                sid = self._add_state_triples(b, info, "expected", atoms, None, step, created,
+                                              f"{entry.object_id}_state_{entry.first_state + step - 1}", state_order)
+                b.rel(plan_id, "expectedState", sid)
+            self._flush(b)
+            self._journal.remove(plan_id)
+
+        self._write(fill)
+        del self._unwritten[plan_id]
+        for record in self._release(entry):  # now cached like any record read back
+            if isinstance(record, StoredPlan):
+                self._plans[record.id] = record
+            elif isinstance(record, StoredAction):
+                self._actions[record.id] = record
+            else:
+                self._states[record.id] = record
 
     def _add_action_triples(self, b: _Batch, info: _ObjectInfo, aid: str, step: int, spec: ActionSpec,
                             order: _ActionOrder | None = None) -> None:
@@ -970,7 +1053,7 @@ class Abox:
     def get_action(self, action_id: str) -> StoredAction:
         with self._lock:
             self._check_open()
-            record = self._actions.get(action_id)
+            record = self._actions.get(action_id) or _held(self._held, action_id, StoredAction)
             if record is None:
                 record = self._load_action(action_id) if isinstance(action_id, str) else None
                 if record is None:
@@ -998,7 +1081,7 @@ class Abox:
     def get_plan(self, plan_id: str) -> StoredPlan:
         with self._lock:
             self._check_open()
-            record = self._plans.get(plan_id)
+            record = self._plans.get(plan_id) or _held(self._held, plan_id, StoredPlan)
             if record is None:
                 record = self._load_plan(plan_id) if isinstance(plan_id, str) else None
                 if record is None:
@@ -1017,10 +1100,20 @@ class Abox:
         self._check_open()
         return self._triples
 
+    def plans_to_write(self) -> int:
+        """Committed plans whose triples are not written yet (no lock)."""
+        self._check_open()
+        return len(self._unwritten)
+
     def object_count(self) -> int:
         """Objects stored (kept by every commit: no scan, no lock)."""
         self._check_open()
         return self._n_objects
+
+
+def _held(held: dict[str, Any], ident: Any, cls: type[T]) -> T | None:
+    record = held.get(ident) if isinstance(ident, str) else None
+    return record if isinstance(record, cls) else None
 
 
 # Writing order of a state: (lists only its non-static atoms?, the atoms it links with madeof, sorted).
@@ -1049,14 +1142,12 @@ def _action_order(spec: ActionSpec) -> _ActionOrder:
 
 @dataclass(frozen=True)
 class CheckedPlan:
-    """A plan's actions and expected states, validated against their object and in writing order
-    (`Abox.check_plan`)."""
+    """A plan's actions and expected states, validated against their object (`Abox.check_plan`). Their writing
+    order is worked out when the triples are written (`Abox._materialise`), off the answer's path."""
 
     object_id: str
     actions: tuple[ActionSpec, ...]
     expected_states: tuple[frozenset[Atom], ...]
-    action_orders: tuple[_ActionOrder, ...]
-    state_orders: tuple[_StateOrder, ...]
 
 
 def _check_plan(abox: Abox, info: _ObjectInfo, actions: tuple[ActionSpec, ...],
@@ -1070,12 +1161,9 @@ def _check_plan(abox: Abox, info: _ObjectInfo, actions: tuple[ActionSpec, ...],
         )
     for i, spec in enumerate(actions):
         abox._check_action(info, i, spec)
-    orders = []
     for i, atoms in enumerate(expected_states):
         if deadline_at is not None and time.monotonic() > deadline_at:
             raise DeadlineError(f"planning: the deadline passed while the store checked expected state {i + 1} of "
                                 f"{len(expected_states)}")
         abox._check_state_atoms(info, "expected", atoms, f"expected_states[{i}]")
-        orders.append(_state_order(info, frozenset(atoms)))
-    return CheckedPlan(info.obj.ident, actions, expected_states, tuple(_action_order(a) for a in actions),
-                       tuple(orders))
+    return CheckedPlan(info.obj.ident, actions, expected_states)

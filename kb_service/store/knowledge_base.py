@@ -97,6 +97,7 @@ class KnowledgeBase(Abox):
             raise ValidationError(f"keep_perceived: must be a positive integer, got {keep_perceived!r}")
         with self._lock:
             self._check_open()
+            self.settle()  # a plan still in the journal is history like any other
             objects = [o.ident for o in self.list_objects()]
             shared = {oid: sorted(self._info(oid).orientation_atom_name.values()) for oid in objects}
 
@@ -120,6 +121,7 @@ class KnowledgeBase(Abox):
             self._check_open()
             if not self._path:
                 raise KBError("store: an in-memory store has no file to rewrite")
+            self.settle()
             before = _file_bytes(self._path)
             self._q.rewrite()
             return before, _file_bytes(self._path)
@@ -129,6 +131,7 @@ class KnowledgeBase(Abox):
         """TBox + ABox as N-Triples (what the reasoners and `export` read)."""
         with self._lock:
             self._check_open()
+            self.settle()
             return self._q.ntriples()
 
     def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
@@ -146,6 +149,7 @@ class KnowledgeBase(Abox):
             raise ValidationError("object: the whole history is exported for every object (history=all)")
         with self._lock:
             self._check_open()
+            self.settle()  # the export reads triples: every journalled plan's are written first
             reader = self._q.reader()
             if reader is None:  # an in-memory store: read on its connection, under its lock, at once
                 return iter(list(ntriples(self._q.db, ABOX_IRI, self._c, self._t["staticFactOf"], ids)))

@@ -1,0 +1,131 @@
+"""A plan is stored as one journal row in the transaction that adopts it and written out as triples by the store's
+writer thread soon after (`kb_service/store/journal.py`): answered at once, never lost, the same triples in the end."""
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from planhrc.kb_service.store import ABOX_IRI, KnowledgeBase
+from planhrc.kb_service.store.errors import NotFoundError
+from planhrc.kb_service.store.journal import JournalEntry, decode, encode
+from planhrc.model import make_object
+from planhrc.paths import default_tbox_path
+from tests.test_kb_scenarios import plan_for
+
+TBOX = default_tbox_path()
+
+
+def _journal_rows(path: str) -> int:
+    with sqlite3.connect(path) as conn:
+        return conn.execute("SELECT COUNT(*) FROM planhrc_plan_journal").fetchone()[0]
+
+
+def _object_with_problem(kb: KnowledgeBase, formulation: str = "absolute"):
+    obj = make_object("obj1", formulation, 4, 8)
+    kb.create_object(obj)
+    start = kb.add_state("obj1", "perceived", obj.state([0] * (4 if formulation == "absolute" else 3)))
+    actions, states = plan_for(obj, start.atoms, [(1, True), (3, False), (2, True)])
+    goal = kb.add_state("obj1", "goal", states[-1])
+    return obj, kb.add_problem("obj1", start.id, goal.id), actions, states
+
+
+def test_a_row_holds_every_part_of_the_plan():
+    obj = make_object("obj1", "absolute", 4, 8)
+    actions, states = plan_for(obj, obj.state([0, 0, 0, 0]), [(1, True), (3, False)])
+    entry = JournalEntry("obj1_plan_3", "obj1", "obj1_problem_2", "inproc", 12.5, 7, tuple(actions), tuple(states))
+    assert any(a.cond_eff for a in actions)
+    assert decode(encode(entry)) == entry
+
+
+def test_a_plan_is_answered_at_once_and_its_triples_follow(tmp_path):
+    path = str(tmp_path / "kb.sqlite3")
+    with KnowledgeBase(path, TBOX) as kb:
+        _, problem, actions, states = _object_with_problem(kb)
+        before = kb.triple_count()
+        plan = kb.add_plan(problem.id, "inproc", actions, states)
+        assert kb.get_plan(plan.id) == plan
+        assert kb.get_state(plan.expected_state_ids[-1]).atoms == frozenset(states[-1])
+        assert kb.get_action(plan.actions[0].id) == plan.actions[0]
+        assert _journal_rows(path) == 1 and kb.triple_count() == before  # answered from the journal
+        deadline = time.monotonic() + 10
+        while _journal_rows(path) and time.monotonic() < deadline:  # the writer thread, not a reader, writes it
+            time.sleep(0.02)
+        assert _journal_rows(path) == 0
+        assert kb.triple_count() > before + 100
+    with KnowledgeBase(path, TBOX) as again:  # read back from the triples alone
+        assert again.get_plan(plan.id) == plan
+
+
+def test_a_process_killed_before_the_write_out_keeps_its_plan(tmp_path):
+    path = str(tmp_path / "kb.sqlite3")
+    child = textwrap.dedent(f"""
+        import os, sys
+        from planhrc.kb_service.store import journal
+        journal.WRITE_DELAY_S = 600.0  # the writer never gets to it: the process dies first
+        from planhrc.kb_service.store import KnowledgeBase
+        from planhrc.paths import default_tbox_path
+        from tests.test_kb_journal import _object_with_problem
+        kb = KnowledgeBase({path!r}, default_tbox_path())
+        _, problem, actions, states = _object_with_problem(kb)
+        plan = kb.add_plan(problem.id, "inproc", actions, states)
+        print(plan.id, flush=True)
+        os._exit(0)
+    """)
+    done = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    plan_id = done.stdout.split()[-1]
+    assert _journal_rows(path) == 1
+    with KnowledgeBase(path, TBOX) as kb:  # opening writes the row out before anything is served
+        assert _journal_rows(path) == 0
+        plan = kb.get_plan(plan_id)
+    with KnowledgeBase(path, TBOX) as again:
+        assert again.get_plan(plan_id) == plan
+        assert len(plan.actions) == 3
+        text = again.export("nt").decode()
+        assert f"<{ABOX_IRI}{plan.actions[2].id}>" in text
+
+
+def test_a_failed_write_out_keeps_the_row_and_the_plan(tmp_path, monkeypatch):
+    path = str(tmp_path / "kb.sqlite3")
+    with KnowledgeBase(path, TBOX) as kb:
+        _, problem, actions, states = _object_with_problem(kb, "relative")
+        original = KnowledgeBase._flush
+        monkeypatch.setattr(KnowledgeBase, "_flush", lambda self, batch: (_ for _ in ()).throw(OSError("disk full")))
+        with kb.transaction():  # inside a transaction the writer waits: nothing is written before the patch
+            plan = kb.add_plan(problem.id, "inproc", actions, states)
+        with pytest.raises(OSError):
+            kb.settle()
+        assert _journal_rows(path) == 1
+        assert kb.get_plan(plan.id) == plan  # still answered
+        monkeypatch.setattr(KnowledgeBase, "_flush", original)
+        kb.settle()
+        assert _journal_rows(path) == 0
+        assert kb.get_plan(plan.id) == plan
+
+
+def test_a_rolled_back_plan_leaves_nothing(tmp_path):
+    path = str(tmp_path / "kb.sqlite3")
+    with KnowledgeBase(path, TBOX) as kb:
+        _, problem, actions, states = _object_with_problem(kb)
+        with pytest.raises(RuntimeError):
+            with kb.transaction():
+                plan = kb.add_plan(problem.id, "inproc", actions, states)
+                raise RuntimeError("the decision's write failed")
+        with pytest.raises(NotFoundError):
+            kb.get_plan(plan.id)
+        with pytest.raises(NotFoundError):
+            kb.get_state(plan.expected_state_ids[0])
+        assert _journal_rows(path) == 0
+        assert kb.add_plan(problem.id, "inproc", actions, states).id == plan.id  # no id was used up
+
+
+def test_readers_of_the_triples_see_a_plan_just_adopted():
+    with KnowledgeBase(None, TBOX) as kb:
+        _, problem, actions, states = _object_with_problem(kb)
+        plan = kb.add_plan(problem.id, "inproc", actions, states)
+        assert f"<{ABOX_IRI}{plan.actions[0].id}>" in kb.export("nt").decode()
