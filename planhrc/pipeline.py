@@ -17,7 +17,7 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping, Protocol, Sequence
+from typing import Callable, Mapping, Protocol, Sequence
 
 from planhrc.model import (HAS_ORIENTATION, ActionSpec, ArticulatedObject, DomainModelSpec, Formulation, State,
                            format_atom, is_subsumed, orientation_name)
@@ -80,6 +80,7 @@ class PlanOutcome:
     attempts: tuple[PlannerAttempt, ...] = ()
     steps: tuple[str, ...] = ()  # the planner's plan as VAL reads it, one "(action arg ...)" per step
     validated: bool = False  # VAL accepted the plan
+    validated_steps: int = 0  # VAL accepted the first steps a_1 .. a_k so far (the early answer; see `validate_first`)
     help: tuple[HelpItem, ...] = ()  # no feasible order: what the human could do instead
     ordering: str = ""  # what the ordering did, in words (empty when the object is not placed)
 
@@ -282,26 +283,46 @@ def validate(outcome: PlanOutcome, obj: ArticulatedObject | None = None, config:
     `validation_pieces`); the answer is the one a single run on the whole plan gives."""
     if not outcome.solved or not outcome.actions or outcome.validated or outcome.task is None:
         return outcome
+    n_pieces = config.val_pieces if config is not None and obj is not None else 1
+    return _checked(outcome, config, deadline_at, lambda left: _run_val(outcome, obj, n_pieces, left),
+                    lambda: replace(outcome, validated=True, validated_steps=len(outcome.steps)), "the plan")
+
+
+def validate_first(outcome: PlanOutcome, piece: ValPiece, config: PlanningConfig | None = None,
+                   deadline_at: float | None = None) -> PlanOutcome:
+    """VAL on the first piece of the plan only (`early_pieces`): the outcome with `validated_steps` = the piece's
+    last step (the rest of the plan is *not* validated: the caller checks the later pieces before using their
+    steps), or an invalid or `timeout` outcome as in `validate`."""
+    if not outcome.solved or not outcome.actions or outcome.validated or outcome.task is None:
+        return outcome
+    task = outcome.task
+    return _checked(outcome, config, deadline_at,
+                    lambda left: validate_plan(task.validation_domain, piece.problem, piece.steps, left),
+                    lambda: replace(outcome, validated_steps=piece.last), f"its first {piece.last} steps")
+
+
+def _checked(outcome: PlanOutcome, config: PlanningConfig | None, deadline_at: float | None,
+             run: Callable[[float], ValidationResult], accepted: Callable[[], PlanOutcome], what: str
+             ) -> PlanOutcome:
     deadline_at = deadline_at if deadline_at is not None else (
         deadline_from(config) if config is not None else time.monotonic() + 60.0)
     t = time.perf_counter()
-    n_pieces = config.val_pieces if config is not None and obj is not None else 1
     try:
         left = _left(deadline_at)
         if left <= 0:
             raise PlannerError("no time left for VAL")
-        check = _run_val(outcome, obj, n_pieces, left)
+        check = run(left)
     except PlannerError as exc:  # VAL's time limit: the request's deadline
         timings = {**outcome.timings, "validate": time.perf_counter() - t}
         limit = f"{config.deadline_s:g} s" if config is not None else "its time limit"
         return PlanOutcome(PlanningStatus.TIMEOUT, f"planning deadline of {limit} exceeded while VAL checked "
-                           f"the plan ({exc})", outcome.planner, timings=timings, task=outcome.task,
+                           f"{what} ({exc})", outcome.planner, timings=timings, task=outcome.task,
                            attempts=outcome.attempts)
     timings = {**outcome.timings, "validate": time.perf_counter() - t}
     if check.valid:
-        return replace(outcome, validated=True, timings=timings)
+        return replace(accepted(), timings=timings)
     log.warning("plan of %s rejected by VAL: %s", outcome.planner, check.reason)
-    return PlanOutcome(PlanningStatus.INVALID, f"VAL rejected the plan: {check.reason}", outcome.planner,
+    return PlanOutcome(PlanningStatus.INVALID, f"VAL rejected {what}: {check.reason}", outcome.planner,
                        timings=timings, task=outcome.task, attempts=outcome.attempts)
 
 
@@ -321,12 +342,14 @@ def _run_val(outcome: PlanOutcome, obj: ArticulatedObject | None, n_pieces: int,
 MIN_PIECE_STEPS = 8
 
 
-def validation_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int
+def validation_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int, first_steps: int | None = None
                       ) -> list[tuple[str, tuple[str, ...]]]:
     """Cut a solved outcome's plan into at most `n_pieces` consecutive pieces of nearly equal length, each a
     (problem, steps) pair for VAL: piece i starts from the expected state s^e_(c_i) and its goal is the *exact*
     next cut state s^e_(c_(i+1)) (every hasorientation atom of it, and the negation of every other one); the
-    last piece's goal is the task's own goal (the first piece starts from the task's initial state).
+    last piece's goal is the task's own goal (the first piece starts from the task's initial state). With
+    `first_steps`, the first piece is the plan's first `first_steps` steps and the rest is cut as above
+    (`piece_bounds`).
 
     Why the pieces say what one run says: hasorientation is the only predicate any action changes, and every
     piece's problem has the task's objects and static facts. Induction over the pieces: VAL's state before
@@ -334,20 +357,90 @@ def validation_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: in
     applicable in turn and the state it ends in satisfies the exact goal, i.e. *is* s^e_(c_(i+1)); so one run
     on the whole plan applies the same steps to the same states and ends where the last piece ends, in a state
     satisfying the goal. When the pieces are accepted, the whole plan is. (A piece can only be refused
-    wrongly if an expected state is wrong, which makes the plan unusable anyway.)"""
+    wrongly if an expected state is wrong, which makes the plan unusable anyway.) The same induction makes an
+    accepted *first* piece mean: from the perceived state, its steps apply one after the other and end exactly
+    in the expected state after them, whatever the later pieces' verdicts."""
+    return [(p.problem, p.steps) for p in early_pieces(obj, outcome, n_pieces, first_steps)]
+
+
+@dataclass(frozen=True)
+class ValPiece:
+    """One piece of a plan for VAL: steps a_first .. a_last (1-based, inclusive) and the problem they solve."""
+
+    first: int
+    last: int
+    problem: str
+    steps: tuple[str, ...]
+
+
+def piece_bounds(n_steps: int, n_pieces: int, first_steps: int | None = None) -> list[tuple[int, int]]:
+    """The pieces of a plan of `n_steps` steps as 0-based half-open (start, end) step ranges: `n_pieces` of
+    nearly equal length, none shorter than MIN_PIECE_STEPS unless the plan is; with `first_steps`, a first piece
+    of that many steps, then the rest cut the same way."""
+    if first_steps is not None and 0 < first_steps < n_steps:
+        rest = piece_bounds(n_steps - first_steps, n_pieces)
+        return [(0, first_steps)] + [(first_steps + a, first_steps + b) for a, b in rest]
+    n = min(n_pieces, max(1, n_steps // MIN_PIECE_STEPS))
+    cuts = [round(i * n_steps / n) for i in range(n + 1)]
+    return [(cuts[i], cuts[i + 1]) for i in range(n)]
+
+
+def early_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int, first_steps: int | None = None
+                 ) -> tuple[ValPiece, ...]:
+    """The pieces of `validation_pieces`, with their step ranges."""
     assert outcome.task is not None
-    steps, states = outcome.steps, outcome.expected_states
-    n = min(n_pieces, max(1, len(steps) // MIN_PIECE_STEPS))
-    cuts = [round(i * len(steps) / n) for i in range(n + 1)]
-    pieces = []
-    for i in range(n):
-        a, b = cuts[i], cuts[i + 1]
-        if i == n - 1:
-            problem = outcome.task.problem if a == 0 else _problem_text(obj, states[a], None, outcome.task.problem)
-        else:
-            problem = _problem_text(obj, states[a], states[b], outcome.task.problem)
-        pieces.append((problem, steps[a:b]))
-    return pieces
+    bounds = piece_bounds(len(outcome.steps), n_pieces, first_steps)
+    return tuple(piece_of(obj, outcome.task.problem, outcome.steps, outcome.expected_states, a + 1, b)
+                 for a, b in bounds)
+
+
+def piece_of(obj: ArticulatedObject, task_problem: str, steps: Sequence[str], states: Sequence[State],
+             first: int, last: int) -> ValPiece:
+    """The piece of a plan (`steps`, expected states `states`, task problem text) holding steps a_first .. a_last:
+    from s^e_first (the task's own init for the first piece) to exactly s^e_(last+1), or to the task's goal for
+    the last piece."""
+    a, b = first - 1, last
+    if b == len(steps):
+        problem = task_problem if a == 0 else _problem_text(obj, states[a], None, task_problem)
+    else:
+        problem = _problem_text(obj, states[a], states[b], task_problem)
+    return ValPiece(first, last, problem, tuple(steps[a:b]))
+
+
+def step_text(action: ActionSpec) -> str:
+    """A ground action as a plan step for VAL: "(name arg ...)"."""
+    return "(" + " ".join((action.name,) + tuple(action.params)) + ")"
+
+
+def first_motion_steps(obj: ArticulatedObject, actions: Sequence[ActionSpec], merge: bool) -> int:
+    """How many plan steps the robot's first motion covers: 1, or with macro steps merged (`merge_macro_steps`)
+    the first run of steps on one joint, one turned link and one direction, short of a full turn."""
+    if not actions:
+        return 0
+    if not merge:
+        return 1
+    first = action_motion(obj, actions[0])
+    total, n = first["delta_deg"], 1
+    for action in actions[1:]:
+        m = action_motion(obj, action)
+        if ((m["joint_index"], m["turned_link_index"]) != (first["joint_index"], first["turned_link_index"])
+                or (m["delta_deg"] > 0) != (total > 0) or abs(total + m["delta_deg"]) >= 360):
+            break
+        total += m["delta_deg"]
+        n += 1
+    return n
+
+
+def early_answer_first_piece(obj: ArticulatedObject, outcome: PlanOutcome, merge: bool) -> int | None:
+    """The length of the first piece to validate before answering, or None when the whole plan is checked
+    before the answer: plans of domains without conditional effects (VAL checks them whole in a few ms) and
+    plans whose rest after the first motion is shorter than MIN_PIECE_STEPS."""
+    if outcome.task is None or not outcome.steps or not has_conditional_effects(outcome.task.validation_domain):
+        return None
+    first = first_motion_steps(obj, outcome.actions, merge)
+    if len(outcome.steps) - first < MIN_PIECE_STEPS:
+        return None
+    return first
 
 
 def _problem_text(obj: ArticulatedObject, start: State, exact_goal: State | None, task_problem: str) -> str:
