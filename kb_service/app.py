@@ -59,7 +59,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         kb = open_knowledge_base(settings)
         app.state.kb = kb
         pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
-        app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks(), pool)
+        orchestrator = app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks(), pool)
         log.info("knowledge base open: %s", settings.db_path or "in memory")
         freeze_heap()
         stop = threading.Event()
@@ -74,6 +74,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             stop.set()
             if compactor is not None:
                 compactor.join(timeout=60)
+            orchestrator.close()
             pool.close()
             kb.close()
             gc.unfreeze()

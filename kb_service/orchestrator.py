@@ -26,6 +26,7 @@ import math
 import os
 import signal
 import threading
+import time
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterator, Sequence
 
@@ -36,6 +37,7 @@ from planhrc.ordering import HelpItem, Move, Placement, help_for
 from .store import (ConflictError, DeadlineError, Execution, KnowledgeBase, NotFoundError, StoredAction, StoredEvent,
                     StoredPlan, StoredState, ValidationError)
 from planhrc.model import ArticulatedObject, Formulation, ModelError, Perception, State, make_object, perceive, snap_angle
+from planhrc.planner.errors import PlannerError
 from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps, move_of
 from planhrc.settings import Settings
 from planhrc.translator import PddlTask, domain_text, read_domain_model, translate
@@ -44,6 +46,7 @@ from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, Fa
 
 from .locks import ObjectLocks
 from .planning_pool import PlanningJob, PlanningPool
+from .val_gate import VERDICT_EVENT, WITHHELD_EVENT, LaterPieces, PieceRecord, Verdict, check_piece, verdict_data, verdict_of
 from .store.abox import CheckedPlan
 from .store.knowledge_base import MAX_EVENTS_PAGE
 from .public import (event_public, execution_public, object_public, plan_public, problem_public,
@@ -66,6 +69,7 @@ class _ObjectMemo:
     failure: FailureHistory | None = None  # the motion failing since the last success, and the remedies tried
     split_plans: set[str] = field(default_factory=set)  # plans whose macro steps are dispatched step by step
     last_decision: str | None = None  # the kind of the last decision logged
+    val: PieceRecord | None = None  # the latest plan adopted with only its first piece validated, and its verdicts
 
 
 class Orchestrator:
@@ -84,6 +88,15 @@ class Orchestrator:
         self._memos: dict[str, _ObjectMemo] = {}
         self._guard = threading.Lock()
         self._perceptions = 0  # counted only for the crash test's hook
+        self._later: dict[str, tuple[str, LaterPieces]] = {}  # object id -> (plan id, its later pieces under VAL)
+
+    def close(self) -> None:
+        """Stop the VAL runs still checking plans' later pieces (the service stops)."""
+        with self._guard:
+            runs = [later for _, later in self._later.values()]
+            self._later.clear()
+        for later in runs:
+            later.cancel()
 
     # -- objects ------------------------------------------------------------------------------------------
     def create_object(self, name: str, links: int | Sequence[float], orientations: int,
@@ -139,6 +152,7 @@ class Orchestrator:
                     problem = self.kb.add_problem(object_id, memo.perceived_state_id, goal.id)
                 # The old plan was made for another goal: the next perception decides anew.
                 self.kb.set_execution(object_id, Execution(None, None, IDLE, None))
+                self._check_later(obj, None, None)
                 self.kb.add_event(object_id, "goal_set",
                                   "goal set; the next perception plans towards it"
                                   + (f" ({'; '.join(warnings)})" if warnings else ""),
@@ -196,7 +210,9 @@ class Orchestrator:
         is held just for the write. While VAL checks a new plan (its own processes), the plan is validated for
         the store and put in writing order (`check_plan`), so the write itself is short. A plan VAL refuses is
         never stored; a re-plan that does not finish within the planning deadline raises DeadlineError and
-        stores nothing."""
+        stores nothing. With the early answer (`val_early_answer`, domains with conditional effects) VAL has
+        accepted the new plan's first motion before the write and checks the rest behind the answer; a continue
+        or resume passes the VAL gate first (`_gate_decision`)."""
         with self.locks.hold(object_id):
             obj = self.kb.get_object(object_id)
             fingerprint = _fingerprint({"perception": list(link_orientations_deg)})
@@ -216,34 +232,157 @@ class Orchestrator:
             decision = None
             outcome = None
             checked = None
+            later = None
             if goal is not None:
+                deadline_at = pipeline.deadline_from(self.planning)
                 decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
                 decision = self._escalate(obj, plan, perception, decision, memo)
+                decision = self._gate_decision(obj, plan, decision, deadline_at)
                 if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
-                    outcome, checked = self._plan_for(obj, perception, goal.atoms, plan, decision, memo)
+                    self._check_later(obj, None, None)  # the plan being replaced needs no more checking
+                    outcome, checked, later = self._plan_for(obj, perception, goal.atoms, plan, decision, memo,
+                                                             deadline_at)
                     if outcome.status is PlanningStatus.TIMEOUT:
                         raise DeadlineError(f"planning: {outcome.message}")
-            new_view = None
-            with self.kb.transaction():
-                perceived = self.kb.add_perception(perception)
-                extra: dict[str, Any] = {}
-                if goal is None or decision is None:
-                    answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
-                                     "no goal is set: PUT /objects/{id}/goal first")
-                else:
-                    extra["goal_state_id"] = goal.id
-                    if decision.remedy is not None:
-                        extra["remedy"] = decision.remedy
-                    if outcome is None:
-                        answer = self._follow(obj, perceived, execution, plan, decision, extra)
-                    else:
-                        answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra, checked)
-                self._log_decision(object_id, answer, extra)
-                self._remember(object_id, idempotency_key, fingerprint, answer)
-                self._crash_point()
-            if new_view is not None:
-                self._keep_view(*new_view)
+            try:
+                answer = self._decide_and_write(obj, perception, execution, goal, plan, decision, outcome, checked,
+                                                later, idempotency_key, fingerprint)
+            except BaseException:
+                if later is not None:
+                    later.cancel()
+                raise
             return answer
+
+    def _decide_and_write(self, obj: ArticulatedObject, perception: Perception, execution: Execution,
+                          goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None,
+                          outcome: PlanOutcome | None, checked: CheckedPlan | None, later: LaterPieces | None,
+                          idempotency_key: str | None, fingerprint: str) -> dict[str, Any]:
+        """The perception's one write (see `handle_perception`); then the new plan's later pieces, if VAL is still
+        checking them, record their verdicts against the stored plan."""
+        object_id = obj.ident
+        new_view = None
+        with self.kb.transaction():
+            perceived = self.kb.add_perception(perception)
+            extra: dict[str, Any] = {}
+            if goal is None or decision is None:
+                answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
+                                 "no goal is set: PUT /objects/{id}/goal first")
+            else:
+                extra["goal_state_id"] = goal.id
+                if decision.remedy is not None:
+                    extra["remedy"] = decision.remedy
+                if outcome is None:
+                    answer = self._follow(obj, perceived, execution, plan, decision, extra)
+                else:
+                    answer, new_view = self._adopt(obj, perceived, goal, decision, outcome, extra, checked,
+                                                   later)
+            self._log_decision(object_id, answer, extra)
+            self._remember(object_id, idempotency_key, fingerprint, answer)
+            self._crash_point()
+        if new_view is not None:
+            self._keep_view(*new_view)
+        if outcome is not None:  # the object's plan changed (or is gone): its checks in the background follow
+            self._check_later(obj, new_view[0].id if new_view is not None else None,
+                              later if "val_pieces" in extra else None)
+        return answer
+
+    # -- VAL behind the answer, and the gate of every dispatch ----------------------------------------------------
+    def _check_later(self, obj: ArticulatedObject, plan_id: str | None, later: LaterPieces | None) -> None:
+        """The object's plan is now `plan_id`: stop checking the previous plan's later pieces; with `later`, record
+        each verdict on the new plan's later pieces as it comes (an event each, `val_verdict`)."""
+        with self._guard:
+            previous = self._later.pop(obj.ident, None)
+            if later is not None and plan_id is not None:
+                self._later[obj.ident] = (plan_id, later)
+        if previous is not None and previous[1] is not later:
+            previous[1].cancel()
+        if later is not None and plan_id is not None:
+            numbers = {p.first: i for i, p in enumerate(later.pieces, start=2)}
+            later.attach(lambda piece, result: self._record_verdict(
+                obj.ident, plan_id, numbers[piece.first], (piece.first, piece.last),
+                Verdict(result.valid, "Plan valid" if result.valid else result.reason), result.seconds))
+            later.start()  # only now: the first piece's VAL and the write had the cores to themselves
+
+    def _record_verdict(self, object_id: str, plan_id: str, number: int, piece: tuple[int, int], verdict: Verdict,
+                        seconds: float) -> None:
+        words = "accepted" if verdict.accepted else f"refused ({verdict.reason})"
+        self.kb.add_event(object_id, VERDICT_EVENT,
+                          f"VAL {words} piece {number} of plan {plan_id}: a_{piece[0]}..a_{piece[1]}",
+                          verdict_data(plan_id, number, piece, verdict, seconds))
+
+    def _gate_decision(self, obj: ArticulatedObject, plan: StoredPlan | None, decision: Decision,
+                       deadline_at: float) -> Decision:
+        """A decision that would dispatch a step of `plan` (continue, resume) stands only when VAL has accepted
+        every piece the motion lies in (`_val_gate`); when VAL refused one, it becomes a re-plan saying so."""
+        if (decision.kind not in (DecisionKind.CONTINUE, DecisionKind.RESUME) or plan is None
+                or decision.next_step is None or not 1 <= decision.next_step <= len(plan.actions)):
+            return decision
+        refusal = self._val_gate(obj, plan, plan.actions[decision.next_step - 1], deadline_at)
+        if refusal is None:
+            return decision
+        return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
+                        f"{decision.reason}; but {refusal}: re-plan from the perceived state")
+
+    def _val_gate(self, obj: ArticulatedObject, plan: StoredPlan, action: StoredAction, deadline_at: float
+                  ) -> str | None:
+        """None when VAL has accepted every piece of `plan` holding the motion that starts with `action` (plans
+        validated whole before they were stored always pass); else VAL's refusal in words. A verdict still to
+        come is waited for; one that will not come (the service restarted while VAL ran, or the verdict could
+        not be recorded) is asked of VAL again here. Raises DeadlineError when no verdict comes by
+        `deadline_at`."""
+        last = self._last_step(obj, plan, action)
+        waited: set[int] = set()
+        while True:
+            record = self._memo(obj.ident).val
+            if record is None or record.plan_id != plan.id:
+                return None
+            missing = None
+            for number in record.covering(action.step, last):
+                verdict = record.verdicts.get(number)
+                if verdict is None:
+                    missing = number
+                    break
+                if not verdict.accepted:
+                    first, end = record.bounds(number)
+                    return f"VAL refused piece {number} of plan {plan.id} (a_{first}..a_{end}): {verdict.reason}"
+            if missing is None:
+                return None
+            first, end = record.bounds(missing)
+            left = deadline_at - time.monotonic()
+            with self._guard:
+                running = self._later.get(obj.ident)
+            if missing not in waited and running is not None and running[0] == plan.id and not running[1].cancelled:
+                waited.add(missing)
+                if not running[1].wait(first, left):
+                    raise DeadlineError(f"planning: planning deadline of {self.planning.deadline_s:g} s exceeded "
+                                        f"while VAL checked a_{first}..a_{end} of plan {plan.id}")
+                continue
+            self._recheck(obj, plan, record, missing, deadline_at)
+
+    def _recheck(self, obj: ArticulatedObject, plan: StoredPlan, record: PieceRecord, number: int,
+                 deadline_at: float) -> None:
+        """VAL on one piece of a stored plan, built again from the store (its problem, steps and expected
+        states), and its verdict recorded."""
+        first, last = record.bounds(number)
+        problem = self.kb.get_problem(plan.problem_id)
+        init, goal = self.kb.get_state(problem.init_state_id), self.kb.get_state(problem.goal_state_id)
+        task = translate(obj, init.atoms, goal.atoms, read_domain_model(self.planning.tbox_path, obj.formulation.value),
+                         pipeline.problem_name(obj))
+        _, view = self._plan_view(plan.id)
+        assert view is not None
+        steps = tuple(pipeline.step_text(a.spec) for a in sorted(plan.actions, key=lambda a: a.step))
+        piece = pipeline.piece_of(obj, task.problem, steps, view.expected_states, first, last)
+        left = deadline_at - time.monotonic()
+        try:
+            if left <= 0:
+                raise PlannerError("no time left for VAL")
+            result = check_piece(task.validation_domain, piece, left, raising=True)
+        except PlannerError as exc:
+            raise DeadlineError(f"planning: planning deadline of {self.planning.deadline_s:g} s exceeded while VAL "
+                                f"checked a_{first}..a_{last} of plan {plan.id} again ({exc})") from None
+        log.info("VAL checked piece %d of plan %s again: %s", number, plan.id, result.reason)
+        self._record_verdict(obj.ident, plan.id, number, (first, last),
+                             Verdict(result.valid, "Plan valid" if result.valid else result.reason), result.seconds)
 
     def _crash_point(self) -> None:
         """The crash test's hook (setting `crash_in_perception_write`, off by default): die like a killed process,
@@ -287,24 +426,48 @@ class Orchestrator:
         return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg))
 
     def _validate_and_check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float
-                            ) -> tuple[PlanOutcome, CheckedPlan | None]:
+                            ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None]:
         """VAL on a new plan (in a thread: it waits for its own processes) beside the store's checks of the plan
         (`check_plan`, outside the store's lock), both before the perception's write. The plan is usable only
-        when VAL accepted it (`validated`)."""
+        when VAL accepted it (`validated`), or, with the early answer, as far as VAL accepted it
+        (`validated_steps`): then the later pieces come back too (`LaterPieces`), for the caller to start VAL on
+        them once the plan is stored, and to record their verdicts."""
         if not (outcome.solved and outcome.actions):
-            return outcome, None
+            return outcome, None, None
         checked_outcome: list[PlanOutcome] = []
         val = None
+        later = None
         if self.planning.validate and not outcome.validated:
-            val = threading.Thread(target=lambda: checked_outcome.append(self._guarded(
-                obj, lambda: pipeline.validate(outcome, obj, self.planning, deadline_at))), name="planhrc-val")
+            first = (pipeline.early_answer_first_piece(obj, outcome, self.merge_macro_steps)
+                     if self.settings.val_early_answer else None)
+            if first is None:
+                def run() -> PlanOutcome:
+                    return pipeline.validate(outcome, obj, self.planning, deadline_at)
+            else:
+                pieces = pipeline.early_pieces(obj, outcome, self.planning.val_pieces, first)
+                assert outcome.task is not None
+                later = LaterPieces(outcome.task.validation_domain, pieces[1:], self.planning.deadline_s)
+
+                def run() -> PlanOutcome:
+                    return pipeline.validate_first(outcome, pieces[0], self.planning, deadline_at)
+            val = threading.Thread(target=lambda: checked_outcome.append(self._guarded(obj, run)), name="planhrc-val")
             val.start()
         try:
             checked = self.kb.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at)
+        except BaseException:
+            if later is not None:
+                later.cancel()
+            raise
         finally:
             if val is not None:
                 val.join()
-        return (checked_outcome[0] if val is not None else outcome), checked
+        if val is None:
+            return outcome, checked, None
+        result = checked_outcome[0]
+        if later is not None and not (result.solved and result.validated_steps):
+            later.cancel()
+            later = None
+        return result, checked, later
 
     def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State,
                       placement: Placement | None = None, deadline_at: float | None = None) -> PlanOutcome:
@@ -312,7 +475,9 @@ class Orchestrator:
         task, else here."""
         pool = self.pool
         if pool is not None and pool.takes(obj):
-            job = PlanningJob(obj, init, goal, self.planning, placement,
+            # with the early answer VAL runs here, after the worker's outcome: the first piece beside `check_plan`
+            config = replace(self.planning, validate=False) if self.settings.val_early_answer else self.planning
+            job = PlanningJob(obj, init, goal, config, placement,
                               pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at)
             return self._guarded(obj, lambda: pool.plan(job))
         return self._guarded(obj, lambda: pipeline.plan(obj, init, goal, self.planning, defer_validation=True,
@@ -352,11 +517,12 @@ class Orchestrator:
         return all(reach_shortfall(centres[k - 1]) <= 1e-9 for k in links if k >= 1)
 
     def _plan_for(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
-                  decision: Decision, memo: _ObjectMemo) -> tuple[PlanOutcome, CheckedPlan | None]:
+                  decision: Decision, memo: _ObjectMemo, deadline_at: float | None = None
+                  ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None]:
         """The new plan a decision asks for: the current plan's rest with the failing joint turned the other way
         round (remedy other_way), else the planner's (ordered on the table for a placed object); checked by VAL
         and by the store (`_validate_and_check`), all within the planning deadline."""
-        deadline_at = pipeline.deadline_from(self.planning)
+        deadline_at = pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at
         return self._validate_and_check(obj, self._new_plan(obj, perception, goal, plan, decision, memo, deadline_at),
                                         deadline_at)
 
@@ -414,11 +580,18 @@ class Orchestrator:
                        decision.matched_expected_step, decision.reason)
 
     def _adopt(self, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
-               outcome: PlanOutcome, extra: dict[str, Any], checked: CheckedPlan | None = None
-               ) -> tuple[dict[str, Any], tuple[StoredPlan, PlanView] | None]:
-        """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL), its plan with
-        expected states; move the execution."""
+               outcome: PlanOutcome, extra: dict[str, Any], checked: CheckedPlan | None = None,
+               later: LaterPieces | None = None) -> tuple[dict[str, Any], tuple[StoredPlan, PlanView] | None]:
+        """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL: the whole plan, or
+        with the early answer its first piece), its plan with expected states; move the execution. With the early
+        answer the decision's event names the plan's pieces and the one accepted (`val_pieces`, `val_accepted`):
+        the record the dispatch gate starts from, through a restart."""
         problem = self.kb.add_problem(obj.ident, perceived.id, goal.id)
+        early = later is not None and outcome.solved and bool(outcome.actions) and not outcome.validated
+        if early:
+            assert later is not None
+            extra["val_pieces"] = [[1, outcome.validated_steps]] + [[p.first, p.last] for p in later.pieces]
+            extra["val_accepted"] = [1]
         if outcome.solved and outcome.actions:
             plan = self.kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states, checked)
             self.kb.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
@@ -430,7 +603,9 @@ class Orchestrator:
             view = PlanView(expected_states=outcome.expected_states,
                             preconditions=tuple(a.pre for a in outcome.actions))
             ordering = f" ({outcome.ordering})" if outcome.ordering else ""
-            reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions{ordering}"
+            checked_by = (f"; VAL accepted a_1..a_{outcome.validated_steps}, a_{outcome.validated_steps + 1}.."
+                          f"a_{len(plan.actions)} are checked before they are dispatched" if early else "")
+            reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions{ordering}{checked_by}"
             return _answer(DecisionKind.REPLAN, plan.id, perceived.id,
                            self._action_public(obj, plan, plan.actions[0]),
                            decision.matched_expected_step, reason), (plan, view)
@@ -547,6 +722,19 @@ class Orchestrator:
             action = plan.actions[execution.next_step - 1]
             if execution.status == DISPATCHED and execution.dispatched_action_id == action.id:
                 return self._action_public(obj, plan, action)
+            try:
+                refusal = self._val_gate(obj, plan, action, pipeline.deadline_from(self.planning))
+            except DeadlineError as exc:  # nothing dispatched; the next call or perception asks again
+                self.kb.add_event(object_id, WITHHELD_EVENT, f"a_{action.step} not dispatched: {exc}",
+                                  {"plan_id": plan.id, "action_id": action.id, "step": action.step})
+                return None
+            if refusal is not None:  # the next perception re-plans (the gate refuses this step again)
+                with self.kb.transaction():
+                    self.kb.set_execution(object_id, Execution(plan.id, execution.next_step, IDLE, None))
+                    self.kb.add_event(object_id, WITHHELD_EVENT,
+                                      f"a_{action.step} not dispatched: {refusal}; the next perception re-plans",
+                                      {"plan_id": plan.id, "action_id": action.id, "step": action.step})
+                return None
             with self.kb.transaction():
                 self.kb.set_execution(object_id, Execution(plan.id, execution.next_step, DISPATCHED, action.id))
                 self.kb.add_event(object_id, "dispatched", f"a_{action.step} ({action.spec.name}) dispatched",
@@ -663,7 +851,12 @@ class Orchestrator:
                 outcome = event.data.get("outcome")
                 memo.last_outcome = ActionOutcome(outcome) if outcome else None
                 memo.failure = _next_failure(memo.failure, event.data)
+            elif event.kind == VERDICT_EVENT:
+                if memo.val is not None and memo.val.plan_id == event.data.get("plan_id"):
+                    memo.val.verdicts[int(event.data["piece"])] = verdict_of(event.data)
             elif event.kind in set(DecisionKind):
+                if event.data.get("val_pieces"):
+                    memo.val = PieceRecord.from_event(event.data["plan_id"], event.data)
                 memo.perceived_state_id = event.data.get("perceived_state_id") or memo.perceived_state_id
                 memo.last_outcome = None  # a feedback informs only the next decision
                 memo.last_decision = event.kind

@@ -49,6 +49,14 @@ class Settings(BaseSettings):
         description="VAL checks a long plan in this many pieces at once (one process each; each piece ends in "
         "an exact expected state, so together they say what one run says); 1: one run on the whole plan.",
     )
+    val_early_answer: bool = Field(
+        default=True,
+        description="A re-plan on a domain with conditional effects (absolute) is answered once VAL has accepted "
+        "the plan's first piece (the first motion, from the perceived state to the exact expected state after it); "
+        "the later pieces are checked behind the answer, and a step is dispatched only once VAL has accepted its "
+        "piece. False: the whole plan is checked before the answer. Plans without conditional effects are always "
+        "checked whole before the answer.",
+    )
     planning_workers: int = Field(
         default=2, ge=0, le=16,
         description="Worker processes of the service's planning pool (started on the first large task, stopped "
