@@ -429,7 +429,9 @@ class EventPublic(BaseModel):
     object_id: str = Field(description="Object the event is about.", examples=["obj1"])
     kind: str = Field(description="A decision kind (goal_reached, continue, resume, replan, no_plan, "
                       "human_help_requested, incomplete_perception), or goal_set, dispatched, feedback, "
-                      "worker_gave_up, object_created.",
+                      "worker_gave_up, object_created, val_verdict (VAL's verdict on a piece of a plan checked "
+                      "after the answer), dispatch_withheld (a step not dispatched: VAL refused or has not decided "
+                      "on its piece).",
                       examples=["continue"])
     reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by s^e_2"])
     data: dict[str, Any] = Field(description="Ids and numbers of the event.", examples=[{"next_step": 2}])
