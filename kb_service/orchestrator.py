@@ -38,6 +38,7 @@ from .store import (ConflictError, DeadlineError, Execution, KnowledgeBase, NotF
                     StoredPlan, StoredState, ValidationError)
 from planhrc.model import ArticulatedObject, Formulation, ModelError, Perception, State, make_object, perceive, snap_angle
 from planhrc.planner.errors import PlannerError
+from planhrc.planner.fast_downward import has_conditional_effects
 from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps, move_of
 from planhrc.settings import Settings
 from planhrc.translator import PddlTask, domain_text, read_domain_model, translate
@@ -55,6 +56,19 @@ from .public import (event_public, execution_public, object_public, plan_public,
 log = logging.getLogger(__name__)
 
 IDLE, READY, DISPATCHED = ExecutionStatus.IDLE, ExecutionStatus.READY, ExecutionStatus.DISPATCHED
+
+
+# VAL still checking a new plan: `finish(t)` waits up to t seconds (None: until it answers), then gives the checked
+# outcome, or None while VAL still runs (`Orchestrator._validate_and_check`).
+Finish = Callable[[float | None], PlanOutcome | None]
+
+# How long a perception's write, begun while VAL checks its new plan, waits for VAL inside the store's transaction.
+# Relative 20 x 12: VAL answers 1-4 ms into the write on a quiet machine; a slower run waits outside the store.
+OVERLAP_WAIT_S = 0.02
+
+
+class _ValStillRunning(Exception):
+    """VAL did not answer within OVERLAP_WAIT_S of the write: roll it back and wait outside the store."""
 
 
 @dataclass
@@ -206,9 +220,11 @@ class Orchestrator:
         re-plan, its problem, plan and expected states, then the execution, the decision's event and the
         idempotent response. A refused or failed write stores none of it.
 
-        Planning and VAL run under the object's lock only, before the write: the store (shared by every object)
-        is held just for the write. While VAL checks a new plan (its own processes), the plan is validated for
-        the store and put in writing order (`check_plan`), so the write itself is short. A plan VAL refuses is
+        Planning and VAL run under the object's lock only: the store (shared by every object) is held just for
+        the write. While VAL checks a new plan (its own processes), the plan is validated for the store
+        (`check_plan`); a plan VAL checks in one short run (no conditional effects) has its write begun
+        meanwhile, which waits for VAL's verdict inside the transaction for `OVERLAP_WAIT_S` at most
+        (`_decide_and_write`). A plan VAL refuses is
         never stored; a re-plan that does not finish within the planning deadline raises DeadlineError and
         stores nothing. With the early answer (`val_early_answer`, domains with conditional effects) VAL has
         accepted the new plan's first motion before the write and checks the rest behind the answer; a continue
@@ -233,6 +249,7 @@ class Orchestrator:
             outcome = None
             checked = None
             later = None
+            finish = None
             if goal is not None:
                 deadline_at = pipeline.deadline_from(self.planning)
                 decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
@@ -240,29 +257,59 @@ class Orchestrator:
                 decision = self._gate_decision(obj, plan, decision, deadline_at)
                 if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
                     self._check_later(obj, None, None)  # the plan being replaced needs no more checking
-                    outcome, checked, later = self._plan_for(obj, perception, goal.atoms, plan, decision, memo,
-                                                             deadline_at)
+                    outcome, checked, later, finish = self._plan_for(obj, perception, goal.atoms, plan, decision,
+                                                                     memo, deadline_at)
                     if outcome.status is PlanningStatus.TIMEOUT:
                         raise DeadlineError(f"planning: {outcome.message}")
             try:
                 answer = self._decide_and_write(obj, perception, execution, goal, plan, decision, outcome, checked,
-                                                later, idempotency_key, fingerprint)
+                                                later, idempotency_key, fingerprint, finish)
             except BaseException:
                 if later is not None:
                     later.cancel()
+                if finish is not None:
+                    finish(None)  # VAL's run ends within the deadline: no process outlives the request
                 raise
             return answer
 
     def _decide_and_write(self, obj: ArticulatedObject, perception: Perception, execution: Execution,
                           goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None,
                           outcome: PlanOutcome | None, checked: CheckedPlan | None, later: LaterPieces | None,
-                          idempotency_key: str | None, fingerprint: str) -> dict[str, Any]:
+                          idempotency_key: str | None, fingerprint: str,
+                          finish: Finish | None = None) -> dict[str, Any]:
         """The perception's one write (see `handle_perception`); then the new plan's later pieces, if VAL is still
-        checking them, record their verdicts against the stored plan."""
+        checking them, record their verdicts against the stored plan.
+
+        With `finish`, VAL is still checking the new plan: the write begins meanwhile and waits for VAL's verdict
+        before it uses the plan, so it commits a plan VAL accepted or none (a plan VAL refuses is stored as a
+        problem without a plan, as before). It waits inside the store's transaction for `OVERLAP_WAIT_S` at most:
+        a VAL run slower than that (a loaded machine) must not hold the store every object writes to, so the
+        write is rolled back, VAL waited for outside the store, and the write done again."""
+        if finish is not None:
+            try:
+                return self._write_decision(obj, perception, execution, goal, plan, decision, outcome, checked, later,
+                                            idempotency_key, fingerprint, finish)
+            except _ValStillRunning:
+                outcome = finish(None)
+                log.info("VAL was slower than %.0f ms on %s's plan: the write waited for it outside the store",
+                         OVERLAP_WAIT_S * 1000, obj.ident)
+        return self._write_decision(obj, perception, execution, goal, plan, decision, outcome, checked, later,
+                                    idempotency_key, fingerprint, None)
+
+    def _write_decision(self, obj: ArticulatedObject, perception: Perception, execution: Execution,
+                        goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None,
+                        outcome: PlanOutcome | None, checked: CheckedPlan | None, later: LaterPieces | None,
+                        idempotency_key: str | None, fingerprint: str, finish: Finish | None) -> dict[str, Any]:
         object_id = obj.ident
         new_view = None
         with self.kb.transaction():
             perceived = self.kb.add_perception(perception)
+            if finish is not None:
+                outcome = finish(OVERLAP_WAIT_S)
+                if outcome is None:
+                    raise _ValStillRunning()
+            if outcome is not None and outcome.status is PlanningStatus.TIMEOUT:
+                raise DeadlineError(f"planning: {outcome.message}")
             extra: dict[str, Any] = {}
             if goal is None or decision is None:
                 answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
@@ -426,21 +473,30 @@ class Orchestrator:
         return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg))
 
     def _validate_and_check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float
-                            ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None]:
+                            ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None, Finish | None]:
         """VAL on a new plan (in a thread: it waits for its own processes) beside the store's checks of the plan
-        (`check_plan`, outside the store's lock), both before the perception's write. The plan is usable only
-        when VAL accepted it (`validated`), or, with the early answer, as far as VAL accepted it
-        (`validated_steps`): then the later pieces come back too (`LaterPieces`), for the caller to start VAL on
-        them once the plan is stored, and to record their verdicts."""
+        (`check_plan`, outside the store's lock). The plan is usable only when VAL accepted it (`validated`), or,
+        with the early answer, as far as VAL accepted it (`validated_steps`): then the later pieces come back too
+        (`LaterPieces`), for the caller to start VAL on them once the plan is stored, and to record their
+        verdicts.
+
+        A plan VAL checks in one short run (a domain without conditional effects: VAL's fixed cost, a few ms)
+        comes back with VAL still running and `finish` (the last item): `finish(t)` waits up to t seconds (None:
+        until VAL answers) and gives the checked outcome, or None while VAL still runs. The caller begins its
+        write meanwhile, on the second core's time (`_decide_and_write`). Otherwise `finish` is None and VAL has
+        answered."""
         if not (outcome.solved and outcome.actions):
-            return outcome, None, None
+            return outcome, None, None, None
         checked_outcome: list[PlanOutcome] = []
         val = None
         later = None
+        overlap = False
         if self.planning.validate and not outcome.validated:
             first = (pipeline.early_answer_first_piece(obj, outcome, self.merge_macro_steps)
                      if self.settings.val_early_answer else None)
             if first is None:
+                overlap = outcome.task is not None and not has_conditional_effects(outcome.task.validation_domain)
+
                 def run() -> PlanOutcome:
                     return pipeline.validate(outcome, obj, self.planning, deadline_at)
             else:
@@ -457,17 +513,25 @@ class Orchestrator:
         except BaseException:
             if later is not None:
                 later.cancel()
-            raise
-        finally:
             if val is not None:
                 val.join()
+            raise
         if val is None:
-            return outcome, checked, None
+            return outcome, checked, None, None
+        running = val
+
+        def finish(timeout_s: float | None) -> PlanOutcome | None:
+            running.join(timeout_s)
+            return None if running.is_alive() else checked_outcome[0]
+
+        if overlap:
+            return outcome, checked, None, finish
+        running.join()
         result = checked_outcome[0]
         if later is not None and not (result.solved and result.validated_steps):
             later.cancel()
             later = None
-        return result, checked, later
+        return result, checked, later, None
 
     def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State,
                       placement: Placement | None = None, deadline_at: float | None = None) -> PlanOutcome:
@@ -518,10 +582,11 @@ class Orchestrator:
 
     def _plan_for(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
                   decision: Decision, memo: _ObjectMemo, deadline_at: float | None = None
-                  ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None]:
+                  ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None, Finish | None]:
         """The new plan a decision asks for: the current plan's rest with the failing joint turned the other way
         round (remedy other_way), else the planner's (ordered on the table for a placed object); checked by VAL
-        and by the store (`_validate_and_check`), all within the planning deadline."""
+        and by the store (`_validate_and_check`, whose VAL may still be running: see there), all within the
+        planning deadline."""
         deadline_at = pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at
         return self._validate_and_check(obj, self._new_plan(obj, perception, goal, plan, decision, memo, deadline_at),
                                         deadline_at)

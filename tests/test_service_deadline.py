@@ -12,7 +12,10 @@ with warnings.catch_warnings():
     from fastapi.testclient import TestClient
 
 from planhrc import pipeline
+from planhrc.kb_service import orchestrator
 from planhrc.kb_service.app import create_app
+from planhrc.kb_service.store import KnowledgeBase
+from planhrc.planner.validate import ValidationResult
 from planhrc.settings import make_settings
 from tests.servers import timed_beside
 
@@ -91,7 +94,8 @@ def test_a_huge_task_answers_503_within_the_deadline_and_other_objects_go_on(db)
 
 def test_a_slow_val_on_one_object_does_not_hold_the_store(db, monkeypatch):
     """VAL takes 3 s on object A's plan; meanwhile B's perceptions (writes) and /health answer at once: VAL no
-    longer runs inside the store's transaction."""
+    longer runs inside the store's transaction (a relative plan's write, begun while VAL checks, waits for it in
+    the transaction for OVERLAP_WAIT_S only, then rolls back and waits outside)."""
     with TestClient(create_app(make_settings(db_path=db, token=None))) as client:
         slow, fast = _object(client, 3), _object(client, 3)
         for oid in (slow, fast):
@@ -118,3 +122,53 @@ def test_a_slow_val_on_one_object_does_not_hold_the_store(db, monkeypatch):
         assert slow_answer.status_code == 200 and slow_answer.json()["decision"] == "replan"
         assert done_before < 3.0, (done_before, timings)
         assert timings["health"] < 0.25, timings
+
+
+def _timed_val(monkeypatch, seconds: float, verdict: ValidationResult | None = None) -> list[float]:
+    """VAL made `seconds` slower (and, with `verdict`, answering that); the times its runs end."""
+    real, ended = pipeline._run_val, []
+
+    def run_val(outcome, obj, n_pieces, timeout_s):
+        time.sleep(seconds)
+        result = real(outcome, obj, n_pieces, timeout_s) if verdict is None else verdict
+        ended.append(time.monotonic())
+        return result
+
+    monkeypatch.setattr(pipeline, "_run_val", run_val)
+    return ended
+
+
+def _write_starts(monkeypatch) -> list[float]:
+    starts, real = [], KnowledgeBase.add_perception
+
+    def add_perception(self, perception):
+        starts.append(time.monotonic())
+        return real(self, perception)
+
+    monkeypatch.setattr(KnowledgeBase, "add_perception", add_perception)
+    return starts
+
+
+def test_a_relative_replan_writes_while_val_checks_and_stores_only_what_val_accepted(db, monkeypatch):
+    """The perception's write begins while VAL still checks the new plan (its run overlaps the write on the
+    second core), and commits the plan only once VAL accepted it; a plan VAL refuses meanwhile is not stored."""
+    with TestClient(create_app(make_settings(db_path=db, token=None))) as client:
+        oid = _object(client, 3)
+        client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
+        monkeypatch.setattr(orchestrator, "OVERLAP_WAIT_S", 10.0)  # this test is about the overlap, not its bound
+        ended, starts = _timed_val(monkeypatch, 0.05), _write_starts(monkeypatch)
+        answer = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0]}).json()
+        assert answer["decision"] == "replan" and answer["next_action"] is not None
+        assert len(starts) == len(ended) == 1 and starts[0] < ended[0]  # the write began before VAL answered
+        assert client.get(f"/objects/{oid}/plan").json()["id"] == answer["plan_id"]
+
+        monkeypatch.undo()
+        monkeypatch.setattr(orchestrator, "OVERLAP_WAIT_S", 10.0)
+        ended = _timed_val(monkeypatch, 0.05, ValidationResult(False, "step 1: precondition not satisfied", 0.0))
+        starts = _write_starts(monkeypatch)
+        refused = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 270, 180]}).json()
+        assert starts[0] < ended[0]
+        assert refused["decision"] == "no_plan" and refused["plan_id"] is None
+        assert "VAL rejected the plan: step 1: precondition not satisfied" in refused["reason"]
+        event = client.get(f"/objects/{oid}/events").json()[-1]
+        assert event["data"]["plan_id"] is None and event["data"]["planning_status"] == "invalid"
