@@ -160,8 +160,10 @@ def create_perception(
     """Store a perceived state and apply the cooperation model: goal reached, continue, resume or re-plan; for an
     object placed in the cell a new plan is put in an order that stays on the table, and when the robot cannot
     carry it out the answer is `human_help_requested` with `help`. A perception with unseen links (null) is
-    answered `incomplete_perception` with `unseen_links`: it stores no state and changes nothing."""
-    return orch.handle_perception(object_id, body.link_orientations_deg, idempotency_key)
+    answered `incomplete_perception` with `unseen_links`: it stores no state and changes nothing. With
+    `base_point_xy` (the base point as measured) a placed object is checked where it lies now, not where it was
+    created."""
+    return orch.handle_perception(object_id, body.link_orientations_deg, idempotency_key, body.base_point_xy)
 
 
 @router.post("/objects/{object_id}/actions/next", response_model=NextActionPublic | None, dependencies=Writer,

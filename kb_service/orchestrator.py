@@ -33,7 +33,7 @@ from typing import Any, Callable, Iterator, Sequence
 from planhrc import pipeline
 from planhrc.cooperation import Decision, FailureHistory, PlanView, decide, escalate
 from planhrc.geometry import GeometryError, ObjectGeometry, configuration_feasible, link_centres, reach_shortfall
-from planhrc.ordering import HelpItem, Move, Placement, help_for
+from planhrc.ordering import HelpItem, Move, Placement, help_for, leaves_the_table
 from .store import (ConflictError, DeadlineError, Execution, KnowledgeBase, NotFoundError, StoredAction, StoredEvent,
                     StoredPlan, StoredState, ValidationError)
 from planhrc.model import ArticulatedObject, Formulation, ModelError, Perception, State, make_object, perceive, snap_angle
@@ -80,6 +80,15 @@ class _ObjectMemo:
     perceived_state_id: str | None = None
     last_outcome: ActionOutcome | None = None
     base_point_xy: tuple[float, float] | None = None  # set: the object is placed in the cell (geometric checks)
+    measured_base_xy: tuple[float, float] | None = None  # where the latest perception measured the base point
+
+    @property
+    def where(self) -> tuple[float, float] | None:
+        """The base point the geometric checks use: the latest measured one, else the one the object was created
+        with; None for an abstract object (no geometric checks)."""
+        if self.base_point_xy is None:
+            return None
+        return self.measured_base_xy or self.base_point_xy
     failure: FailureHistory | None = None  # the motion failing since the last success, and the remedies tried
     split_plans: set[str] = field(default_factory=set)  # plans whose macro steps are dispatched step by step
     last_decision: str | None = None  # the kind of the last decision logged
@@ -142,7 +151,8 @@ class Orchestrator:
         return obj
 
     def base_point(self, object_id: str) -> tuple[float, float] | None:
-        return self._memo(object_id).base_point_xy
+        """Where the object's base point lies now: as last measured, else as created (None: abstract)."""
+        return self._memo(object_id).where
 
     def goal_state_id(self, object_id: str) -> str | None:
         return self._memo(object_id).goal_state_id
@@ -178,12 +188,13 @@ class Orchestrator:
                        link_orientations_deg: Sequence[float] | None, allow_infeasible: bool) -> list[str]:
         """The geometric check of a goal (placed objects, complete goals): raises ValidationError for an infeasible
         one unless allowed; the warnings to answer with."""
-        if memo.base_point_xy is None:
+        base = memo.where
+        if base is None:
             return []
         links = self._goal_links(obj, memo, atoms, link_orientations_deg)
         if links is None:
             return []
-        result = configuration_feasible(ObjectGeometry.of(obj, memo.base_point_xy), links)
+        result = configuration_feasible(ObjectGeometry.of(obj, base), links)
         blocking = [r for r in result.reasons if r.code != "out_of_reach"]
         warnings = [f"goal: {r.message}" for r in result.reasons if r.code == "out_of_reach"]
         if blocking and not allow_infeasible:
@@ -215,7 +226,8 @@ class Orchestrator:
 
     # -- perception ---------------------------------------------------------------------------------------
     def handle_perception(self, object_id: str, link_orientations_deg: Sequence[float | None],
-                          idempotency_key: str | None = None) -> dict[str, Any]:
+                          idempotency_key: str | None = None,
+                          base_point_xy: Sequence[float] | None = None) -> dict[str, Any]:
         """Decide on one perception and store all it leads to in one write: the perceived state and, after a
         re-plan, its problem, plan and expected states, then the execution, the decision's event and the
         idempotent response. A refused or failed write stores none of it.
@@ -228,20 +240,29 @@ class Orchestrator:
         never stored; a re-plan that does not finish within the planning deadline raises DeadlineError and
         stores nothing. With the early answer (`val_early_answer`, domains with conditional effects) VAL has
         accepted the new plan's first motion before the write and checks the rest behind the answer; a continue
-        or resume passes the VAL gate first (`_gate_decision`)."""
+        or resume passes the VAL gate first (`_gate_decision`).
+
+        `base_point_xy` is where the worker measured the object's base point p1 (the object is a physical body:
+        turns and hands slide it). It is kept with the perception's event, and from then on the goals, plans,
+        reach and help of a placed object are checked there instead of where the object was created; a plan
+        whose rest would leave the table at the measured point is not dispatched as is but re-planned."""
+        measured = _measured_base(base_point_xy)
         with self.locks.hold(object_id):
             obj = self.kb.get_object(object_id)
-            fingerprint = _fingerprint({"perception": list(link_orientations_deg)})
+            fingerprint = _fingerprint({"perception": list(link_orientations_deg)} if measured is None else
+                                       {"perception": list(link_orientations_deg), "base_point_xy": list(measured)})
             recalled = self._recall(object_id, idempotency_key, fingerprint)
             if recalled is not None:
                 return recalled
             if any(v is None for v in link_orientations_deg):
-                return self._incomplete_perception(obj, link_orientations_deg, idempotency_key, fingerprint)
+                return self._incomplete_perception(obj, link_orientations_deg, idempotency_key, fingerprint,
+                                                   measured)
             try:
                 perception = perceive(obj, link_orientations_deg)  # validated and snapped once, here
             except ModelError as exc:
                 raise ValidationError(str(exc)) from None
             memo = self._memo(object_id)
+            base = (measured or memo.where) if memo.base_point_xy is not None else None
             execution = self.kb.get_execution(object_id)
             goal = self.kb.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
             plan, view = self._plan_view(execution.plan_id)
@@ -253,17 +274,18 @@ class Orchestrator:
             if goal is not None:
                 deadline_at = pipeline.deadline_from(self.planning)
                 decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
-                decision = self._escalate(obj, plan, perception, decision, memo)
+                decision = self._recheck_at(obj, base, plan, perception, decision)
+                decision = self._escalate(obj, plan, perception, decision, memo, base)
                 decision = self._gate_decision(obj, plan, decision, deadline_at)
                 if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
                     self._check_later(obj, None, None)  # the plan being replaced needs no more checking
                     outcome, checked, later, finish = self._plan_for(obj, perception, goal.atoms, plan, decision,
-                                                                     memo, deadline_at)
+                                                                     memo, base, deadline_at)
                     if outcome.status is PlanningStatus.TIMEOUT:
                         raise DeadlineError(f"planning: {outcome.message}")
             try:
                 answer = self._decide_and_write(obj, perception, execution, goal, plan, decision, outcome, checked,
-                                                later, idempotency_key, fingerprint, finish)
+                                                later, idempotency_key, fingerprint, finish, measured)
             except BaseException:
                 if later is not None:
                     later.cancel()
@@ -276,7 +298,8 @@ class Orchestrator:
                           goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None,
                           outcome: PlanOutcome | None, checked: CheckedPlan | None, later: LaterPieces | None,
                           idempotency_key: str | None, fingerprint: str,
-                          finish: Finish | None = None) -> dict[str, Any]:
+                          finish: Finish | None = None,
+                          measured: tuple[float, float] | None = None) -> dict[str, Any]:
         """The perception's one write (see `handle_perception`); then the new plan's later pieces, if VAL is still
         checking them, record their verdicts against the stored plan.
 
@@ -288,18 +311,19 @@ class Orchestrator:
         if finish is not None:
             try:
                 return self._write_decision(obj, perception, execution, goal, plan, decision, outcome, checked, later,
-                                            idempotency_key, fingerprint, finish)
+                                            idempotency_key, fingerprint, finish, measured)
             except _ValStillRunning:
                 outcome = finish(None)
                 log.info("VAL was slower than %.0f ms on %s's plan: the write waited for it outside the store",
                          OVERLAP_WAIT_S * 1000, obj.ident)
         return self._write_decision(obj, perception, execution, goal, plan, decision, outcome, checked, later,
-                                    idempotency_key, fingerprint, None)
+                                    idempotency_key, fingerprint, None, measured)
 
     def _write_decision(self, obj: ArticulatedObject, perception: Perception, execution: Execution,
                         goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None,
                         outcome: PlanOutcome | None, checked: CheckedPlan | None, later: LaterPieces | None,
-                        idempotency_key: str | None, fingerprint: str, finish: Finish | None) -> dict[str, Any]:
+                        idempotency_key: str | None, fingerprint: str, finish: Finish | None,
+                        measured: tuple[float, float] | None = None) -> dict[str, Any]:
         object_id = obj.ident
         new_view = None
         with self.kb.transaction():
@@ -311,6 +335,8 @@ class Orchestrator:
             if outcome is not None and outcome.status is PlanningStatus.TIMEOUT:
                 raise DeadlineError(f"planning: {outcome.message}")
             extra: dict[str, Any] = {}
+            if measured is not None:  # kept with the perception's event: a restarted service checks there too
+                extra["base_point_xy"] = list(measured)
             if goal is None or decision is None:
                 answer = _answer(DecisionKind.NO_PLAN, None, perceived.id, None, None,
                                  "no goal is set: PUT /objects/{id}/goal first")
@@ -444,7 +470,8 @@ class Orchestrator:
             os.kill(os.getpid(), signal.SIGKILL)
 
     def _incomplete_perception(self, obj: ArticulatedObject, link_orientations_deg: Sequence[float | None],
-                               idempotency_key: str | None, fingerprint: str) -> dict[str, Any]:
+                               idempotency_key: str | None, fingerprint: str,
+                               measured: tuple[float, float] | None = None) -> dict[str, Any]:
         """A perception with unseen links (None): validated like any, then answered `incomplete_perception`. It
         stores no state and changes no plan or execution; only its event (naming the unseen links) is kept."""
         if len(link_orientations_deg) != obj.n_links:
@@ -460,14 +487,17 @@ class Orchestrator:
         answer = _answer(DecisionKind.INCOMPLETE_PERCEPTION, None, None, None, None, reason)
         answer["unseen_links"] = unseen
         with self.kb.transaction():
-            self.kb.add_event(obj.ident, DecisionKind.INCOMPLETE_PERCEPTION, reason,
-                              {"unseen_links": unseen, "link_orientations_deg": list(link_orientations_deg)})
+            data: dict[str, Any] = {"unseen_links": unseen, "link_orientations_deg": list(link_orientations_deg)}
+            if measured is not None:  # recorded, not used: an incomplete perception changes nothing
+                data["base_point_xy"] = list(measured)
+            self.kb.add_event(obj.ident, DecisionKind.INCOMPLETE_PERCEPTION, reason, data)
             self._remember(obj.ident, idempotency_key, fingerprint, answer)
         return answer
 
-    def _placement(self, obj: ArticulatedObject, perception: Perception) -> Placement | None:
-        """Where a placed object lies at this perception (None for an abstract one: no geometric checks)."""
-        base = self._memo(obj.ident).base_point_xy
+    def _placement(self, obj: ArticulatedObject, perception: Perception,
+                   base: tuple[float, float] | None) -> Placement | None:
+        """Where a placed object lies at this perception, its base point at `base` (None for an abstract one: no
+        geometric checks)."""
         if base is None:
             return None
         return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg))
@@ -555,7 +585,7 @@ class Orchestrator:
             return PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", self.planning.planner)
 
     def _escalate(self, obj: ArticulatedObject, plan: StoredPlan | None, perception: Perception,
-                  decision: Decision, memo: _ObjectMemo) -> Decision:
+                  decision: Decision, memo: _ObjectMemo, base: tuple[float, float] | None) -> Decision:
         """`cooperation.escalate` for the motion the decision would dispatch: after a failure of that motion (or
         while the human is asked for it) it is not dispatched identically again."""
         failure = memo.failure
@@ -569,31 +599,52 @@ class Orchestrator:
         action = plan.actions[decision.next_step - 1]
         motion = action_motion(obj, action)
         macro = self._last_step(obj, plan, action) - action.step + 1
-        reachable = self._reachable(obj, perception, motion["turned_link_index"], motion["held_link_index"])
+        reachable = self._reachable(obj, perception, base, motion["turned_link_index"], motion["held_link_index"])
         return escalate(decision, failure, (motion["joint_index"], motion["turned_link_index"]), macro, reachable)
 
-    def _reachable(self, obj: ArticulatedObject, perception: Perception, *links: int) -> bool:
-        """Whether the robot reaches the grasp points of `links` as perceived (always, for an abstract object)."""
-        base = self._memo(obj.ident).base_point_xy
+    def _recheck_at(self, obj: ArticulatedObject, base: tuple[float, float] | None, plan: StoredPlan | None,
+                    perception: Perception, decision: Decision) -> Decision:
+        """A decision to go on with the current plan, checked where the object lies now: when the rest of the plan
+        would put a link past the table's edge or inside the robot with the base point at `base` (as measured;
+        the plan was checked where the base point was then), the plan is not dispatched as is: re-plan."""
+        if (base is None or plan is None or decision.next_step is None
+                or decision.kind not in (DecisionKind.CONTINUE, DecisionKind.RESUME)):
+            return decision
+        rest = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.next_step]
+        step, problem = leaves_the_table(Placement(ObjectGeometry.of(obj, base),
+                                                   tuple(float(v) for v in perception.snapped_deg)), rest)
+        if step is None or problem is None:
+            return decision
+        where = f"({base[0]:.3f}, {base[1]:.3f})"
+        return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
+                        f"{decision.reason}; but with the base point measured at {where} step "
+                        f"a_{decision.next_step + step - 1} of {plan.id} would end with {problem.message}: re-plan")
+
+    def _reachable(self, obj: ArticulatedObject, perception: Perception, base: tuple[float, float] | None,
+                   *links: int) -> bool:
+        """Whether the robot reaches the grasp points of `links` as perceived, the base point at `base` (always,
+        for an abstract object)."""
         if base is None:
             return True
         centres = link_centres(ObjectGeometry.of(obj, base), perception.snapped_deg)
         return all(reach_shortfall(centres[k - 1]) <= 1e-9 for k in links if k >= 1)
 
     def _plan_for(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
-                  decision: Decision, memo: _ObjectMemo, deadline_at: float | None = None
+                  decision: Decision, memo: _ObjectMemo, base: tuple[float, float] | None,
+                  deadline_at: float | None = None
                   ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None, Finish | None]:
         """The new plan a decision asks for: the current plan's rest with the failing joint turned the other way
-        round (remedy other_way), else the planner's (ordered on the table for a placed object); checked by VAL
-        and by the store (`_validate_and_check`, whose VAL may still be running: see there), all within the
-        planning deadline."""
+        round (remedy other_way), else the planner's (ordered on the table for a placed object, its base point at
+        `base`); checked by VAL and by the store (`_validate_and_check`, whose VAL may still be running: see
+        there), all within the planning deadline."""
         deadline_at = pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at
-        return self._validate_and_check(obj, self._new_plan(obj, perception, goal, plan, decision, memo, deadline_at),
-                                        deadline_at)
+        return self._validate_and_check(obj, self._new_plan(obj, perception, goal, plan, decision, memo, deadline_at,
+                                                            base), deadline_at)
 
     def _new_plan(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
-                  decision: Decision, memo: _ObjectMemo, deadline_at: float) -> PlanOutcome:
-        placement = self._placement(obj, perception)
+                  decision: Decision, memo: _ObjectMemo, deadline_at: float,
+                  base: tuple[float, float] | None) -> PlanOutcome:
+        placement = self._placement(obj, perception, base)
         if (decision.remedy == Remedy.OTHER_WAY and plan is not None and memo.failure is not None
                 and decision.matched_expected_step is not None):
             rest = [a for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.matched_expected_step]
@@ -616,7 +667,8 @@ class Orchestrator:
             last = self._last_step(obj, plan, action)
             moves = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
                      if action.step <= a.step <= last]
-            base = self._memo(obj.ident).base_point_xy
+            where = self._memo(obj.ident).where  # None: an abstract object
+            base = (_base_of(extra) or where) if where is not None else None
             seen = tuple(float(snap_angle(v, obj.orientations)) for v in perceived.link_orientations_deg or ())
             if len(seen) != obj.n_links:  # not a perceived state with its observation: the plan's own view
                 seen = tuple(float(v) for v in obj.link_orientations_of(perceived.atoms))
@@ -923,6 +975,7 @@ class Orchestrator:
                 if event.data.get("val_pieces"):
                     memo.val = PieceRecord.from_event(event.data["plan_id"], event.data)
                 memo.perceived_state_id = event.data.get("perceived_state_id") or memo.perceived_state_id
+                memo.measured_base_xy = _base_of(event.data) or memo.measured_base_xy
                 memo.last_outcome = None  # a feedback informs only the next decision
                 memo.last_decision = event.kind
                 remedy = event.data.get("remedy")
@@ -1018,6 +1071,26 @@ def _failure_reason(outcome: ActionOutcome, reason: str | None) -> FailureReason
     if outcome == ActionOutcome.SUCCEEDED:
         raise ValidationError(f"reason: must be null when the outcome is succeeded, got {reason!r}")
     return FailureReason(reason)
+
+
+def _measured_base(value: Sequence[float] | None) -> tuple[float, float] | None:
+    """A measured base point as [x, y] metres, validated (ValidationError naming the field), or None."""
+    if value is None:
+        return None
+    try:
+        return ObjectGeometry((1.0,), (value[0], value[1])).base_point_xy if len(value) == 2 else _bad_base(value)
+    except (GeometryError, IndexError, TypeError):
+        return _bad_base(value)
+
+
+def _bad_base(value: object) -> tuple[float, float]:
+    raise ValidationError(f"base_point_xy: expected [x, y], two finite numbers in metres, got {value!r}")
+
+
+def _base_of(data: dict[str, Any]) -> tuple[float, float] | None:
+    """The measured base point a decision's event keeps (None when its perception carried none)."""
+    base = data.get("base_point_xy")
+    return (float(base[0]), float(base[1])) if base else None
 
 
 def _fingerprint(body: dict[str, Any]) -> str:

@@ -192,6 +192,16 @@ class PerceptionCreate(BaseModel):
         examples=[[1.7, 88.9, 91.2, 179.4], [1.7, None, 91.2, 179.4]],
     )
 
+    base_point_xy: list[TableCoordinate] | None = Field(
+        default=None, min_length=2, max_length=2,
+        description="Where the worker measured the object's base point p1 on the table, [x, y] in metres in the "
+        "robot's frame (from the camera: the first link's marker). Optional. The object is a physical body that "
+        "turns and hands may slide: for an object placed in the cell, goals, plans, reach and help requests are "
+        "checked at the latest measured base point instead of the one it was created with, and a plan whose rest "
+        "would leave the table there is re-planned. Kept with the perception's event.",
+        examples=[[0.6, 0.39]],
+    )
+
     @field_validator("link_orientations_deg")
     @classmethod
     def _one_seen(cls, values: list[float | None]) -> list[float | None]:

@@ -165,10 +165,14 @@ class KBClient:
             body["allow_infeasible"] = True
         return self._request("PUT", f"/objects/{object_id}/goal", body)
 
-    def post_perception(self, object_id: str, link_orientations_deg: Sequence[float | None]) -> Decision:
-        """One perception (None = a link not seen): a fresh idempotency key, reused by every retry of it."""
+    def post_perception(self, object_id: str, link_orientations_deg: Sequence[float | None],
+                        base_point_xy: Sequence[float] | None = None) -> Decision:
+        """One perception (None = a link not seen), with the base point as measured ([x, y] metres) when known: a
+        fresh idempotency key, reused by every retry of it."""
         key = str(uuid.uuid4())
-        body = {"link_orientations_deg": [None if v is None else float(v) for v in link_orientations_deg]}
+        body: dict[str, Any] = {"link_orientations_deg": [None if v is None else float(v) for v in link_orientations_deg]}
+        if base_point_xy is not None:
+            body["base_point_xy"] = [float(v) for v in base_point_xy]
         return Decision.from_json(self._request("POST", f"/objects/{object_id}/perceptions", body, key))
 
     def next_action(self, object_id: str) -> dict[str, Any] | None:

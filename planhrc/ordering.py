@@ -203,6 +203,26 @@ def first_obstacle(placement: Placement, moves: Sequence[Move],
     return None, None
 
 
+def leaves_the_table(placement: Placement, moves: Sequence[Move], increment_deg: float = 5.0
+                     ) -> tuple[int | None, Infeasibility | None]:
+    """The first of `moves`, in their order, whose sweep puts a link past the table's edge or inside the robot as
+    drawn (`STRICT`; problems the start already has, no worse than there, excepted), and the problem; (None,
+    None) when none does. Reach and the planning clearance are not judged: this is the check of a plan made for
+    the object elsewhere against where the object lies now."""
+    search = _Search(placement, math.inf, baseline=_baseline(placement))  # type: ignore[arg-type]
+    geometry, angles = placement.geometry, tuple(float(a) for a in placement.link_deg)
+    for i, move in enumerate(moves, start=1):
+        n = max(1, int(math.ceil(abs(move.delta_deg) / increment_deg)))
+        for j in range(1, n + 1):
+            placed, values = rotated(geometry, angles, move.turned, move.held, move.delta_deg * j / n)
+            result = configuration_feasible(placed, values, placement.cell, reach_links=())
+            for reason in result.reasons:
+                if reason.code in ("off_table", "inside_robot") and not search.excused(reason):
+                    return i, reason
+        geometry, angles = rotated(geometry, angles, move.turned, move.held, move.delta_deg)
+    return None, None
+
+
 def final_configuration(placement: Placement, moves: Sequence[Move]) -> tuple[ObjectGeometry, tuple[float, ...]]:
     geometry, angles = placement.geometry, tuple(float(a) for a in placement.link_deg)
     for move in moves:
