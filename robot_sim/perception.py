@@ -4,7 +4,8 @@
 link's pose and the head's pan from the simulated robot, renders what it sees with TinyRenderer, detects one
 ArUco marker per link and turns each marker's corners into a table angle. It reads nothing else from the
 simulator: a link whose marker it does not see is reported as unseen (None). `look` looks again with the head
-turned, keeping what each view saw. Instead of reading the angle off the image
+turned, keeping what each view saw. The base point p1 is measured too, from the first link's marker: its centre
+on the table, half a link back along the link's measured direction (None while that marker is unseen). Instead of reading the angle off the image
 (whose axes are tilted by the oblique view and flipped: image rows grow downwards), every corner is cast
 back through the camera onto the plane of the marker tops, and the angle is measured on the table in
 the world frame: theta = atan2(-dy, dx), clockwise seen from above from +x.
@@ -30,6 +31,7 @@ class Perception:
     link_orientations_deg: tuple[float | None, ...]
     frame: np.ndarray | None = None
     looks: int = 1  # views taken (more than one: the head turned to look again)
+    base_point_xy: tuple[float, float] | None = None  # p1 on the table as measured (None: l1 not seen)
 
     @property
     def complete(self) -> bool:
@@ -150,19 +152,33 @@ class CameraPerception:
 
     def marker_angle(self, corners: np.ndarray) -> float:
         """Table angle of a marker's corner 0 -> corner 1 direction, averaged over its four edges."""
+        return self.marker_pose(corners)[0]
+
+    def marker_pose(self, corners: np.ndarray) -> tuple[float, np.ndarray]:
+        """(table angle, centre (x, y) on the table) of a marker from its four corners in pixels."""
         z = self.scene.marker_z
         tl, tr, br, bl = (self.pixel_to_table(float(u), float(v), z) for u, v in corners)
         along = [table_angle(tr - tl), table_angle(br - bl)]
         across = [table_angle(bl - tl) - 90.0, table_angle(br - tr) - 90.0]
-        return circular_mean_deg(along + across)
+        return circular_mean_deg(along + across), (tl + tr + br + bl) / 4.0
+
+    def base_point(self, first: tuple[float, np.ndarray] | None) -> tuple[float, float] | None:
+        """p1 from the first link's marker pose (its centre is the link's centre), or None when it was not seen."""
+        if first is None:
+            return None
+        angle, centre = first
+        t = math.radians(angle)
+        half = self.scene.spec.link_length_m / 2.0
+        return float(centre[0] - half * math.cos(t)), float(centre[1] + half * math.sin(t))
 
     def perceive(self) -> Perception:
         """One look from where the head points now."""
         self._aim()
         frame = self.render()
         link_ids = [asset.marker_id for asset in self.scene.markers]
-        found = self.detect(frame, set(link_ids))
-        return Perception(tuple(found.get(m) for m in link_ids), frame)
+        found = self.detect_poses(frame, set(link_ids))
+        return Perception(tuple(found[m][0] if m in found else None for m in link_ids), frame,
+                          base_point_xy=self.base_point(found.get(link_ids[0])))
 
     def look(self) -> Perception:
         """Look; while markers are missing, look again with the head turned to each side, keeping what each
@@ -171,19 +187,26 @@ class CameraPerception:
         if seen.complete:
             return seen
         values = list(seen.link_orientations_deg)
+        base = seen.base_point_xy
         for pan in self.camera.look_again_pans_rad:
             self.turn_head(pan)
             again = self.perceive()
             values = [v if v is not None else a for v, a in zip(values, again.link_orientations_deg)]
+            base = base or again.base_point_xy
             if all(v is not None for v in values):
                 break
         self.turn_head(0.0)
-        return Perception(tuple(values), seen.frame, looks=1 + len(self.camera.look_again_pans_rad))
+        return Perception(tuple(values), seen.frame, looks=1 + len(self.camera.look_again_pans_rad),
+                          base_point_xy=base)
 
     def detect(self, frame: np.ndarray, wanted: set[int]) -> dict[int, float]:
         """Marker id -> table angle for the wanted markers seen in `frame`."""
+        return {m: angle for m, (angle, _) in self.detect_poses(frame, wanted).items()}
+
+    def detect_poses(self, frame: np.ndarray, wanted: set[int]) -> dict[int, tuple[float, np.ndarray]]:
+        """Marker id -> (table angle, centre on the table) for the wanted markers seen in `frame`."""
         grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
-        found: dict[int, float] = {}
+        found: dict[int, tuple[float, np.ndarray]] = {}
         for k in self.camera.upscales:
             image = grey if k == 1 else cv2.resize(grey, None, fx=k, fy=k, interpolation=cv2.INTER_CUBIC)
             corners, ids, _ = self._detector.detectMarkers(image)
@@ -192,7 +215,7 @@ class CameraPerception:
                     if int(marker_id) in wanted and int(marker_id) not in found:
                         # corner (x, y) of the enlarged image -> pixel coordinates of the frame
                         pixels = (marker_corners.reshape(4, 2) + 0.5) / k - 0.5
-                        found[int(marker_id)] = self.marker_angle(pixels)
+                        found[int(marker_id)] = self.marker_pose(pixels)
             if wanted <= found.keys():
                 break
         return found
@@ -213,4 +236,6 @@ class FallbackPerception:
     def perceive(self) -> Perception:
         truth = self.scene.link_orientations_deg()
         noise = self._rng.normal(0.0, self.sigma_deg, size=len(truth)) if self.sigma_deg > 0 else np.zeros(len(truth))
-        return Perception(tuple(float((t + n) % 360.0) for t, n in zip(truth, noise)), None)
+        base = self.scene.base_point()
+        return Perception(tuple(float((t + n) % 360.0) for t, n in zip(truth, noise)), None,
+                          base_point_xy=(round(base[0], 4), round(base[1], 4)))

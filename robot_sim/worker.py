@@ -305,7 +305,8 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         t1 = time.perf_counter()
         values = seen.link_orientations_deg
         # nothing seen at all says nothing the service could store: it is an incomplete perception here
-        decision = kb.post_perception(object_id, values) if any(v is not None for v in values) else None
+        decision = (kb.post_perception(object_id, values, seen.base_point_xy)
+                    if any(v is not None for v in values) else None)
         t2 = time.perf_counter()
         frame = seen.frame if seen.frame is not None or not record_frames else camera.render()
         if frame is not None:
