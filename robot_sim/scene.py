@@ -31,8 +31,8 @@ from typing import Callable, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.geometry import (EXECUTION, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, configuration_feasible,
-                              rotated)
+from planhrc.geometry import (EXECUTION, STRICT, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, Tolerance,
+                              configuration_feasible, rotated)
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
@@ -326,23 +326,27 @@ def baseline_problems(geometry: ObjectGeometry, orientations_deg: Sequence[float
 
 
 def added_hazards(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell,
-                  baseline: frozenset[tuple[str, int]], hazards: Sequence[str] = HAZARDS
-                  ) -> tuple[Infeasibility, ...]:
+                  baseline: frozenset[tuple[str, int]], hazards: Sequence[str] = HAZARDS,
+                  tolerance: Tolerance = EXECUTION) -> tuple[Infeasibility, ...]:
     """The problems among `hazards` that the configuration has beyond `baseline`, judged with the tolerance a
-    physical execution is given (`planhrc.geometry.EXECUTION`)."""
-    result = configuration_feasible(geometry, orientations_deg, cell, tolerance=EXECUTION)
+    physical execution is given on its way (`planhrc.geometry.EXECUTION`), or `tolerance`."""
+    result = configuration_feasible(geometry, orientations_deg, cell, tolerance=tolerance)
     return tuple(r for r in result.reasons if r.code in hazards and (r.code, r.link) not in baseline)
 
 
 def sweep_hazard(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell, turned_link: int,
                  held_link: int, delta_deg: float, baseline: frozenset[tuple[str, int]],
-                 hazards: Sequence[str] = HAZARDS, increment_deg: float = 5.0) -> Infeasibility | None:
+                 hazards: Sequence[str] = HAZARDS, increment_deg: float = 5.0,
+                 end_tolerance: Tolerance = EXECUTION) -> Infeasibility | None:
     """The first problem among `hazards` (beyond `baseline`) that turning `turned_link` about its joint with
-    `held_link` by `delta_deg` causes somewhere along its sweep (every `increment_deg`), or None."""
+    `held_link` by `delta_deg` causes somewhere along its sweep (every `increment_deg`), or None; where the
+    turn comes to rest is judged with `end_tolerance` (`STRICT`: the object is left there, and perceived)."""
     n = max(1, math.ceil(abs(delta_deg) / increment_deg))
     for i in range(1, n + 1):
         placed, values = rotated(geometry, orientations_deg, turned_link, held_link, delta_deg * i / n)
         found = added_hazards(placed, values, cell, baseline, hazards)
+        if i == n and not found and end_tolerance != EXECUTION:
+            found = added_hazards(placed, values, cell, baseline, hazards, end_tolerance)
         if found:
             return found[0]
     return None
@@ -352,21 +356,23 @@ def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float
                 increment_deg: float = 5.0, hazards: Sequence[str] = HAZARDS) -> Infeasibility | None:
     """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
     somewhere along its sweep (a link past the table's edge, inside the robot, folded onto or across another,
-    beyond `planhrc.geometry.EXECUTION`'s tolerance), from the object's measured pose; None when the turn is
-    safe. Problems the object already has before the turn, and links out of the robot's reach, do not count;
-    `hazards` narrows what counts."""
+    beyond `planhrc.geometry.EXECUTION`'s tolerance) or where it comes to rest (as drawn, `STRICT`: a turn may
+    brush the edge on its way, but must not leave the object hanging over it), from the object's measured
+    pose; None when the turn is safe. Problems the object already has before the turn, and links out of the
+    robot's reach, do not count; `hazards` narrows what counts."""
     base, theta = scene.configuration()
     geometry, cell = scene.spec.geometry(base), scene.spec.cell()
     return sweep_hazard(geometry, theta, cell, turned_link, held_link, delta_deg,
-                        baseline_problems(geometry, theta, cell), hazards, increment_deg)
+                        baseline_problems(geometry, theta, cell), hazards, increment_deg, end_tolerance=STRICT)
 
 
 def new_hazards(scene: Scene, geometry: ObjectGeometry, orientations_deg: Sequence[float]) -> tuple[Infeasibility, ...]:
-    """The problems (`HAZARDS`, with `planhrc.geometry.EXECUTION`'s tolerance) the object placed as `geometry`
-    with `orientations_deg` would have that it does not have now (measured)."""
+    """The problems (`HAZARDS`, as drawn: `planhrc.geometry.STRICT`) the object placed as `geometry` with
+    `orientations_deg`, where a move leaves it, would have that it does not have now (measured)."""
     base, theta = scene.configuration()
     cell = scene.spec.cell()
-    return added_hazards(geometry, orientations_deg, cell, baseline_problems(scene.spec.geometry(base), theta, cell))
+    return added_hazards(geometry, orientations_deg, cell, baseline_problems(scene.spec.geometry(base), theta, cell),
+                         tolerance=STRICT)
 
 
 def random_orientations(

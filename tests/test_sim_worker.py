@@ -255,6 +255,32 @@ def test_a_turn_goes_the_other_way_round_when_only_that_way_stays_clear():
         client.disconnect()
 
 
+def test_a_turn_that_would_leave_the_object_hanging_over_the_edge_is_not_started():
+    """A turn may brush the table's edge on its way (a physical sweep is given a few centimetres), but one that
+    comes to rest with a link past the edge, even by a centimetre, is refused before anything moves."""
+    import pybullet
+    from pybullet_utils.bullet_client import BulletClient
+
+    from planhrc.robot_sim.scene import build_scene
+    from planhrc.robot_sim.skills import Outcome, RotationAction
+    from planhrc.robot_sim.worker import refuse_unsafe
+    from planhrc.vocabulary import FailureReason
+
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    # straight along -y at x = 0.74: l5 turned to 0 deg points at the far edge (x = 0.9) and ends 1 cm past it
+    scene = build_scene(client, SceneSpec(load_robot=False, base_point_xy=(0.74, 0.39)))
+    try:
+        before = scene.configuration()
+        refused = refuse_unsafe(scene, RotationAction(turned_link=5, held_link=4, delta_deg=-90))
+        assert refused is not None and refused.outcome is Outcome.FAILED, refused
+        assert refused.reason is FailureReason.LEFT_TABLE and "link 5 leaves the table" in refused.message
+        assert refuse_unsafe(scene, RotationAction(turned_link=5, held_link=4, delta_deg=-45)) is None  # stays on
+        assert scene.configuration() == before  # nothing moved
+    finally:
+        scene.close()
+        client.disconnect()
+
+
 @pytest.mark.parametrize("helps", [True, False])
 def test_a_help_request_is_done_by_the_visible_human_or_the_worker_says_it_gives_up(tmp_path, helps):
     kb = GreedyKB(GOAL, help_first=[{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"}])
