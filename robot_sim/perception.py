@@ -107,14 +107,17 @@ class CameraPerception:
         proj = np.array(self._proj, dtype=float).reshape(4, 4).T
         self._inverse = np.linalg.inv(proj @ view)
 
-    def turn_head(self, pan_rad: float, max_steps: int = 60) -> None:
-        """Turn the head (its pan motor, on the physics clock) and aim the camera from where it ends."""
+    def turn_head(self, pan_rad: float, max_steps: int = 120, settled_rad: float = 5e-4) -> None:
+        """Turn the head (its pan motor, on the physics clock) until it has settled at `pan_rad` (within
+        `settled_rad`, 0.03°) and aim the camera from there. Waiting for it to settle makes a look at a pan the
+        same look whichever pan the head came from: stopping 0.01 rad short left it where its path put it, and a
+        marker at the edge of the view was read or not depending on which pans were tried before."""
         c, scene = self.client, self.scene
         c.setJointMotorControl2(scene.robot, scene.head_pan, pybullet.POSITION_CONTROL, targetPosition=pan_rad,
                                 force=50.0, maxVelocity=4.0)
         for _ in range(max_steps):
             scene.step()
-            if abs(c.getJointState(scene.robot, scene.head_pan)[0] - pan_rad) < 0.01:
+            if abs(c.getJointState(scene.robot, scene.head_pan)[0] - pan_rad) < settled_rad:
                 break
         self._aim()
 

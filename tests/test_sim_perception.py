@@ -56,15 +56,25 @@ def test_a_marker_at_the_edge_of_the_view_is_seen_when_the_head_turns_far_enough
     # border, too slanted to read from the head turned 0.35 rad either way; turned 0.7 rad, it is read (the
     # pose as measured in that episode: the marker is at the limit of what the detector reads)
     theta, base = (224.78, 315.55, 89.43, 313.43, 89.54), (0.6092265273329907, 0.38687713917710215)
+    # The head settles at each pan it turns to, so the look at 0.7 rad is the same look whichever pans came
+    # before (it used to stop 0.01 rad short, where its path left it: at some of those pans link 2 is not read).
     client = BulletClient(connection_mode=pybullet.DIRECT)
     scene = build_scene(client, SceneSpec(initial_orientations_deg=theta, base_point_xy=base))
     try:
-        seen = CameraPerception(client, scene).look()
+        camera = CameraPerception(client, scene)
+        seen = camera.look()
+        pans = []
+        for came_from in (-0.7, 0.0, 0.9):
+            camera.turn_head(came_from)
+            camera.turn_head(0.7)
+            pans.append(client.getJointState(scene.robot, scene.head_pan)[0])
+            assert camera.perceive().link_orientations_deg[1] is not None, f"link 2 unseen coming from {came_from}"
     finally:
         scene.close()
         client.disconnect()
     assert seen.complete, f"markers missing for links {seen.missing_links}"
     assert all(abs(angle_difference_deg(a, b)) < 3.0 for a, b in zip(seen.link_orientations_deg, theta))
+    assert all(abs(pan - 0.7) < 1e-3 for pan in pans), pans
 
 
 def test_fallback_adds_seeded_noise(scene):
