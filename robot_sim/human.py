@@ -30,8 +30,8 @@ import pybullet
 
 from planhrc.geometry import configuration_feasible, rotated
 from planhrc.robot_sim.handling import SWEEP_HAZARDS, joint_angles, shorter, turn_order, turn_path
-from planhrc.robot_sim.scene import (HAZARDS, TIME_STEP_S, Scene, SimError, baseline_problems, direction, new_hazards,
-                                    sweep_hazard, turn_hazard)
+from planhrc.robot_sim.scene import (HAZARDS, TIME_STEP_S, Scene, SimError, baseline_problems, direction, eased,
+                                    new_hazards, sweep_hazard, turn_hazard)
 
 log = logging.getLogger(__name__)
 
@@ -428,7 +428,7 @@ def bring_to(human: Human, end: Sequence[float], what: str) -> list[str] | None:
 # -- the human's body: two hands that grasp and turn links on the physics clock --------------------------------
 REST_XY = ((1.05, 0.25), (1.05, -0.25))  # where the hands wait, beyond the table's far edge
 HAND_SPEED_M_S = 1.2
-TURN_SPEED_DEG_S = 90.0
+TURN_SPEED_DEG_S = 90.0  # the fastest a hand turns a link, half-way through a turn (`eased`)
 HAND_FORCE_N = 30.0  # a firm human grip, weaker than the robot's
 
 
@@ -518,6 +518,9 @@ class Human:
         z_high = s.spec.table_top_z + 0.15
         hold_hand, turn_hand = self.hands
         holds = move.held >= 1 and move.held not in s.gripped  # the robot may hold it already
+        # turning l1 about its point on the table: the other hand holds that point down, or the chain dragged
+        # along by l1 slides it (4.6 cm over a help request's turns of l1, in a random episode)
+        pins = move.held == 0 and 1 not in s.gripped
 
         def hands_to(targets: list[tuple[int, Callable[[], tuple[np.ndarray, float, float]]]]):
             starts = {h: np.asarray(c.getBasePositionAndOrientation(h)[0]) for h, _ in targets}
@@ -537,10 +540,14 @@ class Human:
         def rest(i: int):
             return lambda: (np.asarray(REST_XY[i]), z_high, 0.0)
 
-        targets = [(turn_hand, over(move.turned, z_high))] + ([(hold_hand, over(move.held, z_high))] if holds else [])
-        yield from hands_to(targets)
-        targets = [(turn_hand, over(move.turned, z_grip))] + ([(hold_hand, over(move.held, z_grip))] if holds else [])
-        yield from hands_to(targets)
+        def at_base(z: float):
+            return lambda: (s.joint_points()[0], z, s.link_orientations_deg()[0])
+
+        def holding(z: float) -> list[tuple[int, Callable[[], tuple[np.ndarray, float, float]]]]:
+            return [(hold_hand, over(move.held, z))] if holds else [(hold_hand, at_base(z))] if pins else []
+
+        yield from hands_to([(turn_hand, over(move.turned, z_high))] + holding(z_high))
+        yield from hands_to([(turn_hand, over(move.turned, z_grip))] + holding(z_grip))
         # grip: a constraint from the world to each link the hands now touch
         grips = {}
 
@@ -559,18 +566,24 @@ class Human:
         grip(turn_hand, move.turned)
         if holds:
             grip(hold_hand, move.held)
+        if pins and turn_hand in grips:  # the holding hand presses p1 onto the table: l1 turns about it
+            p1 = s.joint_points()[0]
+            cid = c.createConstraint(s.body, -1, -1, -1, pybullet.JOINT_POINT2POINT, [0, 0, 0],
+                                     [-s.spec.link_length_m / 2.0, 0.0, 0.0], [float(p1[0]), float(p1[1]), s.link_center_z])
+            c.changeConstraint(cid, maxForce=HAND_FORCE_N)
+            self._grips.append(cid)
         if turn_hand in grips:
             cid = grips[turn_hand][0]
             theta0 = s.link_orientations_deg()
             reference0 = theta0[move.held - 1] if move.held >= 1 else 0.0
             relative0 = theta0[move.turned - 1] - reference0
             pivot0 = s.joint_points()[max(move.turned, move.held) - 1] if move.held == 0 else None
-            n = max(2, int(abs(move.delta_deg) / (TURN_SPEED_DEG_S * dt)))
+            n = max(2, int(math.pi / 2 * abs(move.delta_deg) / (TURN_SPEED_DEG_S * dt)))  # peak speed: TURN_SPEED
             half = s.spec.link_length_m / 2.0
             for i in range(1, n + 1):
                 theta = s.link_orientations_deg()
                 reference = theta[move.held - 1] if move.held >= 1 else 0.0
-                wanted = reference + relative0 + move.delta_deg * i / n
+                wanted = reference + relative0 + move.delta_deg * eased(i / n)
                 if move.held == 0:
                     assert pivot0 is not None  # set above whenever the table is held
                     pivot = pivot0

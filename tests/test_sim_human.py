@@ -92,3 +92,27 @@ def test_a_human_acting_during_a_robot_turn_counts_the_rest_of_that_turn():
     finally:
         scene.close()
         client.disconnect()
+
+
+def test_a_human_turning_the_first_link_of_a_bent_chain_does_not_slide_it_or_bend_it():
+    """l1 turns about its point on the table with the whole chain beyond it held by joint friction alone: the hand
+    speeds up and slows down smoothly and the other hand holds that point down (a random episode's help request:
+    turned at full speed from the first tick, this turn slid the base point by 4 cm and bent joint 2 by 10°)."""
+    theta, base = (88.0, 90.0, 134.0, 90.0, 134.0), (0.593, 0.388)
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    scene = build_scene(client, SceneSpec(load_robot=False, initial_orientations_deg=theta, base_point_xy=base))
+    try:
+        human = Human(scene)
+        before_base, before = scene.configuration()
+        human.start(HumanMove(1, 0, -43.0, "turn l1 about the table"))
+        human.finish()
+        after_base, after = scene.configuration()
+    finally:
+        scene.close()
+        client.disconnect()
+    slide = ((after_base[0] - before_base[0]) ** 2 + (after_base[1] - before_base[1]) ** 2) ** 0.5
+    assert slide < 0.005, f"the base point slid {slide * 100:.1f} cm"
+    assert abs(angle_difference_deg(after[0], before[0]) + 43.0) < 3.0, after
+    for k in range(1, 5):  # every joint beyond keeps its angle: the chain turned as one piece
+        bend = angle_difference_deg(after[k] - after[k - 1], before[k] - before[k - 1])
+        assert abs(bend) < 2.0, (k + 1, bend)
