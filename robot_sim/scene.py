@@ -376,12 +376,14 @@ def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float
 
 
 def new_hazards(scene: Scene, geometry: ObjectGeometry, orientations_deg: Sequence[float]) -> tuple[Infeasibility, ...]:
-    """The problems (`HAZARDS`, as drawn: `planhrc.geometry.STRICT`) the object placed as `geometry` with
-    `orientations_deg`, where a move leaves it, would have that it does not have now (measured)."""
+    """The problems (`HAZARDS`, with `planhrc.geometry.EXECUTION`'s tolerance) the object placed as `geometry`
+    with `orientations_deg` would have that it does not have now (measured). The human brings the object to the
+    end the robot asks for with this tolerance: asked for an end just past the edge as drawn (a relative goal
+    turned with `l1`), the human does it, and the state is counted off the table, rather than refusing until the
+    worker gives up."""
     base, theta = scene.configuration()
     cell = scene.spec.cell()
-    return added_hazards(geometry, orientations_deg, cell, baseline_problems(scene.spec.geometry(base), theta, cell),
-                         tolerance=STRICT)
+    return added_hazards(geometry, orientations_deg, cell, baseline_problems(scene.spec.geometry(base), theta, cell))
 
 
 def random_orientations(
