@@ -127,11 +127,11 @@ def direction(theta_deg: float) -> np.ndarray:
 
 
 def eased(fraction: float) -> float:
-    """How much of a turn is done at `fraction` of its time, for the robot's gripper and the human's hand alike:
-    a half cosine, speeding up and slowing down smoothly. The links beyond the turned one are held by joint
-    friction alone, and the point l1 turns about by nothing but the table: a turn at full speed from its first
-    tick to its last jerked them (a human's turn of l1 slid the base point by 4 cm; links beyond a turned l2
-    lagged behind)."""
+    """How much of a human's turn is done at `fraction` of its time: a half cosine, speeding up and slowing down
+    smoothly. The links beyond the turned one are held by joint friction alone, and the point l1 turns about by
+    nothing but the table: a turn at full speed from its first tick to its last jerked them (a human's turn of
+    l1 slid the base point by 4 cm). The robot's arc keeps its even pace: eased the same way, its longer turns
+    dragged the links before a held one further (see the README's robot table)."""
     return 0.5 - 0.5 * math.cos(math.pi * min(1.0, max(0.0, fraction)))
 
 

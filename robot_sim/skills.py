@@ -30,7 +30,6 @@ from planhrc.robot_sim.scene import (
     arm_joints,
     direction,
     drive_gripper,
-    eased,
     hold_arm,
     joint_between,
     rotate_point,
@@ -347,13 +346,10 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
     grasp_xy, turned_yaw = reached
     primitives.append(Grasp(turner, action.turned_link))
 
-    # waypoints closer together at both ends of the arc: the gripper speeds up and slows down smoothly (its peak
-    # speed that of `robot.step_deg` per waypoint), so the links beyond the turned one, held by joint friction
-    # alone, are carried along, not jerked and left behind
-    n = max(1, math.ceil(math.pi / 2 * abs(action.delta_deg) / robot.step_deg))
+    n = max(1, math.ceil(abs(action.delta_deg) / robot.step_deg))
     yaw = turned_yaw
     for i in range(1, n + 1):
-        angle = action.delta_deg * eased(i / n)
+        angle = action.delta_deg * i / n
         xy = rotate_point(grasp_xy, pivot, angle)
         yaw = _unwrap_yaw(turned_yaw - math.radians(angle), yaw)
         q, miss = robot.solve_ik(turner, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=robot.turn_twist_deg)
