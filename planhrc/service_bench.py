@@ -147,10 +147,13 @@ def perceive(client: httpx.Client, object_id: str, angles: list[float]) -> tuple
 
 
 def replanning_latencies(client: httpx.Client, object_id: str, links: int, orientations: int, count: int,
-                         rng: random.Random) -> list[float]:
-    """Seconds of `count` perceptions that each force a new plan (random configurations far from the plan)."""
+                         rng: random.Random, pause_s: float = 0.0) -> list[float]:
+    """Seconds of `count` perceptions that each force a new plan (random configurations far from the plan),
+    `pause_s` apart (0: back to back)."""
     out = []
     for _ in range(count):
+        if pause_s:
+            time.sleep(pause_s)
         seconds, decision = perceive(client, object_id, random_angles(rng, links, orientations))
         if decision == "replan":
             out.append(seconds)

@@ -88,7 +88,8 @@ def test_http_perception_is_measured_on_a_real_server():
     from planhrc.bench import measure_http
 
     result = measure_http("relative", links=4, orientations=4, runs=4)
-    assert 1 <= result["n"] <= 4 and result["median_ms"] > 0
+    assert 1 <= result["n"] <= 4 and result["median_ms"] > 0 and result["pause_s"] > 0
+    assert 1 <= result["back_to_back"]["n"] <= 4 and result["back_to_back"]["median_ms"] > 0
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
