@@ -12,6 +12,7 @@ import pytest
 
 from planhrc.kb_service.store import ABOX_IRI, KnowledgeBase
 from planhrc.kb_service.store.errors import NotFoundError
+from planhrc.kb_service.store import journal
 from planhrc.kb_service.store.journal import JournalEntry, decode, encode
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
@@ -42,8 +43,9 @@ def test_a_row_holds_every_part_of_the_plan():
     assert decode(encode(entry)) == entry
 
 
-def test_a_plan_is_answered_at_once_and_its_triples_follow(tmp_path):
+def test_a_plan_is_answered_at_once_and_its_triples_follow(tmp_path, monkeypatch):
     path = str(tmp_path / "kb.sqlite3")
+    monkeypatch.setattr(journal, "WRITE_DELAY_S", 1.0)  # the checks right after the commit come first, under any load
     with KnowledgeBase(path, TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb)
         before = kb.triple_count()
