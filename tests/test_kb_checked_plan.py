@@ -20,7 +20,8 @@ def _write(checked_ahead: bool):
         problem = kb.add_problem("obj1", init.id, goal.id)
         checked = kb.check_plan("obj1", actions, states) if checked_ahead else None
         plan = kb.add_plan(problem.id, "inproc", actions, states, checked)
-        kb._drop_caches()  # read back from the database
+        kb.settle()  # the plan's triples written (the store's writer does it behind the answer) ...
+        kb._drop_caches()  # ... and read back from the database
         again = kb.get_plan(plan.id)
         return (plan.expected_state_ids, [kb.get_state(s).atoms for s in again.expected_state_ids],
                 [a.spec for a in again.actions],

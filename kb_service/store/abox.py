@@ -869,8 +869,8 @@ class Abox:
 
     def check_plan(self, object_id: str, actions: Sequence[ActionSpec],
                    expected_states: Sequence[frozenset[Atom]], deadline_at: float | None = None) -> CheckedPlan:
-        """Validate a plan of an object and put its atoms in writing order: the part of `add_plan` that needs
-        neither the database nor the store's lock, so a caller can do it while something else runs (the
+        """Validate a plan of an object (its writing order is worked out later, by the store's writer): the part
+        of `add_plan` that needs neither the database nor the store's lock, so a caller can do it while something else runs (the
         service: while VAL checks the plan). Hand the result to `add_plan(..., checked=...)` with the same
         `actions` and `expected_states` objects. Past `deadline_at` (`time.monotonic()`) a DeadlineError is
         raised: a caller's request deadline bounds the check of a huge plan too."""
