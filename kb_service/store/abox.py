@@ -932,9 +932,11 @@ class Abox:
 
     def _release(self, entry: JournalEntry) -> list[StoredPlan | StoredAction | StoredState]:
         """Stop answering for a plan from memory (its triples are written, or its transaction rolled back)."""
-        ids = [entry.plan_id, *(f"{entry.plan_id}_a{step}" for step in range(1, len(entry.actions) + 1)),
-               *(f"{entry.object_id}_state_{entry.first_state + i}" for i in range(len(entry.expected_states)))]
-        return [r for r in (self._held.pop(i, None) for i in ids) if r is not None]
+        plan = self._held.pop(entry.plan_id, None)
+        if not isinstance(plan, StoredPlan):  # never held: its transaction failed before `_hold`
+            return []
+        ids = [*(a.id for a in plan.actions), *plan.expected_state_ids]  # the names `_hold` gave them
+        return [plan, *(r for r in (self._held.pop(i, None) for i in ids) if r is not None)]
 
     def settle(self) -> None:
         """Write out every journalled plan's triples now (readers of the triples themselves call this first).
