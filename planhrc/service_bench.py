@@ -20,7 +20,6 @@ import platform
 import random
 import signal
 import socket
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -80,6 +79,24 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def wait_until_serving(proc: subprocess.Popen, base: str, timeout_s: float = 90, log_path: Path | None = None) -> None:
+    """Poll `base`/health until the server answers 200; a RuntimeError (with its log, if given) when the process
+    exits first or `timeout_s` passes."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        if proc.poll() is not None:
+            raise RuntimeError(f"planhrc serve exited with {proc.returncode}"
+                               + (f":\n{log_path.read_text()}" if log_path else ""))
+        try:
+            if httpx.get(f"{base}/health", timeout=2).status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"planhrc serve did not answer /health within {timeout_s:g} s")
+        time.sleep(0.05)
+
+
 @contextmanager
 def running_service(workdir: Path, extra_env: dict[str, str] | None = None) -> Iterator[Server]:
     """`planhrc serve` on a fresh store in `workdir`, stopped (with its process group) on the way out."""
@@ -92,18 +109,7 @@ def running_service(workdir: Path, extra_env: dict[str, str] | None = None) -> I
         cwd=workdir, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     base = f"http://127.0.0.1:{port}"
     try:
-        deadline = time.monotonic() + 90
-        while True:
-            if proc.poll() is not None:
-                raise RuntimeError(f"planhrc serve exited with {proc.returncode}")
-            try:
-                if httpx.get(f"{base}/health", timeout=2).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if time.monotonic() > deadline:
-                raise RuntimeError("planhrc serve did not answer /health within 90 s")
-            time.sleep(0.1)
+        wait_until_serving(proc, base, 90)
         yield Server(base, proc.pid)
     finally:
         try:

@@ -11,7 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
-import httpx
+from planhrc.service_bench import wait_until_serving  # noqa: F401 (the tests import it from here too)
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -35,25 +35,6 @@ def serve_env(env: Mapping[str, str] | None = None) -> dict[str, str]:
     return out
 
 
-def wait_until_serving(proc: subprocess.Popen, base: str, log_path: Path | None = None,
-                       timeout_s: float = 60) -> None:
-    """Poll `base`/health until the server answers 200; an AssertionError (with its log, if given) when the
-    process exits first or `timeout_s` passes."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        if proc.poll() is not None:
-            raise AssertionError(f"planhrc serve exited with {proc.returncode}:\n"
-                                 f"{log_path.read_text() if log_path else ''}")
-        try:
-            if httpx.get(f"{base}/health", timeout=1).status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        if time.monotonic() > deadline:
-            raise AssertionError(f"planhrc serve did not answer /health within {timeout_s:g} s")
-        time.sleep(0.05)
-
-
 @contextmanager
 def serving(db: Path, port: int | None = None, args: Sequence[str] = (),
             env: Mapping[str, str] | None = None) -> Iterator[str]:
@@ -66,7 +47,7 @@ def serving(db: Path, port: int | None = None, args: Sequence[str] = (),
                                 stdout=log_file, stderr=subprocess.STDOUT)
         base = f"http://127.0.0.1:{port}"
         try:
-            wait_until_serving(proc, base, log_path)
+            wait_until_serving(proc, base, log_path=log_path)
             yield base
         finally:
             proc.terminate()

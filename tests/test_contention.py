@@ -100,7 +100,7 @@ def test_no_planning_worker_outlives_the_service(tmp_path, sig):
     base = f"http://127.0.0.1:{port}"
     workers: set[int] = set()
     try:
-        wait_until_serving(proc, base, log_path)
+        wait_until_serving(proc, base, log_path=log_path)
         rng = random.Random(5)
         with httpx.Client(base_url=base, timeout=60) as client:
             big, mid = _object(client, 200, "absolute"), _object(client, 20, "absolute")
