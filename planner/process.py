@@ -52,30 +52,30 @@ def run_limited(cmd: list[str], cwd: str, timeout_s: float, env: dict[str, str] 
                             start_new_session=True)
     try:
         if nice > 0:
-            _renice(proc.pid, nice)
+            renice(proc.pid, nice)
         if on_start is not None:
             on_start(proc.pid)
         out, err = proc.communicate(timeout=max(timeout_s, 0.001))
         return ProcessOutcome(proc.returncode, out, err)
     except subprocess.TimeoutExpired:
         log.debug("killing process group %d after %.3f s", proc.pid, timeout_s)
-        _kill_group(proc.pid)
+        kill_group(proc.pid)
         out, err = proc.communicate()
         return ProcessOutcome(None, out, err)
     except BaseException:
-        _kill_group(proc.pid)
+        kill_group(proc.pid)
         proc.wait()
         raise
 
 
-def _renice(pid: int, nice: int) -> None:
+def renice(pid: int, nice: int) -> None:
     try:
         os.setpriority(os.PRIO_PROCESS, pid, min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
     except (ProcessLookupError, PermissionError):  # already gone, or not ours to change: it runs as it is
         pass
 
 
-def _kill_group(pgid: int) -> None:
+def kill_group(pgid: int) -> None:
     try:
         os.killpg(pgid, signal.SIGKILL)
     except ProcessLookupError:

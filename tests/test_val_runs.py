@@ -1,0 +1,175 @@
+"""VAL as a process the caller does not wait on (`planner.validate.ValRun`) and VAL processes armed ahead of need
+(`planner.armed`): the same verdicts as a plain run, nothing left behind, nothing outliving its owner."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from planhrc.model import make_object
+from planhrc.planner import get_planner
+from planhrc.planner.armed import ArmedValidators
+from planhrc.planner.errors import PlannerError
+from planhrc.planner.validate import keep_off_this_cpu, start_validation, validate_plan
+from planhrc.translator.problem import get_problem
+
+DATA = Path(__file__).parent / "data"
+DOMAIN = (DATA / "domain-relative.pddl").read_text()
+PAPER_ABSOLUTE = (DATA / "domain-absolute-paper.pddl").read_text()
+
+
+def _task(formulation: str = "relative", links: int = 6, k: int = 8) -> tuple[str, list[str]]:
+    obj = make_object("obj1", formulation, links, k)
+    n = obj.n_joints
+    problem = get_problem(obj, obj.configuration_atoms([0] * n),
+                          obj.configuration_atoms([(45 * (i + 1)) % 360 for i in range(n)]), "t")
+    domain = DOMAIN if formulation == "relative" else PAPER_ABSOLUTE
+    plan = list(get_planner("inproc").solve(domain, problem, 10).plan)
+    assert plan
+    return problem, plan
+
+
+def _scratch_files() -> set[str]:
+    return {p for p in os.listdir("/dev/shm") if p.startswith("planhrc-val")} if os.path.isdir("/dev/shm") else set()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_a_run_answers_later_and_as_a_plain_run_does():
+    problem, plan = _task()
+    run = start_validation(DOMAIN, problem, plan)
+    first = run.verdict(0)  # asked at once: VAL has hardly started
+    final = run.verdict(None)
+    assert final is not None and final.valid
+    assert first is None or first.valid
+    assert run.verdict(0) is final  # asked again: the same answer
+    wrong = start_validation(DOMAIN, problem, plan[:-1]).verdict(None)
+    assert wrong is not None and not wrong.valid
+    assert wrong.reason == validate_plan(DOMAIN, problem, plan[:-1]).reason
+    assert "Goal not satisfied" in wrong.reason
+
+
+def test_a_run_past_its_time_limit_is_killed_and_leaves_no_files():
+    before = _scratch_files()
+    problem, plan = _task("absolute", 12, 8)
+    run = start_validation(PAPER_ABSOLUTE, problem, plan)
+    pid = run.pid
+    with pytest.raises(PlannerError, match="did not finish within"):
+        run.result(0.0005)
+    assert not _alive(pid)
+    assert _scratch_files() == before
+
+
+def test_a_started_run_is_kept_off_the_callers_cpu_until_the_caller_waits():
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("one CPU: nothing to keep off")
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(5)"])
+    try:
+        release = keep_off_this_cpu(proc.pid)
+        assert release is not None
+        kept = os.sched_getaffinity(proc.pid)
+        assert kept and kept < os.sched_getaffinity(0)
+        release()
+        assert os.sched_getaffinity(proc.pid) == os.sched_getaffinity(0)
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def _armed_once(armed: ArmedValidators, domain: str) -> None:
+    """Wait until `armed` holds a process for `domain` that waits for its problem."""
+    deadline = time.monotonic() + 20
+    while armed.armed_domains() < 1:
+        assert time.monotonic() < deadline, "no VAL process was armed"
+        time.sleep(0.01)
+
+
+@pytest.mark.parametrize("formulation", ["relative", "absolute"])
+def test_an_armed_process_gives_the_verdict_of_a_cold_run(formulation):
+    domain = DOMAIN if formulation == "relative" else PAPER_ABSOLUTE
+    problem, plan = _task(formulation)
+    armed = ArmedValidators(arm_delay_s=0.0)
+    try:
+        assert armed.start(domain, problem, plan).verdict(None).valid  # cold: nothing armed yet
+        assert armed.counts == {"armed": 0, "cold": 1}
+        _armed_once(armed, domain)
+        good = armed.start(domain, problem, plan).verdict(None)
+        _armed_once(armed, domain)
+        bad = armed.start(domain, problem, plan[:-1]).verdict(None)
+        assert armed.counts == {"armed": 2, "cold": 1}
+        assert good.valid
+        assert not bad.valid and bad.reason == validate_plan(domain, problem, plan[:-1]).reason
+    finally:
+        armed.close()
+
+
+def test_closing_ends_every_armed_process_and_removes_its_files():
+    before = _scratch_files()
+    problem, plan = _task()
+    armed = ArmedValidators(arm_delay_s=0.0)
+    armed.start(DOMAIN, problem, plan).verdict(None)
+    _armed_once(armed, DOMAIN)
+    pids = [a.proc.pid for a in armed._armed.values() if a is not None]
+    assert pids and all(_alive(p) for p in pids)
+    armed.close()
+    assert not any(_alive(p) for p in pids)
+    assert _scratch_files() == before
+    assert armed.start(DOMAIN, problem, plan).verdict(None).valid  # after close: cold runs, nothing armed again
+    assert armed.armed_domains() == 0
+
+
+def test_an_armed_process_that_died_is_replaced_by_a_cold_run():
+    problem, plan = _task()
+    armed = ArmedValidators(arm_delay_s=0.0)
+    try:
+        armed.start(DOMAIN, problem, plan).verdict(None)
+        _armed_once(armed, DOMAIN)
+        for a in armed._armed.values():
+            os.kill(a.proc.pid, signal.SIGKILL)
+            a.proc.wait()
+        assert armed.start(DOMAIN, problem, plan[:-1]).verdict(None).valid is False
+        assert armed.counts["cold"] == 2 and armed.counts["armed"] == 0
+    finally:
+        armed.close()
+
+
+def test_an_armed_process_does_not_outlive_its_owner_killed_with_sigkill(tmp_path):
+    """The owner holds the FIFO VAL waits on: when the owner dies, VAL reads end-of-file and exits."""
+    problem, plan = _task()
+    (tmp_path / "p.pddl").write_text(problem)
+    script = textwrap.dedent(f"""
+        import sys, time
+        from pathlib import Path
+        from planhrc.planner.armed import ArmedValidators
+        domain = Path({str(DATA / "domain-relative.pddl")!r}).read_text()
+        problem = Path({str(tmp_path / "p.pddl")!r}).read_text()
+        armed = ArmedValidators(arm_delay_s=0.0)
+        armed.start(domain, problem, {plan!r}).verdict(None)
+        while armed.armed_domains() < 1:
+            time.sleep(0.01)
+        print(*[a.proc.pid for a in armed._armed.values() if a is not None], flush=True)
+        time.sleep(60)
+    """)
+    owner = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        pids = [int(p) for p in owner.stdout.readline().split()]
+        assert pids and all(_alive(p) for p in pids)
+    finally:
+        owner.kill()
+        owner.wait()
+    deadline = time.monotonic() + 10
+    while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(_alive(p) for p in pids), "an armed VAL process outlived its owner"
