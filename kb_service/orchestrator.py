@@ -28,7 +28,7 @@ import signal
 import threading
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence, TypeVar
 
 from planhrc import pipeline
 from planhrc.cooperation import Decision, FailureHistory, PlanView, decide, escalate
@@ -37,9 +37,11 @@ from planhrc.ordering import HelpItem, Move, Placement, help_for, leaves_the_tab
 from .store import (ConflictError, DeadlineError, Execution, KnowledgeBase, NotFoundError, StoredAction, StoredEvent,
                     StoredPlan, StoredState, ValidationError)
 from planhrc.model import ArticulatedObject, Formulation, ModelError, Perception, State, make_object, perceive, snap_angle
+from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.fast_downward import has_conditional_effects
-from planhrc.pipeline import PlanOutcome, action_motion, config_from_settings, merge_macro_steps, move_of
+from planhrc.pipeline import (PlanningConfig, PlanOutcome, action_motion, config_from_settings, merge_macro_steps,
+                              move_of)
 from planhrc.settings import Settings
 from planhrc.translator import PddlTask, domain_text, read_domain_model, translate
 from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, PlanningStatus, Remedy,
@@ -55,12 +57,27 @@ from .public import (event_public, execution_public, object_public, plan_public,
 
 log = logging.getLogger(__name__)
 
+_T = TypeVar("_T")
+
 IDLE, READY, DISPATCHED = ExecutionStatus.IDLE, ExecutionStatus.READY, ExecutionStatus.DISPATCHED
 
 
-# VAL still checking a new plan: `finish(t)` waits up to t seconds (None: until it answers), then gives the checked
-# outcome, or None while VAL still runs (`Orchestrator._validate_and_check`).
-Finish = Callable[[float | None], PlanOutcome | None]
+@dataclass(frozen=True)
+class Pending:
+    """VAL still checking a new plan, in its own process (`pipeline.start_val`): `outcome(t)` waits up to t seconds
+    (None: until VAL answers or the deadline passes) and gives the checked outcome, or None while VAL still runs;
+    `stop()` ends the run (`Orchestrator._validate_and_check`)."""
+
+    plan: PlanOutcome
+    check: pipeline.ValCheck
+    config: PlanningConfig
+    deadline_at: float
+
+    def outcome(self, timeout_s: float | None) -> PlanOutcome | None:
+        return pipeline.finish_val(self.plan, self.check, self.config, self.deadline_at, timeout_s)
+
+    def stop(self) -> None:
+        self.check.cancel()
 
 # How long a perception's write, begun while VAL checks its new plan, waits for VAL inside the store's transaction.
 # Relative 20 x 12: VAL answers 1-4 ms into the write on a quiet machine; a slower run waits outside the store.
@@ -112,14 +129,17 @@ class Orchestrator:
         self._guard = threading.Lock()
         self._perceptions = 0  # counted only for the crash test's hook
         self._later: dict[str, tuple[str, LaterPieces]] = {}  # object id -> (plan id, its later pieces under VAL)
+        self.armed = ArmedValidators() if settings.val_armed and settings.validate_plans else None
 
     def close(self) -> None:
-        """Stop the VAL runs still checking plans' later pieces (the service stops)."""
+        """Stop the VAL runs still checking plans' later pieces and the armed VAL processes (the service stops)."""
         with self._guard:
             runs = [later for _, later in self._later.values()]
             self._later.clear()
         for later in runs:
             later.cancel()
+        if self.armed is not None:
+            self.armed.close()
 
     # -- objects ------------------------------------------------------------------------------------------
     def create_object(self, name: str, links: int | Sequence[float], orientations: int,
@@ -270,7 +290,7 @@ class Orchestrator:
             outcome = None
             checked = None
             later = None
-            finish = None
+            pending = None
             if goal is not None:
                 deadline_at = pipeline.deadline_from(self.planning)
                 decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
@@ -279,18 +299,18 @@ class Orchestrator:
                 decision = self._gate_decision(obj, plan, decision, deadline_at)
                 if decision.kind in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
                     self._check_later(obj, None, None)  # the plan being replaced needs no more checking
-                    outcome, checked, later, finish = self._plan_for(obj, perception, goal.atoms, plan, decision,
-                                                                     memo, base, deadline_at)
+                    outcome, checked, later, pending = self._plan_for(obj, perception, goal.atoms, plan, decision,
+                                                                      memo, base, deadline_at)
                     if outcome.status is PlanningStatus.TIMEOUT:
                         raise DeadlineError(f"planning: {outcome.message}")
             try:
                 answer = self._decide_and_write(obj, perception, execution, goal, plan, decision, outcome, checked,
-                                                later, idempotency_key, fingerprint, finish, measured)
+                                                later, idempotency_key, fingerprint, pending, measured)
             except BaseException:
                 if later is not None:
                     later.cancel()
-                if finish is not None:
-                    finish(None)  # VAL's run ends within the deadline: no process outlives the request
+                if pending is not None:
+                    pending.stop()  # no VAL process outlives the request
                 raise
             return answer
 
@@ -298,22 +318,22 @@ class Orchestrator:
                           goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None,
                           outcome: PlanOutcome | None, checked: CheckedPlan | None, later: LaterPieces | None,
                           idempotency_key: str | None, fingerprint: str,
-                          finish: Finish | None = None,
+                          pending: Pending | None = None,
                           measured: tuple[float, float] | None = None) -> dict[str, Any]:
         """The perception's one write (see `handle_perception`); then the new plan's later pieces, if VAL is still
         checking them, record their verdicts against the stored plan.
 
-        With `finish`, VAL is still checking the new plan: the write begins meanwhile and waits for VAL's verdict
+        With `pending`, VAL is still checking the new plan: the write begins meanwhile and waits for VAL's verdict
         before it uses the plan, so it commits a plan VAL accepted or none (a plan VAL refuses is stored as a
         problem without a plan, as before). It waits inside the store's transaction for `OVERLAP_WAIT_S` at most:
         a VAL run slower than that (a loaded machine) must not hold the store every object writes to, so the
         write is rolled back, VAL waited for outside the store, and the write done again."""
-        if finish is not None:
+        if pending is not None:
             try:
                 return self._write_decision(obj, perception, execution, goal, plan, decision, outcome, checked, later,
-                                            idempotency_key, fingerprint, finish, measured)
+                                            idempotency_key, fingerprint, pending, measured)
             except _ValStillRunning:
-                outcome = finish(None)
+                outcome = pending.outcome(None)
                 log.info("VAL was slower than %.0f ms on %s's plan: the write waited for it outside the store",
                          OVERLAP_WAIT_S * 1000, obj.ident)
         return self._write_decision(obj, perception, execution, goal, plan, decision, outcome, checked, later,
@@ -322,14 +342,14 @@ class Orchestrator:
     def _write_decision(self, obj: ArticulatedObject, perception: Perception, execution: Execution,
                         goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None,
                         outcome: PlanOutcome | None, checked: CheckedPlan | None, later: LaterPieces | None,
-                        idempotency_key: str | None, fingerprint: str, finish: Finish | None,
+                        idempotency_key: str | None, fingerprint: str, pending: Pending | None,
                         measured: tuple[float, float] | None = None) -> dict[str, Any]:
         object_id = obj.ident
         new_view = None
         with self.kb.transaction():
             perceived = self.kb.add_perception(perception)
-            if finish is not None:
-                outcome = finish(OVERLAP_WAIT_S)
+            if pending is not None:
+                outcome = pending.outcome(OVERLAP_WAIT_S)
                 if outcome is None:
                     raise _ValStillRunning()
             if outcome is not None and outcome.status is PlanningStatus.TIMEOUT:
@@ -502,31 +522,44 @@ class Orchestrator:
             return None
         return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg))
 
-    def _validate_and_check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float
-                            ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None, Finish | None]:
-        """VAL on a new plan (in a thread: it waits for its own processes) beside the store's checks of the plan
-        (`check_plan`, outside the store's lock). The plan is usable only when VAL accepted it (`validated`), or,
-        with the early answer, as far as VAL accepted it (`validated_steps`): then the later pieces come back too
-        (`LaterPieces`), for the caller to start VAL on them once the plan is stored, and to record their
-        verdicts.
+    def _validate_and_check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float,
+                            started: pipeline.ValCheck | None = None
+                            ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None, Pending | None]:
+        """VAL on a new plan beside the store's checks of the plan (`check_plan`, outside the store's lock). The plan
+        is usable only when VAL accepted it (`validated`), or, with the early answer, as far as VAL accepted it
+        (`validated_steps`): then the later pieces come back too (`LaterPieces`), for the caller to start VAL on them
+        once the plan is stored, and to record their verdicts.
 
-        A plan VAL checks in one short run (a domain without conditional effects: VAL's fixed cost, a few ms)
-        comes back with VAL still running and `finish` (the last item): `finish(t)` waits up to t seconds (None:
-        until VAL answers) and gives the checked outcome, or None while VAL still runs. The caller begins its
-        write meanwhile, on the second core's time (`_decide_and_write`). Otherwise `finish` is None and VAL has
-        answered."""
+        A plan VAL checks in one short run (a domain without conditional effects: VAL's fixed cost, a few ms) comes
+        back with VAL still running in its own process (`started`, begun by the pipeline before the replay, or
+        begun here) as `Pending` (the last item), whose `outcome(t)` gives the checked outcome once VAL answered:
+        the caller begins its write meanwhile (`_decide_and_write`). Nothing in this process waits for that VAL run
+        on a thread, so the write does not compete with it for the interpreter. Otherwise Pending is None and VAL
+        has answered (its pieces in threads that wait for their processes, beside `check_plan`)."""
         if not (outcome.solved and outcome.actions):
+            if started is not None:
+                started.cancel()
             return outcome, None, None, None
+        if started is None and self._val_beside(outcome.task):
+            assert outcome.task is not None
+            begun = self._start_val(obj, outcome.task, outcome.steps)
+            if isinstance(begun, PlanOutcome):
+                return begun, None, None, None
+            started = begun
+        if started is not None:
+            try:
+                checked = self.kb.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at)
+            except BaseException:
+                started.cancel()
+                raise
+            return outcome, checked, None, Pending(outcome, started, self.planning, deadline_at)
         checked_outcome: list[PlanOutcome] = []
         val = None
         later = None
-        overlap = False
         if self.planning.validate and not outcome.validated:
             first = (pipeline.early_answer_first_piece(obj, outcome, self.merge_macro_steps)
                      if self.settings.val_early_answer else None)
             if first is None:
-                overlap = outcome.task is not None and not has_conditional_effects(outcome.task.validation_domain)
-
                 def run() -> PlanOutcome:
                     return pipeline.validate(outcome, obj, self.planning, deadline_at)
             else:
@@ -548,36 +581,53 @@ class Orchestrator:
             raise
         if val is None:
             return outcome, checked, None, None
-        running = val
-
-        def finish(timeout_s: float | None) -> PlanOutcome | None:
-            running.join(timeout_s)
-            return None if running.is_alive() else checked_outcome[0]
-
-        if overlap:
-            return outcome, checked, None, finish
-        running.join()
+        val.join()
         result = checked_outcome[0]
         if later is not None and not (result.solved and result.validated_steps):
             later.cancel()
             later = None
         return result, checked, later, None
 
+    def _start_val(self, obj: ArticulatedObject, task: PddlTask, steps: Sequence[str]
+                   ) -> pipeline.ValCheck | PlanOutcome:
+        """`pipeline.start_val`, or the error outcome when VAL cannot be started."""
+        return self._guarded(obj, lambda: pipeline.start_val(task, steps, self.armed))
+
+    def _val_beside(self, task: PddlTask | None) -> bool:
+        """Whether a plan of this task is checked by one VAL run started at once and read after the write began:
+        VAL on, and a domain without conditional effects (one short run)."""
+        return (self.planning.validate and task is not None
+                and not has_conditional_effects(task.validation_domain))
+
     def _run_pipeline(self, obj: ArticulatedObject, init: State, goal: State,
-                      placement: Placement | None = None, deadline_at: float | None = None) -> PlanOutcome:
+                      placement: Placement | None = None, deadline_at: float | None = None
+                      ) -> tuple[PlanOutcome, pipeline.ValCheck | None]:
         """The pipeline up to VAL (left to `_validate_and_check`): in a worker of the planning pool for a large
-        task, else here."""
+        task, else here; here, a plan VAL checks in one short run has VAL started on its steps before the replay
+        (the second item, else None)."""
         pool = self.pool
         if pool is not None and pool.takes(obj):
             # with the early answer VAL runs here, after the worker's outcome: the first piece beside `check_plan`
             config = replace(self.planning, validate=False) if self.settings.val_early_answer else self.planning
             job = PlanningJob(obj, init, goal, config, placement,
                               pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at)
-            return self._guarded(obj, lambda: pool.plan(job))
-        return self._guarded(obj, lambda: pipeline.plan(obj, init, goal, self.planning, defer_validation=True,
-                                                        placement=placement, deadline_at=deadline_at))
+            return self._guarded(obj, lambda: pool.plan(job)), None
+        deadline_at = pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at
+        found = self._guarded(obj, lambda: pipeline.find_plan(obj, init, goal, self.planning, placement=placement,
+                                                              deadline_at=deadline_at))
+        if isinstance(found, PlanOutcome):
+            return found, None
+        started = self._start_val(obj, found.task, found.steps) if self._val_beside(found.task) else None
+        if isinstance(started, PlanOutcome):
+            return started, None
+        try:
+            return self._guarded(obj, lambda: pipeline.expect(obj, init, goal, found, deadline_at)), started
+        except BaseException:
+            if started is not None:
+                started.cancel()
+            raise
 
-    def _guarded(self, obj: ArticulatedObject, stage: Callable[[], PlanOutcome]) -> PlanOutcome:
+    def _guarded(self, obj: ArticulatedObject, stage: Callable[[], _T]) -> _T | PlanOutcome:
         try:
             return stage()
         except Exception as exc:  # a crashing stage must not leave the perception without a decision
@@ -632,18 +682,18 @@ class Orchestrator:
     def _plan_for(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
                   decision: Decision, memo: _ObjectMemo, base: tuple[float, float] | None,
                   deadline_at: float | None = None
-                  ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None, Finish | None]:
+                  ) -> tuple[PlanOutcome, CheckedPlan | None, LaterPieces | None, Pending | None]:
         """The new plan a decision asks for: the current plan's rest with the failing joint turned the other way
         round (remedy other_way), else the planner's (ordered on the table for a placed object, its base point at
         `base`); checked by VAL and by the store (`_validate_and_check`, whose VAL may still be running: see
         there), all within the planning deadline."""
         deadline_at = pipeline.deadline_from(self.planning) if deadline_at is None else deadline_at
-        return self._validate_and_check(obj, self._new_plan(obj, perception, goal, plan, decision, memo, deadline_at,
-                                                            base), deadline_at)
+        outcome, started = self._new_plan(obj, perception, goal, plan, decision, memo, deadline_at, base)
+        return self._validate_and_check(obj, outcome, deadline_at, started)
 
     def _new_plan(self, obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
                   decision: Decision, memo: _ObjectMemo, deadline_at: float,
-                  base: tuple[float, float] | None) -> PlanOutcome:
+                  base: tuple[float, float] | None) -> tuple[PlanOutcome, pipeline.ValCheck | None]:
         placement = self._placement(obj, perception, base)
         if (decision.remedy == Remedy.OTHER_WAY and plan is not None and memo.failure is not None
                 and decision.matched_expected_step is not None):
@@ -652,7 +702,7 @@ class Orchestrator:
             if moves is not None:
                 try:
                     return pipeline.plan_moves(obj, perception.atoms, goal, moves, self.planning,
-                                               placement=placement, defer_validation=True)
+                                               placement=placement, defer_validation=True), None
                 except Exception as exc:  # the composed plan does not hold: let the planner try
                     log.warning("the other way round failed for %s: %s", obj.ident, exc)
         return self._run_pipeline(obj, perception.atoms, goal, placement, deadline_at)
@@ -992,13 +1042,13 @@ class Orchestrator:
         if not self.merge_macro_steps or plan.id in self._memo(plan.object_id).split_plans:
             return action.step
         rest = [a for a in plan.actions if a.step >= action.step]
-        return merge_macro_steps(obj, rest)[0].last_step
+        return merge_macro_steps(obj, rest, first_only=True)[0].last_step
 
     def _action_public(self, obj: ArticulatedObject, plan: StoredPlan, action: StoredAction) -> dict[str, Any]:
         motion = action_motion(obj, action)
         last = self._last_step(obj, plan, action)
         if last > action.step:
-            merged = merge_macro_steps(obj, [a for a in plan.actions if action.step <= a.step <= last])[0]
+            merged = merge_macro_steps(obj, [a for a in plan.actions if action.step <= a.step <= last], True)[0]
             motion.update(delta_deg=merged.delta_deg, macro_steps=last - action.step + 1)
         return {"id": action.id, "name": action.spec.name, "params": list(action.spec.params),
                 "step": action.step, "last_step": last, "plan_id": plan.id, **motion}

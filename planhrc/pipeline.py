@@ -22,11 +22,12 @@ from typing import Callable, Mapping, Protocol, Sequence
 from planhrc.model import (HAS_ORIENTATION, ActionSpec, ArticulatedObject, DomainModelSpec, Formulation, State,
                            format_atom, is_subsumed, orientation_name)
 from planhrc.ordering import HelpItem, Move, Placement, feasible_alternative, order_moves
+from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.chain import plan_with_fallback
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.fast_downward import has_conditional_effects
 from planhrc.planner.result import PlannerAttempt, PlanResult
-from planhrc.planner.validate import ValidationResult, validate_pieces, validate_plan
+from planhrc.planner.validate import ValidationResult, start_validation, validate_pieces, validate_plan
 from planhrc.settings import Settings, get_settings
 from planhrc.transition import ReplayDeadline, StateIndex, TransitionError, apply, ground_action, parse_step, replay
 from planhrc.translator.domain import read_domain_model
@@ -114,8 +115,43 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
     beside other work) and must not use the plan before VAL accepted it (`validated`). With a `placement` (where
     the object lies when the plan starts), the plan's actions are put in an order whose every configuration is
     feasible (or the plan is refused, `unsolvable`, with the `help` to ask for); VAL and the replay then see that
-    order."""
+    order. The stages one by one: `find_plan`, then `expect` (and VAL: `validate`, or `start_val` beside `expect`)."""
     config = config or config_from_settings(get_settings())
+    deadline_at = deadline_from(config) if deadline_at is None else deadline_at
+    found = find_plan(obj, init, goal, config, placement=placement, deadline_at=deadline_at)
+    if isinstance(found, PlanOutcome):
+        return found
+    outcome = expect(obj, init, goal, found, deadline_at)
+    if config.validate and not defer_validation:
+        outcome = validate(outcome, obj, config, deadline_at)
+        if outcome.solved:
+            outcome = replace(outcome, timings={**outcome.timings,
+                                                "pipeline": time.perf_counter() - found.started})
+    return outcome
+
+
+@dataclass(frozen=True)
+class Found:
+    """A plan's steps, final (ordered on the table for a placed object), before its expected states: what
+    `find_plan` hands to `expect`, and what VAL can start on (`start_val`)."""
+
+    task: PddlTask
+    model: DomainModelSpec
+    result: PlanResult
+    ordering: str
+    timings: Mapping[str, float]
+    started: float  # time.perf_counter() when the pipeline began
+    config: PlanningConfig
+
+    @property
+    def steps(self) -> tuple[str, ...]:
+        return tuple(self.result.plan)
+
+
+def find_plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig, *,
+              placement: Placement | None = None, deadline_at: float | None = None) -> Found | PlanOutcome:
+    """Translate, plan and (for a placed object) order: the plan's final steps, or the outcome when there is no
+    plan to go on with (the goal already holds, nothing solved, no feasible order, the deadline)."""
     deadline_at = deadline_from(config) if deadline_at is None else deadline_at
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -150,29 +186,31 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
                                task=task, attempts=result.attempts, help=ordered.help)
         ordering = ordered.sentence
         result = replace(result, plan=ordered.steps)
+    return Found(task, model, result, ordering, timings, t0, config)
 
+
+def expect(obj: ArticulatedObject, init: State, goal: State, found: Found, deadline_at: float) -> PlanOutcome:
+    """The expected states of a found plan (replay with the transition equations), checked against the goal: the
+    solved outcome, not yet validated."""
+    timings = dict(found.timings)
+    result = found.result
     t = time.perf_counter()
     try:
-        actions, states = replay(model, init, result.plan, deadline_at)
+        actions, states = replay(found.model, init, result.plan, deadline_at)
     except ReplayDeadline:
-        return _over_deadline(config, f"while replaying the plan of {len(result.plan)} steps", result.planner,
-                              timings, task)
+        return _over_deadline(found.config, f"while replaying the plan of {len(result.plan)} steps", result.planner,
+                              timings, found.task)
     except TransitionError as exc:
         return PlanOutcome(PlanningStatus.INVALID, f"plan does not replay: {exc}", result.planner,
-                           timings=timings, task=task)
+                           timings=timings, task=found.task)
     if not is_subsumed(states[-1], goal):
         return PlanOutcome(PlanningStatus.INVALID, "the last expected state is not subsumed by the goal",
-                           result.planner, timings=timings, task=task)
+                           result.planner, timings=timings, task=found.task)
     timings["expected_states"] = time.perf_counter() - t
-    timings["pipeline"] = time.perf_counter() - t0
-    outcome = PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
-                          tuple(states), timings, task, result.attempts, tuple(result.plan), ordering=ordering)
-    if config.validate and not defer_validation:
-        outcome = validate(outcome, obj, config, deadline_at)
-        if outcome.solved:
-            outcome = replace(outcome, timings={**outcome.timings,
-                                                "pipeline": time.perf_counter() - t0})
-    return outcome
+    timings["pipeline"] = time.perf_counter() - found.started
+    return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
+                       tuple(states), timings, found.task, result.attempts, tuple(result.plan),
+                       ordering=found.ordering)
 
 
 def plan_moves(obj: ArticulatedObject, init: State, goal: State, moves: Sequence[Move],
@@ -313,17 +351,70 @@ def _checked(outcome: PlanOutcome, config: PlanningConfig | None, deadline_at: f
             raise PlannerError("no time left for VAL")
         check = run(left)
     except PlannerError as exc:  # VAL's time limit: the request's deadline
-        timings = {**outcome.timings, "validate": time.perf_counter() - t}
-        limit = f"{config.deadline_s:g} s" if config is not None else "its time limit"
-        return PlanOutcome(PlanningStatus.TIMEOUT, f"planning deadline of {limit} exceeded while VAL checked "
-                           f"{what} ({exc})", outcome.planner, timings=timings, task=outcome.task,
-                           attempts=outcome.attempts)
-    timings = {**outcome.timings, "validate": time.perf_counter() - t}
+        return _val_timeout(outcome, config, what, str(exc), time.perf_counter() - t)
+    return _judged(outcome, check, time.perf_counter() - t, accepted, what)
+
+
+def _judged(outcome: PlanOutcome, check: ValidationResult, seconds: float, accepted: Callable[[], PlanOutcome],
+            what: str) -> PlanOutcome:
+    """The outcome VAL's answer makes of a plan: `accepted()` when VAL accepted it, else invalid with VAL's
+    reason (the time VAL took in the timings, as `validate`)."""
+    timings = {**outcome.timings, "validate": seconds}
     if check.valid:
         return replace(accepted(), timings=timings)
     log.warning("plan of %s rejected by VAL: %s", outcome.planner, check.reason)
     return PlanOutcome(PlanningStatus.INVALID, f"VAL rejected {what}: {check.reason}", outcome.planner,
                        timings=timings, task=outcome.task, attempts=outcome.attempts)
+
+
+def _val_timeout(outcome: PlanOutcome, config: PlanningConfig | None, what: str, why: str, seconds: float
+                 ) -> PlanOutcome:
+    limit = f"{config.deadline_s:g} s" if config is not None else "its time limit"
+    return PlanOutcome(PlanningStatus.TIMEOUT, f"planning deadline of {limit} exceeded while VAL checked "
+                       f"{what} ({why})", outcome.planner, timings={**outcome.timings, "validate": seconds},
+                       task=outcome.task, attempts=outcome.attempts)
+
+
+class ValCheck(Protocol):
+    """A VAL run under way (`planner.validate.ValRun`): its verdict once there is one, and a way to stop it."""
+
+    def verdict(self, timeout_s: float | None = None) -> ValidationResult | None: ...
+
+    def cancel(self) -> None: ...
+
+
+def start_val(task: PddlTask, steps: Sequence[str], armed: ArmedValidators | None = None) -> ValCheck:
+    """VAL started on a plan's steps as one run on the whole plan against the paper's exact domain, e.g. as soon
+    as `find_plan` has them, before the expected states are replayed: it runs in its own process (on the other
+    core) beside `expect` and whatever the caller does next, and `finish_val` reads its verdict. With `armed`
+    (a service's), on a VAL process that has already read the domain. For domains whose plans VAL checks in one
+    short run (no conditional effects); the others go through `validate`."""
+    if armed is not None:
+        return armed.start(task.validation_domain, task.problem, steps)
+    return start_validation(task.validation_domain, task.problem, steps)
+
+
+def finish_val(outcome: PlanOutcome, check: ValCheck, config: PlanningConfig | None, deadline_at: float,
+               timeout_s: float | None = None) -> PlanOutcome | None:
+    """The outcome of `expect` once the VAL run `start_val` began on its plan has answered (as `validate` would
+    make it), waiting up to `timeout_s` (None: until VAL answers or the deadline passes); None while VAL still
+    runs within the deadline. At the deadline VAL is stopped and the outcome is a `timeout`. An outcome that is
+    not a plan to check stops VAL and comes back unchanged."""
+    if not outcome.solved or not outcome.actions:
+        check.cancel()
+        return outcome
+    t = time.perf_counter()
+    until = deadline_at if timeout_s is None else min(deadline_at, time.monotonic() + timeout_s)
+    verdict = check.verdict(max(0.0, until - time.monotonic()))
+    while verdict is None and time.monotonic() < until:  # a wait may end a little early
+        verdict = check.verdict(max(0.0, until - time.monotonic()))
+    if verdict is None:
+        if _left(deadline_at) > 0:
+            return None
+        check.cancel()
+        return _val_timeout(outcome, config, "the plan", "VAL did not answer in time", time.perf_counter() - t)
+    return _judged(outcome, verdict, verdict.seconds,
+                   lambda: replace(outcome, validated=True, validated_steps=len(outcome.steps)), "the plan")
 
 
 def _run_val(outcome: PlanOutcome, obj: ArticulatedObject | None, n_pieces: int, timeout_s: float
@@ -541,10 +632,14 @@ class MacroStep:
         return self.last_step + 1
 
 
-def merge_macro_steps(obj: ArticulatedObject, actions: Sequence[PlanStep]) -> tuple[MacroStep, ...]:
-    """The paper's consolidation: e.g. two 45° steps of one joint become one 90° step."""
+def merge_macro_steps(obj: ArticulatedObject, actions: Sequence[PlanStep], first_only: bool = False
+                      ) -> tuple[MacroStep, ...]:
+    """The paper's consolidation: e.g. two 45° steps of one joint become one 90° step. With `first_only`, only the
+    first macro step (the actions after it are not looked at: the motion to dispatch next)."""
     merged: list[MacroStep] = []
     for action in sorted(actions, key=lambda a: a.step):
+        if first_only and len(merged) > 1:
+            break
         m = action_motion(obj, action)
         prev = merged[-1] if merged else None
         same = (
@@ -561,4 +656,4 @@ def merge_macro_steps(obj: ArticulatedObject, actions: Sequence[PlanStep]) -> tu
         else:
             merged.append(MacroStep(action.step, action.step, m["joint_index"], m["turned_link_index"],
                                     m["held_link_index"], m["delta_deg"], (action.id,)))
-    return tuple(merged)
+    return tuple(merged[:1]) if first_only else tuple(merged)

@@ -338,7 +338,7 @@ def test_unsolvable_or_failed_planning_answers_no_plan(client, monkeypatch):
     from planhrc import pipeline
     from planhrc.vocabulary import PlanningStatus
 
-    monkeypatch.setattr(pipeline, "plan",
+    monkeypatch.setattr(pipeline, "find_plan",
                         lambda *a, **k: pipeline.PlanOutcome(PlanningStatus.UNSOLVABLE, "no plan exists", "stub"))
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
@@ -584,7 +584,14 @@ def test_a_plan_val_refuses_is_never_stored_or_dispatched(client, monkeypatch):
     from planhrc import pipeline
     from planhrc.planner.validate import ValidationResult
 
-    monkeypatch.setattr(pipeline, "validate_plan", lambda *a, **k: ValidationResult(False, "stub refusal", 0.0))
+    class Refusing:  # a VAL run (pipeline.ValCheck) that refuses
+        def verdict(self, timeout_s=None):
+            return ValidationResult(False, "stub refusal", 0.0)
+
+        def cancel(self):
+            pass
+
+    monkeypatch.setattr(pipeline, "start_val", lambda *a, **k: Refusing())
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
     answer = perceive(client, oid, [0, 0, 0, 0])

@@ -101,16 +101,17 @@ def test_a_slow_val_on_one_object_does_not_hold_the_store(db, monkeypatch):
         for oid in (slow, fast):
             client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
         client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 90, 0]})
-        real = pipeline._run_val
+        real = pipeline.start_val
         started = threading.Event()
 
-        def run_val(outcome, obj, n_pieces, timeout_s):
-            if obj is not None and obj.ident == slow:
+        def start_val(task, steps, armed=None):
+            check = real(task, steps, armed)
+            if f"(problem {slow}-task)" in task.problem:
                 started.set()
-                time.sleep(3.0)
-            return real(outcome, obj, n_pieces, timeout_s)
+                return _Slower(check, 3.0)
+            return check
 
-        monkeypatch.setattr(pipeline, "_run_val", run_val)
+        monkeypatch.setattr(pipeline, "start_val", start_val)
         slow_answer, timings, done_before = timed_beside(
             lambda: client.post(f"/objects/{slow}/perceptions", json={"link_orientations_deg": [0, 0, 0]}),
             started, (
@@ -124,17 +125,40 @@ def test_a_slow_val_on_one_object_does_not_hold_the_store(db, monkeypatch):
         assert timings["health"] < 0.25, timings
 
 
+class _Slower:
+    """A VAL run (`pipeline.ValCheck`) whose verdict comes `seconds` after it began at the earliest (and, with
+    `verdict`, is that); the time it is first given is appended to `ended`."""
+
+    def __init__(self, check, seconds: float, verdict: ValidationResult | None = None,
+                 ended: list[float] | None = None) -> None:
+        self.check, self.ready_at, self.forced, self.ended = check, time.monotonic() + seconds, verdict, ended
+
+    def verdict(self, timeout_s=None):
+        wait = self.ready_at - time.monotonic()
+        if wait > 0:
+            if timeout_s is not None and timeout_s < wait:
+                time.sleep(max(timeout_s, 0.0))
+                return None
+            time.sleep(wait)
+        real = self.check.verdict(timeout_s)
+        if real is None:
+            return None
+        if self.ended is not None and not self.ended:
+            self.ended.append(time.monotonic())
+        return real if self.forced is None else self.forced
+
+    def cancel(self):
+        self.check.cancel()
+
+
 def _timed_val(monkeypatch, seconds: float, verdict: ValidationResult | None = None) -> list[float]:
     """VAL made `seconds` slower (and, with `verdict`, answering that); the times its runs end."""
-    real, ended = pipeline._run_val, []
+    real, ended = pipeline.start_val, []
 
-    def run_val(outcome, obj, n_pieces, timeout_s):
-        time.sleep(seconds)
-        result = real(outcome, obj, n_pieces, timeout_s) if verdict is None else verdict
-        ended.append(time.monotonic())
-        return result
+    def start_val(task, steps, armed=None):
+        return _Slower(real(task, steps, armed), seconds, verdict, ended)
 
-    monkeypatch.setattr(pipeline, "_run_val", run_val)
+    monkeypatch.setattr(pipeline, "start_val", start_val)
     return ended
 
 

@@ -109,15 +109,16 @@ def _tamper_once(cell: Orchestrator, monkeypatch) -> list:
     tampered: list = []
 
     def run(obj, init, goal, placement=None, deadline_at=None):
-        outcome = real(obj, init, goal, placement, deadline_at)
+        outcome, started = real(obj, init, goal, placement, deadline_at)
+        assert started is None  # absolute: VAL checks the plan in pieces, after the pipeline
         if tampered or not outcome.solved:
-            return outcome
+            return outcome, started
         k = len(outcome.steps) - 3  # in the last piece
         words = outcome.steps[k].strip("()").split()
         name = "rotateclockwise" if "anticlockwise" in words[0] else "rotateanticlockwise"
         flipped = "(" + " ".join([name] + words[1:-2] + [words[-1], words[-2]]) + ")"
         tampered.append(k + 1)
-        return replace(outcome, steps=outcome.steps[:k] + (flipped,) + outcome.steps[k + 1:])
+        return replace(outcome, steps=outcome.steps[:k] + (flipped,) + outcome.steps[k + 1:]), started
 
     monkeypatch.setattr(cell, "_run_pipeline", run)
     return tampered
