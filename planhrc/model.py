@@ -20,7 +20,7 @@ import math
 import re
 from dataclasses import dataclass
 from enum import Enum
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Iterable, Sequence
 
 from planhrc.errors import PlanhrcError
@@ -183,6 +183,10 @@ class ArticulatedObject:
         return frozenset(atoms)
 
     def static_atoms(self) -> frozenset[Atom]:
+        return self._static_atoms
+
+    @cached_property
+    def _static_atoms(self) -> frozenset[Atom]:  # worked out once per object: every state and problem holds them
         return self.connected_atoms() | self.ord_atoms() | self.affected_atoms()
 
     # -- configurations --------------------------------------------------------------------------------

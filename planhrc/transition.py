@@ -8,6 +8,7 @@ s^e_1 .. s^e_{N+1} of a plan. Inputs are never changed: states are frozensets.
 from __future__ import annotations
 
 import time
+from functools import lru_cache
 from typing import Iterator, Mapping, Sequence
 
 from planhrc.errors import PlanhrcError
@@ -180,6 +181,50 @@ def apply(state: State, action: ActionSpec) -> State:
     return frozenset((state - neg) | pos)
 
 
+class Grounder:
+    """`ground_action` for one domain, remembering the ground actions of schemas without conditional effects:
+    such a step grounds to the same action in every state where it applies, so along a plan (and across the
+    re-plans of an object) a step seen before costs a look-up and a check of its precondition, not a new
+    instantiation (relative 20 x 12 plans: 14 µs a step before). Steps of schemas with conditional effects, and
+    every step whose precondition fails (for the message), take `ground_action`'s path. Get one per domain from
+    `grounder(domain)`; it holds at most `LIMIT` steps."""
+
+    LIMIT = 50_000
+
+    def __init__(self, domain: DomainModelSpec) -> None:
+        self.domain = domain
+        self._plain = {s.name for s in domain.actions if not s.conditional_effects}
+        self._seen: dict[str, tuple[ActionSpec, frozenset[Atom], frozenset[Atom]]] = {}
+
+    def ground(self, step: str, state: State, index: StateIndex | None = None) -> ActionSpec:
+        known = self._seen.get(step)
+        if known is not None:
+            action, present, absent = known
+            if present <= state and absent.isdisjoint(state):
+                return action
+            return ground_action(self.domain, step, state, index)  # raises, naming the failing precondition
+        action = ground_action(self.domain, step, state, index)
+        if action.name in self._plain:
+            self._remember(step, action)
+        return action
+
+    def _remember(self, step: str, action: ActionSpec) -> None:
+        schema = find_schema(self.domain, action.name)
+        binding = {var: value for (var, _), value in zip(schema.parameters, action.params)}
+        # (in)equalities depend on the arguments alone: they held when the step was ground, they hold again
+        absent = frozenset(_instantiate(lit, binding) for lit in schema.precondition
+                           if lit.negated and lit.predicate != "=")
+        if len(self._seen) >= self.LIMIT:
+            self._seen.clear()
+        self._seen[step] = (action, action.pre, absent)
+
+
+@lru_cache(maxsize=8)
+def grounder(domain: DomainModelSpec) -> Grounder:
+    """The `Grounder` of a domain (one per domain value)."""
+    return Grounder(domain)
+
+
 def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_at: float | None = None
            ) -> tuple[tuple[ActionSpec, ...], tuple[State, ...]]:
     """Ground every step in turn and return the actions and the expected states s^e_1 .. s^e_{N+1}; past
@@ -187,10 +232,11 @@ def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_a
     states = [frozenset(init)]
     actions = []
     index = StateIndex(states[0]) if any(s.conditional_effects for s in domain.actions) else None
+    ground = grounder(domain).ground
     for k, step in enumerate(plan, 1):
         if deadline_at is not None and time.monotonic() > deadline_at:
             raise ReplayDeadline(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
-        action = ground_action(domain, step, states[-1], index)
+        action = ground(step, states[-1], index)
         actions.append(action)
         states.append(apply(states[-1], action))
         if index is not None:

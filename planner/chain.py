@@ -14,7 +14,7 @@ import time
 from typing import Sequence
 
 from .errors import PlannerError
-from .registry import get_planner
+from .registry import PLANNERS, get_planner
 from .result import PlannerAttempt, PlanResult, PlanStatus
 
 DEFAULT_CHAIN = ("inproc", "fd-lama")
@@ -34,15 +34,18 @@ def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeo
         raise PlannerError("planners: the chain names no planner")
     if not isinstance(timeout_s, (int, float)) or not timeout_s > 0:
         raise PlannerError(f"timeout: must be a positive number of seconds, got {timeout_s!r}")
-    backends = [get_planner(name) for name in names]  # every name checked before anything runs
+    unknown = [name for name in names if name not in PLANNERS]  # every name checked before anything runs
+    if unknown:
+        get_planner(unknown[0])  # raises, naming the known planners
     start = time.perf_counter()
     attempts: list[PlannerAttempt] = []
     last: PlanResult | None = None
-    for backend in backends:
+    for name in names:
         remaining = timeout_s - (time.perf_counter() - start)
         if remaining <= 0:
-            attempts.append(PlannerAttempt(backend.name, PlanStatus.TIMEOUT, "not tried: no time left", 0.0))
+            attempts.append(PlannerAttempt(name, PlanStatus.TIMEOUT, "not tried: no time left", 0.0))
             continue
+        backend = get_planner(name)  # built when reached: a chain the first planner ends builds no other
         result = backend.solve(domain, problem, remaining)
         attempts.append(PlannerAttempt(backend.name, result.status, result.message, result.seconds))
         last = result

@@ -62,11 +62,12 @@ def _analysed(text: str, goal_predicates: frozenset[str]) -> LiftedTask:
 
 @lru_cache(maxsize=16)
 def _recognised_cached(lifted: LiftedTask, problem_name: str, objects: tuple[tuple[str, str], ...],
-                       statics: frozenset[Atom], owners: frozenset[tuple[str, tuple[str, ...]]]) -> CyclicTask:
+                       statics: frozenset[Atom], owners: frozenset[tuple[str, tuple[str, ...]]]) -> GroundTask:
     """Keyed on the lifted task (by identity: one per domain text and goal predicates), the objects, the static
-    facts and which variables have a value."""
+    facts and which variables have a value; the ground task without a problem, whose `for_problem` tasks share
+    what the solver works out."""
     grounded = ground_lifted(lifted, problem_name, objects, statics, owners)
-    return recognise(grounded, frozenset())
+    return GroundTask(recognise(grounded, frozenset()), frozenset(), frozenset())
 
 
 def cached_ground_task(domain: str, problem: str) -> GroundTask:
@@ -74,7 +75,7 @@ def cached_ground_task(domain: str, problem: str) -> GroundTask:
     prob = parse_problem(problem)
     lifted = _analysed(domain, frozenset(a[0] for a in prob.goal))
     task = _recognised_cached(lifted, "", prob.objects, lifted.static_facts(prob.init), owner_values(lifted, prob.init))
-    return GroundTask(task, prob.init, prob.goal)
+    return task.for_problem(prob.init, prob.goal)
 
 
 class InprocPlanner:

@@ -8,7 +8,7 @@ with a message that says what was expected where.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Union
+from typing import Union, cast
 
 from .errors import PlannerError
 
@@ -224,19 +224,26 @@ def parse_problem(text: str) -> Problem:
         dup = sorted({n for n in names if names.count(n) > 1})
         raise PlannerError(f"{what} {name}: objects declared twice: {', '.join(dup)}")
     known = set(names)
-    for atom in sorted(init | goal):
-        for arg in atom[1:]:
-            if arg not in known:
-                raise PlannerError(f"{what} {name}: atom {format_sexpr(atom)} names {arg!r}, which is not an object")
+    named = {arg for atom in init for arg in atom[1:]} | {arg for atom in goal for arg in atom[1:]}
+    if not named <= known:  # name the first such atom, in a fixed order
+        for atom in sorted(init | goal):
+            for arg in atom[1:]:
+                if arg not in known:
+                    raise PlannerError(f"{what} {name}: atom {format_sexpr(atom)} names {arg!r}, which is not an "
+                                       "object")
     return Problem(name, domain_name, objects, frozenset(init), goal)
 
 
 def _ground_atom(expr: SExpr, what: str) -> Atom:
-    if not isinstance(expr, tuple) or not expr or not all(isinstance(e, str) for e in expr):
+    if not isinstance(expr, tuple) or not expr or expr[0] in _CONNECTIVES:
         raise PlannerError(f"{what}: expected a ground atom (pred obj ...), got {format_sexpr(expr)}")
-    if expr[0] in ("not", "and", "or", "=") or any(str(e).startswith("?") for e in expr):
-        raise PlannerError(f"{what}: expected a ground atom (pred obj ...), got {format_sexpr(expr)}")
-    return tuple(str(e) for e in expr)
+    for e in expr:
+        if not isinstance(e, str) or e.startswith("?"):
+            raise PlannerError(f"{what}: expected a ground atom (pred obj ...), got {format_sexpr(expr)}")
+    return cast(Atom, expr)  # a tuple of names, checked above
+
+
+_CONNECTIVES = frozenset({"not", "and", "or", "="})
 
 
 def _goal_atoms(expr: SExpr, what: str) -> frozenset[Atom]:

@@ -303,3 +303,26 @@ def test_same_task_gives_the_same_plan():
     again = InprocPlanner().solve(DOMAINS["absolute-paper"], shuffled, 5.0)
     task = ground_task(DOMAINS["absolute-paper"], problem)
     assert first.plan == again.plan == task.solve_problem().plan == task.solve_problem().plan
+
+
+@pytest.mark.parametrize("formulation", ["relative", "absolute"])
+def test_problems_of_one_task_share_what_the_solver_works_out_and_plan_as_a_fresh_task(formulation):
+    """`cached_ground_task` hands out tasks that share the recognised task's memo (chains, the transforms' views):
+    each plans exactly what a task grounded afresh from the same text plans, partial goals included."""
+    from planhrc.planner.inproc import cached_ground_task
+
+    obj, _, goal, _ = make_case(formulation, 12, 8, seed=5)
+    rng = random.Random(5)
+    memos = []
+    for _ in range(15):
+        init = [rng.choice(obj.orientation_degrees) for _ in obj.joint_indices]
+        atoms = {("hasorientation", f"deg_{v}", obj.joint(j)) for j, v in goal.items()}
+        partial = {a for a in atoms if rng.random() < 0.8} or atoms
+        text = get_problem(obj, obj.configuration_atoms(init), partial, "p")
+        task = cached_ground_task(DOMAINS[formulation], text)
+        memos.append(task.memo)
+        got, fresh = task.solve_problem(), ground_task(DOMAINS[formulation], text).solve_problem()
+        assert (got.status, got.plan, got.message, got.optimal) == (fresh.status, fresh.plan, fresh.message,
+                                                                    fresh.optimal)
+        assert got.status is PlanStatus.SOLVED
+    assert all(m is memos[0] for m in memos)

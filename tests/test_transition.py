@@ -130,3 +130,37 @@ def test_replay_stops_at_its_deadline_without_a_result():
     with pytest.raises(ReplayDeadline, match="after 0 of 1 steps"):
         replay(domain, obj.state([0, 0, 0]), ["(rotateclockwise o_l2 o_l1 o_j2 deg_0 deg_90)"],
                deadline_at=time.monotonic() - 1.0)
+
+
+def test_a_remembered_step_grounds_as_a_fresh_one_and_is_still_refused_where_it_does_not_apply():
+    """`Grounder` remembers the ground actions of schemas without conditional effects: the same action as
+    `ground_action`, and a remembered step whose precondition fails is refused as before, naming it."""
+    from planhrc.transition import Grounder, ground_action
+
+    obj = make_object("o", "relative", 4, 4)
+    domain = read_domain_model(default_tbox_path(), "relative")
+    grounder = Grounder(domain)
+    state = obj.state([0, 90, 180])
+    step = "(rotateclockwise o_l3 o_l2 o_j2 deg_90 deg_180)"
+    first = grounder.ground(step, state)
+    again = grounder.ground(step, state)
+    assert first == again == ground_action(domain, step, state)
+    moved = apply(state, first)  # j2 is at 180 now: the same step no longer applies
+    with pytest.raises(TransitionError, match="precondition"):
+        grounder.ground(step, moved)
+    rng = random.Random(3)
+    for _ in range(200):  # random steps in random states: remembered or not, the same answer as a fresh one
+        values = [rng.choice([0, 90, 180, 270]) for _ in range(3)]
+        k = rng.randrange(1, 4)
+        now = values[k - 1]
+        then = rng.choice([0, 90, 180, 270])
+        name = rng.choice(["rotateclockwise", "rotateanticlockwise"])
+        text = f"({name} o_l{k + 1} o_l{k} o_j{k} deg_{now} deg_{then})"
+        s = obj.state(values)
+        try:
+            expected = ground_action(domain, text, s)
+        except TransitionError as exc:
+            with pytest.raises(TransitionError, match=str(exc).split(":")[0]):
+                grounder.ground(text, s)
+            continue
+        assert grounder.ground(text, s) == expected

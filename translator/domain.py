@@ -9,6 +9,7 @@ every list is ordered by the `position` the TBox gives it.
 from __future__ import annotations
 
 import io
+import os
 from functools import lru_cache
 from pathlib import Path
 from typing import TextIO, cast
@@ -88,8 +89,16 @@ class _TBox:
 
 
 def read_domain_model(tbox_path: Path | str, formulation: str) -> DomainModelSpec:
-    """The DomainModel individual `<formulation>_domain` of the TBox, as an immutable value."""
-    return _read_domain_model_cached(str(Path(tbox_path).resolve()), Path(tbox_path).stat().st_mtime_ns, formulation)
+    """The DomainModel individual `<formulation>_domain` of the TBox, as an immutable value (read again when the
+    file changes)."""
+    path = os.fspath(tbox_path)
+    return _read_domain_model_cached(_resolved(path), os.stat(path).st_mtime_ns, formulation)
+
+
+@lru_cache(maxsize=32)
+def _resolved(path: str) -> str:
+    """The file's absolute path (resolved once per name: every re-plan reads the model)."""
+    return str(Path(path).resolve())
 
 
 @lru_cache(maxsize=8)

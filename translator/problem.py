@@ -29,10 +29,13 @@ def write_problem(
         raise TranslationError("goal: the goal state asserts no predicate")
     objects = {"link": obj.all_links, "joint": obj.joints, "orientation": obj.orientation_names}
     known = {name for names in objects.values() for name in names}
-    for atom in sorted(init_atoms | frozenset(goal_atoms)):
-        for arg in atom[1:]:
-            if arg not in known:
-                raise TranslationError(f"state: atom {format_atom(atom)} names {arg!r}, which is not part of {obj.ident}")
+    every = init_atoms | frozenset(goal_atoms)
+    if not {arg for atom in every for arg in atom[1:]} <= known:  # name the first such atom, in a fixed order
+        for atom in sorted(every):
+            for arg in atom[1:]:
+                if arg not in known:
+                    raise TranslationError(f"state: atom {format_atom(atom)} names {arg!r}, which is not part of "
+                                           f"{obj.ident}")
     for atom in goal_atoms:
         if atom[0] != HAS_ORIENTATION:
             raise TranslationError(f"goal: only hasorientation atoms may be goals, got {format_atom(atom)}")
