@@ -85,11 +85,14 @@ SAME_OBJECT = {"object_id": "$request.path.object_id"}
 
 
 # -- dependencies -----------------------------------------------------------------------------------------
-def get_orchestrator(request: Request) -> Orchestrator:
+# Both are `async def`: they do no I/O and return at once, and FastAPI runs a plain `def` dependency on its thread
+# pool, a trip there and back before the handler's own (a re-planning perception: 0.83 ms from the request's
+# arrival to its handler with two such dependencies).
+async def get_orchestrator(request: Request) -> Orchestrator:
     return request.app.state.orchestrator
 
 
-def require_writer(request: Request, authorization: Annotated[str | None, Header()] = None) -> None:
+async def require_writer(request: Request, authorization: Annotated[str | None, Header()] = None) -> None:
     """Every request that changes something needs the bearer token when one is configured."""
     check_bearer(request.app.state.settings.token, authorization)
 

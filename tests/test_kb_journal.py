@@ -131,3 +131,21 @@ def test_readers_of_the_triples_see_a_plan_just_adopted():
         _, problem, actions, states = _object_with_problem(kb)
         plan = kb.add_plan(problem.id, "inproc", actions, states)
         assert f"<{ABOX_IRI}{plan.actions[0].id}>" in kb.export("nt").decode()
+
+
+def test_a_row_holds_the_expected_states_as_changes_and_rows_of_the_layout_before_are_read():
+    """The row keeps the first expected state and each next one's dropped and added atoms (a few atoms a step),
+    and decodes to the same plan; a row written whole by the layout before is still read."""
+    import pickle
+
+    obj = make_object("obj1", "relative", 20, 12)
+    start = obj.state([0] * 19)
+    actions, states = plan_for(obj, start, [(k, k % 2 == 0) for k in range(1, 19)] * 2)
+    entry = JournalEntry("obj1_plan_3", "obj1", "obj1_problem_2", "inproc", 12.5, 7, tuple(actions), tuple(states))
+    row = encode(entry)
+    assert decode(row) == entry
+    whole = pickle.dumps((journal.WHOLE_STATES, *pickle.loads(row)[1:8], tuple(states)), protocol=5)
+    assert decode(whole) == entry
+    assert len(row) < len(whole) / 2, (len(row), len(whole))
+    with pytest.raises(ValueError, match="unknown layout"):
+        decode(pickle.dumps((99, "x")))

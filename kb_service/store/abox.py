@@ -133,6 +133,7 @@ class _ObjectInfo:
             (HAS_ORIENTATION, o, j): atom_fragment(obj, obj.ident, (HAS_ORIENTATION, o, j))
             for j in obj.joints for o in obj.orientation_names
         }
+        self.orientation_atoms = frozenset(self.orientation_atom_name)
 
 
 class _Batch:
@@ -561,8 +562,16 @@ class Abox:
             raise ValidationError(f"{field}: expected a frozenset of atoms, got {type(atoms).__name__}")
         if not atoms:
             raise ValidationError(f"{field}: a state needs at least one atom")
-        by_joint: dict[str, Atom] = {}
         static = info.static
+        # The common case in a few set operations: every atom is a static fact or a well-formed hasorientation
+        # atom of the object, one per joint (a complete state: every joint). Anything else takes the path below,
+        # which finds the first error in a fixed order.
+        rest_set = frozenset(atoms) - static
+        if rest_set <= info.orientation_atoms:
+            by_joint = {atom[2]: atom for atom in rest_set}
+            if len(by_joint) == len(rest_set) and (kind not in COMPLETE_KINDS or len(by_joint) == len(info.joints)):
+                return by_joint
+        by_joint = {}
         # Static facts of the object are valid by construction; only the rest needs checking. Sorting the rest
         # makes the first error reported the same on every run.
         well_formed = info.orientation_atom_name
