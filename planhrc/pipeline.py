@@ -326,17 +326,64 @@ def validate(outcome: PlanOutcome, obj: ArticulatedObject | None = None, config:
                     lambda: replace(outcome, validated=True, validated_steps=len(outcome.steps)), "the plan")
 
 
-def validate_first(outcome: PlanOutcome, piece: ValPiece, config: PlanningConfig | None = None,
-                   deadline_at: float | None = None) -> PlanOutcome:
-    """VAL on the first piece of the plan only (`early_pieces`): the outcome with `validated_steps` = the piece's
-    last step (the rest of the plan is *not* validated: the caller checks the later pieces before using their
-    steps), or an invalid or `timeout` outcome as in `validate`."""
+def validate_first(outcome: PlanOutcome, pieces: Sequence[ValPiece], config: PlanningConfig | None = None,
+                   deadline_at: float | None = None, armed: ArmedValidators | None = None) -> PlanOutcome:
+    """VAL on the plan's first pieces only (`early_pieces`: the first motion, in one or more pieces checked at
+    once): the outcome with `validated_steps` = the last piece's last step (the rest of the plan is *not*
+    validated: the caller checks the later pieces before using their steps), or an invalid or `timeout` outcome
+    as in `validate`. `start_pieces` then `finish_first`, for a caller with work to do meanwhile."""
     if not outcome.solved or not outcome.actions or outcome.validated or outcome.task is None:
         return outcome
-    task = outcome.task
-    return _checked(outcome, config, deadline_at,
-                    lambda left: validate_plan(task.validation_domain, piece.problem, piece.steps, left),
-                    lambda: replace(outcome, validated_steps=piece.last), f"its first {piece.last} steps")
+    checks = start_pieces(outcome.task, pieces, armed)
+    return finish_first(outcome, pieces, checks, config, deadline_at)
+
+
+def start_pieces(task: PddlTask, pieces: Sequence[ValPiece], armed: ArmedValidators | None = None
+                 ) -> tuple[ValCheck, ...]:
+    """One VAL run per piece, all started now (on armed processes when given), against the paper's exact domain."""
+    checks: list[ValCheck] = []
+    try:
+        for piece in pieces:
+            checks.append(armed.start(task.validation_domain, piece.problem, piece.steps) if armed is not None
+                          else start_validation(task.validation_domain, piece.problem, piece.steps))
+    except BaseException:
+        for check in checks:
+            check.cancel()
+        raise
+    return tuple(checks)
+
+
+def finish_first(outcome: PlanOutcome, pieces: Sequence[ValPiece], checks: Sequence[ValCheck],
+                 config: PlanningConfig | None, deadline_at: float | None) -> PlanOutcome:
+    """The outcome once VAL has answered on every first piece (`start_pieces`): `validated_steps` up to the last
+    one when all accepted, else invalid naming the piece VAL refused (the others stopped), or `timeout` at the
+    deadline."""
+    deadline_at = deadline_at if deadline_at is not None else (
+        deadline_from(config) if config is not None else time.monotonic() + 60.0)
+    what = f"its first {pieces[-1].last} steps"
+    t = time.perf_counter()
+    try:
+        for i, check in enumerate(checks, start=1):
+            verdict = _wait_verdict(check, deadline_at)
+            if verdict is None:
+                return _val_timeout(outcome, config, what, "VAL did not answer in time", time.perf_counter() - t)
+            if not verdict.valid:
+                reason = verdict.reason if len(checks) == 1 else f"piece {i} of {len(checks)}: {verdict.reason}"
+                return _judged(outcome, ValidationResult(False, reason, verdict.seconds), time.perf_counter() - t,
+                               lambda: outcome, what)
+    finally:
+        for check in checks:
+            check.cancel()  # a run that answered is only cleaned up; one still running is stopped
+    return _judged(outcome, ValidationResult(True, "Plan valid", 0.0), time.perf_counter() - t,
+                   lambda: replace(outcome, validated_steps=pieces[-1].last), what)
+
+
+def _wait_verdict(check: ValCheck, until: float) -> ValidationResult | None:
+    """VAL's answer, waited for until `until` (`time.monotonic()`), else None."""
+    verdict = check.verdict(max(0.0, until - time.monotonic()))
+    while verdict is None and time.monotonic() < until:  # a wait may end a little early
+        verdict = check.verdict(max(0.0, until - time.monotonic()))
+    return verdict
 
 
 def _checked(outcome: PlanOutcome, config: PlanningConfig | None, deadline_at: float | None,
@@ -405,9 +452,7 @@ def finish_val(outcome: PlanOutcome, check: ValCheck, config: PlanningConfig | N
         return outcome
     t = time.perf_counter()
     until = deadline_at if timeout_s is None else min(deadline_at, time.monotonic() + timeout_s)
-    verdict = check.verdict(max(0.0, until - time.monotonic()))
-    while verdict is None and time.monotonic() < until:  # a wait may end a little early
-        verdict = check.verdict(max(0.0, until - time.monotonic()))
+    verdict = _wait_verdict(check, until)
     if verdict is None:
         if _left(deadline_at) > 0:
             return None
@@ -464,23 +509,30 @@ class ValPiece:
     steps: tuple[str, ...]
 
 
-def piece_bounds(n_steps: int, n_pieces: int, first_steps: int | None = None) -> list[tuple[int, int]]:
+def piece_bounds(n_steps: int, n_pieces: int, first_steps: int | None = None, first_parts: int = 1
+                 ) -> list[tuple[int, int]]:
     """The pieces of a plan of `n_steps` steps as 0-based half-open (start, end) step ranges: `n_pieces` of
-    nearly equal length, none shorter than MIN_PIECE_STEPS unless the plan is; with `first_steps`, a first piece
-    of that many steps, then the rest cut the same way."""
+    nearly equal length, none shorter than MIN_PIECE_STEPS unless the plan is; with `first_steps`, the first
+    `first_steps` steps as `first_parts` pieces of nearly equal length (at least one step each: they are checked
+    at once before an answer, where VAL's cost per step matters more than its fixed cost), then the rest cut the
+    same way."""
     if first_steps is not None and 0 < first_steps < n_steps:
         rest = piece_bounds(n_steps - first_steps, n_pieces)
-        return [(0, first_steps)] + [(first_steps + a, first_steps + b) for a, b in rest]
+        parts = max(1, min(first_parts, first_steps))
+        cuts = [round(i * first_steps / parts) for i in range(parts + 1)]
+        return ([(cuts[i], cuts[i + 1]) for i in range(parts)]
+                + [(first_steps + a, first_steps + b) for a, b in rest])
     n = min(n_pieces, max(1, n_steps // MIN_PIECE_STEPS))
     cuts = [round(i * n_steps / n) for i in range(n + 1)]
     return [(cuts[i], cuts[i + 1]) for i in range(n)]
 
 
-def early_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int, first_steps: int | None = None
-                 ) -> tuple[ValPiece, ...]:
-    """The pieces of `validation_pieces`, with their step ranges."""
+def early_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int, first_steps: int | None = None,
+                 first_parts: int = 1) -> tuple[ValPiece, ...]:
+    """The pieces of `validation_pieces` (the first `first_steps` in `first_parts` pieces), with their step
+    ranges."""
     assert outcome.task is not None
-    bounds = piece_bounds(len(outcome.steps), n_pieces, first_steps)
+    bounds = piece_bounds(len(outcome.steps), n_pieces, first_steps, first_parts)
     return tuple(piece_of(obj, outcome.task.problem, outcome.steps, outcome.expected_states, a + 1, b)
                  for a, b in bounds)
 

@@ -112,16 +112,19 @@ class _Armed:
 
 
 class ArmedValidators:
-    """VAL processes armed per domain for `start` to use; `close()` stops them (the service's shutdown).
+    """VAL processes armed per domain for `start` to use, `per_domain` of each (a plan's first motion may be
+    checked in that many pieces at once); `close()` stops them (the service's shutdown).
 
     Thread-safe: requests of several objects may start checks at once; one background thread arms."""
 
-    def __init__(self, arm_delay_s: float = ARM_DELAY_S, max_domains: int = MAX_DOMAINS) -> None:
+    def __init__(self, arm_delay_s: float = ARM_DELAY_S, max_domains: int = MAX_DOMAINS, per_domain: int = 2
+                 ) -> None:
         self.arm_delay_s = arm_delay_s
         self.max_domains = max_domains
+        self.per_domain = max(1, per_domain)
         self.supported = os.name == "posix" and os.path.isdir("/proc/self/fd") and hasattr(os, "mkfifo")
         self._lock = threading.Condition()
-        self._armed: OrderedDict[str, _Armed | None] = OrderedDict()  # domain -> its armed run (None: to arm)
+        self._armed: OrderedDict[str, list[_Armed]] = OrderedDict()  # domain -> its armed runs, most recent last
         self._closed = False
         self._thread: threading.Thread | None = None
         self._folder: str | None = None  # made with the first armed process, removed by close()
@@ -129,21 +132,23 @@ class ArmedValidators:
         self.counts = {"armed": 0, "cold": 0}  # checks started on an armed process, and cold ones
 
     def start(self, domain: str, problem: str, plan: Sequence[str], *, nice: int = 0) -> ValRun:
-        """A VAL run on the plan, on the armed process of `domain` when there is one ready, else started cold;
-        either way another is armed for `domain` for the next check."""
+        """A VAL run on the plan, on an armed process of `domain` when there is one ready, else started cold;
+        either way `domain` is armed again for the next checks."""
         if not self.supported:
             return start_validation(domain, problem, plan, nice=nice)
         with self._lock:
             if self._closed:
                 return start_validation(domain, problem, plan, nice=nice)
-            armed = self._armed.pop(domain, None)
-            self._armed[domain] = None  # (re)arm it, most recently used
+            ready = self._armed.pop(domain, [])
+            armed = ready.pop(0) if ready else None
+            self._armed[domain] = ready  # most recently used; the arming thread fills it up again
+            dropped: list[_Armed] = []
             while len(self._armed) > self.max_domains:
-                _, dropped = self._armed.popitem(last=False)
-                if dropped is not None:
-                    dropped.discard()
+                dropped.extend(self._armed.popitem(last=False)[1])
             self._start_thread()
             self._lock.notify_all()
+        for old in dropped:
+            old.discard()
         if armed is not None:
             if armed.ready():
                 try:
@@ -165,16 +170,19 @@ class ArmedValidators:
             self._thread = threading.Thread(target=self._arm_loop, name="planhrc-val-armer", daemon=True)
             self._thread.start()
 
+    def _missing(self) -> list[str]:
+        return [d for d, runs in self._armed.items() for _ in range(self.per_domain - len(runs))]
+
     def _arm_loop(self) -> None:
         while True:
             with self._lock:
-                while not self._closed and all(a is not None for a in self._armed.values()):
+                while not self._closed and not self._missing():
                     self._lock.wait()
                 if self._closed:
                     return
             time.sleep(self.arm_delay_s)  # let the request that used the last one finish first
             with self._lock:
-                wanted = [d for d, a in self._armed.items() if a is None]
+                wanted = self._missing()
             for domain in wanted:
                 try:
                     if self._folder is None:
@@ -188,24 +196,25 @@ class ArmedValidators:
                         self._armed.pop(domain, None)
                     continue
                 with self._lock:
-                    if self._closed or domain not in self._armed or self._armed[domain] is not None:
-                        keep = False
-                    else:
-                        self._armed[domain] = armed
-                        keep = True
+                    runs = self._armed.get(domain)
+                    keep = not self._closed and runs is not None and len(runs) < self.per_domain
+                    if keep and runs is not None:
+                        runs.append(armed)
                 if not keep:
                     armed.discard()
 
-    def armed_domains(self) -> int:
-        """How many domains have a VAL process armed now."""
+    def armed_count(self, domain: str | None = None) -> int:
+        """How many VAL processes are armed now (for `domain`, or for every domain)."""
         with self._lock:
-            return sum(1 for a in self._armed.values() if a is not None)
+            if domain is not None:
+                return len(self._armed.get(domain, ()))
+            return sum(len(runs) for runs in self._armed.values())
 
     def close(self) -> None:
         """Stop arming and end every armed process."""
         with self._lock:
             self._closed = True
-            armed = [a for a in self._armed.values() if a is not None]
+            armed = [a for runs in self._armed.values() for a in runs]
             self._armed.clear()
             self._lock.notify_all()
             thread = self._thread

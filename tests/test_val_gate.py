@@ -79,8 +79,11 @@ def test_the_answer_comes_once_the_first_piece_is_accepted_and_a_later_step_wait
         assert answer["decision"] == "replan" and answer["next_action"]["step"] == 1
         event = adoption(kb, oid, answer["plan_id"])
         pieces = event.data["val_pieces"]
-        assert pieces[0] == [1, answer["next_action"]["last_step"]]  # the first piece: the first motion
-        assert event.data["val_accepted"] == [1] and len(pieces) >= 2
+        accepted = event.data["val_accepted"]
+        first = pieces[:len(accepted)]  # the first motion, in pieces checked at once before the answer
+        assert accepted == list(range(1, len(accepted) + 1)) and len(pieces) > len(accepted)
+        assert first[0][0] == 1 and first[-1][1] == answer["next_action"]["last_step"]
+        assert all(b + 1 == c for (_, b), (c, _) in zip(pieces, pieces[1:]))  # consecutive, nothing left out
         assert pieces[-1][1] == len(cell.describe_plan(answer["plan_id"])["steps"])
         assert "are checked before they are dispatched" in answer["reason"]
         assert kinds(kb, oid, "val_verdict") == []  # answered while VAL still holds the later pieces
@@ -96,10 +99,10 @@ def test_the_answer_comes_once_the_first_piece_is_accepted_and_a_later_step_wait
         assert perceiving.is_alive(), "a step of a piece VAL has not decided on must wait for the verdict"
         held_back.set()
         perceiving.join(60)
-        assert result["decision"] == "continue" and result["next_action"]["step"] == pieces[1][0]
+        assert result["decision"] == "continue" and result["next_action"]["step"] == pieces[len(accepted)][0]
         verdicts = kinds(kb, oid, "val_verdict")
         decided = next(e for e in reversed(kb.list_events(oid)) if e.kind == "continue")
-        assert any(v.data["piece"] == 2 and v.data["verdict"] == "accepted" and v.seq < decided.seq
+        assert any(v.data["piece"] == len(accepted) + 1 and v.data["verdict"] == "accepted" and v.seq < decided.seq
                    for v in verdicts)
 
 
@@ -166,6 +169,7 @@ def test_after_a_restart_a_step_whose_verdict_was_not_recorded_is_checked_by_val
         oid = new_object(cell)
         answer = cell.handle_perception(oid, START)
         plan_id = answer["plan_id"]
+        accepted = len(adoption(kb, oid, plan_id).data["val_accepted"])
         action = cell.take_next_action(oid)
         cell.handle_feedback(oid, action["id"], "succeeded")
         assert kinds(kb, oid, "val_verdict") == []
@@ -179,7 +183,7 @@ def test_after_a_restart_a_step_whose_verdict_was_not_recorded_is_checked_by_val
         assert decided["decision"] == "continue" and decided["plan_id"] == plan_id
         step = decided["next_action"]["step"]
         verdicts = kinds(kb, oid, "val_verdict")
-        assert [(v.data["piece"], v.data["verdict"]) for v in verdicts] == [(2, "accepted")]
+        assert [(v.data["piece"], v.data["verdict"]) for v in verdicts] == [(accepted + 1, "accepted")]
         assert verdicts[0].data["first_step"] <= step <= verdicts[0].data["last_step"]
         continued = [e for e in kb.list_events(oid) if e.kind == "continue"][-1]
         assert verdicts[0].seq < continued.seq
@@ -210,9 +214,11 @@ def test_the_early_answer_on_the_planning_pool_path(tmp_path):
         oid = new_object(cell)
         answer = cell.handle_perception(oid, START)
         assert answer["decision"] == "replan" and pool.pids()
-        pieces = adoption(kb, oid, answer["plan_id"]).data["val_pieces"]
+        event = adoption(kb, oid, answer["plan_id"]).data
+        pieces, accepted = event["val_pieces"], event["val_accepted"]
+        assert len(accepted) == 2  # the first motion of this plan has several steps: two pieces at once
         deadline = time.monotonic() + 60
-        while len(kinds(kb, oid, "val_verdict")) < len(pieces) - 1:
+        while len(kinds(kb, oid, "val_verdict")) < len(pieces) - len(accepted):
             assert time.monotonic() < deadline
             time.sleep(0.05)
         assert all(v.data["verdict"] == "accepted" for v in kinds(kb, oid, "val_verdict"))
@@ -224,6 +230,8 @@ def test_piece_bounds_put_the_first_motion_alone_then_cut_the_rest():
     assert pipeline.piece_bounds(40, 2) == [(0, 20), (20, 40)]
     assert pipeline.piece_bounds(10, 2, 3) == [(0, 3), (3, 10)]  # the rest is too short to cut again
     assert pipeline.piece_bounds(3, 2, 3) == [(0, 3)]
+    assert pipeline.piece_bounds(40, 2, 5, 2) == [(0, 2), (2, 5), (5, 23), (23, 40)]  # the first motion in two
+    assert pipeline.piece_bounds(40, 2, 1, 2) == [(0, 1), (1, 21), (21, 40)]  # one step: one piece
 
 
 def test_the_first_motion_is_the_first_run_of_merged_steps():

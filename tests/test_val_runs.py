@@ -89,9 +89,9 @@ def test_a_started_run_is_kept_off_the_callers_cpu_until_the_caller_waits():
 
 
 def _armed_once(armed: ArmedValidators, domain: str) -> None:
-    """Wait until `armed` holds a process for `domain` that waits for its problem."""
+    """Wait until `armed` holds its processes for `domain`, each waiting for its problem."""
     deadline = time.monotonic() + 20
-    while armed.armed_domains() < 1:
+    while armed.armed_count(domain) < armed.per_domain:
         assert time.monotonic() < deadline, "no VAL process was armed"
         time.sleep(0.01)
 
@@ -121,13 +121,14 @@ def test_closing_ends_every_armed_process_and_removes_its_files():
     armed = ArmedValidators(arm_delay_s=0.0)
     armed.start(DOMAIN, problem, plan).verdict(None)
     _armed_once(armed, DOMAIN)
-    pids = [a.proc.pid for a in armed._armed.values() if a is not None]
+    pids = [a.proc.pid for runs in armed._armed.values() for a in runs]
+    assert len(pids) == armed.per_domain
     assert pids and all(_alive(p) for p in pids)
     armed.close()
     assert not any(_alive(p) for p in pids)
     assert _scratch_files() == before
     assert armed.start(DOMAIN, problem, plan).verdict(None).valid  # after close: cold runs, nothing armed again
-    assert armed.armed_domains() == 0
+    assert armed.armed_count() == 0
 
 
 def test_an_armed_process_that_died_is_replaced_by_a_cold_run():
@@ -136,9 +137,10 @@ def test_an_armed_process_that_died_is_replaced_by_a_cold_run():
     try:
         armed.start(DOMAIN, problem, plan).verdict(None)
         _armed_once(armed, DOMAIN)
-        for a in armed._armed.values():
-            os.kill(a.proc.pid, signal.SIGKILL)
-            a.proc.wait()
+        for runs in armed._armed.values():
+            for a in runs:
+                os.kill(a.proc.pid, signal.SIGKILL)
+                a.proc.wait()
         assert armed.start(DOMAIN, problem, plan[:-1]).verdict(None).valid is False
         assert armed.counts["cold"] == 2 and armed.counts["armed"] == 0
     finally:
@@ -157,9 +159,9 @@ def test_an_armed_process_does_not_outlive_its_owner_killed_with_sigkill(tmp_pat
         problem = Path({str(tmp_path / "p.pddl")!r}).read_text()
         armed = ArmedValidators(arm_delay_s=0.0)
         armed.start(domain, problem, {plan!r}).verdict(None)
-        while armed.armed_domains() < 1:
+        while armed.armed_count() < armed.per_domain:
             time.sleep(0.01)
-        print(*[a.proc.pid for a in armed._armed.values() if a is not None], flush=True)
+        print(*[a.proc.pid for runs in armed._armed.values() for a in runs], flush=True)
         time.sleep(60)
     """)
     owner = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
