@@ -164,3 +164,31 @@ def test_a_remembered_step_grounds_as_a_fresh_one_and_is_still_refused_where_it_
                 grounder.ground(text, s)
             continue
         assert grounder.ground(text, s) == expected
+
+
+def test_a_step_with_conditional_effects_grounds_as_a_fresh_one_in_every_state_and_for_other_static_facts():
+    """`Grounder` keeps a conditional step's bindings the static facts allow and checks only the fluents per
+    state: the same action as `ground_action` along random plans, for two objects of different sizes (other static
+    facts), and a step whose precondition fails is refused."""
+    from planhrc.transition import Grounder, ground_action
+
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    grounder = Grounder(domain)
+    rng = random.Random(8)
+    for links in (4, 6, 4):
+        obj = make_object("o", "absolute", links, 8)
+        state = obj.state([rng.choice(obj.orientation_degrees) for _ in obj.joint_indices])
+        statics = grounder.statics(state)
+        for _ in range(120):
+            k = rng.randrange(1, links + 1)
+            now = obj.joint_values_of(state)[k]
+            clockwise = rng.random() < 0.5
+            then = (now + (45 if clockwise else -45)) % 360
+            name = "rotateclockwise" if clockwise else "rotateanticlockwise"
+            step = f"({name} o_l{k} o_l{k - 1} o_j{k} deg_{now} deg_{then})"
+            fresh = ground_action(domain, step, state)
+            assert grounder.ground(step, state, statics=statics) == fresh
+            assert grounder.ground(step, state) == fresh  # without the caller's statics too
+            state = apply(state, fresh)
+        with pytest.raises(TransitionError, match="precondition"):
+            grounder.ground(step, state, statics=statics)  # the last step again: its joint has moved on
