@@ -520,7 +520,8 @@ class Orchestrator:
         geometric checks)."""
         if base is None:
             return None
-        return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg))
+        return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.snapped_deg),
+                         whole_turn_deg=_whole_turn_deg(obj))
 
     def _validate_and_check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float,
                             started: pipeline.ValCheck | None = None
@@ -742,7 +743,8 @@ class Orchestrator:
             if len(seen) != obj.n_links:  # not a perceived state with its observation: the plan's own view
                 seen = tuple(float(v) for v in obj.link_orientations_of(perceived.atoms))
             geometry = ObjectGeometry.of(obj, base)
-            help_items = help_for(Placement(geometry, seen), moves, None, why=_failure_words(self._memo(obj.ident)))
+            help_items = help_for(Placement(geometry, seen, whole_turn_deg=_whole_turn_deg(obj)), moves, None,
+                                  why=_failure_words(self._memo(obj.ident)))
             self.kb.set_execution(obj.ident, Execution(plan.id, decision.next_step, IDLE, None))
             answer = _answer(DecisionKind.HUMAN_HELP_REQUESTED, plan.id, perceived.id, None,
                              decision.matched_expected_step, decision.reason)
@@ -1120,6 +1122,12 @@ def _other_way(obj: ArticulatedObject, moves: Sequence[Move], failure: FailureHi
     first = moves.index(group[0])
     rest = [m for m in moves if (m.joint, m.turned) != (failure.joint, failure.turned)]
     return rest[:first] + turned_back + rest[first:]
+
+
+def _whole_turn_deg(obj: ArticulatedObject) -> int:
+    """The step by which a human may turn the whole object without changing its state (`Placement`): relative
+    objects only, whose states do not say where l1 points."""
+    return obj.step if obj.formulation is Formulation.RELATIVE else 0
 
 
 def _failure_words(memo: _ObjectMemo) -> str | None:

@@ -619,11 +619,12 @@ def _run_bench(args: argparse.Namespace) -> int:
                                         http=not args.no_http)
         table = replan_table(extra["replan"])
         print(table)
-    if args.replan_only:
+    if args.replan or args.replan_only:  # its own files too: the README's re-planning table is read from them
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / "replan.json").write_text(json.dumps(extra["replan"], indent=2))
         (out_dir / "replan.md").write_text(table + "\n")
         print(f"wrote {out_dir / 'replan.json'}, {out_dir / 'replan.md'}")
+    if args.replan_only:
         return 0
     instances = make_instances(args.links, args.orientations, args.instances)
     rows = run_grid(planners, formulations, instances, args.timeout, not args.no_validate, not args.no_progress)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 from planhrc.geometry import (PLANNING, STRICT, Cell, Feasibility, Infeasibility, ObjectGeometry, Tolerance,
@@ -62,6 +62,10 @@ class Placement:
     geometry: ObjectGeometry
     link_deg: tuple[float, ...]
     cell: Cell = field(default_factory=Cell)
+    # The step (degrees) by which a human may turn the whole object about its base point without changing its
+    # state: the relative formulation, whose states fix the links' angles to each other, not where l1 points
+    # (a human turned it, say); 0: never (the absolute formulation's goals fix every link's orientation).
+    whole_turn_deg: int = 0
 
 
 @dataclass(frozen=True)
@@ -240,7 +244,16 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
     which is feasible. `why` (else the obstacle) is said in each sentence."""
     if not moves:
         return ()
-    _, final = final_configuration(placement, moves)
+    end, final = final_configuration(placement, moves)
+    turn = _whole_turn(placement, end, final)
+    if turn:  # the plan's end does not lie on the table where the object points now: turn it as a whole first
+        turned_start = rotated(placement.geometry, placement.link_deg, 1, 0, turn)[1]
+        to = int(round(turned_start[0])) % 360
+        problem_there = configuration_feasible(end, final, placement.cell, reach_links=()).reasons[0].message
+        first = HelpItem(1, to, f"turn link 1 to {to}° and the whole object with it, about its base point "
+                                f"(pointing as it does now, the plan's end would not lie on the table: {problem_there})")
+        rest = help_for(replace(placement, link_deg=turned_start, whole_turn_deg=0), moves, problem, why)
+        return (first,) + tuple(item for item in rest if item.link != 1)
     start = tuple(float(a) % 360.0 for a in placement.link_deg)
     changed = [k for k in range(1, len(final) + 1) if round(final[k - 1]) % 360 != round(start[k - 1]) % 360]
     named = [k for k in (problem.links if problem is not None else ()) if k in changed]
@@ -253,6 +266,33 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
         to = int(round(final[k - 1])) % 360
         items.append(HelpItem(k, to, f"turn link {k} to {to}°{why}"))
     return tuple(items)
+
+
+def _whole_turn(placement: Placement, end: ObjectGeometry, final: Sequence[float]) -> float:
+    """For an object a human may turn as a whole (`Placement.whole_turn_deg`) whose plan ends off the table, in
+    the robot or folded (as drawn): the smallest turn of it, in whole steps, after which the plan's end is feasible
+    for a human (reach aside) and the object, turned where it lies now, no worse off than now; 0 when the end is
+    feasible, or no turn makes it so."""
+    step = placement.whole_turn_deg
+    if step <= 0 or configuration_feasible(end, final, placement.cell, reach_links=()).ok:
+        return 0.0
+    for k in range(1, 360 // step // 2 + 1):
+        for turn in (k * step, -k * step):
+            if not configuration_feasible(*rotated(end, final, 1, 0, turn), placement.cell, reach_links=()).ok:
+                continue
+            if _no_worse(placement, *rotated(placement.geometry, placement.link_deg, 1, 0, turn)):
+                return float(turn)
+    return 0.0
+
+
+def _no_worse(placement: Placement, geometry: ObjectGeometry, angles: Sequence[float]) -> bool:
+    """Whether the object placed as `geometry` with `angles` has no problem (reach aside) that it does not have
+    where it lies now (`placement`), or has it worse (a link further past the edge)."""
+    now = {(r.code, r.link): r.distance_m
+           for r in configuration_feasible(placement.geometry, placement.link_deg, placement.cell,
+                                           reach_links=()).reasons}
+    return all((r.code, r.link) in now and r.distance_m <= now[(r.code, r.link)] + 1e-3
+               for r in configuration_feasible(geometry, angles, placement.cell, reach_links=()).reasons)
 
 
 def _safe_for_a_human(placement: Placement, final: Sequence[float], links: Sequence[int]) -> bool:

@@ -176,3 +176,25 @@ def test_help_asks_for_the_plans_end_when_the_named_turn_alone_would_harm_the_ob
     # a named link that can be turned alone safely is asked for alone
     alone = help_for(Placement(FIVE, STRAIGHT), [turn(5, 45), turn(5, 45)], blocked)
     assert [(h.link, h.to_deg) for h in alone] == [(5, 180)]
+
+
+def test_a_relative_goal_that_no_longer_fits_where_the_object_points_asks_the_human_to_turn_it_as_a_whole_first():
+    """A relative state does not say where l1 points (a human may have turned the object): when the plan's end does
+    not lie on the table where the object points now, the help asks first to turn link 1, the whole object with
+    it, by whole steps to where the end fits, then the links the plan changes at their orientations from there.
+    An absolute object (whole_turn_deg 0: its goal fixes l1) is never asked that."""
+    from planhrc.geometry import configuration_feasible
+    from planhrc.ordering import final_configuration, help_for
+
+    start = (135.0, 45.0, 315.0, 0.0, 270.0)
+    moves = [turn(5, 45), turn(5, 45)]  # l5 from 270 to 0: past the table's far edge
+    end, final = final_configuration(Placement(FIVE, start), moves)
+    assert not configuration_feasible(end, final, reach_links=()).ok
+    asked = help_for(Placement(FIVE, start, whole_turn_deg=45), moves, None)
+    assert [(h.link, h.to_deg) for h in asked] == [(1, 180), (5, 45)]
+    assert "the whole object with it" in asked[0].sentence and "link 5 leaves the table" in asked[0].sentence
+    turned = tuple((a + 45.0) % 360 for a in start)  # done in that order, the object stays on the table
+    assert configuration_feasible(FIVE, turned, reach_links=()).ok
+    assert configuration_feasible(FIVE, turned[:4] + (45.0,), reach_links=()).ok
+    fixed = help_for(Placement(FIVE, start), moves, None)
+    assert all(h.link != 1 for h in fixed)
