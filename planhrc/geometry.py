@@ -55,6 +55,9 @@ EXECUTION = Tolerance(overhang_m=0.03, overlap_m=0.01)
 # The configurations a plan comes to rest in on its way to the goal keep 1.5 cm from the table's edges, so that a
 # physical turn ending a degree or two off (1-2 cm at the chain's end) still leaves the object on the table.
 PLANNING = Tolerance(clearance_m=0.015)
+# What an order of a plan's steps keeps where it can: a turn dragging three or four links along the table may
+# flex the joints beyond the turned one by 5° or so, which moves the chain's end 4-5 cm.
+ROOMY = Tolerance(clearance_m=0.05)
 
 
 class GeometryError(ModelError):

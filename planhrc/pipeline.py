@@ -275,11 +275,13 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
     answer, added = feasible_alternative(placement, moves, obj.orientations)
     if answer.moves is None:
         return Refusal(answer.sentence(), answer.help)
+    room = f" ({answer.clearance_m * 100:.1f} cm from its edges at rest)"
     if list(answer.moves) == moves:
-        return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table")
+        return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table{room}")
     what = (f"{added} steps longer: one joint turns the other way round" if added
             else f"reordered {len(moves)} actions")
-    return Ordered(steps_of(obj, model, init, answer.moves), f"{what} so that every configuration stays on the table")
+    return Ordered(steps_of(obj, model, init, answer.moves),
+                   f"{what} so that every configuration stays on the table{room}")
 
 
 def move_of(obj: ArticulatedObject, step: str | ActionSpec) -> Move:
