@@ -188,11 +188,18 @@ def _check_angles(geometry: ObjectGeometry, angles: Sequence[float]) -> tuple[fl
 
 def joint_points(geometry: ObjectGeometry, angles: Sequence[float]) -> tuple[np.ndarray, ...]:
     """p1 .. p(N+1) on the table, for link orientations `angles` (degrees)."""
-    values = _check_angles(geometry, angles)
-    points = [np.asarray(geometry.base_point_xy, dtype=float)]
-    for length, theta in zip(geometry.link_lengths_m, values):
-        points.append(points[-1] + length * direction(theta))
-    return tuple(points)
+    return tuple(_points(geometry, _check_angles(geometry, angles)))
+
+
+def _points(geometry: ObjectGeometry, values: Sequence[float]) -> np.ndarray:
+    """`joint_points` as one (N+1) x 2 array, for checked `values`."""
+    t = np.radians(np.asarray(values, dtype=float))
+    steps = np.asarray(geometry.link_lengths_m)[:, None] * np.stack((np.cos(t), -np.sin(t)), axis=1)
+    points = np.empty((len(values) + 1, 2))
+    points[0] = geometry.base_point_xy
+    np.cumsum(steps, axis=0, out=points[1:])
+    points[1:] += points[0]
+    return points
 
 
 def link_centres(geometry: ObjectGeometry, angles: Sequence[float]) -> tuple[np.ndarray, ...]:
@@ -225,7 +232,7 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
     The checks are vectorised over links and link pairs: a plan's ordering calls this thousands of times."""
     cell = cell or Cell()
     values = _check_angles(geometry, angles)
-    points = np.asarray(joint_points(geometry, values))
+    points = _points(geometry, values)
     n = geometry.n_links
     half_width = geometry.link_width_m / 2.0
     a, b = points[:-1], points[1:]
@@ -257,8 +264,11 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
                                      f"link {int(fold) + 2} folds back onto link {int(fold) + 1}"))
     if n > 2:
         i, j = np.triu_indices(n, k=2)
-        gaps = _segment_distances(a[i], b[i], a[j], b[j])
-        close = gaps < geometry.link_width_m - tolerance.overlap_m
+        limit = geometry.link_width_m - tolerance.overlap_m
+        lo, hi = np.minimum(a, b), np.maximum(a, b)  # pairs whose bounding boxes lie `limit` apart are not close
+        near = np.all((lo[i] - hi[j] < limit) & (lo[j] - hi[i] < limit), axis=1)
+        i, j = i[near], j[near]
+        close = _segment_distances(a[i], b[i], a[j], b[j]) < limit if len(i) else np.zeros(0, dtype=bool)
         for pi, pj in zip(i[close], j[close]):
             reasons.append(Infeasibility("overlap", int(pj) + 1, f"link {int(pj) + 1} overlaps link {int(pi) + 1}"))
     return Feasibility(not reasons, tuple(reasons))

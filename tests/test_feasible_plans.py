@@ -15,7 +15,7 @@ with warnings.catch_warnings():
     from fastapi.testclient import TestClient
 
 from planhrc import pipeline
-from planhrc.geometry import ObjectGeometry, configuration_feasible, rotated, sweep_feasible
+from planhrc.geometry import PLANNING, ROOMY, ObjectGeometry, configuration_feasible, rotated, sweep_feasible
 from planhrc.kb_service.app import create_app
 from planhrc.model import make_object
 from planhrc.ordering import Move, Placement, feasible_alternative, first_obstacle, order_moves
@@ -45,6 +45,27 @@ def test_a_feasible_order_is_kept_and_an_infeasible_one_is_reordered():
     for m in answer.moves:
         assert sweep_feasible(geometry, angles, m.turned, m.held, m.delta_deg).ok
         geometry, angles = rotated(geometry, angles, m.turned, m.held, m.delta_deg)
+
+
+def test_an_order_with_room_to_spare_is_preferred():
+    """random-23: the plan's own order rests links 4-5 2 mm inside the 1.5 cm clearance after turning l2, where a
+    turn dragging links 3-5 flexed joint 3 by 6 degrees and pushed them off the table; swapping its last two steps
+    keeps every resting configuration 5 cm from the edges."""
+    placement = Placement(ObjectGeometry((0.155,) * 5, (0.5964, -0.1123)), (180.0, 45.0, 0.0, 135.0, 135.0))
+    planned = [turn(3, -45), turn(1, 45), turn(4, -45), turn(1, 45), turn(4, -45), turn(5, -45), turn(2, 45),
+               turn(3, -45)]
+    tight = placement.geometry, placement.link_deg
+    for m in planned[:7]:
+        tight = rotated(*tight, m.turned, m.held, m.delta_deg)
+    assert configuration_feasible(*tight, tolerance=PLANNING, reach_links=(2, 3)).ok
+    assert not configuration_feasible(*tight, tolerance=ROOMY, reach_links=()).ok  # the plan's own order: feasible, but tight
+    answer = order_moves(placement, planned)
+    assert answer.found and answer.clearance_m == ROOMY.clearance_m
+    assert sorted(answer.moves, key=repr) == sorted(planned, key=repr)
+    geometry, angles = placement.geometry, placement.link_deg
+    for m in answer.moves[:-1]:
+        geometry, angles = rotated(geometry, angles, m.turned, m.held, m.delta_deg)
+        assert configuration_feasible(geometry, angles, tolerance=ROOMY, reach_links=()).ok
 
 
 def test_no_order_names_the_obstacle_and_the_help_to_ask_for():
