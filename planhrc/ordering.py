@@ -9,12 +9,12 @@ the given moves in which every step is geometrically feasible (see `planhrc.geom
   and clear of each other, and the configuration it comes to rest in keeps the clearance `planhrc.geometry.PLANNING`
   from the table's edges (1.5 cm: a physical turn ends a degree or two off; the plan's end, the goal, as drawn),
   and
+* the links the step grasps (the turned and the held one) are within reach before and after it.
+
 Among the feasible orders, one whose resting configurations keep `planhrc.geometry.ROOMY`'s clearance (5 cm) is
 preferred: a turn that drags several links along the table flexes the joints beyond it by a few degrees, and the
 chain's end lands centimetres from where it was drawn. That search gets eight step checks per move (a few steps
 of the plan's own order moved past each other); when it finds nothing, the 1.5 cm clearance decides.
-
-* the links the step grasps (the turned and the held one) are within reach before and after it.
 
 A problem the plan's start configuration already has (a link the human left off the table) is not held against
 the plan, as long as the plan does not make it worse (that link no further past the edge, or out of reach, than
@@ -172,7 +172,8 @@ def order_moves(placement: Placement, moves: Sequence[Move], budget: int = DEFAU
     unreachable = final_out_of_reach(placement, moves)
     if unreachable is not None:  # the plan's end itself is beyond the robot's reach: say that
         step, problem = None, unreachable
-    return Ordering(None, search.checks, exhausted, step, problem, help_for(placement, moves, problem))
+    return Ordering(None, roomy.checks + search.checks, exhausted, step, problem,
+                    help_for(placement, moves, problem))
 
 
 def final_out_of_reach(placement: Placement, moves: Sequence[Move]) -> Feasibility | None:
@@ -265,8 +266,8 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
         turned_start = rotated(placement.geometry, placement.link_deg, 1, 0, turn)[1]
         to = int(round(turned_start[0])) % 360
         problem_there = configuration_feasible(end, final, placement.cell, reach_links=()).reasons[0].message
-        first = HelpItem(1, to, f"turn link 1 to {to}° and the whole object with it, about its base point "
-                                f"(pointing as it does now, the plan's end would not lie on the table: {problem_there})")
+        first = HelpItem(1, to, f"turn link 1 to {to}° and the whole object with it, about its base point (pointing "
+                                f"as it does now, the plan's end would not lie on the table: {problem_there})")
         rest = help_for(replace(placement, link_deg=turned_start, whole_turn_deg=0), moves, problem, why)
         return (first,) + tuple(item for item in rest if item.link != 1)
     start = tuple(float(a) % 360.0 for a in placement.link_deg)
@@ -286,28 +287,21 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
 def _whole_turn(placement: Placement, end: ObjectGeometry, final: Sequence[float]) -> float:
     """For an object a human may turn as a whole (`Placement.whole_turn_deg`) whose plan ends off the table, in
     the robot or folded (as drawn): the smallest turn of it, in whole steps, after which the plan's end is feasible
-    for a human (reach aside) and the object, turned where it lies now, no worse off than now; 0 when the end is
-    feasible, or no turn makes it so."""
+    for a human (reach aside) and the object, turned where it lies now, has no problem it does not have now, or has
+    it no worse (`_Search.excused`); 0 when the end is feasible, or no turn makes it so."""
     step = placement.whole_turn_deg
     if step <= 0 or configuration_feasible(end, final, placement.cell, reach_links=()).ok:
         return 0.0
+    now = _Search(placement, 0, baseline=_baseline(placement))
     for k in range(1, 360 // step // 2 + 1):
         for turn in (k * step, -k * step):
             if not configuration_feasible(*rotated(end, final, 1, 0, turn), placement.cell, reach_links=()).ok:
                 continue
-            if _no_worse(placement, *rotated(placement.geometry, placement.link_deg, 1, 0, turn)):
+            turned = configuration_feasible(*rotated(placement.geometry, placement.link_deg, 1, 0, turn),
+                                            placement.cell, reach_links=())
+            if all(now.excused(r) for r in turned.reasons):
                 return float(turn)
     return 0.0
-
-
-def _no_worse(placement: Placement, geometry: ObjectGeometry, angles: Sequence[float]) -> bool:
-    """Whether the object placed as `geometry` with `angles` has no problem (reach aside) that it does not have
-    where it lies now (`placement`), or has it worse (a link further past the edge)."""
-    now = {(r.code, r.link): r.distance_m
-           for r in configuration_feasible(placement.geometry, placement.link_deg, placement.cell,
-                                           reach_links=()).reasons}
-    return all((r.code, r.link) in now and r.distance_m <= now[(r.code, r.link)] + 1e-3
-               for r in configuration_feasible(geometry, angles, placement.cell, reach_links=()).reasons)
 
 
 def _safe_for_a_human(placement: Placement, final: Sequence[float], links: Sequence[int]) -> bool:

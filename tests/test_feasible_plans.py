@@ -58,7 +58,8 @@ def test_an_order_with_room_to_spare_is_preferred():
     for m in planned[:7]:
         tight = rotated(*tight, m.turned, m.held, m.delta_deg)
     assert configuration_feasible(*tight, tolerance=PLANNING, reach_links=(2, 3)).ok
-    assert not configuration_feasible(*tight, tolerance=ROOMY, reach_links=()).ok  # the plan's own order: feasible, but tight
+    # the plan's own order: feasible, but tight
+    assert not configuration_feasible(*tight, tolerance=ROOMY, reach_links=()).ok
     answer = order_moves(placement, planned)
     assert answer.found and answer.clearance_m == ROOMY.clearance_m
     assert sorted(answer.moves, key=repr) == sorted(planned, key=repr)
