@@ -149,3 +149,31 @@ def test_a_row_holds_the_expected_states_as_changes_and_rows_of_the_layout_befor
     assert len(row) < len(whole) / 2, (len(row), len(whole))
     with pytest.raises(ValueError, match="unknown layout"):
         decode(pickle.dumps((99, "x")))
+
+
+def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(monkeypatch):
+    """The writer takes the store's lock once per plan; a thread waiting for that lock must get it after the plan
+    being written, not after every plan left (a lock released and taken again at once is not handed over)."""
+    import threading
+
+    monkeypatch.setattr(journal, "WRITE_DELAY_S", 0.0)
+    lock = threading.RLock()
+    left = [20]
+    writing = threading.Event()
+
+    def write_one() -> bool:  # one plan: 5 ms with the store's lock held
+        with lock:
+            writing.set()
+            time.sleep(0.005)
+            left[0] -= 1
+            return left[0] > 0
+
+    writer = journal.PlanWriter(write_one)
+    try:
+        writer.poke()
+        assert writing.wait(5)
+        with lock:
+            behind = left[0]  # plans still to write when the waiting thread got the store
+    finally:
+        writer.close()
+    assert behind >= 15, f"the waiting thread got the store only with {behind} of 20 plans left"

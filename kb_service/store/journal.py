@@ -36,6 +36,10 @@ WHOLE_STATES = 1  # the layout before: every expected state whole (still read, f
 # perception that made the plan is on its way meanwhile (the writer would compete with it for the interpreter),
 # and a robot's next perception follows its action seconds later.
 WRITE_DELAY_S = 0.05
+# Between two plans the writer pauses this long, so that a request waiting for the store's lock gets it: a lock
+# released and taken again at once by the same thread is not handed to the thread waiting for it, and a request
+# arriving behind ten unwritten plans waited for all of them (30-45 ms, one re-plan in ten, back to back).
+YIELD_S = 0.002
 
 
 @dataclass(frozen=True)
@@ -114,8 +118,8 @@ class PlanJournal:
 
 class PlanWriter:
     """A thread that writes journalled plans out as triples, woken by each commit that adopted one: it calls
-    `write_one()` (one plan per call, so other writers get the store between two plans) until that returns False
-    (nothing left, or the store busy in a transaction: the next commit wakes the thread again)."""
+    `write_one()` (one plan per call, pausing `YIELD_S` between two, so other writers get the store) until that
+    returns False (nothing left, or the store busy in a transaction: the next commit wakes the thread again)."""
 
     def __init__(self, write_one: Callable[[], bool]) -> None:
         self._write_one = write_one
@@ -136,8 +140,9 @@ class PlanWriter:
                 return
             self._wake.clear()
             try:
-                while not self._stop.is_set() and self._write_one():
-                    pass
+                while self._write_one():
+                    if self._stop.wait(YIELD_S):
+                        return
             except Exception:  # the rows stay in the journal: written at the next wake, or when the store opens
                 log.exception("store: writing a journalled plan's triples failed")
 
