@@ -6,6 +6,7 @@ import sqlite3
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 
 import pytest
@@ -154,8 +155,6 @@ def test_a_row_holds_the_expected_states_as_changes_and_rows_of_the_layout_befor
 def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(monkeypatch):
     """The writer takes the store's lock once per plan; a thread waiting for that lock must get it after the plan
     being written, not after every plan left (a lock released and taken again at once is not handed over)."""
-    import threading
-
     monkeypatch.setattr(journal, "WRITE_DELAY_S", 0.0)
     lock = threading.RLock()
     left = [20]
