@@ -1,6 +1,6 @@
 """`planhrc solve`: one problem end to end through the ontology.
 
-object -> translation -> planning -> VAL -> expected states (`planhrc.solve`, values) -> the object, its initial
+object -> translation -> planning -> VAL -> expected states (`planhrc.pipeline.solve`, values) -> the object, its initial
 and goal States, the Problem and the Plan with its expected States stored in the ABox in one write; prints the
 time of each stage and the plan with its expected states.
 """
@@ -19,7 +19,7 @@ from planhrc.pipeline import PlanningConfig, config_from_settings
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS
 from planhrc.settings import get_settings
-from planhrc.solve import SolveRequest, parse_angles, report, solve
+from planhrc.pipeline.solve import SolveRequest, parse_angles, report, solve
 from planhrc.translator.errors import TranslationError
 
 from .store import KBError, KnowledgeBase

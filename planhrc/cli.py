@@ -25,13 +25,13 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "ontology": ("planhrc.kb_service.check", "add_ontology_parser", "check the ontology with a DL reasoner"),
     "plan": ("planhrc.planner.cli", "add_plan_parser", "plan for a PDDL domain and problem"),
     "solve": ("planhrc.kb_service.solve", "add_solve_parser", "solve one problem end to end through the ontology"),
-    "bench": ("planhrc.bench", "add_bench_parser", "the paper's planning grid and re-planning latency"),
+    "bench": ("planhrc.bench.grid", "add_bench_parser", "the paper's planning grid and re-planning latency"),
     "serve": ("planhrc.kb_service.cli", "add_serve_parser", "run the knowledge-base HTTP service"),
     "compact": ("planhrc.kb_service.cli", "add_compact_parser", "drop the history the retention policy does not keep"),
     "worker": ("planhrc.robot_sim.worker", "add_worker_parser", "run the simulated Baxter worker"),
     "demo": ("planhrc.robot_sim.demo", "add_demo_parser", "KB service + Baxter worker: a scenario to the end"),
     "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser", "what the simulated cell measures"),
-    "service-bench": ("planhrc.service_bench", "add_service_bench_parser",
+    "service-bench": ("planhrc.bench.service", "add_service_bench_parser",
                       "the KB service measured with a long history, over HTTP"),
 }
 

@@ -15,10 +15,7 @@ import json
 import logging
 import os
 import secrets
-import signal
-import socket
 import statistics
-import subprocess
 import sys
 import time
 from collections import Counter
@@ -30,7 +27,8 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from planhrc.cli_args import http_url, non_negative_int, positive_int, writable_dir
-from planhrc.client import KBClient, ProtocolError, RetryPolicy
+from planhrc.client import KBClient, ProtocolError
+from planhrc.service_process import ServiceStartError, running_service
 from planhrc.geometry import configuration_feasible
 from planhrc.robot_sim.scene import SceneSpec, SimError, is_feasible, random_orientations
 from planhrc.vocabulary import DecisionKind
@@ -119,67 +117,16 @@ def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interven
                         base_point_xy=spec.base_xy)
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @contextmanager
 def kb_service(out_dir: Path, token: str, startup_timeout_s: float = 90.0) -> Iterator[str]:
-    """`planhrc serve` as a child process on a free loopback port; yields its URL, stops it afterwards."""
-    port = free_port()
-    db = out_dir / "planhrc.sqlite3"
-    log_path = out_dir / "kb-service.log"
-    env = dict(os.environ, PLANHRC_TOKEN=token)
-    cmd = [sys.executable, "-m", "planhrc.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
-           "--db", str(db)]
-    with log_path.open("w") as log_file:
-        # its own session: the demo alone decides when it stops (terminate, then kill the group); and it is told
-        # to stop should the demo die without cleaning up (killed, or a native library exiting the process)
-        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, env=env, start_new_session=True,
-                                preexec_fn=die_with_parent)
-        url = f"http://127.0.0.1:{port}"
-        try:
-            deadline = time.monotonic() + startup_timeout_s
-            with KBClient(url, retry=RetryPolicy(attempts=1)) as probe:
-                while True:
-                    if proc.poll() is not None:
-                        raise SimError(f"the KB service exited with {proc.returncode}; see {log_path}")
-                    try:
-                        probe.health()
-                        break
-                    except ProtocolError:
-                        if time.monotonic() > deadline:
-                            raise SimError(f"the KB service did not answer within {startup_timeout_s} s") from None
-                        time.sleep(0.2)
-            yield url
-        finally:
-            stop_process_group(proc)
-
-
-def die_with_parent() -> None:
-    """In a child before exec (Linux): receive SIGTERM when the parent dies. Elsewhere nothing."""
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-
-
-def stop_process_group(proc: subprocess.Popen, grace_s: float = 15.0) -> None:
-    """SIGTERM to the child's process group, SIGKILL after `grace_s`; returns once the child is reaped."""
-    for sig, wait_s in ((signal.SIGTERM, grace_s), (signal.SIGKILL, None)):
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            break
-        try:
-            proc.wait(timeout=wait_s)
-            break
-        except subprocess.TimeoutExpired:
-            continue
-    proc.wait()
+    """`planhrc serve` as a child process on a free loopback port (`planhrc.service_process`); yields its URL,
+    stops it afterwards."""
+    try:
+        with running_service(out_dir / "planhrc.sqlite3", env={"PLANHRC_TOKEN": token},
+                             log_path=out_dir / "kb-service.log", startup_timeout_s=startup_timeout_s) as service:
+            yield service.url
+    except ServiceStartError as exc:
+        raise SimError(f"the KB service did not start: {exc}") from None
 
 
 def serve_until_interrupted(url: str) -> None:

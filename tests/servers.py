@@ -2,29 +2,23 @@
 from __future__ import annotations
 
 import os
-import socket
-import subprocess
-import sys
 import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
-from planhrc.service_bench import wait_until_serving  # noqa: F401 (the tests import it from here too)
+import httpx
+
+from planhrc.service_process import RunningService, free_port, running_service, wait_until_serving  # noqa: F401
+from planhrc.service_process import serve_command as _serve_command
 
 REPO = Path(__file__).resolve().parent.parent
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+TOKEN = "test-token"
 
 
 def serve_command(port: int, db: Path, args: Sequence[str] = ()) -> list[str]:
-    return [sys.executable, "-m", "planhrc.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
-            "--db", str(db), "--log-level", "warning", *args]
+    return _serve_command(port, db, ("--log-level", "warning", *args))
 
 
 def serve_env(env: Mapping[str, str] | None = None) -> dict[str, str]:
@@ -38,24 +32,27 @@ def serve_env(env: Mapping[str, str] | None = None) -> dict[str, str]:
 @contextmanager
 def serving(db: Path, port: int | None = None, args: Sequence[str] = (),
             env: Mapping[str, str] | None = None) -> Iterator[str]:
-    """`planhrc serve` on `db` until it answers /health; yields its base URL, stops it afterwards.
-    The server's output goes to `serve-<port>.log` beside the database and is shown if it exits early."""
+    """`planhrc serve` on `db` until it answers /health; yields its base URL, stops it (its process group)
+    afterwards. The server's output goes to `serve-<port>.log` beside the database and is shown if it exits
+    early."""
+    with served(db, port, args, env) as server:
+        yield server.url
+
+
+@contextmanager
+def served(db: Path, port: int | None = None, args: Sequence[str] = (),
+           env: Mapping[str, str] | None = None) -> Iterator[RunningService]:
+    """`serving`, yielding the running service (its URL and process id)."""
     port = port or free_port()
-    log_path = db.parent / f"serve-{port}.log"
-    with open(log_path, "w") as log_file:
-        proc = subprocess.Popen(serve_command(port, db, args), cwd=db.parent, env=serve_env(env),
-                                stdout=log_file, stderr=subprocess.STDOUT)
-        base = f"http://127.0.0.1:{port}"
-        try:
-            wait_until_serving(proc, base, log_path=log_path)
-            yield base
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+    with running_service(db, port=port, args=("--log-level", "warning", *args), env=serve_env(env), cwd=db.parent,
+                         log_path=db.parent / f"serve-{port}.log") as server:
+        yield server
+
+
+def token_client(server: RunningService | str, timeout: float = 60, token: str = TOKEN) -> httpx.Client:
+    """An HTTP client of a served service sending `token` as its bearer token."""
+    url = server if isinstance(server, str) else server.url
+    return httpx.Client(base_url=url, timeout=timeout, headers={"Authorization": f"Bearer {token}"})
 
 
 def settled_health(client: Any, timeout_s: float = 10) -> dict[str, Any]:

@@ -9,10 +9,10 @@ import time
 
 import pytest
 
-from planhrc.bench import make_instances, optimal_length, relative_equivalent, run_grid, summarise, write_results
+from planhrc.bench.grid import make_instances, optimal_length, relative_equivalent, run_grid, summarise, write_results
 from planhrc.cli import main
 from tests.scenarios import SCENARIOS, Scenario
-from planhrc.bench import Instance
+from planhrc.bench.grid import Instance
 
 
 def test_instances_are_fixed_by_seed():
@@ -58,7 +58,7 @@ def test_bench_command_refuses_unknown_planner(tmp_path, capsys):
 
 
 def test_replan_measurement_reports_every_stage():
-    from planhrc.bench import measure_replan
+    from planhrc.bench.grid import measure_replan
 
     result = measure_replan("absolute", links=5, orientations=4, runs=3)
     assert result["median_ms"] > 0 and result["first_run_ms"] > 0 and result["n"] == 3
@@ -66,7 +66,7 @@ def test_replan_measurement_reports_every_stage():
 
 
 def test_planner_stages_on_a_size_beyond_the_paper():
-    from planhrc.bench import measure_planner
+    from planhrc.bench.grid import measure_planner
 
     result = measure_planner("relative", links=100, orientations=72, runs=2)
     assert result["validation"] == "valid" and result["optimal"] is True
@@ -78,14 +78,14 @@ def test_planner_stages_on_a_size_beyond_the_paper():
 
 
 def test_fast_downward_timeout_is_reported_and_not_repeated():
-    from planhrc.bench import measure_fast_downward
+    from planhrc.bench.grid import measure_fast_downward
 
     result = measure_fast_downward("relative", links=5, orientations=4, runs=3, timeout_s=0.01)
     assert result["statuses"] == ["timeout"] and result["runs"] == 1 and "not repeated" in result["note"]
 
 
 def test_http_perception_is_measured_on_a_real_server():
-    from planhrc.bench import measure_http
+    from planhrc.bench.grid import measure_http
 
     result = measure_http("relative", links=4, orientations=4, runs=4)
     assert 1 <= result["n"] <= 4 and result["median_ms"] > 0 and result["pause_s"] > 0

@@ -3,13 +3,13 @@
     0 model        planhrc.model, .vocabulary, .transition, .cooperation, .paths, .settings, .geometry, .ordering,
                    .stats, .errors,
                    .cli_args (argument checks every command shares), planhrc.ontology
-    0.5 client     planhrc.client (layer 0 and httpx only)
+    0.5 client     planhrc.client, planhrc.service_process (layer 0 and httpx only: the service's HTTP client,
+                   `planhrc serve` as a child process)
     1 translator   planhrc.translator
     2 planner      planhrc.planner
-    3 pipeline     planhrc.pipeline, planhrc.solve
+    3 pipeline     planhrc.pipeline (the folder pipeline/)
     4 service      planhrc.kb_service (HTTP, service layer, the knowledge-base store, reasoners)
-    5 top          planhrc (the lazy facade), planhrc.cli, .bench, .plots, .service_bench, .ordering_bench,
-                   planhrc.robot_sim
+    5 top          planhrc (the lazy facade), planhrc.cli, planhrc.bench (the folder bench/), planhrc.robot_sim
 
 `planhrc.robot_sim` may import only layer 0 and the client. A module missing from `LAYERS` fails the test, so a
 new module is placed on purpose.
@@ -24,7 +24,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 # folder of the repository -> its import name (the package-dir mapping of pyproject.toml)
 PACKAGES = {"planhrc": "planhrc", "kb_service": "planhrc.kb_service", "translator": "planhrc.translator",
-            "planner": "planhrc.planner", "robot_sim": "planhrc.robot_sim", "ontology": "planhrc.ontology"}
+            "planner": "planhrc.planner", "robot_sim": "planhrc.robot_sim", "ontology": "planhrc.ontology",
+            "pipeline": "planhrc.pipeline", "bench": "planhrc.bench"}
 
 # Longest prefix wins.
 LAYERS: dict[str, float] = {
@@ -32,13 +33,12 @@ LAYERS: dict[str, float] = {
     "planhrc.paths": 0, "planhrc.settings": 0, "planhrc.geometry": 0, "planhrc.ordering": 0, "planhrc.stats": 0,
     "planhrc.errors": 0,
     "planhrc.cli_args": 0, "planhrc.ontology": 0,
-    "planhrc.client": 0.5,
+    "planhrc.client": 0.5, "planhrc.service_process": 0.5,
     "planhrc.translator": 1,
     "planhrc.planner": 2,
-    "planhrc.pipeline": 3, "planhrc.solve": 3,
+    "planhrc.pipeline": 3,
     "planhrc.kb_service": 4,
-    "planhrc": 5, "planhrc.cli": 5, "planhrc.bench": 5, "planhrc.plots": 5, "planhrc.service_bench": 5,
-    "planhrc.ordering_bench": 5,
+    "planhrc": 5, "planhrc.cli": 5, "planhrc.bench": 5,
     "planhrc.robot_sim": 5,
 }
 # Besides its own package, robot_sim reaches only these layers (the service only over HTTP).
@@ -117,3 +117,11 @@ def test_the_walk_sees_function_level_and_relative_imports():
     assert imports_of("planhrc.translator", "from .domain import x\n", is_package=True) >= {"planhrc.translator.domain"}
     assert layer_of("planhrc.kb_service.app") > layer_of("planhrc.model")
     assert layer_of(next(iter(imports_of("planhrc.model", "from planhrc import plan\n")))) == 5
+
+
+def test_the_shared_folder_holds_only_the_ground_floor():
+    """`planhrc/` keeps what every layer shares (layers 0 and 0.5) plus the command-line entry and the lazy facade:
+    the pipeline, the benchmarks, the service and the robot live in folders of their own."""
+    shared = [m for m, path in ALL.items() if path.parent == ROOT / "planhrc"]
+    above = [m for m in shared if m not in {"planhrc", "planhrc.cli"} and (layer_of(m) or 0) > 0.5]
+    assert shared and above == []

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from planhrc.plots import PlotError, main as plots_main, plot_times, run_from
+from planhrc.bench.plots import PlotError, main as plots_main, plot_times, run_from
 from planhrc.robot_sim.markers import aruco_dictionary
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                         draw_configurations, step_caption, write_movie)

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from planhrc.service_bench import percentile
+from planhrc.bench.service import percentile
 
 pytestmark = pytest.mark.integration
 

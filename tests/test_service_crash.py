@@ -7,8 +7,7 @@ import time
 import httpx
 import pytest
 
-from planhrc.service_bench import _client, create_object, running_service, set_goal
-from tests.servers import settled_health
+from tests.servers import TOKEN, served, settled_health, token_client
 
 
 def _perceive(client: httpx.Client, oid: str, links: list[float], key: str) -> httpx.Response:
@@ -25,10 +24,12 @@ def _dead(pid: int) -> bool:
 
 
 def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path):
-    with running_service(tmp_path, {"PLANHRC_CRASH_IN_PERCEPTION_WRITE": "3"}) as server, \
-            _client(server, 60) as client:
-        oid = create_object(client, 3, 4, "relative", "rod")
-        set_goal(client, oid, [0, 90, 90])
+    db = tmp_path / "kb.sqlite3"
+    with served(db, env={"PLANHRC_TOKEN": TOKEN, "PLANHRC_CRASH_IN_PERCEPTION_WRITE": "3"}) as server, \
+            token_client(server) as client:
+        oid = client.post("/objects", json={"name": "rod", "links": 3, "orientations": 4,
+                                            "formulation": "relative"}).json()["id"]
+        assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]}).status_code == 200
         kept = [_perceive(client, oid, links, f"p{i}") for i, links in enumerate(([0, 0, 0], [0, 90, 0]))]
         assert [r.status_code for r in kept] == [200, 200]
         health = settled_health(client)
@@ -40,7 +41,7 @@ def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path):
             time.sleep(0.05)
         assert _dead(server.pid)
 
-    with running_service(tmp_path) as server, _client(server, 60) as client:
+    with served(db, env={"PLANHRC_TOKEN": TOKEN}) as server, token_client(server) as client:
         after = client.get("/health").json()  # counted by a scan of the tables at start-up
         assert (after["objects"], after["triples"]) == (health["objects"], health["triples"])
         assert client.get(f"/objects/{oid}/events").json() == events

@@ -56,7 +56,8 @@ def test_worker_survives_a_restart_of_the_service_and_no_perception_counts_twice
     import sys
     from pathlib import Path
 
-    from planhrc.robot_sim.demo import DEMO_SCENARIOS, free_port
+    from planhrc.robot_sim.demo import DEMO_SCENARIOS
+    from planhrc.service_process import free_port
     from planhrc.robot_sim.scene import SceneSpec
     from planhrc.client import KBClient, ProtocolError, RetryPolicy
     from planhrc.robot_sim.worker import run_worker

@@ -8,7 +8,7 @@ unsolvable, error) is drawn as a cross at the time it used, on a line marking th
 the title: nothing is dropped. The two formulations of one planner share their y-scale, so the pair can be
 compared by eye.
 
-    python -m planhrc.plots docs/results/bench.csv [--out DIR] [--timeout S]
+    python -m planhrc.bench.plots docs/results/bench.csv [--out DIR] [--timeout S]
 
 redraws the figures from a bench CSV without planning again.
 """
@@ -143,7 +143,7 @@ def _count(runs: Sequence[Run]) -> dict[str, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m planhrc.plots", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m planhrc.bench.plots", description=__doc__.splitlines()[0])
     parser.add_argument("csv", type=Path, help="bench.csv written by `planhrc bench`")
     parser.add_argument("--out", type=Path, default=None, help="folder for the figures (default: beside the CSV)")
     parser.add_argument("--timeout", type=float, default=None, help="the bench's time limit (default: the "
@@ -152,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         runs = read_csv(args.csv)
     except (OSError, PlotError) as exc:
-        print(f"planhrc.plots: {args.csv}: {exc}", file=sys.stderr)
+        print(f"planhrc.bench.plots: {args.csv}: {exc}", file=sys.stderr)
         return 2
     for path in plot_times(runs, args.out or args.csv.parent, args.timeout):
         print(path)

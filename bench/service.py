@@ -18,9 +18,7 @@ import json
 import os
 import platform
 import random
-import signal
 import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -32,16 +30,12 @@ from typing import Any, Callable, Iterator
 
 import httpx
 
+from planhrc.service_process import RunningService as Server
+from planhrc.service_process import running_service as start_service
 from planhrc.stats import percentile
 
 TOKEN = "service-bench-token"
 READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
-
-
-@dataclass(frozen=True)
-class Server:
-    base: str
-    pid: int
 
 
 def rss_mb(pid: int) -> float:
@@ -73,58 +67,16 @@ def _replanning_with_cpu(client: httpx.Client, server: Server, object_id: str, l
     return lat, round((cpu_seconds(server.pid) - before) / max(count, 1) * 1000, 2)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def wait_until_serving(proc: subprocess.Popen, base: str, timeout_s: float = 90, log_path: Path | None = None) -> None:
-    """Poll `base`/health until the server answers 200; a RuntimeError (with its log, if given) when the process
-    exits first or `timeout_s` passes."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        if proc.poll() is not None:
-            raise RuntimeError(f"planhrc serve exited with {proc.returncode}"
-                               + (f":\n{log_path.read_text()}" if log_path else ""))
-        try:
-            if httpx.get(f"{base}/health", timeout=2).status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"planhrc serve did not answer /health within {timeout_s:g} s")
-        time.sleep(0.05)
-
-
 @contextmanager
 def running_service(workdir: Path, extra_env: dict[str, str] | None = None) -> Iterator[Server]:
-    """`planhrc serve` on a fresh store in `workdir`, stopped (with its process group) on the way out."""
-    port = _free_port()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
-    env.update({"PLANHRC_TOKEN": TOKEN, **(extra_env or {})})
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "planhrc.cli", "serve", "--port", str(port), "--db", str(workdir / "kb.sqlite3"),
-         "--log-level", "warning"],
-        cwd=workdir, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    base = f"http://127.0.0.1:{port}"
-    try:
-        wait_until_serving(proc, base, 90)
-        yield Server(base, proc.pid)
-    finally:
-        try:
-            os.killpg(proc.pid, signal.SIGTERM)
-            proc.wait(timeout=20)
-        except (ProcessLookupError, subprocess.TimeoutExpired):
-            try:
-                os.killpg(proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            proc.wait()
+    """`planhrc serve` on a fresh store in `workdir` with the bench's token (`planhrc.service_process`)."""
+    with start_service(workdir / "kb.sqlite3", args=("--log-level", "warning"), clean_env=True, cwd=workdir,
+                       env={"PLANHRC_TOKEN": TOKEN, **(extra_env or {})}) as server:
+        yield server
 
 
 def _client(server: Server, timeout: float) -> httpx.Client:
-    return httpx.Client(base_url=server.base, timeout=timeout, headers={"Authorization": f"Bearer {TOKEN}"})
+    return httpx.Client(base_url=server.url, timeout=timeout, headers={"Authorization": f"Bearer {TOKEN}"})
 
 
 def create_object(client: httpx.Client, links: int, orientations: int, formulation: str, name: str) -> str:
@@ -223,7 +175,7 @@ def _health_worst_wait(server: Server, during: Callable[[], Any]) -> tuple[float
     worst = [0.0]
 
     def poll() -> None:
-        with httpx.Client(base_url=server.base, timeout=120) as c:
+        with httpx.Client(base_url=server.url, timeout=120) as c:
             while not stop.is_set():
                 t = time.perf_counter()
                 try:
@@ -391,7 +343,7 @@ def bench_refusal() -> dict[str, Any]:
     """Seconds to answer a request announcing a 150 MB body, with only its first KB sent."""
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server:
-        host, port = server.base.rsplit(":", 1)
+        host, port = server.url.rsplit(":", 1)
         for label, auth in (("no_token", ""), ("token_over_limit", f"Authorization: Bearer {TOKEN}\r\n")):
             head = (f"POST /objects HTTP/1.1\r\nHost: x\r\n{auth}Content-Type: application/json\r\n"
                     f"Content-Length: {150 * 1024 * 1024}\r\n\r\n").encode()

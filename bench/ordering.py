@@ -1,4 +1,4 @@
-"""How long `ordering.order_moves` takes on long chains: `python -m planhrc.ordering_bench [--links 20]`.
+"""How long `ordering.order_moves` takes on long chains: `python -m planhrc.bench.ordering [--links 20]`.
 
 Each episode draws a random goal on the table (every link turned by -30°, 0 or +30° from its predecessor's
 direction, kept only when feasible), makes the plan of downstream steps that reaches it from the straight start and
@@ -58,7 +58,7 @@ def _moves(goal: Sequence[float], start: Sequence[float], step: int) -> list[Mov
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m planhrc.ordering_bench", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m planhrc.bench.ordering", description=__doc__.splitlines()[0])
     parser.add_argument("--links", type=int, default=20)
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=7)

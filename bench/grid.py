@@ -45,7 +45,7 @@ from typing import Iterable, Sequence
 from planhrc.cli_args import int_list, name_list, positive_float, positive_int, writable_dir
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
-from planhrc.plots import plot_times
+from planhrc.bench.plots import plot_times
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS, available_planners, get_planner
 from planhrc.planner.result import PlanStatus
@@ -339,11 +339,11 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
 
     import httpx
 
-    from planhrc.service_bench import TOKEN, create_object, random_angles, replanning_latencies, running_service, set_goal
+    from planhrc.bench.service import TOKEN, create_object, random_angles, replanning_latencies, running_service, set_goal
 
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-http-") as tmp, running_service(Path(tmp)) as server, \
-            httpx.Client(base_url=server.base, timeout=120,
+            httpx.Client(base_url=server.url, timeout=120,
                          headers={"Authorization": f"Bearer {TOKEN}"}) as client:
         ident = create_object(client, links, orientations, formulation, f"bench-{formulation}")
         set_goal(client, ident, random_angles(rng, links, orientations))
@@ -352,7 +352,7 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
         done = threading.Event()
 
         def poll() -> None:
-            with httpx.Client(base_url=server.base, timeout=120) as other:
+            with httpx.Client(base_url=server.url, timeout=120) as other:
                 other.get("/health").raise_for_status()  # the connection's first request is not the service's
                 while not done.wait(0.02):
                     t = time.perf_counter()

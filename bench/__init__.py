@@ -1,0 +1,9 @@
+"""Benchmarks and their drawings: they measure the other layers and report numbers; nothing imports them.
+
+| module | command | measures |
+|---|---|---|
+| `grid` | `planhrc bench` | the paper's planning grid and the re-planning latency, beside packaged planners |
+| `service` | `planhrc service-bench` | the KB service over HTTP with a long history, contention and refusals |
+| `ordering` | `python -m planhrc.bench.ordering` | `ordering.order_moves` on long chains |
+| `plots` | `python -m planhrc.bench.plots` | the box plots of the grid's CSV |
+"""
