@@ -23,6 +23,8 @@ COPY translator ./translator
 COPY planner ./planner
 COPY robot_sim ./robot_sim
 COPY ontology ./ontology
+COPY pipeline ./pipeline
+COPY bench ./bench
 RUN pip install --no-cache-dir --no-deps -c constraints.txt . && rm -rf build
 # 3. An unprivileged user that owns nothing but the store.
 RUN groupadd --system --gid 10001 planhrc \
