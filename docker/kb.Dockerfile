@@ -16,7 +16,7 @@ COPY pyproject.toml constraints.txt docker/requirements.py ./
 RUN python requirements.py > requirements.txt \
     && pip install --no-cache-dir -c constraints.txt -r requirements.txt
 # 2. The project, a regular (non-editable) install: the TBox travels as package data of planhrc.ontology.
-COPY README.md ./
+COPY README.md LICENSE ./
 COPY planhrc ./planhrc
 COPY kb_service ./kb_service
 COPY translator ./translator
