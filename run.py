@@ -9,7 +9,9 @@ a task.
     python3 ./run.py planhrc ARGS...  # any `planhrc` command inside the environment
 
 The environment gets planhrc (editable) with the `sim` and `test` extras, pinned by constraints.txt (the
-versions the suite last passed with), so every machine resolves the same versions.
+versions the suite last passed with), so every machine resolves the same versions. Each step says what it does in
+one line; what the installers (pip, apt-get) print goes to a log in `.venv/`, named with its last lines when a step
+fails.
 Only the standard library is used here, so this works from a fresh clone with nothing but python3; the file
 also parses on old interpreters (no newer syntax, annotations as strings) so that they get the version message.
 """
@@ -17,14 +19,19 @@ import hashlib
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
+import time
 import venv
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 STAMP = VENV / ".planhrc-installed"
+INSTALL_LOG = VENV / "install.log"
+APT_LOG = VENV / "apt.log"
+LOG_TAIL_LINES = 12
 CHROMIUM = Path("/usr/bin/chromium")
 CONSTRAINTS = ROOT / "constraints.txt"
 EXTRAS = "all,test"
@@ -41,8 +48,48 @@ class SetupError(Exception):
     """The environment cannot be made here; the message says why and what to do."""
 
 
+class InstallFailed(SetupError):
+    """An installer exited with an error; its output is in a log, whose last lines the message quotes."""
+
+    def __init__(self, what: str, code: int, log: "Path") -> None:
+        super().__init__(f"{what} failed (exit status {code}); the last lines of {shown(log)}:\n" + quoted(log))
+
+
+class Terminated(Exception):
+    """SIGTERM arrived: raised from the signal handler so that a running installer is stopped with run.py."""
+
+
 def say(message: str) -> None:
     print(f"[run.py] {message}", file=sys.stderr, flush=True)
+
+
+def shown(path: "Path") -> str:
+    """A path as the user reads it: relative to the repository when it lies inside."""
+    try:
+        return str(path.relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+def quoted(log: "Path") -> str:
+    """The last non-blank lines of a log, indented: where an installer says what went wrong."""
+    try:
+        lines = log.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        lines = [f"(the log cannot be read: {exc})"]
+    return "\n".join("    " + line for line in [l for l in lines if l.strip()][-LOG_TAIL_LINES:])
+
+
+def run_logged(cmd: "list[str]", log: "Path", what: str, env: "dict[str, str] | None" = None) -> None:
+    """Run an installer with its output appended to `log`; raise InstallFailed (naming the log) when it fails.
+    An exception while it runs (Ctrl-C, SIGTERM) kills it before passing on, so nothing is left running."""
+    with open(log, "a", encoding="utf-8") as out:
+        out.write(f"\n$ {' '.join(cmd)}\n")
+        out.flush()
+        code = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                              env=env).returncode
+    if code != 0:
+        raise InstallFailed(what, code, log)
 
 
 def venv_python() -> "Path":
@@ -114,13 +161,21 @@ def remove_venv() -> None:
 
 
 def create_venv() -> None:
-    venv.EnvBuilder(with_pip=True).create(VENV)
+    try:
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    except subprocess.CalledProcessError as exc:  # ensurepip, which venv runs with its output captured
+        output = exc.output.decode(errors="replace") if isinstance(exc.output, bytes) else str(exc.output or "")
+        INSTALL_LOG.write_text(output + "\n(on Debian or Ubuntu, the python3-venv package provides ensurepip)\n")
+        raise InstallFailed("creating .venv (ensurepip)", exc.returncode, INSTALL_LOG) from None
 
 
 def install_project(py: str) -> None:
+    """pip installs the project and its extras, pinned by constraints.txt; pip's output goes to the install log
+    (a quiet pip still let the build backend's warnings through, pages of them on a first run)."""
     constraints = ["-c", str(CONSTRAINTS)] if CONSTRAINTS.exists() else []
-    subprocess.run([py, "-m", "pip", "install", "--quiet", "--upgrade", "pip", *constraints], check=True)
-    subprocess.run([py, "-m", "pip", "install", "--quiet", *constraints, "-e", f"{ROOT}[{EXTRAS}]"], check=True)
+    run_logged([py, "-m", "pip", "install", "--upgrade", "pip", *constraints], INSTALL_LOG, "upgrading pip")
+    run_logged([py, "-m", "pip", "install", *constraints, "-e", f"{ROOT}[{EXTRAS}]"], INSTALL_LOG,
+               "installing planhrc")
 
 
 def ensure_environment() -> "Path":
@@ -134,13 +189,15 @@ def ensure_environment() -> "Path":
     digest = requirements_digest()
     if STAMP.exists() and STAMP.read_text().strip() == digest and venv_python().exists():
         return venv_python()
+    started = time.monotonic()
     if not venv_python().exists():
         say("creating .venv")
         create_venv()
     STAMP.unlink(missing_ok=True)  # until the installation below finishes, the environment counts as half-made
-    say("installing planhrc and its dependencies into .venv")
+    say(f"installing planhrc and its dependencies (log: {shown(INSTALL_LOG)})")
     install_project(str(venv_python()))
     STAMP.write_text(digest)
+    say(f".venv is ready ({time.monotonic() - started:.0f} s)")
     return venv_python()
 
 
@@ -159,15 +216,39 @@ def ensure_chromium() -> None:
     if CHROMIUM.exists():
         return
     if os.name != "posix" or os.geteuid() != 0 or not Path("/usr/bin/apt-get").exists():
-        print(f"[run.py] {CHROMIUM} is missing and apt-get cannot be used here (needs root on Debian): "
-              "the browser tests will skip", flush=True)
+        say(f"{CHROMIUM} is missing and apt-get cannot be used here (needs root on Debian): "
+            "the browser tests will skip")
         return
-    print("[run.py] installing Debian's chromium for the browser tests", flush=True)
+    say(f"installing Debian's chromium for the browser tests (log: {shown(APT_LOG)})")
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    ok = subprocess.run(["apt-get", "update", "-qq"], env=env).returncode == 0 and subprocess.run(
-        ["apt-get", "install", "-y", "-qq", "--no-install-recommends", "chromium"], env=env).returncode == 0
-    if not ok or not CHROMIUM.exists():
-        print("[run.py] installing chromium failed: the browser tests will skip", flush=True)
+    try:
+        run_logged(["apt-get", "update"], APT_LOG, "apt-get update", env=env)
+        run_logged(["apt-get", "install", "-y", "--no-install-recommends", "chromium"], APT_LOG,
+                   "apt-get install chromium", env=env)
+    except InstallFailed as exc:
+        say(f"{exc}\nThe browser tests will skip.")
+        return
+    if not CHROMIUM.exists():
+        say(f"apt-get installed chromium but {CHROMIUM} is not there: the browser tests will skip")
+
+
+def on_sigterm(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+def run_task(cmd: "list[str]") -> int:
+    """Run the task's command in the foreground; pass a SIGTERM on to it and wait until it has stopped (it stops
+    its own children: the demo its service, the tests theirs)."""
+    child = subprocess.Popen(cmd, cwd=ROOT)
+    while True:
+        try:
+            code = child.wait()
+            return 128 - code if code < 0 else code  # killed by signal N: the shell's 128 + N
+        except KeyboardInterrupt:  # the child got the same Ctrl-C and reports it itself
+            child.wait()
+            return 130
+        except Terminated:
+            child.terminate()
 
 
 def main(argv: "list[str]") -> int:
@@ -178,31 +259,34 @@ def main(argv: "list[str]") -> int:
     if task not in TASKS:
         say(f"unknown task {task!r}; use {', '.join(TASKS)}")
         return 2
+    signal.signal(signal.SIGTERM, on_sigterm)
     try:
         py = str(ensure_environment())
+        if task == "test":
+            ensure_chromium()
+    except InstallFailed as exc:
+        say(f"{exc}\nRun the same command again to retry: the environment will be repaired.")
+        return 1
     except SetupError as exc:
         say(str(exc))
         return 2
-    except subprocess.CalledProcessError as exc:
-        say(f"installation failed ({' '.join(exc.cmd[:4])} ... exited with {exc.returncode}); "
-            "run again to retry, the environment will be repaired")
-        return 1
+    except (KeyboardInterrupt, Terminated) as exc:
+        say("interrupted; run the same command again to finish the installation")
+        return 130 if isinstance(exc, KeyboardInterrupt) else 143
     if task == "setup":
         return 0
     if task == "lock":
         write_constraints(py)
         return 0
     if task == "test":
-        ensure_chromium()
+        say(" ".join(["running the tests: pytest", *rest]))
         cmd = [py, "-m", "pytest", *rest]
     elif task == "demo":
+        say(" ".join(["running the demo: planhrc demo", *rest]))
         cmd = [py, "-m", "planhrc.cli", "demo", *rest]
     else:
         cmd = [py, "-m", "planhrc.cli", *rest]
-    try:
-        return subprocess.run(cmd, cwd=ROOT).returncode
-    except KeyboardInterrupt:  # the child got the same Ctrl-C and reports it itself
-        return 130
+    return run_task(cmd)
 
 
 if __name__ == "__main__":

@@ -619,7 +619,7 @@ def _run_bench(args: argparse.Namespace) -> int:
                                         http=not args.no_http)
         table = replan_table(extra["replan"])
         print(table)
-    if args.replan or args.replan_only:  # its own files too: the README's re-planning table is read from them
+    if args.replan or args.replan_only:  # its own files too: docs/results.md's re-planning table is read from them
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / "replan.json").write_text(json.dumps(extra["replan"], indent=2))
         (out_dir / "replan.md").write_text(table + "\n")

@@ -15,13 +15,15 @@ COPY pyproject.toml constraints.txt docker/requirements.py ./
 RUN python requirements.py sim > requirements.txt \
     && pip install --no-cache-dir -c constraints.txt -r requirements.txt
 # 2. The project, a regular (non-editable) install.
-COPY README.md ./
+COPY README.md LICENSE ./
 COPY planhrc ./planhrc
 COPY kb_service ./kb_service
 COPY translator ./translator
 COPY planner ./planner
 COPY robot_sim ./robot_sim
 COPY ontology ./ontology
+COPY pipeline ./pipeline
+COPY bench ./bench
 RUN pip install --no-cache-dir --no-deps -c constraints.txt . && rm -rf build
 # 3. An unprivileged user that owns nothing but the output folder.
 RUN groupadd --system --gid 10001 planhrc \

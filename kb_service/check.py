@@ -1,4 +1,5 @@
-"""`planhrc ontology check` and `planhrc ontology bench-subsumption` (wired into planhrc.cli by the lead)."""
+"""`planhrc ontology check` (a DL reasoner on the TBox, or on the TBox with a store's ABox: consistency, classes,
+inferred facts) and `planhrc ontology bench-subsumption` (the in-process subsumption check's latency)."""
 from __future__ import annotations
 
 import argparse

@@ -57,7 +57,6 @@ USER_ERRORS: tuple[tuple[str, str], ...] = (
     ("planhrc.model", "ModelError"),
     ("planhrc.transition", "TransitionError"),
     ("planhrc.kb_service.store.errors", "KBError"),
-    ("planhrc.kb_service.errors", "KBError"),
     ("planhrc.translator.errors", "TranslationError"),
     ("planhrc.planner.errors", "PlannerError"),
     ("planhrc.client", "ProtocolError"),

@@ -38,7 +38,9 @@ from typing import Mapping, Sequence
 from planhrc.geometry import (PLANNING, ROOMY, STRICT, Cell, Feasibility, Infeasibility, ObjectGeometry, Tolerance,
                               configuration_feasible, link_centres, reach_shortfall, rotated)
 
-DEFAULT_BUDGET = 4000  # step checks per search (about 1 ms each for 20 links)
+# Step checks per search: bounds the time the ordering adds to a re-plan; a plan it cannot order within it goes to
+# the human (`python -m planhrc.bench.ordering` measures the checks a search takes).
+DEFAULT_BUDGET = 4000
 # The search for an order keeping ROOMY's clearance may try this many step checks per move: enough to move a few
 # steps of the plan's own order past each other, not enough to double the search when no such order exists.
 ROOMY_CHECKS_PER_MOVE = 8

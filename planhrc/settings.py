@@ -60,8 +60,8 @@ class Settings(BaseSettings):
     val_armed: bool = Field(
         default=True,
         description="Keep one VAL process per domain in use started ahead of need, its domain already read, "
-        "waiting for the next plan's problem (`planner.armed`): a short check skips VAL's start-up (relative "
-        "20 x 12: about 1.3 ms of 2.8). The same binary and inputs as a cold run; Linux only.",
+        "waiting for the next plan's problem (`planner.armed`): a short check skips VAL's start-up, a large part of "
+        "it. The same binary and inputs as a cold run; Linux only.",
     )
     planning_workers: int = Field(
         default=2, ge=0, le=16,

@@ -206,14 +206,13 @@ class Grounder:
     """`ground_action` for one domain, remembering what a step grounds to.
 
     A step of a schema without conditional effects grounds to the same action in every state where it applies:
-    a step seen before costs a look-up and a check of its precondition (relative 20 x 12 plans: 14 µs a step
-    before). A step with conditional effects is ground once per set of static facts (predicates no action
-    changes): the bindings of its `forall` variables the static facts allow are kept, and in each state only
-    their fluent conditions are checked (the absolute 20 x 12 task: one `when` of 20 joints x 12 x 12
-    orientations a step, 0.33 ms a step before). Either way the action is the one `ground_action` gives; a step
-    whose precondition fails takes `ground_action`'s path (for its message), and so does a conditional effect
-    whose variables the static facts do not all bind. Get one per domain from `grounder(domain)`; it holds at
-    most `LIMIT` steps."""
+    a step seen before costs a look-up and a check of its precondition, not a grounding. A step with conditional
+    effects is ground once per set of static facts (predicates no action changes): the bindings of its `forall`
+    variables the static facts allow are kept, and in each state only their fluent conditions are checked (on
+    the absolute 20 x 12 task a step's one `when` ranges over 20 joints x 12 x 12 orientations). Either way the
+    action is the one `ground_action` gives; a step whose precondition fails takes `ground_action`'s path (for its
+    message), and so does a conditional effect whose variables the static facts do not all bind. Get one per
+    domain from `grounder(domain)`; it holds at most `LIMIT` steps."""
 
     LIMIT = 50_000
 

@@ -23,7 +23,7 @@ from planhrc.geometry import Cell, ObjectGeometry, rotated
 from planhrc.robot_sim.scene import sweep_hazard
 
 SWEEP_HAZARDS = ("off_table", "inside_robot")
-PATH_BUDGET = 6000  # sweep checks of one search (about 1.5 ms each)
+PATH_BUDGET = 6000  # sweep checks of one search: bounds the time the human spends looking for a way (then: None)
 GREED = 2.0  # weighted A*: the estimate counts twice, so the search goes for the goal first (not always the fewest moves)
 
 

@@ -131,7 +131,7 @@ def eased(fraction: float) -> float:
     smoothly. The links beyond the turned one are held by joint friction alone, and the point l1 turns about by
     nothing but the table: a turn at full speed from its first tick to its last jerked them (a human's turn of
     l1 slid the base point by 4 cm). The robot's arc keeps its even pace: eased the same way, its longer turns
-    dragged the links before a held one further (see the README's robot table)."""
+    dragged the links before a held one further (docs/results.md, the robot)."""
     return 0.5 - 0.5 * math.cos(math.pi * min(1.0, max(0.0, fraction)))
 
 

@@ -9,6 +9,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -73,6 +74,17 @@ def test_every_copied_path_exists_and_is_in_the_build_context(image):
                 assert source.split("/")[0] not in ignored, f"{source} is excluded by .dockerignore"
     for clutter in (".venv", ".git", "tests", "**/__pycache__"):
         assert clutter in ignored
+
+
+@pytest.mark.parametrize("image", sorted(IMAGES))
+def test_the_image_copies_everything_the_build_reads(image):
+    """`pip install .` in the image reads every package folder pyproject.toml maps, the readme and the license
+    files: a folder left out of the COPY lines (a new layer folder) fails the image's build, not a test."""
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())
+    needed = {*project["tool"]["setuptools"]["package-dir"].values(), project["project"]["readme"],
+              *project["project"].get("license-files", [])}
+    copied = {source for line in dockerfile(image) if line.startswith("COPY ") for source in line.split()[1:-1]}
+    assert needed <= copied, f"not copied into the {image} image: {sorted(needed - copied)}"
 
 
 def test_the_compose_file_wires_the_two_images():

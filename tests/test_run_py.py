@@ -1,18 +1,71 @@
 """`run.py` refuses an unknown task and an old interpreter before creating anything, and rebuilds a `.venv` made
-by another interpreter or left half-made. Each test works on a copy of run.py + pyproject.toml in a temporary
-folder; no real installation runs (the installer is replaced where one would start)."""
+by another interpreter or left half-made: those tests work on a copy of run.py + pyproject.toml in a temporary
+folder, with the installer replaced where one would start. The tests at the end run run.py for real on a tiny
+package of the same shape (a `planhrc.cli` with a `demo`): a real `python -m venv`, real pip, a real build, to see
+what a first run prints, where the installers' output goes, and what a failing installation says."""
 from __future__ import annotations
 
+import ast
 import importlib.util
+import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 import venv
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# A tiny real package standing where planhrc stands: run.py installs it with the extras it installs planhrc with,
+# and its `planhrc.cli` answers the tasks run.py starts.
+PROBE_PYPROJECT = """\
+[build-system]
+requires = ["setuptools>=77.0.3"]
+build-backend = "setuptools.build_meta"
+
+[project]
+name = "planhrc"
+version = "0.0.1"
+requires-python = ">=3.11"
+
+[project.optional-dependencies]
+all = []
+test = []
+
+[tool.setuptools]
+packages = ["planhrc"]
+"""
+PROBE_CLI = """\
+import os
+import sys
+import time
+from pathlib import Path
+
+
+def main(argv):
+    if argv[0] == "demo":
+        print("[demo] the probe's first line", flush=True)
+        return 0
+    if argv[0] == "wait":  # wait PIDFILE: stands for a long task
+        Path(argv[1]).write_text(str(os.getpid()))
+        time.sleep(120)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
+"""
+# A build backend of the package's own that refuses to build: a real pip run that fails, with its reason last
+BROKEN_BACKEND = """\
+def _refuse(*args, **kwargs):
+    raise RuntimeError("probe-build-refused: this package does not build")
+
+
+get_requires_for_build_editable = get_requires_for_build_wheel = build_editable = build_wheel = _refuse
+"""
 
 
 @pytest.fixture
@@ -162,3 +215,102 @@ def test_constraints_pin_everything_the_environment_installs():
     assert not missing, f"not pinned in constraints.txt: {missing} (run `python3 ./run.py lock`)"
     differ = {name: (pins[name], version) for name, version in required.items() if pins[name] != version}
     assert not differ, f"constraints.txt pins other versions than installed: {differ}"
+
+
+def test_run_py_parses_on_old_interpreters():
+    """An old python3 must get run.py's version message, not a SyntaxError: no syntax newer than 3.6."""
+    ast.parse((REPO / "run.py").read_text(), feature_version=(3, 6))
+
+
+def make_probe(folder: Path, pyproject: str = PROBE_PYPROJECT) -> Path:
+    folder.mkdir()
+    shutil.copy(REPO / "run.py", folder / "run.py")
+    (folder / "pyproject.toml").write_text(pyproject)
+    (folder / "planhrc").mkdir()
+    (folder / "planhrc" / "__init__.py").write_text("")
+    (folder / "planhrc" / "cli.py").write_text(PROBE_CLI)
+    return folder
+
+
+def run_py_in(folder: Path, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in {"PYTHONPATH", "VIRTUAL_ENV"}}
+    return subprocess.run([sys.executable, "run.py", *args], cwd=folder, env=env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def first_demo(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    """A fresh checkout of the probe and what its first `python3 ./run.py demo` did."""
+    folder = make_probe(tmp_path_factory.mktemp("probe") / "clone")
+    return folder, run_py_in(folder, "demo")
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_the_first_demo_says_each_step_in_a_line_and_keeps_pip_in_a_log(first_demo):
+    folder, result = first_demo
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ["[demo] the probe's first line"]
+    lines = result.stderr.splitlines()
+    assert lines == [
+        "[run.py] creating .venv",
+        "[run.py] installing planhrc and its dependencies (log: .venv/install.log)",
+        lines[2],
+        "[run.py] running the demo: planhrc demo",
+    ], result.stderr
+    assert lines[2].startswith("[run.py] .venv is ready (") and lines[2].endswith(" s)")
+    log = (folder / ".venv" / "install.log").read_text()
+    assert "Successfully installed planhrc-0.0.1" in log and "-m pip install --upgrade pip" in log
+    assert (folder / ".venv" / ".planhrc-installed").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_a_second_demo_installs_nothing(first_demo):
+    folder, _ = first_demo
+    log = (folder / ".venv" / "install.log").read_text()
+    result = run_py_in(folder, "demo")
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.splitlines() == ["[run.py] running the demo: planhrc demo"]
+    assert (folder / ".venv" / "install.log").read_text() == log
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_sigterm_stops_the_task_with_run_py(first_demo, tmp_path):
+    """A SIGTERM to run.py reaches the task it runs (a service manager or CI stopping run.py leaves nothing
+    running), and run.py answers with the task's status."""
+    folder, _ = first_demo
+    pidfile = tmp_path / "task.pid"
+    env = {k: v for k, v in os.environ.items() if k not in {"PYTHONPATH", "VIRTUAL_ENV"}}
+    runner = subprocess.Popen([sys.executable, "run.py", "planhrc", "wait", str(pidfile)], cwd=folder, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not (pidfile.exists() and pidfile.read_text()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        task = int(pidfile.read_text())
+        runner.send_signal(signal.SIGTERM)
+        assert runner.wait(timeout=30) == 128 + signal.SIGTERM
+    finally:
+        if runner.poll() is None:
+            runner.kill()
+    assert not Path(f"/proc/{task}").exists(), "the task outlived run.py"
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_a_failing_installation_names_its_log_and_quotes_the_error(tmp_path):
+    broken = PROBE_PYPROJECT.replace('requires = ["setuptools>=77.0.3"]\nbuild-backend = "setuptools.build_meta"',
+                                     'requires = []\nbuild-backend = "broken_backend"\nbackend-path = ["."]')
+    folder = make_probe(tmp_path / "clone", broken)
+    (folder / "broken_backend.py").write_text(BROKEN_BACKEND)
+    result = run_py_in(folder, "demo")
+    assert result.returncode == 1
+    assert "[run.py] installing planhrc failed (exit status 1); the last lines of .venv/install.log:" in result.stderr
+    assert "probe-build-refused: this package does not build" in result.stderr  # pip's error, quoted from the log
+    assert "Run the same command again to retry" in result.stderr
+    assert "Traceback" not in result.stderr.split("the last lines of")[0]
+    assert "probe-build-refused" in (folder / ".venv" / "install.log").read_text()
+    assert not (folder / ".venv" / ".planhrc-installed").exists()  # the next run repairs the environment
+    assert "[demo]" not in result.stdout
