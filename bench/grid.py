@@ -45,6 +45,7 @@ from typing import Iterable, Sequence
 from planhrc.cli_args import int_list, name_list, positive_float, positive_int, writable_dir
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
+from planhrc.bench.errors import BenchError
 from planhrc.bench.plots import plot_times
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS, available_planners, get_planner
@@ -415,7 +416,7 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
             stages.append({**outcome.timings, "store": t_out - t_store, "write_out": time.perf_counter() - t_out})
             lengths.append(len(outcome.actions))
             if outcome.status != "solved":
-                raise RuntimeError(f"re-plan failed: {outcome.status} {outcome.message}")
+                raise BenchError(f"re-plan failed: {outcome.status} {outcome.message}")
     out["first_run_ms"] = round(times[0] * 1000, 3)
     out.update(stats_ms(times[1:]))
     out["stage_medians_ms"] = {k: stats_ms([s.get(k, 0.0) for s in stages[1:]])["median_ms"] for k in stages[1]}

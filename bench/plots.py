@@ -22,11 +22,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
+from planhrc.bench.errors import BenchError
+
 SOLVED = "solved"
 K_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 
 
-class PlotError(Exception):
+class PlotError(BenchError):
     """A benchmark record cannot be drawn (a field is missing or not a number)."""
 
 

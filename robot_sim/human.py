@@ -30,8 +30,9 @@ import pybullet
 
 from planhrc.geometry import configuration_feasible, rotated
 from planhrc.robot_sim.handling import SWEEP_HAZARDS, joint_angles, shorter, turn_order, turn_path
-from planhrc.robot_sim.scene import (HAZARDS, TIME_STEP_S, Scene, SimError, baseline_problems, direction, eased,
-                                    new_hazards, sweep_hazard, turn_hazard)
+from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.scene import (HAZARDS, TIME_STEP_S, Scene, baseline_problems, direction, eased, new_hazards,
+                                    sweep_hazard, turn_hazard)
 
 log = logging.getLogger(__name__)
 

@@ -20,8 +20,9 @@ import cv2
 import numpy as np
 import pybullet
 
+from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.markers import aruco_dictionary
-from planhrc.robot_sim.scene import Scene, SimError
+from planhrc.robot_sim.scene import Scene
 
 
 @dataclass(frozen=True)

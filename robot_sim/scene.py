@@ -33,6 +33,7 @@ import pybullet
 
 from planhrc.geometry import (EXECUTION, STRICT, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, Tolerance,
                               configuration_feasible, rotated)
+from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
@@ -45,10 +46,6 @@ HOME_POSE = {
     "right": (-1.0, -0.9, 0.3, 1.6, 0.0, 0.9, 0.0),
 }
 TIME_STEP_S = 1.0 / 120.0  # a coarse step keeps an action well under a second of wall time
-
-
-class SimError(Exception):
-    """Root of the simulator's errors; the message names the offending field or value."""
 
 
 @dataclass(frozen=True)

@@ -22,11 +22,11 @@ import pybullet
 from planhrc.geometry import reach_shortfall
 from planhrc.vocabulary import ActionOutcome as Outcome
 from planhrc.vocabulary import FailureReason  # the words of a failure, defined once, shared with the service
+from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
     Scene,
-    SimError,
     arm_joints,
     direction,
     drive_gripper,

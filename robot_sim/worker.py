@@ -41,7 +41,8 @@ from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, RobotTurn,
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
-from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene, turn_hazard
+from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
 from planhrc.robot_sim.skills import ActionResult, Outcome, Robot, RotationAction, perform_action
 from planhrc.vocabulary import FailureReason
 
