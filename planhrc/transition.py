@@ -12,16 +12,12 @@ from functools import lru_cache
 from dataclasses import dataclass, replace
 from typing import Iterator, Mapping, Sequence
 
-from planhrc.errors import PlanhrcError
+from planhrc.errors import DeadlineExceeded, PlanhrcError
 from planhrc.model import ActionSchemaSpec, ActionSpec, Atom, CondEffect, DomainModelSpec, Literal, State
 
 
 class TransitionError(PlanhrcError):
     """A plan step does not match a schema or is not applicable in the state it is applied to."""
-
-
-class ReplayDeadline(TransitionError):
-    """The replay of a plan did not finish by its deadline (the plan is neither accepted nor refused)."""
 
 
 def parse_step(step: str) -> tuple[str, tuple[str, ...]]:
@@ -317,7 +313,8 @@ def grounder(domain: DomainModelSpec) -> Grounder:
 def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_at: float | None = None
            ) -> tuple[tuple[ActionSpec, ...], tuple[State, ...]]:
     """Ground every step in turn and return the actions and the expected states s^e_1 .. s^e_{N+1}; past
-    `deadline_at` (`time.monotonic()`) a `ReplayDeadline` is raised instead."""
+    `deadline_at` (`time.monotonic()`) `DeadlineExceeded` is raised instead (the plan is neither accepted nor
+    refused)."""
     states = [frozenset(init)]
     actions = []
     conditional = any(s.conditional_effects for s in domain.actions)
@@ -326,7 +323,7 @@ def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_a
     statics = g.statics(states[0]) if conditional else None  # no action changes them: the same in every state
     for k, step in enumerate(plan, 1):
         if deadline_at is not None and time.monotonic() > deadline_at:
-            raise ReplayDeadline(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
+            raise DeadlineExceeded(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
         action = g.ground(step, states[-1], index, statics)
         actions.append(action)
         states.append(apply(states[-1], action))

@@ -7,9 +7,8 @@ as plain JSON strings and appear as enums in the service's OpenAPI schemas.
 * `FailureReason`: why an action that did not succeed failed (machine-readable; the feedback's sentence says the
   rest);
 * `Remedy`: what the cooperation model does instead of retrying a failed action identically;
-* `PlanStatus`: what one planner call returned (the planner package uses this very enum);
-* `PlanningStatus`: what one run of the planning pipeline produced (a planner status, or `invalid` when VAL or
-  the replay refused the plan).
+* `PlanStatus`: how planning ended, for one planner call (the planner package uses this very enum) and for one
+  run of the planning pipeline, which adds `invalid` when VAL or the replay refused the planner's plan.
 """
 from __future__ import annotations
 
@@ -62,22 +61,18 @@ class Remedy(StrEnum):
 
 
 class PlanStatus(StrEnum):
-    """The status of one planner call: "unsolvable" and "timeout" are results, not exceptions."""
-
-    SOLVED = "solved"
-    UNSOLVABLE = "unsolvable"
-    TIMEOUT = "timeout"
-    ERROR = "error"
-
-
-class PlanningStatus(StrEnum):
-    """The status of one pipeline run: the planner's, or `invalid` when the plan failed VAL or the replay."""
+    """How planning ended: "unsolvable" and "timeout" are results, not exceptions. A planner call answers one of
+    the first four; `invalid` is the pipeline's, for a plan that VAL or the replay refused."""
 
     SOLVED = "solved"
     UNSOLVABLE = "unsolvable"
     TIMEOUT = "timeout"
     ERROR = "error"
     INVALID = "invalid"
+
+
+# The pipeline's and the service's name for `PlanStatus` (the same enum), kept while they still say it.
+PlanningStatus = PlanStatus
 
 
 def one_of(enum: type[StrEnum]) -> str:

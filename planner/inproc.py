@@ -19,7 +19,9 @@ import time
 from functools import lru_cache
 
 from .cyclic import NAME, GroundTask
-from .deadline import DeadlineExceeded, within
+from planhrc.errors import DeadlineExceeded
+
+from .deadline import within
 from .errors import PlannerError
 from .ground import LiftedTask, OutsideFamilyError, analyse, ground_lifted, owner_values
 from .pddl import Atom, Domain, Problem, parse_domain, parse_problem
