@@ -3,8 +3,8 @@
 External planners are processes killed at their limit (`process.run_limited`); the in-process planner runs in
 the caller's thread, so it checks the clock itself: `InprocPlanner.solve` opens `within(timeout_s)` and the
 loops whose length grows with the task (grounding, recognition, the dynamic programmes) call `check()`, which
-raises `planhrc.errors.DeadlineExceeded` once the limit has passed. The limit lives in a context variable, not an argument, so
-that the memoised stages keep their cache keys; each thread (each request) has its own.
+raises `planhrc.errors.DeadlineExceeded` once the limit has passed. The limit lives in a context variable, not
+an argument, so that the memoised stages keep their cache keys; each thread (each request) has its own.
 """
 from __future__ import annotations
 

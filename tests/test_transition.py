@@ -82,11 +82,11 @@ def test_macro_steps_merge_consecutive_same_joint_same_direction():
 
 def _brute_force_bindings(literals, variables, binding, state, objects):
     """Every binding of `variables` over `objects` under which the literals hold, the slow obvious way."""
-    from planhrc.transition import _holds
+    from planhrc.grounding import holds
     found = []
     for values in itertools.product(objects, repeat=len(variables)):
         b = {**binding, **dict(zip(variables, values))}
-        if all(_holds(lit, b, state) for lit in literals):
+        if all(holds(lit, b, state) for lit in literals):
             found.append(b)
     return found
 
