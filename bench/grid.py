@@ -86,7 +86,7 @@ class Row:
     label: str
     links: int
     orientations: int
-    status: str
+    status: PlanStatus
     seconds: float
     plan_length: int | None
     optimal_length: int
@@ -160,7 +160,7 @@ def run_grid(planners: Sequence[str], formulations: Sequence[str], instances: Se
             valid, vsec = check.valid, check.seconds
         rows.append(Row(
             formulation=formulation, planner=planner_name, instance=inst.name, label=inst.label,
-            links=inst.links, orientations=inst.orientations, status=result.status.value,
+            links=inst.links, orientations=inst.orientations, status=result.status,
             seconds=result.seconds, plan_length=len(result.plan) if result.status is PlanStatus.SOLVED else None,
             optimal_length=optimal_length(formulation, inst), relative_equivalent_length=relative_equivalent(inst),
             valid=valid, validate_seconds=vsec, message=result.message[:200],
@@ -173,7 +173,7 @@ def summarise(rows: Sequence[Row]) -> list[dict]:
     keys = sorted({(r.formulation, r.planner) for r in rows})
     for formulation, planner in keys:
         sel = [r for r in rows if r.formulation == formulation and r.planner == planner]
-        solved = [r for r in sel if r.status == "solved" and r.valid is not False]
+        solved = [r for r in sel if r.status is PlanStatus.SOLVED and r.valid is not False]
         times = [r.seconds for r in solved]
         out.append({
             "formulation": formulation,
@@ -311,16 +311,17 @@ def measure_fast_downward(formulation: str, links: int = 20, orientations: int =
     obj, init, goal = _random_case(formulation, links, orientations, rng)
     problem = get_problem(obj, obj.configuration_atoms(init), obj.configuration_atoms(goal), "bench")
     fd = get_planner(planner)
-    times, statuses = [], []
+    times: list[float] = []
+    statuses: list[PlanStatus] = []
     for _ in range(runs):
         result = fd.solve(domain, problem, timeout_s)
-        statuses.append(result.status.value)
+        statuses.append(result.status)
         if result.status is PlanStatus.TIMEOUT:
             break
         times.append(result.seconds)
     out = {"planner": planner, "formulation": formulation, "links": links, "orientations": orientations,
            "runs": len(statuses), "statuses": statuses, "time_limit_s": timeout_s, **stats_ms(times)}
-    if statuses and statuses[-1] == "timeout":
+    if statuses and statuses[-1] is PlanStatus.TIMEOUT:
         out["note"] = f"no plan within {timeout_s} s; not repeated"
     return out
 
@@ -415,7 +416,7 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
             kb.settle()  # the plan's triples, which the store's writer thread writes behind the answer
             stages.append({**outcome.timings, "store": t_out - t_store, "write_out": time.perf_counter() - t_out})
             lengths.append(len(outcome.actions))
-            if outcome.status != "solved":
+            if outcome.status is not PlanStatus.SOLVED:
                 raise BenchError(f"re-plan failed: {outcome.status} {outcome.message}")
     out["first_run_ms"] = round(times[0] * 1000, 3)
     out.update(stats_ms(times[1:]))

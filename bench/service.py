@@ -33,6 +33,7 @@ import httpx
 from planhrc.service_process import RunningService as Server
 from planhrc.service_process import running_service as start_service
 from planhrc.stats import percentile
+from planhrc.vocabulary import DecisionKind
 
 TOKEN = "service-bench-token"
 READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
@@ -113,7 +114,7 @@ def replanning_latencies(client: httpx.Client, object_id: str, links: int, orien
         if pause_s:
             time.sleep(pause_s)
         seconds, decision = perceive(client, object_id, random_angles(rng, links, orientations))
-        if decision == "replan":
+        if decision == DecisionKind.REPLAN:
             out.append(seconds)
     return out
 

@@ -32,7 +32,7 @@ from planhrc.service_process import ServiceStartError, running_service
 from planhrc.geometry import configuration_feasible
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import SceneSpec, is_feasible, random_orientations
-from planhrc.vocabulary import DecisionKind
+from planhrc.vocabulary import ActionOutcome, DecisionKind, Infeasible
 
 log = logging.getLogger(__name__)
 
@@ -170,8 +170,8 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         "reached_goal": summary.reached_goal,
         "stop_reason": summary.stop_reason,
         "time_to_goal_s": round(summary.wall_s, 3),
-        "replans": counts.get("replan", 0),
-        "resumes": counts.get("resume", 0),
+        "replans": counts.get(DecisionKind.REPLAN, 0),
+        "resumes": counts.get(DecisionKind.RESUME, 0),
         "decision_counts": dict(counts),
         "actions": [{"step": a.get("step"), "last_step": a.get("last_step"), "name": a.get("name"),
                      "joint_index": a.get("joint_index"), "turned_link_index": a.get("turned_link_index"),
@@ -212,7 +212,7 @@ def _states_off_table(summary, spec: SceneSpec) -> int:
     count = 0
     for base, theta in zip(summary.base_points, summary.configurations):
         result = configuration_feasible(spec.geometry(base), theta, spec.cell())
-        count += any(r.code in ("off_table", "inside_robot") for r in result.reasons)
+        count += any(r.code in (Infeasible.OFF_TABLE, Infeasible.INSIDE_ROBOT) for r in result.reasons)
     return count
 
 
@@ -227,7 +227,7 @@ def aggregate(results: list[dict]) -> dict:
     actions = sum(outcomes.values())
     return {
         "actions": actions,
-        "action_success_rate": round(outcomes.get("succeeded", 0) / actions, 3) if actions else None,
+        "action_success_rate": round(outcomes.get(ActionOutcome.SUCCEEDED, 0) / actions, 3) if actions else None,
         "outcomes": dict(outcomes),
         "failure_reasons": dict(reasons),
         "stop_reasons": dict(Counter(r["stop_reason"] for r in results)),

@@ -24,7 +24,8 @@ from planhrc.robot_sim.perception import CameraPerception, angle_difference_deg
 from planhrc.geometry import sweep_feasible
 from planhrc.robot_sim.scene import SceneSpec, build_scene, random_orientations
 from planhrc.stats import percentile
-from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
+from planhrc.robot_sim.skills import Robot, RotationAction, perform_action
+from planhrc.vocabulary import ActionOutcome
 
 
 def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dict:
@@ -69,7 +70,7 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
             if result.reason is not None:
                 reasons[result.reason.value] += 1
             turn_errors.append(abs(result.reached_deg - delta))
-            if result.outcome is not Outcome.SUCCEEDED:
+            if result.outcome is not ActionOutcome.SUCCEEDED:
                 scene.set_configuration(spec.orientations0, spec.base_xy)
     finally:
         scene.close()
@@ -79,7 +80,7 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
                              "max": max(errors), "missed_markers": missed},
         "perception_s": {"median": statistics.median(frame_s), "max": max(frame_s)},
         "rotation_action_s": {"median": statistics.median(rotation_s), "max": max(rotation_s),
-                              "succeeded": outcomes.get("succeeded", 0), "of": len(rotation_s)},
+                              "succeeded": outcomes.get(ActionOutcome.SUCCEEDED.value, 0), "of": len(rotation_s)},
         "rotation_outcomes": dict(outcomes),
         "rotation_failure_reasons": dict(reasons),
         "turn_error_deg": {"median": statistics.median(turn_errors), "max": max(turn_errors)},

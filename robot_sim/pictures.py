@@ -22,8 +22,10 @@ import cv2
 import numpy as np
 
 from planhrc.robot_sim.markers import aruco_dictionary
+from planhrc.vocabulary import ActionOutcome
 
-OUTCOME_COLOURS = {"succeeded": "#2e7d32", "partial": "#e07b00", "failed": "#c62828"}
+OUTCOME_COLOURS = {ActionOutcome.SUCCEEDED: "#2e7d32", ActionOutcome.PARTIAL: "#e07b00",
+                   ActionOutcome.FAILED: "#c62828"}
 ACTOR_COLOURS = {"robot": "#1f5fbf", "human": "#b0368a", "robot and human": "#6a3d9a", "nobody": "#5f6b7a",
                  "start": "#5f6b7a"}
 CAPTION_FONT_PX = 15
@@ -59,7 +61,7 @@ def describe_action(action: dict | None) -> str | None:
 def actor_between(robot_outcome: str | None, human_moves: Sequence[str]) -> str:
     """Who changed the object between two perceptions: a robot action that moved something (succeeded or
     partial), a human move, both, or nobody."""
-    robot = robot_outcome in ("succeeded", "partial")
+    robot = robot_outcome in (ActionOutcome.SUCCEEDED, ActionOutcome.PARTIAL)
     human = bool(human_moves)
     return "robot and human" if robot and human else "robot" if robot else "human" if human else "nobody"
 
@@ -129,9 +131,9 @@ def draw_configurations(path: Path, steps: Sequence[PictureStep], link_length_m:
                     transform=ax.transAxes, fontsize=7, va="top", ha="right", color="#c62828")
     legend = [Line2D([], [], color="#1f5fbf", linewidth=3, label="perceived configuration (true poses)"),
               Line2D([], [], color="#2e9e5b", linewidth=9, alpha=0.3, label="goal (ghost)"),
-              Line2D([], [], color=OUTCOME_COLOURS["succeeded"], label="action succeeded"),
-              Line2D([], [], color=OUTCOME_COLOURS["partial"], label="partial"),
-              Line2D([], [], color=OUTCOME_COLOURS["failed"], label="failed")]
+              Line2D([], [], color=OUTCOME_COLOURS[ActionOutcome.SUCCEEDED], label="action succeeded"),
+              Line2D([], [], color=OUTCOME_COLOURS[ActionOutcome.PARTIAL], label="partial"),
+              Line2D([], [], color=OUTCOME_COLOURS[ActionOutcome.FAILED], label="failed")]
     fig.legend(handles=legend, loc="lower center", ncol=5, fontsize=8, frameon=False)
     if title:
         fig.suptitle(title, fontsize=11)

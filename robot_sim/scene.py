@@ -34,6 +34,7 @@ import pybullet
 from planhrc.geometry import (EXECUTION, STRICT, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, Tolerance,
                               configuration_feasible, rotated)
 from planhrc.robot_sim.errors import SimError
+from planhrc.vocabulary import Infeasible
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
@@ -239,7 +240,7 @@ class Scene:
         """Links beyond the table's edge or fallen below its top (measured)."""
         base, theta = self.configuration()
         result = configuration_feasible(self.spec.geometry(base), theta, self.spec.cell())
-        beyond = {r.link for r in result.reasons if r.code == "off_table"}
+        beyond = {r.link for r in result.reasons if r.code is Infeasible.OFF_TABLE}
         fallen = {k for k in range(1, self.n_links + 1) if self.link_pose(k)[0][2] < self.spec.table_top_z - 0.01}
         return tuple(sorted(beyond | fallen))
 
@@ -322,17 +323,18 @@ def is_feasible(spec: SceneSpec, orientations_deg: Sequence[float], base_point_x
     return configuration_feasible(spec.geometry(base_point_xy), orientations_deg, spec.cell()).ok
 
 
-HAZARDS = ("off_table", "inside_robot", "overlap")  # what a turn must not cause; reach is the robot's matter
+# what a turn must not cause; reach is the robot's matter
+HAZARDS = (Infeasible.OFF_TABLE, Infeasible.INSIDE_ROBOT, Infeasible.OVERLAP)
 
 
 def baseline_problems(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell
-                      ) -> frozenset[tuple[str, int]]:
+                      ) -> frozenset[tuple[Infeasible, int]]:
     """(code, link) of the problems a configuration has already (strictly): acting on it does not cause them."""
     return frozenset((r.code, r.link) for r in configuration_feasible(geometry, orientations_deg, cell).reasons)
 
 
 def added_hazards(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell,
-                  baseline: frozenset[tuple[str, int]], hazards: Sequence[str] = HAZARDS,
+                  baseline: frozenset[tuple[Infeasible, int]], hazards: Sequence[Infeasible] = HAZARDS,
                   tolerance: Tolerance = EXECUTION) -> tuple[Infeasibility, ...]:
     """The problems among `hazards` that the configuration has beyond `baseline`, judged with the tolerance a
     physical execution is given on its way (`planhrc.geometry.EXECUTION`), or `tolerance`."""
@@ -341,8 +343,8 @@ def added_hazards(geometry: ObjectGeometry, orientations_deg: Sequence[float], c
 
 
 def sweep_hazard(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell, turned_link: int,
-                 held_link: int, delta_deg: float, baseline: frozenset[tuple[str, int]],
-                 hazards: Sequence[str] = HAZARDS, increment_deg: float = 5.0,
+                 held_link: int, delta_deg: float, baseline: frozenset[tuple[Infeasible, int]],
+                 hazards: Sequence[Infeasible] = HAZARDS, increment_deg: float = 5.0,
                  end_tolerance: Tolerance = EXECUTION) -> Infeasibility | None:
     """The first problem among `hazards` (beyond `baseline`) that turning `turned_link` about its joint with
     `held_link` by `delta_deg` causes somewhere along its sweep (every `increment_deg`), or None; where the
@@ -359,7 +361,7 @@ def sweep_hazard(geometry: ObjectGeometry, orientations_deg: Sequence[float], ce
 
 
 def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float,
-                increment_deg: float = 5.0, hazards: Sequence[str] = HAZARDS) -> Infeasibility | None:
+                increment_deg: float = 5.0, hazards: Sequence[Infeasible] = HAZARDS) -> Infeasibility | None:
     """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
     somewhere along its sweep (a link past the table's edge, inside the robot, folded onto or across another,
     beyond `planhrc.geometry.EXECUTION`'s tolerance) or where it comes to rest (as drawn, `STRICT`: a turn may
