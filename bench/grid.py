@@ -40,9 +40,9 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence
 
-from planhrc.cli_args import int_list, name_list, positive_float, positive_int, writable_dir
+from planhrc.cli_args import SubParsers, int_list, name_list, positive_float, positive_int, writable_dir
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
 from planhrc.bench.errors import BenchError
@@ -168,7 +168,7 @@ def run_grid(planners: Sequence[str], formulations: Sequence[str], instances: Se
     return rows
 
 
-def summarise(rows: Sequence[Row]) -> list[dict]:
+def summarise(rows: Sequence[Row]) -> list[dict[str, Any]]:
     out = []
     keys = sorted({(r.formulation, r.planner) for r in rows})
     for formulation, planner in keys:
@@ -194,7 +194,7 @@ def summarise(rows: Sequence[Row]) -> list[dict]:
     return out
 
 
-def write_results(rows: Sequence[Row], summary: list[dict], out_dir: Path, extra: dict | None = None) -> list[Path]:
+def write_results(rows: Sequence[Row], summary: list[dict[str, Any]], out_dir: Path, extra: dict[str, Any] | None = None) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     data = {"machine": machine_info(), "summary": summary, "rows": [asdict(r) for r in rows], **(extra or {})}
@@ -212,7 +212,7 @@ def write_results(rows: Sequence[Row], summary: list[dict], out_dir: Path, extra
     return written
 
 
-def machine_info() -> dict:
+def machine_info() -> dict[str, Any]:
     import os
 
     cpu = platform.processor() or ""
@@ -227,7 +227,7 @@ def machine_info() -> dict:
 
 
 # -- re-planning latency -------------------------------------------------------------------------------------
-def stats_ms(values: Sequence[float]) -> dict:
+def stats_ms(values: Sequence[float]) -> dict[str, Any]:
     """Count, median and p90 in milliseconds (the one percentile helper: `planhrc.stats.percentile`)."""
     from planhrc.stats import percentile
 
@@ -243,7 +243,7 @@ def _random_case(formulation: str, links: int, orientations: int, rng: random.Ra
 
 
 def measure_planner(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7,
-                    val_timeout_s: float = 60.0, validate: bool = True, val_runs: int | None = None) -> dict:
+                    val_timeout_s: float = 60.0, validate: bool = True, val_runs: int | None = None) -> dict[str, Any]:
     """The in-process stages on PDDL text: grounding (parse, ground, recognise; once per object), re-planning
     on the ground task from new initial states, VAL against the paper's exact domain, and the whole
     in-process loop (problem text -> `InprocPlanner.solve` with its memoised grounding -> VAL). With
@@ -270,7 +270,7 @@ def measure_planner(formulation: str, links: int = 20, orientations: int = 12, r
         plan_s.append(time.perf_counter() - t)
         lengths.append(len(result.plan))
         problems.append(get_problem(obj, atoms, goal_atoms, "bench"))
-    out: dict = {"formulation": formulation, "links": links, "orientations": orientations,
+    out: dict[str, Any] = {"formulation": formulation, "links": links, "orientations": orientations,
                  "ground_ms": round(ground_s * 1000, 3), "plan": stats_ms(plan_s),
                  "median_plan_length": statistics.median(lengths), "optimal": result.optimal}
     planner = InprocPlanner()
@@ -302,7 +302,7 @@ def measure_planner(formulation: str, links: int = 20, orientations: int = 12, r
 
 
 def measure_fast_downward(formulation: str, links: int = 20, orientations: int = 12, runs: int = 3,
-                          timeout_s: float = 10.0, seed: int = 7, planner: str = "fd-lama") -> dict:
+                          timeout_s: float = 10.0, seed: int = 7, planner: str = "fd-lama") -> dict[str, Any]:
     """Fast Downward's whole process (driver, translator, search, plan file) on the same kind of problem.
     A run that hits `timeout_s` is reported as a timeout and not repeated."""
     tbox = default_tbox_path()
@@ -331,7 +331,7 @@ def measure_fast_downward(formulation: str, links: int = 20, orientations: int =
 ROBOT_PAUSE_S = 0.25
 
 
-def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7) -> dict:
+def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7) -> dict[str, Any]:
     """A re-planning `POST /objects/{id}/perceptions` to a real `planhrc serve` process, request to answer, each
     `ROBOT_PAUSE_S` after the last answer as from a robot; and, meanwhile, `GET /health` from another connection
     every 20 ms (its slowest answer: does a re-plan stall the service?). Then the same number back to back
@@ -375,7 +375,7 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
                               "max_ms": round(max(health) * 1000, 3) if health else None}}
 
 
-def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10, seed: int = 7) -> dict:
+def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10, seed: int = 7) -> dict[str, Any]:
     """The library pipeline in this process: a new perceived state -> translation -> planning -> expected
     states -> VAL (in pieces where the service cuts them), then what the service writes after a re-plan
     (perceived state, problem, plan journal row) in one transaction, on a SQLite file like the service's; medians
@@ -391,7 +391,7 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
     rng = random.Random(seed)
     step = 360 // orientations
     n_values = links if formulation == "absolute" else links - 1
-    out: dict = {"formulation": formulation, "links": links, "orientations": orientations}
+    out: dict[str, Any] = {"formulation": formulation, "links": links, "orientations": orientations}
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-kb-") as tmp, \
             KnowledgeBase(str(Path(tmp) / "kb.sqlite3"), tbox) as kb:
         ident = kb.new_object_id()
@@ -426,11 +426,11 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
 
 
 def replan_report(formulations: Sequence[str], runs: int, fd_runs: int, fd_timeout_s: float,
-                  http: bool = True) -> dict:
+                  http: bool = True) -> dict[str, Any]:
     """Everything `--replan-only` measures, in one run, on 20 links x 12 orientations."""
-    report: dict = {"machine": machine_info(), "links": 20, "orientations": 12, "formulations": {}}
+    report: dict[str, Any] = {"machine": machine_info(), "links": 20, "orientations": 12, "formulations": {}}
     for f in formulations:
-        row: dict = {"planner": measure_planner(f, runs=runs)}
+        row: dict[str, Any] = {"planner": measure_planner(f, runs=runs)}
         log.info("%s: in-process stages done", f)
         row["pipeline"] = measure_replan(f, runs=runs)
         if "fd-lama" in available_planners():
@@ -441,7 +441,7 @@ def replan_report(formulations: Sequence[str], runs: int, fd_runs: int, fd_timeo
     return report
 
 
-def replan_table(report: dict) -> str:
+def replan_table(report: dict[str, Any]) -> str:
     lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; "
              f"{report['links']} links x {report['orientations']} orientations; medians (p90) in ms",
              "| formulation | ground (once) | plan | VAL | in-process loop | pipeline (KB) | its VAL | its store | "
@@ -474,7 +474,7 @@ SCALE_ORIENTATIONS = (12, 36, 72)
 
 
 def scale_report(formulations: Sequence[str], links: Sequence[int], orientations: Sequence[int], runs: int,
-                 val_timeout_s: float) -> dict:
+                 val_timeout_s: float) -> dict[str, Any]:
     """Every cell validates one plan; once VAL times out for a formulation and orientation count, larger
     cells skip VAL (and say so) instead of waiting for it again."""
     rows = []
@@ -493,7 +493,7 @@ def scale_report(formulations: Sequence[str], links: Sequence[int], orientations
     return {"machine": machine_info(), "rows": rows}
 
 
-def scale_table(report: dict) -> str:
+def scale_table(report: dict[str, Any]) -> str:
     """Medians in ms. "solve from text" is `InprocPlanner.solve` on a new problem text (parse, memoised
     grounding, plan); "loop" adds VAL, and is shown only where VAL ran."""
     lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; medians in ms",
@@ -509,7 +509,7 @@ def scale_table(report: dict) -> str:
     return "\n".join(lines)
 
 
-def scale_plot(report: dict, path: Path) -> Path:
+def scale_plot(report: dict[str, Any], path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -542,7 +542,7 @@ def scale_plot(report: dict, path: Path) -> Path:
     return path
 
 
-def add_bench_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_bench_parser(subparsers: SubParsers) -> None:
     p = subparsers.add_parser("bench", help="the paper's planning grid, re-planning latency and scale",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--planners", type=name_list(list(PLANNERS)), default="inproc,fd-lama",
@@ -615,7 +615,7 @@ def _run_bench(args: argparse.Namespace) -> int:
     if missing and not args.replan_only:
         print(f"planhrc bench: --planners: not available here: {', '.join(missing)}", file=sys.stderr)
         return 2
-    extra: dict = {}
+    extra: dict[str, Any] = {}
     if args.replan or args.replan_only:
         extra["replan"] = replan_report(formulations, args.replan_runs, args.fd_runs, args.fd_timeout,
                                         http=not args.no_http)

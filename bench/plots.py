@@ -20,10 +20,13 @@ import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 from planhrc.bench.errors import BenchError
 from planhrc.vocabulary import PlanStatus, one_of
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 K_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 
@@ -46,7 +49,7 @@ class Run:
 
 def run_from(record: Any) -> Run:
     """A `Run` from a bench `Row` or a CSV dict; PlotError names the field that is wrong."""
-    get = record.get if isinstance(record, dict) else lambda key: getattr(record, key, None)
+    get: Callable[[str], Any] = record.get if isinstance(record, dict) else lambda key: getattr(record, key, None)
     values: dict[str, Any] = {}
     fields: tuple[tuple[str, Callable[[Any], Any], str], ...] = (
         ("formulation", str, "str"), ("planner", str, "str"), ("links", int, "int"), ("orientations", int, "int"),
@@ -86,7 +89,7 @@ def plot_times(rows: Iterable[Any], out_dir: Path, timeout_s: float | None = Non
         low, high = _y_range(mine, limit)
         for formulation in sorted({r.formulation for r in mine}):
             sel = [r for r in mine if r.formulation == formulation]
-            fig = _figure(plt, sel, formulation, planner, limit, low, high)
+            fig = _figure(sel, formulation, planner, limit, low, high)
             path = out_dir / f"times-{formulation}-{planner}.png"
             fig.savefig(path, dpi=120)
             plt.close(fig)
@@ -100,7 +103,10 @@ def _y_range(runs: Sequence[Run], limit: float | None) -> tuple[float, float]:
     return 10 ** math.floor(math.log10(min(times))), 10 ** math.ceil(math.log10(max(times) * 1.5))
 
 
-def _figure(plt, runs: Sequence[Run], formulation: str, planner: str, limit: float | None, low: float, high: float):
+def _figure(runs: Sequence[Run], formulation: str, planner: str, limit: float | None, low: float, high: float
+            ) -> Figure:
+    import matplotlib.pyplot as plt
+
     links = sorted({r.links for r in runs})
     ks = sorted({r.orientations for r in runs})
     width = 0.8 / max(len(ks), 1)

@@ -16,9 +16,10 @@ import signal
 import sys
 import threading
 from contextlib import ExitStack, contextmanager, nullcontext
+from types import FrameType
 from typing import Any, Callable, Iterator
 
-from planhrc.cli_args import OneLineParser, settings_error_line
+from planhrc.cli_args import OneLineParser, SubParsers, settings_error_line
 from planhrc.errors import PlanhrcError
 
 # command -> (module, name of its `add_*_parser(subparsers)` function, one-line help)
@@ -83,7 +84,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
         if name != wanted:  # only the command that runs is imported
             sub.add_parser(name, help=help_text)
             continue
-        add: Callable = getattr(importlib.import_module(module), func)
+        add: Callable[[SubParsers], object] = getattr(importlib.import_module(module), func)
         add(sub)
     return parser
 
@@ -159,7 +160,7 @@ def native_stdout_diverted(verbose: bool) -> Iterator[None]:
         os.close(saved)
 
 
-def _on_signal(signum: int, frame) -> None:
+def _on_signal(signum: int, frame: FrameType | None) -> None:
     # later signals are ignored so that the cleanup started by the first one can finish (it is time-bounded)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -26,7 +26,7 @@ import math
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 import pybullet
@@ -34,8 +34,11 @@ import pybullet
 from planhrc.geometry import (EXECUTION, STRICT, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, Tolerance,
                               configuration_feasible, rotated)
 from planhrc.robot_sim.errors import SimError
-from planhrc.vocabulary import Infeasible
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
+from planhrc.vocabulary import Infeasible
+
+if TYPE_CHECKING:
+    from pybullet_utils.bullet_client import BulletClient
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
 PACKAGE_PREFIX = "package://example-robot-data/"
@@ -138,7 +141,8 @@ def rotate_point(point: np.ndarray, pivot: np.ndarray, delta_deg: float) -> np.n
     t = -math.radians(delta_deg)
     c, s = math.cos(t), math.sin(t)
     d = point - pivot
-    return pivot + np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+    turned: np.ndarray = pivot + np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+    return turned
 
 
 def baxter_urdf_source() -> Path:
@@ -162,7 +166,7 @@ def write_baxter_urdf(directory: Path) -> Path:
 class Scene:
     """A built work cell. Create it with `build_scene`; call `close` to remove its temporary files."""
 
-    def __init__(self, client, spec: SceneSpec, workdir: tempfile.TemporaryDirectory) -> None:
+    def __init__(self, client: BulletClient, spec: SceneSpec, workdir: tempfile.TemporaryDirectory[str]) -> None:
         self.client = client
         self.spec = spec
         self._workdir = workdir
@@ -314,7 +318,7 @@ class Scene:
     def __enter__(self) -> "Scene":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -554,7 +558,7 @@ def _load_object(scene: Scene) -> None:
     scene.set_configuration(s.orientations0, s.base_xy)
 
 
-def build_scene(client, spec: SceneSpec | None = None) -> Scene:
+def build_scene(client: BulletClient, spec: SceneSpec | None = None) -> Scene:
     """Load Baxter (optional), the table and the object into `client`; the caller keeps the client."""
     spec = spec or SceneSpec()
     workdir = tempfile.TemporaryDirectory(prefix="planhrc-scene-")

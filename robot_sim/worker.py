@@ -34,16 +34,17 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
+from planhrc.cli_args import (SubParsers, float_tuple, http_url, non_negative_float, non_negative_int, positive_int,
+                              writable_dir)
 from planhrc.client import KBClient, ProtocolError
 from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, RobotTurn, Scenario, apply_event,
                                      assist_failed_action, get_scenario, goal_differences, help_turns, safe_way)
-from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
+from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perceiver, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
-from planhrc.robot_sim.skills import ActionResult, Robot, RotationAction, perform_action
+from planhrc.robot_sim.skills import ActionResult, Interrupt, Robot, RotationAction, perform_action
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, Infeasible, StopReason
 
 log = logging.getLogger(__name__)
@@ -177,7 +178,7 @@ def _following_action(kb: KBClient, action: dict[str, Any]) -> tuple[int, int, f
     return None
 
 
-def _perceive(perceiver) -> Perception:
+def _perceive(perceiver: Perceiver) -> Perception:
     """Look (the camera looks again with the head turned while markers are missing). An unseen link stays
     unseen: nothing fills it in."""
     seen = perceiver.look()
@@ -279,7 +280,8 @@ def _signature(action: RotationAction) -> tuple[int, int, float, int]:
     return action.turned_link, action.held_link, round(action.delta_deg, 3), action.macro_steps
 
 
-def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, context, max_steps, run,
+def _loop(kb: KBClient, object_id: str, scene: Scene, robot: Robot, camera: CameraPerception, perceiver: Perceiver,
+          human: Human, scenario: Scenario, context: HumanContext, max_steps: int, run: _Run,
           record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3) -> StopReason:
     """Perceive -> decide -> act until the goal; returns why it stopped.
 
@@ -510,7 +512,8 @@ def refuse_unsafe(scene: Scene, action: RotationAction) -> ActionResult | None:
                         action.delta_deg, 0.0)
 
 
-def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt, stop_fraction):
+def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt: Interrupt,
+                   stop_fraction: float | None) -> ActionResult:
     """Perform the single steps of an action one after the other; stop at the first that does not succeed or
     would not be safe. The result covers them all: the turn reached is their sum."""
     reached = 0.0
@@ -629,7 +632,7 @@ def display_problem() -> str | None:
     return None
 
 
-def add_worker_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_worker_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("worker", help="run the simulated Baxter worker against the KB service",
                               description="Perceive, ask the KB service for actions and execute them in PyBullet.")
     p.add_argument("--kb", type=http_url, required=True, help="base URL of the KB service, e.g. http://127.0.0.1:8000")
