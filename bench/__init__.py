@@ -5,5 +5,6 @@
 | `grid` | `planhrc bench` | the paper's planning grid and the re-planning latency, beside packaged planners |
 | `service` | `planhrc service-bench` | the KB service over HTTP with a long history, contention and refusals |
 | `ordering` | `python -m planhrc.bench.ordering` | `ordering.order_moves` on long chains |
+| `replay` | `python -m planhrc.bench.replay` | grounding: the replay of a plan (cold and warm) and the planner's `ground_task` |
 | `plots` | `python -m planhrc.bench.plots` | the box plots of the grid's CSV |
 """

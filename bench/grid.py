@@ -40,11 +40,12 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence
 
-from planhrc.cli_args import int_list, name_list, positive_float, positive_int, writable_dir
+from planhrc.cli_args import SubParsers, int_list, name_list, positive_float, positive_int, writable_dir
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
+from planhrc.bench.errors import BenchError
 from planhrc.bench.plots import plot_times
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS, available_planners, get_planner
@@ -85,7 +86,7 @@ class Row:
     label: str
     links: int
     orientations: int
-    status: str
+    status: PlanStatus
     seconds: float
     plan_length: int | None
     optimal_length: int
@@ -159,7 +160,7 @@ def run_grid(planners: Sequence[str], formulations: Sequence[str], instances: Se
             valid, vsec = check.valid, check.seconds
         rows.append(Row(
             formulation=formulation, planner=planner_name, instance=inst.name, label=inst.label,
-            links=inst.links, orientations=inst.orientations, status=result.status.value,
+            links=inst.links, orientations=inst.orientations, status=result.status,
             seconds=result.seconds, plan_length=len(result.plan) if result.status is PlanStatus.SOLVED else None,
             optimal_length=optimal_length(formulation, inst), relative_equivalent_length=relative_equivalent(inst),
             valid=valid, validate_seconds=vsec, message=result.message[:200],
@@ -167,12 +168,12 @@ def run_grid(planners: Sequence[str], formulations: Sequence[str], instances: Se
     return rows
 
 
-def summarise(rows: Sequence[Row]) -> list[dict]:
+def summarise(rows: Sequence[Row]) -> list[dict[str, Any]]:
     out = []
     keys = sorted({(r.formulation, r.planner) for r in rows})
     for formulation, planner in keys:
         sel = [r for r in rows if r.formulation == formulation and r.planner == planner]
-        solved = [r for r in sel if r.status == "solved" and r.valid is not False]
+        solved = [r for r in sel if r.status is PlanStatus.SOLVED and r.valid is not False]
         times = [r.seconds for r in solved]
         out.append({
             "formulation": formulation,
@@ -193,7 +194,7 @@ def summarise(rows: Sequence[Row]) -> list[dict]:
     return out
 
 
-def write_results(rows: Sequence[Row], summary: list[dict], out_dir: Path, extra: dict | None = None) -> list[Path]:
+def write_results(rows: Sequence[Row], summary: list[dict[str, Any]], out_dir: Path, extra: dict[str, Any] | None = None) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     data = {"machine": machine_info(), "summary": summary, "rows": [asdict(r) for r in rows], **(extra or {})}
@@ -211,7 +212,7 @@ def write_results(rows: Sequence[Row], summary: list[dict], out_dir: Path, extra
     return written
 
 
-def machine_info() -> dict:
+def machine_info() -> dict[str, Any]:
     import os
 
     cpu = platform.processor() or ""
@@ -226,7 +227,7 @@ def machine_info() -> dict:
 
 
 # -- re-planning latency -------------------------------------------------------------------------------------
-def stats_ms(values: Sequence[float]) -> dict:
+def stats_ms(values: Sequence[float]) -> dict[str, Any]:
     """Count, median and p90 in milliseconds (the one percentile helper: `planhrc.stats.percentile`)."""
     from planhrc.stats import percentile
 
@@ -242,7 +243,7 @@ def _random_case(formulation: str, links: int, orientations: int, rng: random.Ra
 
 
 def measure_planner(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7,
-                    val_timeout_s: float = 60.0, validate: bool = True, val_runs: int | None = None) -> dict:
+                    val_timeout_s: float = 60.0, validate: bool = True, val_runs: int | None = None) -> dict[str, Any]:
     """The in-process stages on PDDL text: grounding (parse, ground, recognise; once per object), re-planning
     on the ground task from new initial states, VAL against the paper's exact domain, and the whole
     in-process loop (problem text -> `InprocPlanner.solve` with its memoised grounding -> VAL). With
@@ -269,7 +270,7 @@ def measure_planner(formulation: str, links: int = 20, orientations: int = 12, r
         plan_s.append(time.perf_counter() - t)
         lengths.append(len(result.plan))
         problems.append(get_problem(obj, atoms, goal_atoms, "bench"))
-    out: dict = {"formulation": formulation, "links": links, "orientations": orientations,
+    out: dict[str, Any] = {"formulation": formulation, "links": links, "orientations": orientations,
                  "ground_ms": round(ground_s * 1000, 3), "plan": stats_ms(plan_s),
                  "median_plan_length": statistics.median(lengths), "optimal": result.optimal}
     planner = InprocPlanner()
@@ -301,7 +302,7 @@ def measure_planner(formulation: str, links: int = 20, orientations: int = 12, r
 
 
 def measure_fast_downward(formulation: str, links: int = 20, orientations: int = 12, runs: int = 3,
-                          timeout_s: float = 10.0, seed: int = 7, planner: str = "fd-lama") -> dict:
+                          timeout_s: float = 10.0, seed: int = 7, planner: str = "fd-lama") -> dict[str, Any]:
     """Fast Downward's whole process (driver, translator, search, plan file) on the same kind of problem.
     A run that hits `timeout_s` is reported as a timeout and not repeated."""
     tbox = default_tbox_path()
@@ -310,16 +311,17 @@ def measure_fast_downward(formulation: str, links: int = 20, orientations: int =
     obj, init, goal = _random_case(formulation, links, orientations, rng)
     problem = get_problem(obj, obj.configuration_atoms(init), obj.configuration_atoms(goal), "bench")
     fd = get_planner(planner)
-    times, statuses = [], []
+    times: list[float] = []
+    statuses: list[PlanStatus] = []
     for _ in range(runs):
         result = fd.solve(domain, problem, timeout_s)
-        statuses.append(result.status.value)
+        statuses.append(result.status)
         if result.status is PlanStatus.TIMEOUT:
             break
         times.append(result.seconds)
     out = {"planner": planner, "formulation": formulation, "links": links, "orientations": orientations,
            "runs": len(statuses), "statuses": statuses, "time_limit_s": timeout_s, **stats_ms(times)}
-    if statuses and statuses[-1] == "timeout":
+    if statuses and statuses[-1] is PlanStatus.TIMEOUT:
         out["note"] = f"no plan within {timeout_s} s; not repeated"
     return out
 
@@ -329,7 +331,7 @@ def measure_fast_downward(formulation: str, links: int = 20, orientations: int =
 ROBOT_PAUSE_S = 0.25
 
 
-def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7) -> dict:
+def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs: int = 30, seed: int = 7) -> dict[str, Any]:
     """A re-planning `POST /objects/{id}/perceptions` to a real `planhrc serve` process, request to answer, each
     `ROBOT_PAUSE_S` after the last answer as from a robot; and, meanwhile, `GET /health` from another connection
     every 20 ms (its slowest answer: does a re-plan stall the service?). Then the same number back to back
@@ -373,7 +375,7 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
                               "max_ms": round(max(health) * 1000, 3) if health else None}}
 
 
-def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10, seed: int = 7) -> dict:
+def measure_replan(formulation: str, links: int = 20, orientations: int = 12, runs: int = 10, seed: int = 7) -> dict[str, Any]:
     """The library pipeline in this process: a new perceived state -> translation -> planning -> expected
     states -> VAL (in pieces where the service cuts them), then what the service writes after a re-plan
     (perceived state, problem, plan journal row) in one transaction, on a SQLite file like the service's; medians
@@ -389,7 +391,7 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
     rng = random.Random(seed)
     step = 360 // orientations
     n_values = links if formulation == "absolute" else links - 1
-    out: dict = {"formulation": formulation, "links": links, "orientations": orientations}
+    out: dict[str, Any] = {"formulation": formulation, "links": links, "orientations": orientations}
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-kb-") as tmp, \
             KnowledgeBase(str(Path(tmp) / "kb.sqlite3"), tbox) as kb:
         ident = kb.new_object_id()
@@ -414,8 +416,8 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
             kb.settle()  # the plan's triples, which the store's writer thread writes behind the answer
             stages.append({**outcome.timings, "store": t_out - t_store, "write_out": time.perf_counter() - t_out})
             lengths.append(len(outcome.actions))
-            if outcome.status != "solved":
-                raise RuntimeError(f"re-plan failed: {outcome.status} {outcome.message}")
+            if outcome.status is not PlanStatus.SOLVED:
+                raise BenchError(f"re-plan failed: {outcome.status} {outcome.message}")
     out["first_run_ms"] = round(times[0] * 1000, 3)
     out.update(stats_ms(times[1:]))
     out["stage_medians_ms"] = {k: stats_ms([s.get(k, 0.0) for s in stages[1:]])["median_ms"] for k in stages[1]}
@@ -424,11 +426,11 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
 
 
 def replan_report(formulations: Sequence[str], runs: int, fd_runs: int, fd_timeout_s: float,
-                  http: bool = True) -> dict:
+                  http: bool = True) -> dict[str, Any]:
     """Everything `--replan-only` measures, in one run, on 20 links x 12 orientations."""
-    report: dict = {"machine": machine_info(), "links": 20, "orientations": 12, "formulations": {}}
+    report: dict[str, Any] = {"machine": machine_info(), "links": 20, "orientations": 12, "formulations": {}}
     for f in formulations:
-        row: dict = {"planner": measure_planner(f, runs=runs)}
+        row: dict[str, Any] = {"planner": measure_planner(f, runs=runs)}
         log.info("%s: in-process stages done", f)
         row["pipeline"] = measure_replan(f, runs=runs)
         if "fd-lama" in available_planners():
@@ -439,7 +441,7 @@ def replan_report(formulations: Sequence[str], runs: int, fd_runs: int, fd_timeo
     return report
 
 
-def replan_table(report: dict) -> str:
+def replan_table(report: dict[str, Any]) -> str:
     lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; "
              f"{report['links']} links x {report['orientations']} orientations; medians (p90) in ms",
              "| formulation | ground (once) | plan | VAL | in-process loop | pipeline (KB) | its VAL | its store | "
@@ -472,7 +474,7 @@ SCALE_ORIENTATIONS = (12, 36, 72)
 
 
 def scale_report(formulations: Sequence[str], links: Sequence[int], orientations: Sequence[int], runs: int,
-                 val_timeout_s: float) -> dict:
+                 val_timeout_s: float) -> dict[str, Any]:
     """Every cell validates one plan; once VAL times out for a formulation and orientation count, larger
     cells skip VAL (and say so) instead of waiting for it again."""
     rows = []
@@ -491,7 +493,7 @@ def scale_report(formulations: Sequence[str], links: Sequence[int], orientations
     return {"machine": machine_info(), "rows": rows}
 
 
-def scale_table(report: dict) -> str:
+def scale_table(report: dict[str, Any]) -> str:
     """Medians in ms. "solve from text" is `InprocPlanner.solve` on a new problem text (parse, memoised
     grounding, plan); "loop" adds VAL, and is shown only where VAL ran."""
     lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; medians in ms",
@@ -507,7 +509,7 @@ def scale_table(report: dict) -> str:
     return "\n".join(lines)
 
 
-def scale_plot(report: dict, path: Path) -> Path:
+def scale_plot(report: dict[str, Any], path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -540,7 +542,7 @@ def scale_plot(report: dict, path: Path) -> Path:
     return path
 
 
-def add_bench_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_bench_parser(subparsers: SubParsers) -> None:
     p = subparsers.add_parser("bench", help="the paper's planning grid, re-planning latency and scale",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--planners", type=name_list(list(PLANNERS)), default="inproc,fd-lama",
@@ -613,7 +615,7 @@ def _run_bench(args: argparse.Namespace) -> int:
     if missing and not args.replan_only:
         print(f"planhrc bench: --planners: not available here: {', '.join(missing)}", file=sys.stderr)
         return 2
-    extra: dict = {}
+    extra: dict[str, Any] = {}
     if args.replan or args.replan_only:
         extra["replan"] = replan_report(formulations, args.replan_runs, args.fd_runs, args.fd_timeout,
                                         http=not args.no_http)

@@ -20,13 +20,18 @@ import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
-SOLVED = "solved"
+from planhrc.bench.errors import BenchError
+from planhrc.vocabulary import PlanStatus, one_of
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 K_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 
 
-class PlotError(Exception):
+class PlotError(BenchError):
     """A benchmark record cannot be drawn (a field is missing or not a number)."""
 
 
@@ -38,21 +43,23 @@ class Run:
     planner: str
     links: int
     orientations: int
-    status: str
+    status: PlanStatus
     seconds: float
 
 
 def run_from(record: Any) -> Run:
     """A `Run` from a bench `Row` or a CSV dict; PlotError names the field that is wrong."""
-    get = record.get if isinstance(record, dict) else lambda key: getattr(record, key, None)
+    get: Callable[[str], Any] = record.get if isinstance(record, dict) else lambda key: getattr(record, key, None)
     values: dict[str, Any] = {}
-    for field, kind in (("formulation", str), ("planner", str), ("links", int), ("orientations", int),
-                        ("status", str), ("seconds", float)):
+    fields: tuple[tuple[str, Callable[[Any], Any], str], ...] = (
+        ("formulation", str, "str"), ("planner", str, "str"), ("links", int, "int"), ("orientations", int, "int"),
+        ("status", PlanStatus, one_of(PlanStatus)), ("seconds", float, "float"))
+    for field, kind, expected in fields:
         raw: Any = get(field)
         try:
             values[field] = kind(raw)
         except (TypeError, ValueError):
-            raise PlotError(f"{field}: expected {kind.__name__}, got {raw!r}") from None
+            raise PlotError(f"{field}: expected {expected}, got {raw!r}") from None
     if not math.isfinite(values["seconds"]) or values["seconds"] < 0:
         raise PlotError(f"seconds: expected a finite time >= 0, got {values['seconds']!r}")
     return Run(**values)
@@ -74,7 +81,7 @@ def plot_times(rows: Iterable[Any], out_dir: Path, timeout_s: float | None = Non
     if not runs:
         return []
     limit = timeout_s if timeout_s is not None else max(
-        (r.seconds for r in runs if r.status != SOLVED), default=None)
+        (r.seconds for r in runs if r.status is not PlanStatus.SOLVED), default=None)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
     for planner in sorted({r.planner for r in runs}):
@@ -82,7 +89,7 @@ def plot_times(rows: Iterable[Any], out_dir: Path, timeout_s: float | None = Non
         low, high = _y_range(mine, limit)
         for formulation in sorted({r.formulation for r in mine}):
             sel = [r for r in mine if r.formulation == formulation]
-            fig = _figure(plt, sel, formulation, planner, limit, low, high)
+            fig = _figure(sel, formulation, planner, limit, low, high)
             path = out_dir / f"times-{formulation}-{planner}.png"
             fig.savefig(path, dpi=120)
             plt.close(fig)
@@ -96,16 +103,19 @@ def _y_range(runs: Sequence[Run], limit: float | None) -> tuple[float, float]:
     return 10 ** math.floor(math.log10(min(times))), 10 ** math.ceil(math.log10(max(times) * 1.5))
 
 
-def _figure(plt, runs: Sequence[Run], formulation: str, planner: str, limit: float | None, low: float, high: float):
+def _figure(runs: Sequence[Run], formulation: str, planner: str, limit: float | None, low: float, high: float
+            ) -> Figure:
+    import matplotlib.pyplot as plt
+
     links = sorted({r.links for r in runs})
     ks = sorted({r.orientations for r in runs})
     width = 0.8 / max(len(ks), 1)
     fig, ax = plt.subplots(figsize=(max(8.0, 0.55 * len(links) + 2), 4.5))
-    unsolved = [r for r in runs if r.status != SOLVED]
+    unsolved = [r for r in runs if r.status is not PlanStatus.SOLVED]
     for j, k in enumerate(ks):
         colour = K_COLOURS[j % len(K_COLOURS)]
         for solved, marker in ((True, "o"), (False, "x")):
-            sel = [r for r in runs if r.orientations == k and (r.status == SOLVED) == solved]
+            sel = [r for r in runs if r.orientations == k and (r.status is PlanStatus.SOLVED) == solved]
             if not sel:
                 continue
             xs = [links.index(r.links) - 0.4 + width * (j + 0.5) for r in sel]

@@ -30,9 +30,11 @@ from typing import Any, Callable, Iterator
 
 import httpx
 
+from planhrc.cli_args import SubParsers
 from planhrc.service_process import RunningService as Server
 from planhrc.service_process import running_service as start_service
 from planhrc.stats import percentile
+from planhrc.vocabulary import DecisionKind
 
 TOKEN = "service-bench-token"
 READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
@@ -113,7 +115,7 @@ def replanning_latencies(client: httpx.Client, object_id: str, links: int, orien
         if pause_s:
             time.sleep(pause_s)
         seconds, decision = perceive(client, object_id, random_angles(rng, links, orientations))
-        if decision == "replan":
+        if decision == DecisionKind.REPLAN:
             out.append(seconds)
     return out
 
@@ -386,7 +388,7 @@ _positive_int = _int_at_least(1, "a positive whole number")
 _non_negative_int = _int_at_least(0, "a whole number >= 0")
 
 
-def add_service_bench_parser(subparsers: Any) -> argparse.ArgumentParser:
+def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("service-bench", help="measure the KB service with a long history (not a test)",
                               description=__doc__.splitlines()[0] if __doc__ else None)
     p.add_argument("--parts", default="objects,history,contention,refusal",

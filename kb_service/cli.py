@@ -10,6 +10,8 @@ import socket
 import sys
 from pathlib import Path
 
+from .store.errors import KBError
+
 
 # Settings field -> the option that sets it, to name the right one in an error.
 SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "token": "--token",
@@ -43,7 +45,7 @@ def add_serve_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     return p
 
 
-class SettingsProblem(Exception):
+class SettingsProblem(KBError):
     """A setting the service cannot start with; the message names the option or variable."""
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any, Sequence
 
 from owlready2 import (
     AllDisjoint,
@@ -23,6 +24,7 @@ from owlready2 import (
     FunctionalProperty,
     Imp,
     ObjectProperty,
+    Ontology,
     Thing,
     TransitiveProperty,
     World,
@@ -461,19 +463,19 @@ def build(path: Path = OUT) -> Path:
     return path
 
 
-def _build_domain_models(onto, ns: dict) -> None:
+def _build_domain_models(onto: Ontology, ns: dict[str, Any]) -> None:
     """Individuals describing the two PDDL domains (paper figures 'relative' and 'conditional' RotateClockwise)."""
     DomainModel, ActionSchema, Variable = ns["DomainModel"], ns["ActionSchema"], ns["Variable"]
     AtomPattern, CondPattern = ns["AtomPattern"], ns["ConditionalEffectPattern"]
 
-    def var(prefix: str, name: str, type_name: str, pos: int):
+    def var(prefix: str, name: str, type_name: str, pos: int) -> Thing:
         v = Variable(f"{prefix}_var_{name}")
         v.pddlName = [f"?{name}"]
         v.typeName = type_name
         v.position = pos
         return v
 
-    def atom(prefix: str, tag: str, pos: int, pred: str, args, negated: bool = False):
+    def atom(prefix: str, tag: str, pos: int, pred: str, args: Sequence[Thing], negated: bool = False) -> Thing:
         """args are given in OWL argument order (arg1, arg2, arg3)."""
         a = AtomPattern(f"{prefix}_{tag}_{pos}")
         a.predicateName = pred

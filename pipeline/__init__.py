@@ -28,8 +28,9 @@ from planhrc.planner.errors import PlannerError
 from planhrc.planner.fast_downward import has_conditional_effects
 from planhrc.planner.result import PlannerAttempt, PlanResult
 from planhrc.planner.validate import ValidationResult, start_validation, validate_pieces, validate_plan
+from planhrc.errors import DeadlineExceeded
 from planhrc.settings import Settings, get_settings
-from planhrc.transition import ReplayDeadline, StateIndex, TransitionError, apply, ground_action, parse_step, replay
+from planhrc.transition import StateIndex, TransitionError, apply, ground_action, parse_step, replay
 from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
 from planhrc.vocabulary import PlanningStatus
@@ -197,7 +198,7 @@ def expect(obj: ArticulatedObject, init: State, goal: State, found: Found, deadl
     t = time.perf_counter()
     try:
         actions, states = replay(found.model, init, result.plan, deadline_at)
-    except ReplayDeadline:
+    except DeadlineExceeded:
         return _over_deadline(found.config, f"while replaying the plan of {len(result.plan)} steps", result.planner,
                               timings, found.task)
     except TransitionError as exc:

@@ -13,7 +13,8 @@ The library API, for programs that embed planhrc (every name is imported on firs
 * the translator: `translate`, `read_domain_model`, `PddlTask`;
 * planning: `plan(obj, init, goal, config=None)` -> `PlanOutcome`, `PlanningConfig`, `config_from_settings`;
 * the cooperation model: `decide`, `PlanView`, `Decision`, and the vocabulary (`DecisionKind`, ...);
-* the HTTP client of the knowledge-base service: `KBClient` (`planhrc.client`).
+* the HTTP client of the knowledge-base service: `KBClient` (`planhrc.client`);
+* the errors: `PlanhrcError`, the root of every package's errors, and `DeadlineExceeded`.
 """
 from __future__ import annotations
 
@@ -33,6 +34,7 @@ _EXPORTS: dict[str, str] = {
                     "PlanStatus"], "planhrc.vocabulary"),
     **dict.fromkeys(["KBClient", "ProtocolError", "RetryPolicy"], "planhrc.client"),
     **dict.fromkeys(["Settings", "get_settings", "make_settings"], "planhrc.settings"),
+    **dict.fromkeys(["DeadlineExceeded", "PlanhrcError"], "planhrc.errors"),
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]

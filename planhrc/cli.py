@@ -16,9 +16,11 @@ import signal
 import sys
 import threading
 from contextlib import ExitStack, contextmanager, nullcontext
+from types import FrameType
 from typing import Any, Callable, Iterator
 
-from planhrc.cli_args import OneLineParser, settings_error_line
+from planhrc.cli_args import OneLineParser, SubParsers, settings_error_line
+from planhrc.errors import PlanhrcError
 
 # command -> (module, name of its `add_*_parser(subparsers)` function, one-line help)
 COMMANDS: dict[str, tuple[str, str, str]] = {
@@ -51,18 +53,6 @@ EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
 }
 EXTRA_OF_MODULE = {module: extra for extra, modules in EXTRAS_NEEDED.values() for module in modules}
 
-# Error roots of the packages: raised for input the user can fix, reported in one line. Looked up only among
-# modules already imported (a module that was never imported cannot have raised).
-USER_ERRORS: tuple[tuple[str, str], ...] = (
-    ("planhrc.model", "ModelError"),
-    ("planhrc.transition", "TransitionError"),
-    ("planhrc.kb_service.store.errors", "KBError"),
-    ("planhrc.translator.errors", "TranslationError"),
-    ("planhrc.planner.errors", "PlannerError"),
-    ("planhrc.client", "ProtocolError"),
-    ("planhrc.robot_sim.scene", "SimError"),
-)
-
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 128 + signal.SIGINT  # 130
 EXIT_TERMINATED = 128 + signal.SIGTERM  # 143
@@ -94,7 +84,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
         if name != wanted:  # only the command that runs is imported
             sub.add_parser(name, help=help_text)
             continue
-        add: Callable = getattr(importlib.import_module(module), func)
+        add: Callable[[SubParsers], object] = getattr(importlib.import_module(module), func)
         add(sub)
     return parser
 
@@ -170,7 +160,7 @@ def native_stdout_diverted(verbose: bool) -> Iterator[None]:
         os.close(saved)
 
 
-def _on_signal(signum: int, frame) -> None:
+def _on_signal(signum: int, frame: FrameType | None) -> None:
     # later signals are ignored so that the cleanup started by the first one can finish (it is time-bounded)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -189,11 +179,6 @@ def install_signal_handlers() -> dict[int, Any]:
 def restore_signal_handlers(previous: dict[int, Any]) -> None:
     for signum, handler in previous.items():
         signal.signal(signum, handler)
-
-
-def _user_error_types() -> tuple[type[BaseException], ...]:
-    types = [getattr(sys.modules[m], n) for m, n in USER_ERRORS if m in sys.modules and hasattr(sys.modules[m], n)]
-    return tuple(types)
 
 
 def _run(argv: list[str]) -> int:
@@ -238,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         if type(exc).__name__ == "ValidationError" and type(exc).__module__.startswith("pydantic"):
             print(f"{name}: {settings_error_line(exc)}", file=sys.stderr)
             return EXIT_USAGE
-        if isinstance(exc, _user_error_types()):
+        if isinstance(exc, PlanhrcError):  # every package's error root: input the user can fix, in one line
             print(f"{name}: {exc}", file=sys.stderr)
             return 1
         if isinstance(exc, OSError) and exc.filename is not None:

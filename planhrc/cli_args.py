@@ -14,10 +14,13 @@ import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import Callable, NoReturn, Sequence
+from typing import Callable, NoReturn, Sequence, TypeAlias
 from urllib.parse import urlsplit
 
 PORT_RANGE = (0, 65535)
+# What `add_subparsers()` returns, as each command's `add_*_parser(subparsers)` receives it (a string: argparse's
+# class is generic only in the type stubs).
+SubParsers: TypeAlias = "argparse._SubParsersAction[OneLineParser]"
 
 
 class OneLineParser(argparse.ArgumentParser):

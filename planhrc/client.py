@@ -121,6 +121,14 @@ class KBClient:
         self.close()
 
     # -- transport with retries ------------------------------------------------------------------------------
+    def _object(self, method: str, path: str, json: Any = None, idempotency_key: str | None = None
+                ) -> dict[str, Any]:
+        """`_request` for an answer that is a JSON object."""
+        data = self._request(method, path, json, idempotency_key)
+        if not isinstance(data, dict):
+            raise ProtocolError(f"{method} {path}: expected a JSON object, got {type(data).__name__}")
+        return data
+
     def _request(self, method: str, path: str, json: Any = None, idempotency_key: str | None = None) -> Any:
         headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
         delays = self.retry.delays()
@@ -151,7 +159,7 @@ class KBClient:
                                 "orientations": orientations, "formulation": formulation}
         if base_point_xy is not None:
             body["base_point_xy"] = [float(v) for v in base_point_xy]
-        return self._request("POST", "/objects", body)
+        return self._object("POST", "/objects", body)
 
     def set_goal(self, object_id: str, link_orientations_deg: Sequence[float] | None = None,
                  joint_angles_deg: Sequence[float | None] | None = None,
@@ -163,7 +171,7 @@ class KBClient:
             else {"joint_angles_deg": list(joint_angles_deg or ())})
         if allow_infeasible:
             body["allow_infeasible"] = True
-        return self._request("PUT", f"/objects/{object_id}/goal", body)
+        return self._object("PUT", f"/objects/{object_id}/goal", body)
 
     def post_perception(self, object_id: str, link_orientations_deg: Sequence[float | None],
                         base_point_xy: Sequence[float] | None = None) -> Decision:
@@ -173,7 +181,7 @@ class KBClient:
         body: dict[str, Any] = {"link_orientations_deg": [None if v is None else float(v) for v in link_orientations_deg]}
         if base_point_xy is not None:
             body["base_point_xy"] = [float(v) for v in base_point_xy]
-        return Decision.from_json(self._request("POST", f"/objects/{object_id}/perceptions", body, key))
+        return Decision.from_json(self._object("POST", f"/objects/{object_id}/perceptions", body, key))
 
     def next_action(self, object_id: str) -> dict[str, Any] | None:
         """Take the action to execute now (`POST /objects/{id}/actions/next`: the service marks it dispatched;
@@ -194,28 +202,32 @@ class KBClient:
             body["reason"] = str(reason)
         if measured_deg is not None:
             body["measured_deg"] = float(measured_deg)
-        return self._request("POST", f"/objects/{object_id}/actions/{action_id}/feedback", body, key)
+        return self._object("POST", f"/objects/{object_id}/actions/{action_id}/feedback", body, key)
 
     def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:
         """Tell the service the worker stopped working on the object (`reason` a short code, `message` a
         sentence); the service records it and answers `{"event_seq": ...}`."""
-        return self._request("POST", f"/objects/{object_id}/give-up", {"reason": reason, "message": message})
+        return self._object("POST", f"/objects/{object_id}/give-up", {"reason": reason, "message": message})
 
     def read_object(self, object_id: str) -> dict[str, Any]:
-        return self._request("GET", f"/objects/{object_id}")
+        return self._object("GET", f"/objects/{object_id}")
 
     def read_plan(self, plan_id: str) -> dict[str, Any]:
-        return self._request("GET", f"/plans/{plan_id}")
+        return self._object("GET", f"/plans/{plan_id}")
 
     def read_state(self, state_id: str) -> dict[str, Any]:
-        return self._request("GET", f"/states/{state_id}")
+        return self._object("GET", f"/states/{state_id}")
 
     def read_events(self, object_id: str) -> list[dict[str, Any]]:
         """Every event of the object (decisions with their reasons), oldest first."""
-        return self._request("GET", f"/objects/{object_id}/events")
+        path = f"/objects/{object_id}/events"
+        events = self._request("GET", path)
+        if not isinstance(events, list):
+            raise ProtocolError(f"GET {path}: expected a JSON list, got {type(events).__name__}")
+        return events
 
     def health(self) -> dict[str, Any]:
-        return self._request("GET", "/health")
+        return self._object("GET", "/health")
 
 
 def _detail(response: httpx.Response) -> str:

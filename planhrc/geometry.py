@@ -33,8 +33,7 @@ from typing import Collection, Sequence
 import numpy as np
 
 from planhrc.model import ArticulatedObject, ModelError
-
-CODES = ("off_table", "inside_robot", "out_of_reach", "overlap")
+from planhrc.vocabulary import Infeasible
 
 
 @dataclass(frozen=True)
@@ -139,9 +138,9 @@ class ObjectGeometry:
 
 @dataclass(frozen=True)
 class Infeasibility:
-    """One reason a configuration is not feasible: `code` (see CODES), the 1-based link, and a sentence."""
+    """One reason a configuration is not feasible: its code, the 1-based link, and a sentence."""
 
-    code: str
+    code: Infeasible
     link: int
     message: str
     distance_m: float = 0.0  # how far off (beyond the table's edge or its clearance, beyond reach); 0 when not one
@@ -161,7 +160,7 @@ class Feasibility:
         return tuple(dict.fromkeys(r.link for r in self.reasons))
 
     @property
-    def codes(self) -> tuple[str, ...]:
+    def codes(self) -> tuple[Infeasible, ...]:
         return tuple(dict.fromkeys(r.code for r in self.reasons))
 
     def sentence(self) -> str:
@@ -252,15 +251,16 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
             past = d - tolerance.clearance_m
             sentence = (f"link {k} leaves the table: {past:.2f} m past its edge" if past > 1e-9 else
                         f"link {k} comes within {tolerance.clearance_m - d:.2f} m of the table's edge")
-            reasons.append(Infeasibility("off_table", k, sentence, d))
+            reasons.append(Infeasibility(Infeasible.OFF_TABLE, k, sentence, d))
         if inside[k - 1]:
-            reasons.append(Infeasibility("inside_robot", k, f"link {k} lies inside the robot's body"))
+            reasons.append(Infeasibility(Infeasible.INSIDE_ROBOT, k, f"link {k} lies inside the robot's body"))
         if k in reach and short[k - 1] > 1e-9:
             d = float(short[k - 1])
-            reasons.append(Infeasibility("out_of_reach", k, f"link {k} unreachable: {d:.2f} m beyond reach", d))
+            reasons.append(Infeasibility(Infeasible.OUT_OF_REACH, k, f"link {k} unreachable: {d:.2f} m beyond reach",
+                                         d))
     folds = (np.diff(np.asarray(values)) % 360.0) if n > 1 else np.zeros(0)
     for fold in np.flatnonzero(np.abs(folds - 180.0) < min_fold_gap_deg):  # neighbours fold onto each other
-        reasons.append(Infeasibility("overlap", int(fold) + 2,
+        reasons.append(Infeasibility(Infeasible.OVERLAP, int(fold) + 2,
                                      f"link {int(fold) + 2} folds back onto link {int(fold) + 1}"))
     if n > 2:
         i, j = np.triu_indices(n, k=2)
@@ -270,7 +270,8 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
         i, j = i[near], j[near]
         close = _segment_distances(a[i], b[i], a[j], b[j]) < limit if len(i) else np.zeros(0, dtype=bool)
         for pi, pj in zip(i[close], j[close]):
-            reasons.append(Infeasibility("overlap", int(pj) + 1, f"link {int(pj) + 1} overlaps link {int(pi) + 1}"))
+            reasons.append(Infeasibility(Infeasible.OVERLAP, int(pj) + 1,
+                                         f"link {int(pj) + 1} overlaps link {int(pi) + 1}"))
     return Feasibility(not reasons, tuple(reasons))
 
 

@@ -32,6 +32,7 @@ CONNECTED = "connected"
 HAS_ORIENTATION = "hasorientation"
 ORIENTATION_ORD = "orientationord"
 AFFECTED = "affected"
+EQUALITY = "="  # the predicate of a literal `(= ?a ?b)`
 
 
 class ModelError(PlanhrcError):
@@ -308,14 +309,20 @@ def format_atom(atom: Atom) -> str:
 # -- the TBox's action schemas, as values (read from the TBox by the translator) ----------------------------
 @dataclass(frozen=True)
 class Literal:
-    """A literal of an action schema: predicate and PDDL variables, possibly negated."""
+    """A literal of an action schema, as the TBox describes it and as the in-process planner parses PDDL:
+    predicate and terms (variables `?x`, or objects), possibly negated. `planhrc.grounding` binds it."""
 
-    predicate: str  # PDDL predicate name or "="
-    args: tuple[str, ...]  # PDDL variable names in PDDL argument order
+    predicate: str  # PDDL predicate name or EQUALITY
+    args: tuple[str, ...]  # terms in PDDL argument order
     negated: bool = False
 
+    @property
+    def atom(self) -> Atom:
+        """`(predicate, *args)`: the atom the literal asserts or denies, its terms unbound."""
+        return (self.predicate, *self.args)
+
     def pddl(self) -> str:
-        core = f"({self.predicate} {' '.join(self.args)})"
+        core = format_atom(self.atom)
         return f"(not {core})" if self.negated else core
 
 

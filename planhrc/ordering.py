@@ -37,6 +37,7 @@ from typing import Mapping, Sequence
 
 from planhrc.geometry import (PLANNING, ROOMY, STRICT, Cell, Feasibility, Infeasibility, ObjectGeometry, Tolerance,
                               configuration_feasible, link_centres, reach_shortfall, rotated)
+from planhrc.vocabulary import Infeasible
 
 # Step checks per search: bounds the time the ordering adds to a re-plan; a plan it cannot order within it goes to
 # the human (`python -m planhrc.bench.ordering` measures the checks a search takes).
@@ -142,9 +143,10 @@ class _Search:
         centres = link_centres(geometry, angles)
         for k in grasped:
             short = reach_shortfall(centres[k - 1], self.placement.cell.robot)
-            if short > 1e-9 and not self.excused(Infeasibility("out_of_reach", k, "", float(short))):
-                return Feasibility(False, (Infeasibility("out_of_reach", k, f"link {k} unreachable: {short:.2f} m "
-                                                         "beyond reach", float(short)),))
+            if short > 1e-9 and not self.excused(Infeasibility(Infeasible.OUT_OF_REACH, k, "", float(short))):
+                return Feasibility(False, (Infeasibility(Infeasible.OUT_OF_REACH, k,
+                                                         f"link {k} unreachable: {short:.2f} m beyond reach",
+                                                         float(short)),))
         n = max(1, int(math.ceil(abs(move.delta_deg) / 5.0)))
         for i in (n, *range(1, n)):  # where it comes to rest first: most refused steps are refused there
             placed, values = rotated(geometry, angles, move.turned, move.held, move.delta_deg * i / n)
@@ -183,7 +185,7 @@ def final_out_of_reach(placement: Placement, moves: Sequence[Move]) -> Feasibili
     geometry, final = final_configuration(placement, moves)
     turned = {m.turned for m in moves}
     result = configuration_feasible(geometry, final, placement.cell, reach_links=turned)
-    reasons = tuple(r for r in result.reasons if r.code == "out_of_reach")
+    reasons = tuple(r for r in result.reasons if r.code is Infeasible.OUT_OF_REACH)
     return Feasibility(False, reasons) if reasons else None
 
 
@@ -239,7 +241,7 @@ def leaves_the_table(placement: Placement, moves: Sequence[Move], increment_deg:
             placed, values = rotated(geometry, angles, move.turned, move.held, move.delta_deg * j / n)
             result = configuration_feasible(placed, values, placement.cell, reach_links=())
             for reason in result.reasons:
-                if reason.code in ("off_table", "inside_robot") and not search.excused(reason):
+                if reason.code in (Infeasible.OFF_TABLE, Infeasible.INSIDE_ROBOT) and not search.excused(reason):
                     return i, reason
         geometry, angles = rotated(geometry, angles, move.turned, move.held, move.delta_deg)
     return None, None

@@ -12,16 +12,13 @@ from functools import lru_cache
 from dataclasses import dataclass, replace
 from typing import Iterator, Mapping, Sequence
 
-from planhrc.errors import PlanhrcError
-from planhrc.model import ActionSchemaSpec, ActionSpec, Atom, CondEffect, DomainModelSpec, Literal, State
+from planhrc.errors import DeadlineExceeded, PlanhrcError
+from planhrc.grounding import holds, instantiate, substitute
+from planhrc.model import EQUALITY, ActionSchemaSpec, ActionSpec, Atom, CondEffect, DomainModelSpec, Literal, State
 
 
 class TransitionError(PlanhrcError):
     """A plan step does not match a schema or is not applicable in the state it is applied to."""
-
-
-class ReplayDeadline(TransitionError):
-    """The replay of a plan did not finish by its deadline (the plan is neither accepted nor refused)."""
 
 
 def parse_step(step: str) -> tuple[str, tuple[str, ...]]:
@@ -30,21 +27,6 @@ def parse_step(step: str) -> tuple[str, tuple[str, ...]]:
     if not tokens:
         raise TransitionError(f"plan step {step!r} is empty")
     return tokens[0], tuple(tokens[1:])
-
-
-def _instantiate(lit: Literal, binding: Mapping[str, str]) -> Atom:
-    try:
-        return (lit.predicate,) + tuple(binding[a] for a in lit.args)
-    except KeyError as exc:
-        raise TransitionError(f"variable {exc.args[0]} of {lit.pddl()} is unbound") from None
-
-
-def _holds(lit: Literal, binding: Mapping[str, str], state: State) -> bool:
-    if lit.predicate == "=":
-        value = binding[lit.args[0]] == binding[lit.args[1]]
-    else:
-        value = _instantiate(lit, binding) in state
-    return value != lit.negated
 
 
 class StateIndex:
@@ -103,12 +85,12 @@ def _bindings(
     literal with the fewest candidates under the variables bound so far); the remaining literals are then
     checked. This enumerates exactly the satisfying bindings of a `when` condition, each once: a binding of
     every literal's variables determines the atoms its positive literals match."""
-    positives = [lit for lit in literals if not lit.negated and lit.predicate != "="]
+    positives = [lit for lit in literals if not lit.negated and lit.predicate != EQUALITY]
     state = index.state
 
     def extend(todo: tuple[int, ...], current: dict[str, str]) -> Iterator[dict[str, str]]:
         if not todo:
-            if all(v in current for v in variables) and all(_holds(lit, current, state) for lit in literals):
+            if all(v in current for v in variables) and all(holds(lit, current, state) for lit in literals):
                 yield dict(current)
             return
         pick, atoms = min(((i, index.candidates(positives[i], current)) for i in todo), key=lambda c: len(c[1]))
@@ -145,24 +127,29 @@ def ground_action(domain: DomainModelSpec, step: str, state: State, index: State
         raise TransitionError(f"{step}: {name} takes {len(schema.parameters)} arguments, got {len(args)}")
     binding = {var: value for (var, _), value in zip(schema.parameters, args)}
     for lit in schema.precondition:
-        if not _holds(lit, binding, state):
-            raise TransitionError(f"{step}: precondition {_render(lit, binding)} does not hold")
-    pre = frozenset(_instantiate(lit, binding) for lit in schema.precondition if lit.predicate != "=" and not lit.negated)
-    eff_neg = frozenset(_instantiate(lit, binding) for lit in schema.effects if lit.negated)
-    eff_pos = frozenset(_instantiate(lit, binding) for lit in schema.effects if not lit.negated)
-    conds = []
-    atoms = index if index is not None and index.state is state else None
-    for ce in schema.conditional_effects:
-        variables = [v for v, _ in ce.variables]
-        atoms = atoms or StateIndex(state)
-        for b in _bindings(ce.when, variables, binding, atoms):
-            conds.append(
-                CondEffect(
-                    when=frozenset(_instantiate(lit, b) for lit in ce.when if lit.predicate != "=" and not lit.negated),
-                    eff_neg=frozenset(_instantiate(lit, b) for lit in ce.effects if lit.negated),
-                    eff_pos=frozenset(_instantiate(lit, b) for lit in ce.effects if not lit.negated),
+        if not holds(lit, binding, state):
+            raise TransitionError(f"{step}: precondition {substitute(lit, binding).pddl()} does not hold")
+    try:
+        pre = frozenset(instantiate(lit, binding) for lit in schema.precondition
+                        if lit.predicate != EQUALITY and not lit.negated)
+        eff_neg = frozenset(instantiate(lit, binding) for lit in schema.effects if lit.negated)
+        eff_pos = frozenset(instantiate(lit, binding) for lit in schema.effects if not lit.negated)
+        conds = []
+        atoms = index if index is not None and index.state is state else None
+        for ce in schema.conditional_effects:
+            variables = [v for v, _ in ce.variables]
+            atoms = atoms or StateIndex(state)
+            for b in _bindings(ce.when, variables, binding, atoms):
+                conds.append(
+                    CondEffect(
+                        when=frozenset(instantiate(lit, b) for lit in ce.when
+                                       if lit.predicate != EQUALITY and not lit.negated),
+                        eff_neg=frozenset(instantiate(lit, b) for lit in ce.effects if lit.negated),
+                        eff_pos=frozenset(instantiate(lit, b) for lit in ce.effects if not lit.negated),
+                    )
                 )
-            )
+    except KeyError as exc:  # a schema's literal names a variable that is neither a parameter nor a forall's
+        raise TransitionError(f"{step}: variable {exc.args[0]} of schema {name} is unbound") from None
     conds.sort(key=_cond_order)
     return ActionSpec(name=name, params=args, pre=pre, eff_neg=eff_neg, eff_pos=eff_pos, cond_eff=tuple(conds))
 
@@ -171,10 +158,6 @@ def _cond_order(ce: CondEffect) -> tuple[list[Atom], list[Atom], list[Atom]]:
     """The order of an action's conditional effects: by what they add, then delete, then need (total: the same
     action is the same value however its bindings were enumerated)."""
     return sorted(ce.eff_pos), sorted(ce.eff_neg), sorted(ce.when)
-
-
-def _render(lit: Literal, binding: Mapping[str, str]) -> str:
-    return Literal(lit.predicate, tuple(binding.get(a, a) for a in lit.args), lit.negated).pddl()
 
 
 def apply(state: State, action: ActionSpec) -> State:
@@ -271,28 +254,29 @@ class Grounder:
         schema = find_schema(self.domain, action.name)
         binding = {var: value for (var, _), value in zip(schema.parameters, action.params)}
         fluent = self._fluent
-        present = frozenset(_instantiate(lit, binding) for lit in schema.precondition
-                            if not lit.negated and lit.predicate != "=" and lit.predicate in fluent)
-        absent = frozenset(_instantiate(lit, binding) for lit in schema.precondition
-                           if lit.negated and lit.predicate != "=" and lit.predicate in fluent)
+        present = frozenset(instantiate(lit, binding) for lit in schema.precondition
+                            if not lit.negated and lit.predicate != EQUALITY and lit.predicate in fluent)
+        absent = frozenset(instantiate(lit, binding) for lit in schema.precondition
+                           if lit.negated and lit.predicate != EQUALITY and lit.predicate in fluent)
         static_index = StateIndex(statics)
         candidates = []
         for ce in schema.conditional_effects:
             variables = [v for v, _ in ce.variables]
-            static_lits = [lit for lit in ce.when if lit.predicate == "=" or lit.predicate not in fluent]
-            bound = {a for lit in static_lits if not lit.negated and lit.predicate != "=" for a in lit.args}
+            static_lits = [lit for lit in ce.when if lit.predicate == EQUALITY or lit.predicate not in fluent]
+            bound = {a for lit in static_lits if not lit.negated and lit.predicate != EQUALITY for a in lit.args}
             if any(v not in bound and v not in binding for v in variables):
                 return None
             for b in _bindings(static_lits, variables, binding, static_index):
-                when = frozenset(_instantiate(lit, b) for lit in ce.when if lit.predicate != "=" and not lit.negated)
+                when = frozenset(instantiate(lit, b) for lit in ce.when
+                                 if lit.predicate != EQUALITY and not lit.negated)
                 candidates.append((
-                    frozenset(_instantiate(lit, b) for lit in ce.when if not lit.negated and lit.predicate in fluent
-                              and lit.predicate != "="),
-                    frozenset(_instantiate(lit, b) for lit in ce.when if lit.negated and lit.predicate in fluent
-                              and lit.predicate != "="),
+                    frozenset(instantiate(lit, b) for lit in ce.when if not lit.negated and lit.predicate in fluent
+                              and lit.predicate != EQUALITY),
+                    frozenset(instantiate(lit, b) for lit in ce.when if lit.negated and lit.predicate in fluent
+                              and lit.predicate != EQUALITY),
                     CondEffect(when=when,
-                               eff_neg=frozenset(_instantiate(lit, b) for lit in ce.effects if lit.negated),
-                               eff_pos=frozenset(_instantiate(lit, b) for lit in ce.effects if not lit.negated))))
+                               eff_neg=frozenset(instantiate(lit, b) for lit in ce.effects if lit.negated),
+                               eff_pos=frozenset(instantiate(lit, b) for lit in ce.effects if not lit.negated))))
         candidates.sort(key=lambda c: _cond_order(c[2]))
         return _Conditional(statics, replace(action, cond_eff=()), present, absent, tuple(candidates))
 
@@ -300,8 +284,8 @@ class Grounder:
         schema = find_schema(self.domain, action.name)
         binding = {var: value for (var, _), value in zip(schema.parameters, action.params)}
         # (in)equalities depend on the arguments alone: they held when the step was ground, they hold again
-        absent = frozenset(_instantiate(lit, binding) for lit in schema.precondition
-                           if lit.negated and lit.predicate != "=")
+        absent = frozenset(instantiate(lit, binding) for lit in schema.precondition
+                           if lit.negated and lit.predicate != EQUALITY)
         if len(self._seen) >= self.LIMIT:
             self._seen.clear()
         self._seen[step] = (action, action.pre, absent)
@@ -316,7 +300,8 @@ def grounder(domain: DomainModelSpec) -> Grounder:
 def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_at: float | None = None
            ) -> tuple[tuple[ActionSpec, ...], tuple[State, ...]]:
     """Ground every step in turn and return the actions and the expected states s^e_1 .. s^e_{N+1}; past
-    `deadline_at` (`time.monotonic()`) a `ReplayDeadline` is raised instead."""
+    `deadline_at` (`time.monotonic()`) `DeadlineExceeded` is raised instead (the plan is neither accepted nor
+    refused)."""
     states = [frozenset(init)]
     actions = []
     conditional = any(s.conditional_effects for s in domain.actions)
@@ -325,7 +310,7 @@ def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_a
     statics = g.statics(states[0]) if conditional else None  # no action changes them: the same in every state
     for k, step in enumerate(plan, 1):
         if deadline_at is not None and time.monotonic() > deadline_at:
-            raise ReplayDeadline(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
+            raise DeadlineExceeded(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
         action = g.ground(step, states[-1], index, statics)
         actions.append(action)
         states.append(apply(states[-1], action))

@@ -7,9 +7,11 @@ as plain JSON strings and appear as enums in the service's OpenAPI schemas.
 * `FailureReason`: why an action that did not succeed failed (machine-readable; the feedback's sentence says the
   rest);
 * `Remedy`: what the cooperation model does instead of retrying a failed action identically;
-* `PlanStatus`: what one planner call returned (the planner package uses this very enum);
-* `PlanningStatus`: what one run of the planning pipeline produced (a planner status, or `invalid` when VAL or
-  the replay refused the plan).
+* `GiveUpReason`: why a worker tells the service it stops working on an object;
+* `StopReason`: why a worker's run ended (its summary, the demo's results);
+* `Infeasible`: why a configuration of an object is not feasible in the cell (`planhrc.geometry`);
+* `PlanStatus`: how planning ended, for one planner call (the planner package uses this very enum) and for one
+  run of the planning pipeline, which adds `invalid` when VAL or the replay refused the planner's plan.
 """
 from __future__ import annotations
 
@@ -61,23 +63,50 @@ class Remedy(StrEnum):
     ASK_HUMAN = "ask_human"
 
 
+class GiveUpReason(StrEnum):
+    """The short code of a worker's give-up (`POST /objects/{id}/give-up`); the message says the rest."""
+
+    UNSEEN_LINKS = "unseen_links"
+    NO_HUMAN_HELP = "no_human_help"
+    HUMAN_COULD_NOT_HELP = "human_could_not_help"
+    REPEATED_FAILURE = "repeated_failure"
+
+
+class StopReason(StrEnum):
+    """Why a worker's run ended: the goal, the service's word (no plan, no action to dispatch), or the worker's
+    own (links not seen, no help, giving up, out of steps)."""
+
+    GOAL_REACHED = "goal_reached"
+    NO_PLAN = "no_plan"
+    NO_ACTION = "no_action"
+    UNSEEN_LINKS = "unseen_links"
+    NO_HUMAN_HELP = "no_human_help"
+    GAVE_UP = "gave_up"
+    MAX_STEPS = "max_steps"
+
+
+class Infeasible(StrEnum):
+    """The code of one reason a configuration is not feasible (`geometry.Infeasibility.code`)."""
+
+    OFF_TABLE = "off_table"
+    INSIDE_ROBOT = "inside_robot"
+    OUT_OF_REACH = "out_of_reach"
+    OVERLAP = "overlap"
+
+
 class PlanStatus(StrEnum):
-    """The status of one planner call: "unsolvable" and "timeout" are results, not exceptions."""
-
-    SOLVED = "solved"
-    UNSOLVABLE = "unsolvable"
-    TIMEOUT = "timeout"
-    ERROR = "error"
-
-
-class PlanningStatus(StrEnum):
-    """The status of one pipeline run: the planner's, or `invalid` when the plan failed VAL or the replay."""
+    """How planning ended: "unsolvable" and "timeout" are results, not exceptions. A planner call answers one of
+    the first four; `invalid` is the pipeline's, for a plan that VAL or the replay refused."""
 
     SOLVED = "solved"
     UNSOLVABLE = "unsolvable"
     TIMEOUT = "timeout"
     ERROR = "error"
     INVALID = "invalid"
+
+
+# The pipeline's and the service's name for `PlanStatus` (the same enum), kept while they still say it.
+PlanningStatus = PlanStatus
 
 
 def one_of(enum: type[StrEnum]) -> str:

@@ -8,9 +8,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any, cast
+from typing import Any
 
-from planhrc.cli_args import OneLineParser, existing_file, positive_float
+from planhrc.cli_args import OneLineParser, SubParsers, existing_file, positive_float
 
 from .chain import DEFAULT_CHAIN, plan_with_fallback
 from .errors import PlannerError
@@ -19,7 +19,7 @@ from .registry import PLANNERS
 from .result import PlanResult, PlanStatus
 
 
-def add_plan_parser(subparsers: Any) -> argparse.ArgumentParser:
+def add_plan_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser("plan", help="plan for a PDDL domain and problem")
     parser.add_argument("domain", type=existing_file, help="PDDL domain file")
     parser.add_argument("problem", type=existing_file, help="PDDL problem file")
@@ -29,7 +29,7 @@ def add_plan_parser(subparsers: Any) -> argparse.ArgumentParser:
     parser.add_argument("--timeout", type=positive_float, default=60.0, help="time limit in seconds")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.set_defaults(func=run_plan)
-    return cast(argparse.ArgumentParser, parser)
+    return parser
 
 
 def run_plan(args: argparse.Namespace) -> int:

@@ -28,10 +28,10 @@ from math import gcd
 from types import MappingProxyType
 from typing import Any, Callable, Generic, Iterable, Mapping, TypeVar, cast
 
-from planhrc.model import natural_key
+from planhrc.model import Atom, natural_key
 
 from .deadline import check as check_deadline
-from .pddl import Atom, format_sexpr
+from .pddl import format_sexpr
 from .recognise import Axis, CyclicTask
 from .result import PlanResult, PlanStatus
 

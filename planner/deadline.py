@@ -3,8 +3,8 @@
 External planners are processes killed at their limit (`process.run_limited`); the in-process planner runs in
 the caller's thread, so it checks the clock itself: `InprocPlanner.solve` opens `within(timeout_s)` and the
 loops whose length grows with the task (grounding, recognition, the dynamic programmes) call `check()`, which
-raises `DeadlineExceeded` once the limit has passed. The limit lives in a context variable, not an argument, so
-that the memoised stages keep their cache keys; each thread (each request) has its own.
+raises `planhrc.errors.DeadlineExceeded` once the limit has passed. The limit lives in a context variable, not
+an argument, so that the memoised stages keep their cache keys; each thread (each request) has its own.
 """
 from __future__ import annotations
 
@@ -13,15 +13,11 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Iterator
 
-from .errors import PlannerError
+from planhrc.errors import DeadlineExceeded
 
 # The monotonic time at which the innermost `within` block ends (None: no limit). A context variable is per
 # thread and per task, so concurrent requests never see each other's limit.
 _ends_at: ContextVar[float | None] = ContextVar("planhrc_planner_deadline", default=None)
-
-
-class DeadlineExceeded(PlannerError):
-    """The in-process planner ran past the time it was given."""
 
 
 @contextmanager

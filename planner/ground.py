@@ -25,10 +25,13 @@ import logging
 from dataclasses import dataclass
 from typing import Iterator, Mapping
 
+from planhrc.grounding import bind_atom, holds, substitute
+from planhrc.model import EQUALITY, Atom, Literal
+
 from .deadline import check as check_deadline
 from .errors import PlannerError
-from .operators import EQUALITY, EffectBlock, Literal, Operator, normalise_domain
-from .pddl import Atom, Domain, Problem, format_sexpr
+from .operators import EffectBlock, Operator, normalise_domain
+from .pddl import Domain, Problem, format_sexpr
 
 log = logging.getLogger(__name__)
 
@@ -160,8 +163,8 @@ def analyse(domain: Domain, goal_predicates: frozenset[str]) -> LiftedTask:
         if name not in arity:
             raise OutsideFamilyError(f"goal: predicate {name} is not declared")
     statics = static_predicates(domain, operators)
-    names = {lit.atom[0] for op in operators for lit in op.precondition}
-    names |= {lit.atom[0] for op in operators for block in op.effects for lit in block.condition}
+    names = {lit.predicate for op in operators for lit in op.precondition}
+    names |= {lit.predicate for op in operators for block in op.effects for lit in block.condition}
     relevant = frozenset(names | goal_predicates)
     operators = tuple(_drop_irrelevant(op, relevant) for op in operators)
     changing = frozenset({atom[0] for op in operators for b in op.effects for atom in b.add + b.delete})
@@ -254,7 +257,7 @@ class FactIndex:
             self._tuples.setdefault(atom[0], []).append(atom[1:])
         for name, table in owners.items():
             self._tuples["owner:" + name] = sorted(table)
-        self._static = static_facts
+        self.static = static_facts
         self._index: dict[tuple[str, tuple[int, ...]], dict[tuple[str, ...], list[tuple[str, ...]]]] = {}
 
     def size(self, relation: str) -> int:
@@ -268,9 +271,6 @@ class FactIndex:
                 index.setdefault(tuple(row[i] for i in positions), []).append(row)
             self._index[(relation, positions)] = index
         return index.get(key, [])
-
-    def holds(self, atom: Atom) -> bool:
-        return atom in self._static
 
 
 def _value_parameters(op: Operator, by_name: Mapping[str, StateVariablePredicate],
@@ -326,24 +326,16 @@ def _ground_operator(op: Operator, by_name: Mapping[str, StateVariablePredicate]
         effects: list[GroundEffect] = []
         for block_plan, block_values, left, block in blocks:
             for inner in block_plan.run(facts, dict(binding)):
-                effects.append(GroundEffect(block_values, tuple(_substitute(lit, inner) for lit in left),
-                                            tuple(_sub_atom(a, inner) for a in block.add),
-                                            tuple(_sub_atom(a, inner) for a in block.delete)))
+                effects.append(GroundEffect(block_values, tuple(substitute(lit, inner) for lit in left),
+                                            tuple(bind_atom(a, inner) for a in block.add),
+                                            tuple(bind_atom(a, inner) for a in block.delete)))
         yield GroundAction(op.name, names, tuple((var, binding[var]) for var, _ in structural), value_params,
-                           tuple(_substitute(lit, binding) for lit in pre), tuple(effects))
+                           tuple(substitute(lit, binding) for lit in pre), tuple(effects))
 
 
 def _left(lit: Literal, values: frozenset[str], by_name: Mapping[str, StateVariablePredicate]) -> bool:
     """Whether a literal is left for recognition: it reads a state variable or mentions a value parameter."""
-    return lit.atom[0] in by_name or bool(set(lit.atom[1:]) & values)
-
-
-def _sub_atom(atom: Atom, binding: Mapping[str, str]) -> Atom:
-    return (atom[0], *[binding.get(a, a) for a in atom[1:]])
-
-
-def _substitute(lit: Literal, binding: Mapping[str, str]) -> Literal:
-    return Literal(lit.positive, _sub_atom(lit.atom, binding))
+    return lit.predicate in by_name or bool(set(lit.args) & values)
 
 
 def _is_var(term: str) -> bool:
@@ -371,7 +363,7 @@ class JoinPlan:
     late_checks: tuple[Literal, ...]  # literals over free parameters
 
     def run(self, facts: FactIndex, binding: dict[str, str]) -> Iterator[dict[str, str]]:
-        if not all(_check(lit, binding, facts) for lit in self.first_checks):
+        if not all(holds(lit, binding, facts.static) for lit in self.first_checks):
             return
         yield from self._step(0, facts, binding, dict(self.allowed))
 
@@ -392,7 +384,7 @@ class JoinPlan:
                     ok = False
                     break
                 binding[var] = row[pos]
-            if not ok or (step.checks and not all(_check(lit, binding, facts) for lit in step.checks)):
+            if not ok or (step.checks and not all(holds(lit, binding, facts.static) for lit in step.checks)):
                 continue
             if last:
                 yield dict(binding)
@@ -404,7 +396,7 @@ class JoinPlan:
     def _enumerate(self, i: int, facts: FactIndex, binding: dict[str, str],
                    allowed: Mapping[str, frozenset[str]]) -> Iterator[dict[str, str]]:
         if i == len(self.free):
-            if all(_check(lit, binding, facts) for lit in self.late_checks):
+            if all(holds(lit, binding, facts.static) for lit in self.late_checks):
                 yield dict(binding)
             return
         var = self.free[i]
@@ -429,24 +421,24 @@ def compile_join(params: list[tuple[str, str]], literals: tuple[Literal, ...],
     relations: list[tuple[str, tuple[str, ...]]] = []
     checks: list[Literal] = []
     for lit in literals:
-        pred = by_name.get(lit.atom[0])
+        pred = by_name.get(lit.predicate)
         if pred is not None:
-            if lit.positive:  # only owners with a value can be read (owner terms are never value parameters)
+            if not lit.negated:  # only owners with a value can be read (owner terms are never value parameters)
                 relations.append(("owner:" + pred.name, pred.owner(lit.atom)))
             continue
-        terms = lit.atom[1:]
+        terms = lit.args
         if any(_is_var(t) and t not in wanted and t not in given for t in terms):
             continue  # mentions a value parameter: left for recognition
-        if lit.atom[0] == EQUALITY or not lit.positive:
+        if lit.predicate == EQUALITY or lit.negated:
             checks.append(lit)
-        elif lit.atom[0] in statics:
-            relations.append((lit.atom[0], terms))
+        elif lit.predicate in statics:
+            relations.append((lit.predicate, terms))
         else:  # pragma: no cover - a changing predicate is always a state variable after the analyses
-            raise OutsideFamilyError(f"{where}: {lit.format()} reads a changing predicate")
+            raise OutsideFamilyError(f"{where}: {lit.pddl()} reads a changing predicate")
     bound = set(given)
 
     def ready(lit: Literal) -> bool:
-        return all(not _is_var(t) or t in bound for t in lit.atom[1:])
+        return all(not _is_var(t) or t in bound for t in lit.args)
 
     first = tuple(lit for lit in checks if ready(lit))
     pending = [lit for lit in checks if lit not in first]
@@ -476,8 +468,3 @@ def compile_join(params: list[tuple[str, str]], literals: tuple[Literal, ...],
     return JoinPlan(first, tuple(steps), unbound, allowed, tuple(pending))
 
 
-def _check(lit: Literal, binding: Mapping[str, str], facts: FactIndex) -> bool:
-    atom = lit.atom
-    if atom[0] == EQUALITY:
-        return (binding.get(atom[1], atom[1]) == binding.get(atom[2], atom[2])) == lit.positive
-    return facts.holds(_sub_atom(atom, binding)) == lit.positive

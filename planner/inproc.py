@@ -18,11 +18,14 @@ import logging
 import time
 from functools import lru_cache
 
+from planhrc.errors import DeadlineExceeded
+from planhrc.model import Atom
+
 from .cyclic import NAME, GroundTask
-from .deadline import DeadlineExceeded, within
+from .deadline import within
 from .errors import PlannerError
 from .ground import LiftedTask, OutsideFamilyError, analyse, ground_lifted, owner_values
-from .pddl import Atom, Domain, Problem, parse_domain, parse_problem
+from .pddl import Domain, Problem, parse_domain, parse_problem
 from .recognise import CyclicTask, recognise
 from .result import PlanResult, PlanStatus
 

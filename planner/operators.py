@@ -2,32 +2,23 @@
 
     (forall (?v ...) (when (and l1 l2 ...) (and (p ...) (not (q ...)))))  ->  EffectBlock(vars, cond, add, delete)
 
-Plain effects are the block with no variables and no condition; nested `and`, `forall` and `when` are
-flattened. Anything beyond STRIPS with negative literals, equality and conditional effects (`or`, `exists`,
-`imply`, numeric fluents) raises `UnsupportedPddlError`, naming the action and the construct.
+Plain effects are the block with no variables and no condition; nested `and`, `forall` and `when` are flattened.
+Literals are `planhrc.model.Literal`, the type of the TBox's schemas. Anything beyond STRIPS with negative
+literals, equality and conditional effects (`or`, `exists`, `imply`, numeric fluents) raises
+`UnsupportedPddlError`, naming the action and the construct.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .errors import PlannerError
-from .pddl import ActionSchema, Atom, Domain, SExpr, format_sexpr, parse_typed_list
+from planhrc.model import EQUALITY, Atom, Literal
 
-EQUALITY = "="
+from .errors import PlannerError
+from .pddl import ActionSchema, Domain, SExpr, format_sexpr, parse_typed_list
 
 
 class UnsupportedPddlError(PlannerError):
     """The PDDL uses a construct the in-process planner does not read."""
-
-
-@dataclass(frozen=True)
-class Literal:
-    positive: bool
-    atom: Atom  # ("=", a, b) for equality
-
-    def format(self) -> str:
-        text = "(" + " ".join(self.atom) + ")"
-        return text if self.positive else f"(not {text})"
 
 
 @dataclass(frozen=True)
@@ -66,8 +57,10 @@ def literals(expr: SExpr, where: str) -> list[Literal]:
             out.extend(literals(part, where))
         return out
     if isinstance(expr, tuple) and len(expr) == 2 and expr[0] == "not":
-        return [Literal(False, _atom(expr[1], where))]
-    return [Literal(True, _atom(expr, where))]
+        atom = _atom(expr[1], where)
+        return [Literal(atom[0], atom[1:], negated=True)]
+    atom = _atom(expr, where)
+    return [Literal(atom[0], atom[1:])]
 
 
 def _atom(expr: SExpr, where: str) -> Atom:

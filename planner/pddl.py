@@ -10,10 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Union, cast
 
+from planhrc.model import Atom
+
 from .errors import PlannerError
 
 SExpr = Union[str, tuple["SExpr", ...]]
-Atom = tuple[str, ...]
 
 
 @dataclass(frozen=True)

@@ -21,12 +21,12 @@ import logging
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from planhrc.model import natural_key
+from planhrc.grounding import holds
+from planhrc.model import EQUALITY, Atom, Literal, natural_key
 
 from .deadline import check as check_deadline
 from .ground import GroundAction, GroundedProblem, OutsideFamilyError, StateVariablePredicate
-from .operators import EQUALITY, Literal
-from .pddl import Atom, format_sexpr
+from .pddl import format_sexpr
 
 log = logging.getLogger(__name__)
 
@@ -108,9 +108,9 @@ def _value_relations(grounded: GroundedProblem, by_name: Mapping[str, StateVaria
     for action in grounded.actions:
         literals = list(action.precondition) + [lit for eff in action.effects for lit in eff.condition]
         for lit in literals:
-            if lit.atom[0] not in by_name and lit.atom[0] != EQUALITY and len(lit.atom) == 3 and all(
-                    t.startswith("?") for t in lit.atom[1:]):
-                names.add(lit.atom[0])
+            if lit.predicate not in by_name and lit.predicate != EQUALITY and len(lit.args) == 2 and all(
+                    t.startswith("?") for t in lit.args):
+                names.add(lit.predicate)
     return frozenset(names)
 
 
@@ -238,19 +238,20 @@ class _Context:
         pinned: list[int] = []
         rest: list[Literal] = []
         for lit in literals:
-            if lit.atom[0] not in self.by_name:
+            if lit.predicate not in self.by_name:
                 rest.append(lit)
                 continue
-            pred, var = self._variable(lit.atom)
-            if not lit.positive:
-                raise self._fail(action, f"{where}{lit.format()} asks a variable NOT to have a value")
+            atom = lit.atom
+            pred, var = self._variable(atom)
+            if lit.negated:
+                raise self._fail(action, f"{where}{lit.pddl()} asks a variable NOT to have a value")
             if var is None:
                 raise _Never()
-            term = pred.value(lit.atom)
+            term = pred.value(atom)
             if term not in env:
                 env[term] = (var, 0)
             elif env[term][0] != var:
-                raise self._fail(action, f"{where}{lit.format()} compares {self._name(var)} with "
+                raise self._fail(action, f"{where}{lit.pddl()} compares {self._name(var)} with "
                                          f"{self._name(env[term][0])}, which depends on the state")
             elif env[term][1] % self.k:
                 raise _Never()
@@ -259,9 +260,9 @@ class _Context:
         while progress:
             progress = False
             for lit in list(rest):
-                name = lit.atom[0]
-                if name in self.rotations and lit.positive:
-                    a, b = lit.atom[1:]
+                name = lit.predicate
+                if name in self.rotations and not lit.negated:
+                    a, b = lit.args
                     m = self.rotations[name]
                     if a in env and b not in env:
                         env[b] = (env[a][0], env[a][1] + m)
@@ -272,31 +273,27 @@ class _Context:
                     rest.remove(lit)
                     progress = True
         for lit in rest:
-            terms = [t for t in lit.atom[1:] if t.startswith("?")]
+            terms = [t for t in lit.args if t.startswith("?")]
             missing = [t for t in terms if t not in env]
             if missing:
-                raise self._fail(action, f"{where}{', '.join(missing)} in {lit.format()} is not fixed by the "
+                raise self._fail(action, f"{where}{', '.join(missing)} in {lit.pddl()} is not fixed by the "
                                          "current values")
             bases = {env[t][0] for t in terms}
             if len(bases) > 1:
-                raise self._fail(action, f"{where}{lit.format()} relates the values of "
+                raise self._fail(action, f"{where}{lit.pddl()} relates the values of "
                                          f"{' and '.join(self._name(b) for b in sorted(bases))}, which depends on "
                                          "the state")
             truth = {self._holds(lit, env, base) for base in range(self.k)}
             if truth == {False}:
                 raise _Never()
             if truth == {True, False}:
-                raise self._fail(action, f"{where}{lit.format()} holds for some values only, which depends on "
+                raise self._fail(action, f"{where}{lit.pddl()} holds for some values only, which depends on "
                                          "the state")
         return pinned
 
     def _holds(self, lit: Literal, env: Mapping[str, Term], base: int) -> bool:
-        args = tuple(self.cycle[(base + env[t][1]) % self.k] if t.startswith("?") else t for t in lit.atom[1:])
-        if lit.atom[0] == EQUALITY:
-            holds = args[0] == args[1]
-        else:
-            holds = (lit.atom[0],) + args in self.grounded.static_facts
-        return holds == lit.positive
+        values = {t: self.cycle[(base + env[t][1]) % self.k] for t in lit.args if t.startswith("?")}
+        return holds(lit, values, self.grounded.static_facts)
 
     def _effect_steps(self, action: GroundAction, add: Sequence[Atom], delete: Sequence[Atom],
                       env: Mapping[str, Term]) -> dict[int, int]:

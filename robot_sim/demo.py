@@ -22,16 +22,20 @@ from collections import Counter
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import TYPE_CHECKING, Any, Iterator, Sequence
 
 import numpy as np
 
-from planhrc.cli_args import http_url, non_negative_int, positive_int, writable_dir
+from planhrc.cli_args import SubParsers, http_url, non_negative_int, positive_int, writable_dir
 from planhrc.client import KBClient, ProtocolError
 from planhrc.service_process import ServiceStartError, running_service
 from planhrc.geometry import configuration_feasible
-from planhrc.robot_sim.scene import SceneSpec, SimError, is_feasible, random_orientations
-from planhrc.vocabulary import DecisionKind
+from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.scene import SceneSpec, is_feasible, random_orientations
+from planhrc.vocabulary import ActionOutcome, DecisionKind, Infeasible
+
+if TYPE_CHECKING:
+    from planhrc.robot_sim.worker import WorkerSummary
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +144,7 @@ def serve_until_interrupted(url: str) -> None:
 
 
 def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir: Path, gui: bool,
-                perception: str, max_steps: int, seed: int) -> dict:
+                perception: str, max_steps: int, seed: int) -> dict[str, Any]:
     from planhrc.robot_sim.worker import run_worker
 
     spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg,
@@ -169,8 +173,8 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         "reached_goal": summary.reached_goal,
         "stop_reason": summary.stop_reason,
         "time_to_goal_s": round(summary.wall_s, 3),
-        "replans": counts.get("replan", 0),
-        "resumes": counts.get("resume", 0),
+        "replans": counts.get(DecisionKind.REPLAN, 0),
+        "resumes": counts.get(DecisionKind.RESUME, 0),
         "decision_counts": dict(counts),
         "actions": [{"step": a.get("step"), "last_step": a.get("last_step"), "name": a.get("name"),
                      "joint_index": a.get("joint_index"), "turned_link_index": a.get("turned_link_index"),
@@ -196,7 +200,7 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
     }
 
 
-def _marker_errors(summary) -> list[float]:
+def _marker_errors(summary: WorkerSummary) -> list[float]:
     """|camera estimate - simulator's measured pose| of every link seen, in degrees (for evaluation)."""
     out = []
     for s in summary.steps:
@@ -206,19 +210,19 @@ def _marker_errors(summary) -> list[float]:
     return out
 
 
-def _states_off_table(summary, spec: SceneSpec) -> int:
+def _states_off_table(summary: WorkerSummary, spec: SceneSpec) -> int:
     """Perceived configurations (measured) with a link off the table or inside the robot."""
     count = 0
     for base, theta in zip(summary.base_points, summary.configurations):
         result = configuration_feasible(spec.geometry(base), theta, spec.cell())
-        count += any(r.code in ("off_table", "inside_robot") for r in result.reasons)
+        count += any(r.code in (Infeasible.OFF_TABLE, Infeasible.INSIDE_ROBOT) for r in result.reasons)
     return count
 
 
-def aggregate(results: list[dict]) -> dict:
+def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
     """The numbers a run of episodes is judged by."""
     outcomes = Counter(o for r in results for o in r["outcomes"])
-    reasons: Counter = Counter()
+    reasons: Counter[str] = Counter()
     for r in results:
         reasons.update(r["failure_reasons"])
     action_s = sorted(t for r in results for t in r["action_s"])
@@ -226,7 +230,7 @@ def aggregate(results: list[dict]) -> dict:
     actions = sum(outcomes.values())
     return {
         "actions": actions,
-        "action_success_rate": round(outcomes.get("succeeded", 0) / actions, 3) if actions else None,
+        "action_success_rate": round(outcomes.get(ActionOutcome.SUCCEEDED, 0) / actions, 3) if actions else None,
         "outcomes": dict(outcomes),
         "failure_reasons": dict(reasons),
         "stop_reasons": dict(Counter(r["stop_reason"] for r in results)),
@@ -244,7 +248,7 @@ def aggregate(results: list[dict]) -> dict:
 
 def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str | None = None,
              token: str | None = None, episodes: int = 1, perception: str = "camera", max_steps: int = 40,
-             seed: int = 0, keep_serving: bool = False) -> dict:
+             seed: int = 0, keep_serving: bool = False) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     if scenario_name == "random":
         scenarios = [random_scenario(seed + i) for i in range(episodes)]
@@ -264,7 +268,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
                   f"in {result['time_to_goal_s']:.1f} s, {len(result['actions'])} actions, "
                   f"{result['replans']} re-plans, {result['resumes']} resumes", flush=True)
 
-    def summarize() -> dict:
+    def summarize() -> dict[str, Any]:
         summary = {
             "scenario": scenario_name,
             "episodes": len(results),
@@ -291,7 +295,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
     return summarize()
 
 
-def add_demo_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_demo_parser(subparsers: SubParsers) -> None:
     p = subparsers.add_parser("demo", help="KB service + Baxter worker: one cooperation scenario to the end",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default="fig13", choices=sorted(DEMO_SCENARIOS) + ["random"])

@@ -21,8 +21,9 @@ from typing import Mapping, Sequence
 
 from planhrc.geometry import Cell, ObjectGeometry, rotated
 from planhrc.robot_sim.scene import sweep_hazard
+from planhrc.vocabulary import Infeasible
 
-SWEEP_HAZARDS = ("off_table", "inside_robot")
+SWEEP_HAZARDS = (Infeasible.OFF_TABLE, Infeasible.INSIDE_ROBOT)
 PATH_BUDGET = 6000  # sweep checks of one search: bounds the time the human spends looking for a way (then: None)
 GREED = 2.0  # weighted A*: the estimate counts twice, so the search goes for the goal first (not always the fewest moves)
 
@@ -43,7 +44,7 @@ def orientations(joints: Sequence[float]) -> tuple[float, ...]:
 
 
 def turn_order(geometry: ObjectGeometry, theta: Sequence[float], cell: Cell, turns: Mapping[int, float],
-               baseline: frozenset[tuple[str, int]]) -> list[tuple[int, float]] | None:
+               baseline: frozenset[tuple[Infeasible, int]]) -> list[tuple[int, float]] | None:
     """An order, and a way round, in which to make the joint turns `turns` (link -> degrees relative to the link
     before it) so that every sweep is safe: [(link, degrees)], or None. A depth-first search over the turns still
     to make, upstream first, remembering the sets of turns from which no order works."""
@@ -72,7 +73,7 @@ def turn_order(geometry: ObjectGeometry, theta: Sequence[float], cell: Cell, tur
 
 
 def turn_path(geometry: ObjectGeometry, theta: Sequence[float], cell: Cell, wanted_joints: Sequence[float],
-              baseline: frozenset[tuple[str, int]], step_deg: float = 45.0, budget: int = PATH_BUDGET
+              baseline: frozenset[tuple[Infeasible, int]], step_deg: float = 45.0, budget: int = PATH_BUDGET
               ) -> list[tuple[int, float]] | None:
     """Moves of one joint by at most `step_deg` each, every sweep safe, that bring the joint angles
     from those of `theta` to `wanted_joints`: [(link, degrees)] with consecutive moves of a joint merged, or None

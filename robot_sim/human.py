@@ -23,17 +23,21 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pybullet
 
 from planhrc.geometry import configuration_feasible, rotated
 from planhrc.robot_sim.handling import SWEEP_HAZARDS, joint_angles, shorter, turn_order, turn_path
-from planhrc.robot_sim.scene import (HAZARDS, TIME_STEP_S, Scene, SimError, baseline_problems, direction, eased,
-                                    new_hazards, sweep_hazard, turn_hazard)
+from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.scene import (HAZARDS, TIME_STEP_S, Scene, baseline_problems, direction, eased, new_hazards,
+                                    sweep_hazard, turn_hazard)
 
 log = logging.getLogger(__name__)
+
+# Where a hand goes at a tick: (table point, height, yaw in degrees), worked out when it gets there.
+HandTarget = Callable[[], tuple[np.ndarray, float, float]]
 
 WHEN = ("before", "during")
 KINDS = ("rotate", "toward_goal", "next_planned", "complete_partial")
@@ -511,7 +515,7 @@ class Human:
 
         return advance
 
-    def _acting(self, move: HumanMove):
+    def _acting(self, move: HumanMove) -> Iterator[None]:
         s, c = self.scene, self.scene.client
         dt = TIME_STEP_S
         z_grip = s.link_center_z + s.spec.link_height_m
@@ -522,7 +526,7 @@ class Human:
         # along by l1 slides it (4.6 cm over a help request's turns of l1, in a random episode)
         pins = move.held == 0 and 1 not in s.gripped
 
-        def hands_to(targets: list[tuple[int, Callable[[], tuple[np.ndarray, float, float]]]]):
+        def hands_to(targets: list[tuple[int, HandTarget]]) -> Iterator[None]:
             starts = {h: np.asarray(c.getBasePositionAndOrientation(h)[0]) for h, _ in targets}
             goal = {h: f() for h, f in targets}
             distance = max(float(np.linalg.norm(np.append(goal[h][0], goal[h][1]) - starts[h])) for h, _ in targets)
@@ -534,16 +538,16 @@ class Human:
                     self._place(h, p[:2], float(p[2]), theta)
                 yield
 
-        def over(link: int, z: float):
+        def over(link: int, z: float) -> HandTarget:
             return lambda: (s.link_center(link), z, s.link_orientations_deg()[link - 1])
 
-        def rest(i: int):
+        def rest(i: int) -> HandTarget:
             return lambda: (np.asarray(REST_XY[i]), z_high, 0.0)
 
-        def at_base(z: float):
+        def at_base(z: float) -> HandTarget:
             return lambda: (s.joint_points()[0], z, s.link_orientations_deg()[0])
 
-        def holding(z: float) -> list[tuple[int, Callable[[], tuple[np.ndarray, float, float]]]]:
+        def holding(z: float) -> list[tuple[int, HandTarget]]:
             return [(hold_hand, over(move.held, z))] if holds else [(hold_hand, at_base(z))] if pins else []
 
         yield from hands_to([(turn_hand, over(move.turned, z_high))] + holding(z_high))

@@ -14,20 +14,22 @@ import statistics
 from collections import Counter
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from planhrc.cli_args import non_negative_int, positive_int, writable_file
+from planhrc.cli_args import SubParsers, non_negative_int, positive_int, writable_file
 from planhrc.robot_sim.perception import CameraPerception, angle_difference_deg
 from planhrc.geometry import sweep_feasible
 from planhrc.robot_sim.scene import SceneSpec, build_scene, random_orientations
 from planhrc.stats import percentile
-from planhrc.robot_sim.skills import Outcome, Robot, RotationAction, perform_action
+from planhrc.robot_sim.skills import Robot, RotationAction, perform_action
+from planhrc.vocabulary import ActionOutcome
 
 
-def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dict:
+def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dict[str, Any]:
     rng = np.random.default_rng(seed)
     client = BulletClient(connection_mode=pybullet.DIRECT)
     spec = SceneSpec()
@@ -69,7 +71,7 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
             if result.reason is not None:
                 reasons[result.reason.value] += 1
             turn_errors.append(abs(result.reached_deg - delta))
-            if result.outcome is not Outcome.SUCCEEDED:
+            if result.outcome is not ActionOutcome.SUCCEEDED:
                 scene.set_configuration(spec.orientations0, spec.base_xy)
     finally:
         scene.close()
@@ -79,7 +81,7 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
                              "max": max(errors), "missed_markers": missed},
         "perception_s": {"median": statistics.median(frame_s), "max": max(frame_s)},
         "rotation_action_s": {"median": statistics.median(rotation_s), "max": max(rotation_s),
-                              "succeeded": outcomes.get("succeeded", 0), "of": len(rotation_s)},
+                              "succeeded": outcomes.get(ActionOutcome.SUCCEEDED.value, 0), "of": len(rotation_s)},
         "rotation_outcomes": dict(outcomes),
         "rotation_failure_reasons": dict(reasons),
         "turn_error_deg": {"median": statistics.median(turn_errors), "max": max(turn_errors)},
@@ -88,7 +90,7 @@ def measure(configurations: int = 20, rotations: int = 20, seed: int = 0) -> dic
     }
 
 
-def add_sim_bench_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_sim_bench_parser(subparsers: SubParsers) -> None:
     p = subparsers.add_parser("sim-bench", help="marker error, perception time and rotation wall time in simulation",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--configurations", type=positive_int, default=20, help="random configurations perceived")

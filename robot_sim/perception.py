@@ -14,14 +14,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import cv2
 import numpy as np
 import pybullet
 
+from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.markers import aruco_dictionary
-from planhrc.robot_sim.scene import Scene, SimError
+from planhrc.robot_sim.scene import Scene
+
+if TYPE_CHECKING:
+    from pybullet_utils.bullet_client import BulletClient
 
 
 @dataclass(frozen=True)
@@ -44,7 +48,13 @@ class Perception:
 
 
 class Perceiver(Protocol):
+    """What the worker perceives with: the camera or the explicit no-camera mode."""
+
     def perceive(self) -> Perception: ...
+
+    def look(self) -> Perception:
+        """`perceive`, looking again (as the camera can) while links are missing."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -83,7 +93,7 @@ def table_angle(vector_xy: np.ndarray) -> float:
 class CameraPerception:
     """Render, detect markers, back-project their corners onto the table and measure each link's angle."""
 
-    def __init__(self, client, scene: Scene, camera: CameraSpec | None = None) -> None:
+    def __init__(self, client: BulletClient, scene: Scene, camera: CameraSpec | None = None) -> None:
         if scene.head_camera is None:
             raise SimError("scene: the head camera needs the robot (load_robot=True)")
         self.client = client
@@ -151,7 +161,8 @@ class CameraPerception:
         far = self._inverse @ np.array([x_ndc, y_ndc, 1.0, 1.0])
         near, far = near[:3] / near[3], far[:3] / far[3]
         t = (z - near[2]) / (far[2] - near[2])
-        return (near + t * (far - near))[:2]
+        point: np.ndarray = (near + t * (far - near))[:2]
+        return point
 
     def marker_angle(self, corners: np.ndarray) -> float:
         """Table angle of a marker's corner 0 -> corner 1 direction, averaged over its four edges."""

@@ -16,14 +16,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import cv2
 import numpy as np
 
 from planhrc.robot_sim.markers import aruco_dictionary
+from planhrc.vocabulary import ActionOutcome, DecisionKind
 
-OUTCOME_COLOURS = {"succeeded": "#2e7d32", "partial": "#e07b00", "failed": "#c62828"}
+OUTCOME_COLOURS = {ActionOutcome.SUCCEEDED: "#2e7d32", ActionOutcome.PARTIAL: "#e07b00",
+                   ActionOutcome.FAILED: "#c62828"}
 ACTOR_COLOURS = {"robot": "#1f5fbf", "human": "#b0368a", "robot and human": "#6a3d9a", "nobody": "#5f6b7a",
                  "start": "#5f6b7a"}
 CAPTION_FONT_PX = 15
@@ -34,17 +36,17 @@ class PictureStep:
     """One decision of an episode as the pictures show it."""
 
     step: int
-    decision: str
+    decision: DecisionKind
     configuration_deg: tuple[float, ...]  # link orientations when perceived (clockwise from the robot's +x)
     base_xy: tuple[float, float]  # where l1 starts on the table (robot frame, metres)
     actor: str  # who changed the object since the previous decision: robot, human, robot and human, nobody, start
     action: str | None = None  # the action taken after the decision, in words
-    outcome: str | None = None  # succeeded, failed or partial
+    outcome: ActionOutcome | None = None
     human: tuple[str, ...] = ()  # what the human did, in words
     markers_seen: int | None = None  # links whose marker the camera found (None: not perceived by camera)
 
 
-def describe_action(action: dict | None) -> str | None:
+def describe_action(action: dict[str, Any] | None) -> str | None:
     """`a_3 j2: turn l3 +90°, hold l2` from a next-action answer of the service."""
     if not action:
         return None
@@ -56,10 +58,10 @@ def describe_action(action: dict | None) -> str | None:
             f"{int(action.get('delta_deg', 0)):+d}°, hold {held}")
 
 
-def actor_between(robot_outcome: str | None, human_moves: Sequence[str]) -> str:
+def actor_between(robot_outcome: ActionOutcome | None, human_moves: Sequence[str]) -> str:
     """Who changed the object between two perceptions: a robot action that moved something (succeeded or
     partial), a human move, both, or nobody."""
-    robot = robot_outcome in ("succeeded", "partial")
+    robot = robot_outcome in (ActionOutcome.SUCCEEDED, ActionOutcome.PARTIAL)
     human = bool(human_moves)
     return "robot and human" if robot and human else "robot" if robot else "human" if human else "nobody"
 
@@ -121,7 +123,7 @@ def draw_configurations(path: Path, steps: Sequence[PictureStep], link_length_m:
         ax.text(0.02, 0.98, _wrap(who, 44), transform=ax.transAxes, fontsize=7.5, va="top",
                 color=ACTOR_COLOURS.get(s.actor, "#1d2733"))
         if s.action:
-            colour = OUTCOME_COLOURS.get(s.outcome or "", "#1d2733")
+            colour = "#1d2733" if s.outcome is None else OUTCOME_COLOURS[s.outcome]
             ax.text(0.02, 0.02, _wrap(f"then {s.action}: {s.outcome or 'not done'}", 44), transform=ax.transAxes,
                     fontsize=7.5, va="bottom", color=colour, fontweight="bold")
         if s.markers_seen is not None and s.markers_seen < len(s.configuration_deg):
@@ -129,9 +131,9 @@ def draw_configurations(path: Path, steps: Sequence[PictureStep], link_length_m:
                     transform=ax.transAxes, fontsize=7, va="top", ha="right", color="#c62828")
     legend = [Line2D([], [], color="#1f5fbf", linewidth=3, label="perceived configuration (true poses)"),
               Line2D([], [], color="#2e9e5b", linewidth=9, alpha=0.3, label="goal (ghost)"),
-              Line2D([], [], color=OUTCOME_COLOURS["succeeded"], label="action succeeded"),
-              Line2D([], [], color=OUTCOME_COLOURS["partial"], label="partial"),
-              Line2D([], [], color=OUTCOME_COLOURS["failed"], label="failed")]
+              Line2D([], [], color=OUTCOME_COLOURS[ActionOutcome.SUCCEEDED], label="action succeeded"),
+              Line2D([], [], color=OUTCOME_COLOURS[ActionOutcome.PARTIAL], label="partial"),
+              Line2D([], [], color=OUTCOME_COLOURS[ActionOutcome.FAILED], label="failed")]
     fig.legend(handles=legend, loc="lower center", ncol=5, fontsize=8, frameon=False)
     if title:
         fig.suptitle(title, fontsize=11)

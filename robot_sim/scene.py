@@ -26,14 +26,19 @@ import math
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 import pybullet
 
 from planhrc.geometry import (EXECUTION, STRICT, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, Tolerance,
                               configuration_feasible, rotated)
+from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
+from planhrc.vocabulary import Infeasible
+
+if TYPE_CHECKING:
+    from pybullet_utils.bullet_client import BulletClient
 
 BAXTER_URDF = "robots/baxter_description/urdf/baxter.urdf"
 PACKAGE_PREFIX = "package://example-robot-data/"
@@ -45,10 +50,6 @@ HOME_POSE = {
     "right": (-1.0, -0.9, 0.3, 1.6, 0.0, 0.9, 0.0),
 }
 TIME_STEP_S = 1.0 / 120.0  # a coarse step keeps an action well under a second of wall time
-
-
-class SimError(Exception):
-    """Root of the simulator's errors; the message names the offending field or value."""
 
 
 @dataclass(frozen=True)
@@ -140,7 +141,8 @@ def rotate_point(point: np.ndarray, pivot: np.ndarray, delta_deg: float) -> np.n
     t = -math.radians(delta_deg)
     c, s = math.cos(t), math.sin(t)
     d = point - pivot
-    return pivot + np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+    turned: np.ndarray = pivot + np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+    return turned
 
 
 def baxter_urdf_source() -> Path:
@@ -164,7 +166,7 @@ def write_baxter_urdf(directory: Path) -> Path:
 class Scene:
     """A built work cell. Create it with `build_scene`; call `close` to remove its temporary files."""
 
-    def __init__(self, client, spec: SceneSpec, workdir: tempfile.TemporaryDirectory) -> None:
+    def __init__(self, client: BulletClient, spec: SceneSpec, workdir: tempfile.TemporaryDirectory[str]) -> None:
         self.client = client
         self.spec = spec
         self._workdir = workdir
@@ -242,7 +244,7 @@ class Scene:
         """Links beyond the table's edge or fallen below its top (measured)."""
         base, theta = self.configuration()
         result = configuration_feasible(self.spec.geometry(base), theta, self.spec.cell())
-        beyond = {r.link for r in result.reasons if r.code == "off_table"}
+        beyond = {r.link for r in result.reasons if r.code is Infeasible.OFF_TABLE}
         fallen = {k for k in range(1, self.n_links + 1) if self.link_pose(k)[0][2] < self.spec.table_top_z - 0.01}
         return tuple(sorted(beyond | fallen))
 
@@ -316,7 +318,7 @@ class Scene:
     def __enter__(self) -> "Scene":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -325,17 +327,18 @@ def is_feasible(spec: SceneSpec, orientations_deg: Sequence[float], base_point_x
     return configuration_feasible(spec.geometry(base_point_xy), orientations_deg, spec.cell()).ok
 
 
-HAZARDS = ("off_table", "inside_robot", "overlap")  # what a turn must not cause; reach is the robot's matter
+# what a turn must not cause; reach is the robot's matter
+HAZARDS = (Infeasible.OFF_TABLE, Infeasible.INSIDE_ROBOT, Infeasible.OVERLAP)
 
 
 def baseline_problems(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell
-                      ) -> frozenset[tuple[str, int]]:
+                      ) -> frozenset[tuple[Infeasible, int]]:
     """(code, link) of the problems a configuration has already (strictly): acting on it does not cause them."""
     return frozenset((r.code, r.link) for r in configuration_feasible(geometry, orientations_deg, cell).reasons)
 
 
 def added_hazards(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell,
-                  baseline: frozenset[tuple[str, int]], hazards: Sequence[str] = HAZARDS,
+                  baseline: frozenset[tuple[Infeasible, int]], hazards: Sequence[Infeasible] = HAZARDS,
                   tolerance: Tolerance = EXECUTION) -> tuple[Infeasibility, ...]:
     """The problems among `hazards` that the configuration has beyond `baseline`, judged with the tolerance a
     physical execution is given on its way (`planhrc.geometry.EXECUTION`), or `tolerance`."""
@@ -344,8 +347,8 @@ def added_hazards(geometry: ObjectGeometry, orientations_deg: Sequence[float], c
 
 
 def sweep_hazard(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell, turned_link: int,
-                 held_link: int, delta_deg: float, baseline: frozenset[tuple[str, int]],
-                 hazards: Sequence[str] = HAZARDS, increment_deg: float = 5.0,
+                 held_link: int, delta_deg: float, baseline: frozenset[tuple[Infeasible, int]],
+                 hazards: Sequence[Infeasible] = HAZARDS, increment_deg: float = 5.0,
                  end_tolerance: Tolerance = EXECUTION) -> Infeasibility | None:
     """The first problem among `hazards` (beyond `baseline`) that turning `turned_link` about its joint with
     `held_link` by `delta_deg` causes somewhere along its sweep (every `increment_deg`), or None; where the
@@ -362,7 +365,7 @@ def sweep_hazard(geometry: ObjectGeometry, orientations_deg: Sequence[float], ce
 
 
 def turn_hazard(scene: Scene, turned_link: int, held_link: int, delta_deg: float,
-                increment_deg: float = 5.0, hazards: Sequence[str] = HAZARDS) -> Infeasibility | None:
+                increment_deg: float = 5.0, hazards: Sequence[Infeasible] = HAZARDS) -> Infeasibility | None:
     """The first problem turning `turned_link` about its joint with `held_link` by `delta_deg` would cause
     somewhere along its sweep (a link past the table's edge, inside the robot, folded onto or across another,
     beyond `planhrc.geometry.EXECUTION`'s tolerance) or where it comes to rest (as drawn, `STRICT`: a turn may
@@ -555,7 +558,7 @@ def _load_object(scene: Scene) -> None:
     scene.set_configuration(s.orientations0, s.base_xy)
 
 
-def build_scene(client, spec: SceneSpec | None = None) -> Scene:
+def build_scene(client: BulletClient, spec: SceneSpec | None = None) -> Scene:
     """Load Baxter (optional), the table and the object into `client`; the caller keeps the client."""
     spec = spec or SceneSpec()
     workdir = tempfile.TemporaryDirectory(prefix="planhrc-scene-")

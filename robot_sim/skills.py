@@ -20,13 +20,12 @@ import numpy as np
 import pybullet
 
 from planhrc.geometry import reach_shortfall
-from planhrc.vocabulary import ActionOutcome as Outcome
-from planhrc.vocabulary import FailureReason  # the words of a failure, defined once, shared with the service
+from planhrc.vocabulary import ActionOutcome, FailureReason  # the words of a result, shared with the service
+from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
     Scene,
-    SimError,
     arm_joints,
     direction,
     drive_gripper,
@@ -85,7 +84,7 @@ class ActionResult:
     """What an action did, judged from the world: the outcome, why (None when it succeeded), a sentence,
     and the turn measured after release against the commanded one (degrees, + = clockwise)."""
 
-    outcome: Outcome
+    outcome: ActionOutcome
     reason: FailureReason | None
     message: str
     commanded_deg: float
@@ -503,7 +502,7 @@ def execute(
     """
     if command is None or isinstance(command, Unreachable):
         message = command.message if isinstance(command, Unreachable) else "no command"
-        return ActionResult(Outcome.FAILED, FailureReason.UNREACHABLE, message, 0.0, 0.0)
+        return ActionResult(ActionOutcome.FAILED, FailureReason.UNREACHABLE, message, 0.0, 0.0)
     robot = robot or Robot(scene)
     hands = _Hands(scene, robot)
     total = command.rotation_steps
@@ -572,14 +571,14 @@ def _judge(scene: Scene, robot: Robot, command: Command, before: float, problem:
         reason = FailureReason.SLIP if abs(reached) > 1.0 else FailureReason.STALL
         sentence = f"link {link} {'slipped' if reason is FailureReason.SLIP else 'did not turn'}"
     else:
-        return ActionResult(Outcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f}",
+        return ActionResult(ActionOutcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f}",
                             commanded, reached)
     if abs(short) <= robot.success_tolerance_deg and reason is not FailureReason.LEFT_TABLE:
         # the turn itself is complete; the problem (a touch on the way back) is reported with it
-        return ActionResult(Outcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f} "
+        return ActionResult(ActionOutcome.SUCCEEDED, None, f"link {link} turned {reached:+.1f} deg of {commanded:+.0f} "
                             f"({sentence})", commanded, reached)
     moved = abs(reached) > 1.0 and reached * commanded > 0
-    outcome = Outcome.PARTIAL if moved else Outcome.FAILED
+    outcome = ActionOutcome.PARTIAL if moved else ActionOutcome.FAILED
     detail = f"{sentence}: turned {reached:+.1f} of {commanded:+.0f} deg, short by {abs(short):.1f} deg"
     return ActionResult(outcome, reason, detail, commanded, reached)
 

@@ -34,16 +34,18 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from planhrc.cli_args import float_tuple, http_url, non_negative_float, non_negative_int, positive_int, writable_dir
+from planhrc.cli_args import (SubParsers, float_tuple, http_url, non_negative_float, non_negative_int, positive_int,
+                              writable_dir)
 from planhrc.client import KBClient, ProtocolError
 from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, RobotTurn, Scenario, apply_event,
                                      assist_failed_action, get_scenario, goal_differences, help_turns, safe_way)
-from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perception
+from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perceiver, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
-from planhrc.robot_sim.scene import Scene, SceneSpec, SimError, build_scene, turn_hazard
-from planhrc.robot_sim.skills import ActionResult, Outcome, Robot, RotationAction, perform_action
-from planhrc.vocabulary import FailureReason
+from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
+from planhrc.robot_sim.skills import ActionResult, Interrupt, Robot, RotationAction, perform_action
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, Infeasible, StopReason
 
 log = logging.getLogger(__name__)
 
@@ -55,12 +57,12 @@ class StepRecord:
     perceived_deg: tuple[float | None, ...]
     true_deg: tuple[float, ...]  # the simulator's measured poses, for evaluation only (never sent)
     missing_links: tuple[int, ...]
-    decision: str
+    decision: DecisionKind
     reason: str
     matched_expected_step: int | None
     action: dict[str, Any] | None = None
-    outcome: str | None = None
-    outcome_reason: str | None = None  # unreachable, collision, slip, stall, grasp_lost, left_table
+    outcome: ActionOutcome | None = None
+    outcome_reason: FailureReason | None = None
     outcome_message: str = ""
     reached_deg: float | None = None
     human_during: tuple[str, ...] = ()
@@ -78,7 +80,7 @@ class WorkerSummary:
     object_id: str
     scenario: str
     reached_goal: bool
-    stop_reason: str
+    stop_reason: StopReason
     steps: tuple[StepRecord, ...]
     configurations: tuple[tuple[float, ...], ...]
     base_points: tuple[tuple[float, float], ...]
@@ -90,11 +92,11 @@ class WorkerSummary:
     human_performed: int = 0
 
     @property
-    def decisions(self) -> tuple[str, ...]:
+    def decisions(self) -> tuple[DecisionKind, ...]:
         return tuple(s.decision for s in self.steps)
 
     @property
-    def outcomes(self) -> tuple[str, ...]:
+    def outcomes(self) -> tuple[ActionOutcome, ...]:
         return tuple(s.outcome for s in self.steps if s.outcome is not None)
 
     @property
@@ -103,7 +105,7 @@ class WorkerSummary:
 
     @property
     def help_requests(self) -> int:
-        return sum(1 for s in self.steps if s.decision == "human_help_requested")
+        return sum(1 for s in self.steps if s.decision is DecisionKind.HUMAN_HELP_REQUESTED)
 
     @property
     def seen_links(self) -> int:
@@ -176,7 +178,7 @@ def _following_action(kb: KBClient, action: dict[str, Any]) -> tuple[int, int, f
     return None
 
 
-def _perceive(perceiver) -> Perception:
+def _perceive(perceiver: Perceiver) -> Perception:
     """Look (the camera looks again with the head turned while markers are missing). An unseen link stays
     unseen: nothing fills it in."""
     seen = perceiver.look()
@@ -236,7 +238,7 @@ def run_worker(
         summary_reason = _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, context,
                                max_steps, run, record_motion=record_motion and record_frames,
                                record_frames=record_frames)
-        reached = summary_reason == "goal_reached"
+        reached = summary_reason is StopReason.GOAL_REACHED
         summary = WorkerSummary(
             object_id=object_id,
             scenario=scenario.name,
@@ -278,8 +280,9 @@ def _signature(action: RotationAction) -> tuple[int, int, float, int]:
     return action.turned_link, action.held_link, round(action.delta_deg, 3), action.macro_steps
 
 
-def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, context, max_steps, run,
-          record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3) -> str:
+def _loop(kb: KBClient, object_id: str, scene: Scene, robot: Robot, camera: CameraPerception, perceiver: Perceiver,
+          human: Human, scenario: Scenario, context: HumanContext, max_steps: int, run: _Run,
+          record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3) -> StopReason:
     """Perceive -> decide -> act until the goal; returns why it stopped.
 
     A failed action is not tried again the same way: a macro step that failed is split into its single steps;
@@ -315,7 +318,7 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
         base_xy, theta = scene.configuration()
         run.configurations.append(tuple(round(v, 3) for v in theta))
         run.base_points.append(base_xy)
-        kind = "incomplete_perception" if decision is None else str(decision.decision)
+        kind = DecisionKind.INCOMPLETE_PERCEPTION if decision is None else decision.decision
         run.labels.append(f"{step}: {kind}")
         base: dict[str, Any] = dict(step=step, human_before=tuple(human_before),
                     perceived_deg=tuple(None if v is None else round(v, 2) for v in values),
@@ -323,60 +326,60 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                     decision=kind, reason="no link seen (not posted)" if decision is None else decision.reason,
                     looks=seen.looks, matched_expected_step=None if decision is None else decision.matched_expected_step,
                     perception_s=t1 - t0, service_s=t2 - t1)
-        if decision is None or decision.decision == "incomplete_perception":
+        if decision is None or decision.decision is DecisionKind.INCOMPLETE_PERCEPTION:
             # the head has turned to look again already; nothing is filled in from elsewhere
             unseen_in_a_row += 1
             run.records.append(StepRecord(**base))
             if unseen_in_a_row >= max_unseen:
                 run.stop_message = f"links {list(seen.missing_links)} not seen in {max_unseen} perceptions"
-                _give_up(kb, object_id, "unseen_links", run.stop_message)
-                return "unseen_links"
+                _give_up(kb, object_id, GiveUpReason.UNSEEN_LINKS, run.stop_message)
+                return StopReason.UNSEEN_LINKS
             scene.step(30)  # a quarter of a second: whatever covers a marker may move away
             step += 1
             continue
         unseen_in_a_row = 0
         log.info("step %d: %s (%s)", step, decision.decision, decision.reason)
 
-        if decision.decision == "human_help_requested":
+        if decision.decision is DecisionKind.HUMAN_HELP_REQUESTED:
             requests = tuple(str(item.get("sentence") or f"turn link {item.get('link')} to {item.get('to_deg')} deg")
                              for item in decision.help or ())
             if scenario.assists_after_failures is None:
                 run.records.append(StepRecord(**base, help_requested=requests))
                 run.stop_message = f"the robot asked for help and no human helps: {decision.reason}"
-                _give_up(kb, object_id, "no_human_help", run.stop_message)
-                return "no_human_help"
+                _give_up(kb, object_id, GiveUpReason.NO_HUMAN_HELP, run.stop_message)
+                return StopReason.NO_HUMAN_HELP
             helped = help_turns(human, [(int(item["link"]), float(item["to_deg"])) for item in decision.help or ()])
             run.records.append(StepRecord(**base, help_requested=requests, human_assist="; ".join(helped or ()) or None))
             helpless = 0 if helped else helpless + 1
             if helpless >= max_unseen:
                 run.stop_message = f"the human could not do what was asked ({'; '.join(requests)})"
-                _give_up(kb, object_id, "human_could_not_help", run.stop_message)
-                return "gave_up"
+                _give_up(kb, object_id, GiveUpReason.HUMAN_COULD_NOT_HELP, run.stop_message)
+                return StopReason.GAVE_UP
             step += 1
             continue
 
-        if decision.decision == "goal_reached":
+        if decision.decision is DecisionKind.GOAL_REACHED:
             run.records.append(StepRecord(**base))
             # a move due now or earlier that found no robot action to go with happens now, while the robot idles
             late = [(i, e) for i, e in enumerate(scenario.events) if i not in run.applied and e.at_step <= step]
             pending = [e for i, e in enumerate(scenario.events) if i not in run.applied and e.at_step > step]
             if not late and not pending:
-                return "goal_reached"
+                return StopReason.GOAL_REACHED
             for index, event in late:
                 if (done := _act(human, run, index, event, context)) is not None:
                     carried.append(done)
             # the robot is idle: the next scheduled human intervention happens now
             step = step + 1 if late else max(step + 1, min(e.at_step for e in pending))
             continue
-        if decision.decision == "no_plan":
+        if decision.decision is DecisionKind.NO_PLAN:
             run.records.append(StepRecord(**base))
             run.stop_message = decision.reason
-            return "no_plan"
+            return StopReason.NO_PLAN
 
         data = kb.next_action(object_id)
         if data is None:
             run.records.append(StepRecord(**base))
-            return "no_action"
+            return StopReason.NO_ACTION
         action = RotationAction.from_api(data)
         context.busy_links = (action.turned_link, action.held_link)
         during_events = _events(scenario, run, step, "during")
@@ -429,10 +432,10 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                 message = f"robot did not retry ({sentence}); the human did it"
                 reason = failed[signature][2]
                 if action.action_id is not None:
-                    _feedback(kb, object_id, action.action_id, Outcome.FAILED, message, reason)
+                    _feedback(kb, object_id, action.action_id, ActionOutcome.FAILED, message, reason)
                 failed.pop(signature)
-                run.records.append(StepRecord(**base, action=dict(data), outcome="failed",
-                                              outcome_reason=reason.value if reason else None,
+                run.records.append(StepRecord(**base, action=dict(data), outcome=ActionOutcome.FAILED,
+                                              outcome_reason=reason,
                                               outcome_message=message, human_during=tuple(human_during),
                                               human_assist=assist, action_s=t4 - t3))
                 helpless = 0
@@ -444,43 +447,44 @@ def _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, conte
                 message = f"robot did not retry ({sentence})"
                 reason = failed[signature][2]
                 if action.action_id is not None:
-                    _feedback(kb, object_id, action.action_id, Outcome.FAILED, message, reason)
-                run.records.append(StepRecord(**base, action=dict(data), outcome="failed",
-                                              outcome_reason=reason.value if reason else None,
+                    _feedback(kb, object_id, action.action_id, ActionOutcome.FAILED, message, reason)
+                run.records.append(StepRecord(**base, action=dict(data), outcome=ActionOutcome.FAILED,
+                                              outcome_reason=reason,
                                               outcome_message=message, human_during=tuple(human_during),
                                               action_s=t4 - t3))
                 step += 1
                 continue
             run.stop_message = f"gave up on {action.name or 'the action'}: {sentence}"
             if action.action_id is not None:
-                _feedback(kb, object_id, action.action_id, Outcome.FAILED, f"worker gives up: {sentence}",
+                _feedback(kb, object_id, action.action_id, ActionOutcome.FAILED, f"worker gives up: {sentence}",
                           failed[signature][2])
-            _give_up(kb, object_id, "repeated_failure", run.stop_message)
-            run.records.append(StepRecord(**base, action=dict(data), outcome="failed", outcome_message=run.stop_message,
-                                          human_during=tuple(human_during), action_s=t4 - t3))
-            return "gave_up"
-        if result.outcome is Outcome.PARTIAL:
+            _give_up(kb, object_id, GiveUpReason.REPEATED_FAILURE, run.stop_message)
+            run.records.append(StepRecord(**base, action=dict(data), outcome=ActionOutcome.FAILED,
+                                          outcome_message=run.stop_message, human_during=tuple(human_during),
+                                          action_s=t4 - t3))
+            return StopReason.GAVE_UP
+        if result.outcome is ActionOutcome.PARTIAL:
             context.partial = (action.turned_link, action.held_link, result.commanded_deg - result.reached_deg)
         message = result.message if result.reason is None else f"{result.reason.value}: {result.message}"
         measured = None
-        if result.outcome is not Outcome.SUCCEEDED:
+        if result.outcome is not ActionOutcome.SUCCEEDED:
             # where the turned link ended, as the robot sees it (the camera looks again; unseen stays None)
             again = perceiver.look()
             measured = again.link_orientations_deg[action.turned_link - 1]
         if action.action_id is not None:
             _feedback(kb, object_id, action.action_id, result.outcome, message, result.reason, measured)
-        if result.outcome is Outcome.SUCCEEDED:
+        if result.outcome is ActionOutcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
             failed[signature] = (result.message, len(parts or ()) > 1 or action.macro_steps <= 1, result.reason)
-        run.records.append(StepRecord(**base, action=dict(data), outcome=result.outcome.value,
-                                      outcome_reason=result.reason.value if result.reason else None,
+        run.records.append(StepRecord(**base, action=dict(data), outcome=result.outcome,
+                                      outcome_reason=result.reason,
                                       measured_deg=None if measured is None else round(measured, 2),
                                       outcome_message=result.message, reached_deg=round(result.reached_deg, 2),
                                       human_during=tuple(human_during), human_assist=assist, action_s=t4 - t3))
         log.info("step %d: %s -> %s (%s)", step, action, result.outcome.value, result.message)
         step += 1
-    return "max_steps"
+    return StopReason.MAX_STEPS
 
 
 def way_round(scene: Scene, action: RotationAction) -> RotationAction:
@@ -501,14 +505,15 @@ def refuse_unsafe(scene: Scene, action: RotationAction) -> ActionResult | None:
     hazard = turn_hazard(scene, action.turned_link, action.held_link, action.delta_deg)
     if hazard is None:
         return None
-    reason = FailureReason.LEFT_TABLE if hazard.code == "off_table" else FailureReason.COLLISION
+    reason = FailureReason.LEFT_TABLE if hazard.code is Infeasible.OFF_TABLE else FailureReason.COLLISION
     log.warning("not turning l%d by %+g deg: %s", action.turned_link, action.delta_deg, hazard.message)
-    return ActionResult(Outcome.FAILED, reason, f"not started: turning link {action.turned_link} by "
+    return ActionResult(ActionOutcome.FAILED, reason, f"not started: turning link {action.turned_link} by "
                         f"{action.delta_deg:+g} deg either way round would end with {hazard.message}",
                         action.delta_deg, 0.0)
 
 
-def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt, stop_fraction):
+def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt: Interrupt,
+                   stop_fraction: float | None) -> ActionResult:
     """Perform the single steps of an action one after the other; stop at the first that does not succeed or
     would not be safe. The result covers them all: the turn reached is their sum."""
     reached = 0.0
@@ -517,28 +522,28 @@ def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], 
         result = refuse_unsafe(scene, part) or perform_action(scene, robot, part, interrupt=interrupt,
                                                               stop_fraction=stop_fraction)
         reached += result.reached_deg
-        if result.outcome is not Outcome.SUCCEEDED:
+        if result.outcome is not ActionOutcome.SUCCEEDED:
             break
     assert result is not None
     if len(parts) == 1:
         return result
     total = sum(p.delta_deg for p in parts)
     outcome = result.outcome
-    if outcome is Outcome.FAILED and abs(reached) > 1.0:
-        outcome = Outcome.PARTIAL
+    if outcome is ActionOutcome.FAILED and abs(reached) > 1.0:
+        outcome = ActionOutcome.PARTIAL
     return ActionResult(outcome, result.reason, f"in single steps: {result.message}", total, reached)
 
 
-def _feedback(kb: KBClient, object_id: str, action_id: str, outcome: Outcome, message: str,
+def _feedback(kb: KBClient, object_id: str, action_id: str, outcome: ActionOutcome, message: str,
               reason: FailureReason | None = None, measured_deg: float | None = None) -> None:
     """Post an action's outcome with its sentence and, for a failed or partial one, its reason and the turned
     link's measured orientation."""
-    if outcome is Outcome.SUCCEEDED:
+    if outcome is ActionOutcome.SUCCEEDED:
         reason, measured_deg = None, None
     kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
 
 
-def _give_up(kb: KBClient, object_id: str, reason: str, message: str) -> None:
+def _give_up(kb: KBClient, object_id: str, reason: GiveUpReason, message: str) -> None:
     """Tell the service the worker stops (it records the reason and dispatches nothing until a perception)."""
     log.warning("giving up on %s: %s", object_id, message)
     kb.give_up(object_id, reason, message[:500])
@@ -627,7 +632,7 @@ def display_problem() -> str | None:
     return None
 
 
-def add_worker_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_worker_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("worker", help="run the simulated Baxter worker against the KB service",
                               description="Perceive, ask the KB service for actions and execute them in PyBullet.")
     p.add_argument("--kb", type=http_url, required=True, help="base URL of the KB service, e.g. http://127.0.0.1:8000")

@@ -136,3 +136,14 @@ def _processes() -> list[tuple[int, int, int, str]]:
         if len(parts) == 5 and not parts[3].startswith("Z"):
             rows.append((int(parts[0]), int(parts[1]), int(parts[2]), parts[4]))
     return rows
+
+
+def test_the_grounding_bench_reports_both_paths_for_both_formulations(capsys):
+    from planhrc.bench.replay import main as replay_main
+
+    assert replay_main(["--links", "4", "--orientations", "4", "--repeat", "2"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    for formulation in ("relative", "absolute"):
+        numbers = report[formulation]
+        assert numbers["plan_length"] > 0
+        assert all(numbers[key] > 0 for key in ("replay_cold_ms", "replay_warm_ms", "ground_task_ms"))

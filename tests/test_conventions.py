@@ -3,9 +3,12 @@ import re
 from pathlib import Path
 
 from planhrc.model import make_object, natural_key, relative_from_absolute, snap_angle
-from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, PlanStatus, Remedy
+from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, GiveUpReason, Infeasible,
+                                PlanStatus, Remedy, StopReason)
 
 TEXT = (Path(__file__).resolve().parents[1] / "CONVENTIONS.md").read_text()
+ENUMS = (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, Remedy, GiveUpReason, StopReason, Infeasible,
+         PlanStatus)
 
 
 def test_a_perceived_angle_snaps_to_the_nearest_allowed_value_ties_to_the_smaller():
@@ -32,9 +35,9 @@ def test_names_sort_naturally():
 
 def test_the_shared_words_are_the_vocabulary():
     words = TEXT[TEXT.index("## Words"):]
-    for enum in (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, Remedy, PlanStatus):
+    for enum in ENUMS:
         for member in enum:
             assert f"`{member.value}`" in words, member
     listed = set(re.findall(r"`([a-z_]+)`", words))
-    known = {m.value for e in (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, Remedy, PlanStatus) for m in e}
+    known = {m.value for e in ENUMS for m in e}
     assert listed - known <= {"planhrc"}, listed - known

@@ -3,6 +3,7 @@ import random
 import threading
 import time
 
+from planhrc.errors import DeadlineExceeded
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 from planhrc.planner import deadline
@@ -49,7 +50,7 @@ def test_limits_nest_and_belong_to_their_thread():
             time.sleep(0.01)
             try:
                 deadline.check("inner")
-            except deadline.DeadlineExceeded as exc:
+            except DeadlineExceeded as exc:
                 seen["inner"] = str(exc)
         deadline.check("outer")  # the outer limit is untouched by the inner one
         t = threading.Thread(target=other)

@@ -34,7 +34,7 @@ def test_paper_scenarios_reach_the_goal(name, tmp_path):
 
 
 def test_unknown_scenario_is_refused(tmp_path):
-    from planhrc.robot_sim.scene import SimError
+    from planhrc.robot_sim.errors import SimError
 
     with pytest.raises(SimError, match="scenario"):
         run_demo("fig99", tmp_path)

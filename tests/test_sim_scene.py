@@ -4,7 +4,8 @@ import pytest
 from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.robot_sim.perception import angle_difference_deg
-from planhrc.robot_sim.scene import SceneSpec, SimError, build_scene, joint_between
+from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.scene import SceneSpec, build_scene, joint_between
 
 pytestmark = pytest.mark.sim
 

@@ -6,9 +6,9 @@ from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.robot_sim.perception import angle_difference_deg
 from planhrc.robot_sim.scene import SceneSpec, arm_joints, build_scene
-from planhrc.robot_sim.skills import (Command, Grasp, MoveArm, Outcome, Release, Robot, RotationAction, Turn,
+from planhrc.robot_sim.skills import (Command, Grasp, MoveArm, Release, Robot, RotationAction, Turn,
                                       Unreachable, execute, perform_action, rotate_skill)
-from planhrc.vocabulary import FailureReason
+from planhrc.vocabulary import ActionOutcome, FailureReason
 
 pytestmark = pytest.mark.sim
 
@@ -46,7 +46,7 @@ def test_a_physical_rotation_is_measured_afterwards(scene, robot):
     assert kinds.count(Grasp) == 2 and kinds.count(Release) == 2 and kinds.count(Turn) == 9 and MoveArm in kinds
     constraints_before = scene.client.getNumConstraints()
     result = execute(scene, command, robot)
-    assert result.outcome is Outcome.SUCCEEDED and result.reason is None, result.message
+    assert result.outcome is ActionOutcome.SUCCEEDED and result.reason is None, result.message
     assert abs(result.reached_deg - 45) < 4 and result.message.startswith("link 4 turned +4")
     # the links beyond the turned one moved with it; the held link and those before it stayed
     assert _close(scene.link_orientations_deg(), [90, 90, 90, 135, 135], 4)
@@ -59,7 +59,7 @@ def test_turning_the_first_link_holds_nothing(scene, robot):
     assert isinstance(command, Command)
     assert len({p.arm for p in command.primitives if isinstance(p, Grasp)}) == 1
     result = execute(scene, command, robot)
-    assert result.outcome is Outcome.SUCCEEDED and abs(result.reached_deg + 45) < 4, result.message
+    assert result.outcome is ActionOutcome.SUCCEEDED and abs(result.reached_deg + 45) < 4, result.message
 
 
 def test_planning_moves_nothing(scene, robot):
@@ -74,14 +74,14 @@ def test_an_object_out_of_reach_fails_with_the_link_and_the_distance_and_does_no
     planned = rotate_skill(scene, robot, RotationAction(turned_link=3, held_link=2, delta_deg=45))
     assert isinstance(planned, Unreachable) and planned.link == 2 and planned.miss_m > 0.3
     result = perform_action(scene, robot, RotationAction(turned_link=3, held_link=2, delta_deg=45))
-    assert result.outcome is Outcome.FAILED and result.reason is FailureReason.UNREACHABLE
+    assert result.outcome is ActionOutcome.FAILED and result.reason is FailureReason.UNREACHABLE
     assert result.message.startswith("link 2 unreachable: ") and " m beyond reach" in result.message
     assert _close(scene.link_orientations_deg(), [90] * 5, 0.5)
 
 
 def test_a_grasp_released_mid_turn_is_partial_with_the_angle_reached(scene, robot):
     result = perform_action(scene, robot, RotationAction(turned_link=5, held_link=4, delta_deg=-90), stop_fraction=0.5)
-    assert result.outcome is Outcome.PARTIAL and result.reason is FailureReason.GRASP_LOST
+    assert result.outcome is ActionOutcome.PARTIAL and result.reason is FailureReason.GRASP_LOST
     assert -60 < result.reached_deg < -30  # measured from the world after the release
     assert "short by" in result.message
     measured = angle_difference_deg(scene.link_orientations_deg()[4], 90)
@@ -91,7 +91,7 @@ def test_a_grasp_released_mid_turn_is_partial_with_the_angle_reached(scene, robo
 def test_a_turn_that_leaves_the_table_says_so(scene, robot):
     result = perform_action(scene, robot, RotationAction(turned_link=3, held_link=2, delta_deg=-90))  # l3-l5 forward
     assert result.reason is FailureReason.LEFT_TABLE and "left the table" in result.message
-    assert result.outcome is Outcome.PARTIAL
+    assert result.outcome is ActionOutcome.PARTIAL
 
 
 def test_a_macro_step_splits_into_single_steps():

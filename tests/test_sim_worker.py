@@ -262,7 +262,8 @@ def test_a_turn_that_would_leave_the_object_hanging_over_the_edge_is_not_started
     from pybullet_utils.bullet_client import BulletClient
 
     from planhrc.robot_sim.scene import build_scene
-    from planhrc.robot_sim.skills import Outcome, RotationAction
+    from planhrc.robot_sim.skills import RotationAction
+    from planhrc.vocabulary import ActionOutcome
     from planhrc.robot_sim.worker import refuse_unsafe
     from planhrc.vocabulary import FailureReason
 
@@ -272,7 +273,7 @@ def test_a_turn_that_would_leave_the_object_hanging_over_the_edge_is_not_started
     try:
         before = scene.configuration()
         refused = refuse_unsafe(scene, RotationAction(turned_link=5, held_link=4, delta_deg=-90))
-        assert refused is not None and refused.outcome is Outcome.FAILED, refused
+        assert refused is not None and refused.outcome is ActionOutcome.FAILED, refused
         assert refused.reason is FailureReason.LEFT_TABLE and "link 5 leaves the table" in refused.message
         assert refuse_unsafe(scene, RotationAction(turned_link=5, held_link=4, delta_deg=-45)) is None  # stays on
         assert scene.configuration() == before  # nothing moved

@@ -5,11 +5,12 @@ import time
 
 import pytest
 
+from planhrc.errors import DeadlineExceeded
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import action_motion, merge_macro_steps
 from planhrc.kb_service.store.records import ActionSpec, StoredAction
-from planhrc.transition import ReplayDeadline, StateIndex, TransitionError, _bindings, apply, replay
+from planhrc.transition import StateIndex, TransitionError, _bindings, apply, replay
 from planhrc.translator.domain import read_domain_model
 
 
@@ -81,11 +82,11 @@ def test_macro_steps_merge_consecutive_same_joint_same_direction():
 
 def _brute_force_bindings(literals, variables, binding, state, objects):
     """Every binding of `variables` over `objects` under which the literals hold, the slow obvious way."""
-    from planhrc.transition import _holds
+    from planhrc.grounding import holds
     found = []
     for values in itertools.product(objects, repeat=len(variables)):
         b = {**binding, **dict(zip(variables, values))}
-        if all(_holds(lit, b, state) for lit in literals):
+        if all(holds(lit, b, state) for lit in literals):
             found.append(b)
     return found
 
@@ -127,7 +128,7 @@ def test_a_moved_index_equals_a_fresh_one_along_a_plan():
 def test_replay_stops_at_its_deadline_without_a_result():
     obj = make_object("o", "absolute", 3, 4)
     domain = read_domain_model(default_tbox_path(), "absolute")
-    with pytest.raises(ReplayDeadline, match="after 0 of 1 steps"):
+    with pytest.raises(DeadlineExceeded, match="after 0 of 1 steps"):
         replay(domain, obj.state([0, 0, 0]), ["(rotateclockwise o_l2 o_l1 o_j2 deg_0 deg_90)"],
                deadline_at=time.monotonic() - 1.0)
 

@@ -18,7 +18,7 @@ from rdflib import Graph, Namespace, URIRef
 from rdflib import Literal as RDFLiteral
 from rdflib.namespace import OWL, RDF
 
-from planhrc.model import ActionSchemaSpec, ConditionalEffect, DomainModelSpec, Literal, PredicateSpec
+from planhrc.model import EQUALITY, ActionSchemaSpec, ConditionalEffect, DomainModelSpec, Literal, PredicateSpec
 
 from .errors import TranslationError
 
@@ -65,7 +65,7 @@ class _TBox:
             v = self.g.value(node, PLAN[f"argVar{i}"])
             if v is not None:
                 owl_args[i] = self.one(cast(URIRef, v), PLAN.pddlName)
-        if pred == "=":
+        if pred == EQUALITY:
             order: tuple[int, ...] = (1, 2)
         else:
             if pred not in self.arg_order:
@@ -128,7 +128,7 @@ def _read_domain_model_cached(path: str, _mtime: int, formulation: str) -> Domai
                 )
             )
         for lit in pre + effects + tuple(x for c in conds for x in c.when + c.effects):
-            if lit.predicate != "=" and lit.predicate not in used_predicates:
+            if lit.predicate != EQUALITY and lit.predicate not in used_predicates:
                 used_predicates.append(lit.predicate)
         actions.append(
             ActionSchemaSpec(tb.one(schema, PLAN.describesActionName), params, pre, effects, tuple(conds))

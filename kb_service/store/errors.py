@@ -1,7 +1,10 @@
 """Errors of the knowledge base. HTTP status codes are chosen only in kb_service's API layer."""
+from __future__ import annotations
+
+from planhrc.errors import DeadlineExceeded, PlanhrcError
 
 
-class KBError(Exception):
+class KBError(PlanhrcError):
     """Root of every knowledge-base error."""
 
 
@@ -21,5 +24,6 @@ class ReasonerError(KBError):
     """The DL reasoner could not run (no Java, Java error, timeout)."""
 
 
-class DeadlineError(KBError):
-    """The request's planning (with VAL) did not finish within its deadline; nothing was stored."""
+class DeadlineError(KBError, DeadlineExceeded):
+    """The request's planning (with VAL) did not finish within its deadline; nothing was stored. The one
+    `DeadlineExceeded` of planhrc, as the service raises it (a `KBError` too, for the service's handlers)."""
