@@ -19,7 +19,7 @@ import threading
 from typing import Any, Iterable, Sequence
 
 import owlready2
-from owlready2 import World
+from owlready2 import World as World  # the world type the store and the reasoners pass around
 from owlready2.base import owl_named_individual, owl_ontology, rdf_type
 
 from .errors import KBError
