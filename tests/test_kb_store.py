@@ -10,7 +10,7 @@ import pytest
 import rdflib
 from rdflib.compare import isomorphic
 
-from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
+from planhrc.kb_service.store.errors import ConflictError, KBError, NotFoundError, ValidationError
 from planhrc.kb_service.store.journal import JournalTable
 from planhrc.kb_service.store.records import ActionSpec, Execution
 from planhrc.kb_service.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase, KnowledgeStore
@@ -286,6 +286,17 @@ def test_failure_inside_a_write_rolls_everything_back():
         assert _snapshot(kb, w) == before
         plan = kb.add_plan(w["problem"].id, "p", actions, states)
         assert plan.id == "obj1_plan_2"
+
+
+def test_a_file_that_is_no_store_is_refused_in_one_line(tmp_path):
+    (tmp_path / "notes.txt").write_text("shopping list\n" * 100)
+    for path, cause in ((tmp_path / "notes.txt", "file is not a database"),
+                        (tmp_path / "no" / "such" / "kb.sqlite3", f"no folder {tmp_path / 'no' / 'such'}"),
+                        (tmp_path, "it is a folder")):
+        with pytest.raises(KBError) as info:
+            KnowledgeBase(str(path), TBOX)
+        assert str(info.value) == f"db: {path} cannot be opened as a store ({cause})"
+    assert (tmp_path / "notes.txt").read_text().startswith("shopping list")  # left as it was
 
 
 # -- export and TBox ------------------------------------------------------------------------------------

@@ -119,7 +119,16 @@ class QuadStore:
         new = bool(path) and not (os.path.exists(str(path)) and os.path.getsize(str(path)))
         # Not owlready2's default exclusive locking: readers on connections of their own (`reader`) must be able
         # to read the file while this connection writes.
-        self.world = World(filename=str(path), exclusive=False) if path else World()
+        # owlready2 leaves a half-built graph behind when SQLite cannot open the file at all, whose clean-up then
+        # fails noisily: a path no file can be made at is refused before.
+        if path and os.path.isdir(path):
+            raise KBError(f"db: {path} cannot be opened as a store (it is a folder)")
+        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+            raise KBError(f"db: {path} cannot be opened as a store (no folder {os.path.dirname(path)})")
+        try:
+            self.world = World(filename=str(path), exclusive=False) if path else World()
+        except sqlite3.Error as exc:  # not a database, or not readable: the caller's mistake
+            raise KBError(f"db: {path} cannot be opened as a store ({exc})") from None
         self.db: sqlite3.Connection = self.world.graph.db
         self._checkpointer: Checkpointer | None = None
         if new:
