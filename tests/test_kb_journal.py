@@ -176,3 +176,22 @@ def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(m
     finally:
         writer.close()
     assert behind >= 15, f"the waiting thread got the store only with {behind} of 20 plans left"
+
+
+def test_a_damaged_journal_row_refuses_the_store_and_leaves_no_thread_behind(tmp_path):
+    """A row this version cannot read (damaged, or written by a newer layout) stops the SQLite store from opening
+    with a DamagedStoreError, before it serves anything, and the threads it had started are stopped."""
+    import sqlite3
+
+    path = str(tmp_path / "kb.sqlite3")
+    with KnowledgeBase(path, TBOX) as kb:
+        _object_with_problem(kb)
+    with sqlite3.connect(path) as conn:
+        conn.execute("INSERT INTO planhrc_plan_journal VALUES ('obj1_plan_1', ?)", (b"\x80\x05not a pickle",))
+    before = {t.name for t in threading.enumerate()}
+    with pytest.raises(DamagedStoreError, match="^plan journal: a row that does not read back"):
+        KnowledgeBase(path, TBOX)
+    deadline = time.monotonic() + 10
+    while {t.name for t in threading.enumerate()} - before and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert {t.name for t in threading.enumerate()} - before == set()

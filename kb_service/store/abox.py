@@ -104,7 +104,7 @@ class Abox:
             self.t = {term: self.q.storid(TBOX_IRI + term) for term in TBOX_TERMS}
             self.q.commit()
         except Exception:
-            self.q.world.close()
+            self.q.abandon()
             raise
         self.depth = 0  # nesting of `transaction()`: writes inside commit with the outermost one
         # /health reads these without a query: counted once at open, then kept by every commit.

@@ -60,7 +60,7 @@ class SqliteStore:
             abox.q.commit()
             self._backlog.recover()  # before anything is served
         except Exception:
-            abox.q.world.close()
+            abox.q.abandon()
             raise
         self._backlog.start()
 

@@ -211,6 +211,13 @@ class QuadStore:
         self.world.save()
         self.world.close()
 
+    def abandon(self) -> None:
+        """Close without committing what the open transaction wrote (a store that failed to open)."""
+        if self._checkpointer is not None:
+            self._checkpointer.close()
+            self._checkpointer = None
+        self.world.close()
+
     # -- ontologies --------------------------------------------------------------------------------------------
     def load_ontology(self, iri: str, data: bytes, reload: bool) -> None:
         self.world.get_ontology(iri).load(fileobj=io.BytesIO(data), reload=reload)
