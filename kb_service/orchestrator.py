@@ -50,7 +50,7 @@ from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, Fa
 from .locks import ObjectLocks
 from .planning_pool import PlanningJob, PlanningPool
 from .val_gate import VERDICT_EVENT, WITHHELD_EVENT, LaterPieces, PieceRecord, Verdict, check_piece, verdict_data, verdict_of
-from .store.abox import CheckedPlan
+from .store import CheckedPlan
 from .store.knowledge_base import MAX_EVENTS_PAGE
 from .public import (event_public, execution_public, object_public, plan_public, problem_public,
                      state_public)

@@ -3,15 +3,14 @@ from __future__ import annotations
 
 import pytest
 
-from planhrc.kb_service.store import KnowledgeBase
 from planhrc.kb_service.store.errors import ValidationError
 from planhrc.model import make_object
-from planhrc.paths import default_tbox_path
+from tests.store_backends import Place, kb, place  # noqa: F401 (fixtures)
 from tests.test_kb_scenarios import plan_for
 
 
-def _write(checked_ahead: bool):
-    with KnowledgeBase(None, default_tbox_path()) as kb:
+def _write(place: Place, checked_ahead: bool):
+    with place.open() as kb:
         obj = make_object("obj1", "absolute", 4, 4)
         kb.create_object(obj)
         init = kb.add_state("obj1", "perceived", obj.state([0, 90, 180, 270]))
@@ -20,49 +19,46 @@ def _write(checked_ahead: bool):
         problem = kb.add_problem("obj1", init.id, goal.id)
         checked = kb.check_plan("obj1", actions, states) if checked_ahead else None
         plan = kb.add_plan(problem.id, "inproc", actions, states, checked)
-        kb.settle()  # the plan's triples written (the store's writer does it behind the answer) ...
-        kb._drop_caches()  # ... and read back from the database
+    with place.open() as kb:  # read back from the database (the store wrote the plan out when it closed)
         again = kb.get_plan(plan.id)
         return (plan.expected_state_ids, [kb.get_state(s).atoms for s in again.expected_state_ids],
                 [a.spec for a in again.actions],
-                sorted(t for t in kb.ntriples().decode().splitlines() if "createdAt" not in t))  # times differ
+                sorted(t for t in kb.export_lines("all") if "createdAt" not in t))  # times differ
 
 
-def test_a_plan_checked_ahead_is_stored_as_one_checked_in_the_write():
-    assert _write(True) == _write(False)
+def test_a_plan_checked_ahead_is_stored_as_one_checked_in_the_write(place, tmp_path):
+    assert _write(place, False) == _write(place.another(tmp_path / "ahead"), True)
 
 
-def test_check_plan_refuses_bad_input_and_a_mismatched_check_is_redone():
-    with KnowledgeBase(None, default_tbox_path()) as kb:
-        a, b = make_object("obj1", "absolute", 3, 4), make_object("obj2", "absolute", 3, 4)
-        kb.create_object(a)
-        kb.create_object(b)
-        init = kb.add_state("obj1", "perceived", a.state([0, 90, 180]))
-        actions, states = plan_for(a, init.atoms, [(1, True)])
-        with pytest.raises(ValidationError, match="expected_states"):
-            kb.check_plan("obj1", actions, states[:1])
-        with pytest.raises(ValidationError, match="object_id"):
-            kb.check_plan("obj9", actions, states)
-        before = kb.triple_count()
-        with pytest.raises(ValidationError, match="obj1"):
-            kb.check_plan("obj2", actions, states)  # atoms of another object
-        assert kb.triple_count() == before  # checking writes nothing
-        goal = kb.add_state("obj1", "goal", states[-1])
-        problem = kb.add_problem("obj1", init.id, goal.id)
-        other = kb.check_plan("obj1", actions, list(states))  # not the objects add_plan is given: checked again
-        plan = kb.add_plan(problem.id, "inproc", actions, states, other)
-        assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == list(states)
+def test_check_plan_refuses_bad_input_and_a_mismatched_check_is_redone(kb):
+    a, b = make_object("obj1", "absolute", 3, 4), make_object("obj2", "absolute", 3, 4)
+    kb.create_object(a)
+    kb.create_object(b)
+    init = kb.add_state("obj1", "perceived", a.state([0, 90, 180]))
+    actions, states = plan_for(a, init.atoms, [(1, True)])
+    with pytest.raises(ValidationError, match="expected_states"):
+        kb.check_plan("obj1", actions, states[:1])
+    with pytest.raises(ValidationError, match="object_id"):
+        kb.check_plan("obj9", actions, states)
+    before = kb.triple_count()
+    with pytest.raises(ValidationError, match="obj1"):
+        kb.check_plan("obj2", actions, states)  # atoms of another object
+    assert kb.triple_count() == before  # checking writes nothing
+    goal = kb.add_state("obj1", "goal", states[-1])
+    problem = kb.add_problem("obj1", init.id, goal.id)
+    other = kb.check_plan("obj1", actions, list(states))  # not the objects add_plan is given: checked again
+    plan = kb.add_plan(problem.id, "inproc", actions, states, other)
+    assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == list(states)
 
 
-def test_a_plan_check_past_its_deadline_stops_with_a_deadline_error():
+def test_a_plan_check_past_its_deadline_stops_with_a_deadline_error(kb):
     import time
 
     from planhrc.kb_service.store.errors import DeadlineError
-    with KnowledgeBase(None, default_tbox_path()) as kb:
-        obj = make_object("obj1", "absolute", 4, 4)
-        kb.create_object(obj)
-        init = obj.state([0, 90, 180, 270])
-        actions, states = plan_for(obj, init, [(1, True), (3, False)])
-        with pytest.raises(DeadlineError, match="expected state 1 of 3"):
-            kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() - 1.0)
-        assert kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() + 60.0).expected_states == tuple(states)
+    obj = make_object("obj1", "absolute", 4, 4)
+    kb.create_object(obj)
+    init = obj.state([0, 90, 180, 270])
+    actions, states = plan_for(obj, init, [(1, True), (3, False)])
+    with pytest.raises(DeadlineError, match="expected state 1 of 3"):
+        kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() - 1.0)
+    assert kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() + 60.0).expected_states == tuple(states)

@@ -1,8 +1,8 @@
 """A plan is stored as one journal row in the transaction that adopts it and written out as triples by the store's
-writer thread soon after (`kb_service/store/journal.py`): answered at once, never lost, the same triples in the end."""
+writer thread soon after (`kb_service/store/journal.py`, `backlog.py`): answered at once, never lost, the same
+triples in the end."""
 from __future__ import annotations
 
-import sqlite3
 import subprocess
 import sys
 import textwrap
@@ -11,23 +11,20 @@ import time
 
 import pytest
 
-from planhrc.kb_service.store import ABOX_IRI, KnowledgeBase
-from planhrc.kb_service.store.errors import NotFoundError
+from planhrc.kb_service.store import ABOX_IRI, KnowledgeBase, KnowledgeStore
+from planhrc.kb_service.store.abox import Abox
+from planhrc.kb_service.store.errors import DamagedStoreError, NotFoundError
 from planhrc.kb_service.store import journal
 from planhrc.kb_service.store.journal import JournalEntry, decode, encode
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
+from tests.store_backends import journal_rows, place  # noqa: F401 (fixtures)
 from tests.test_kb_scenarios import plan_for
 
 TBOX = default_tbox_path()
 
 
-def _journal_rows(path: str) -> int:
-    with sqlite3.connect(path) as conn:
-        return conn.execute("SELECT COUNT(*) FROM planhrc_plan_journal").fetchone()[0]
-
-
-def _object_with_problem(kb: KnowledgeBase, formulation: str = "absolute"):
+def _object_with_problem(kb: KnowledgeStore, formulation: str = "absolute"):
     obj = make_object("obj1", formulation, 4, 8)
     kb.create_object(obj)
     start = kb.add_state("obj1", "perceived", obj.state([0] * (4 if formulation == "absolute" else 3)))
@@ -44,36 +41,35 @@ def test_a_row_holds_every_part_of_the_plan():
     assert decode(encode(entry)) == entry
 
 
-def test_a_plan_is_answered_at_once_and_its_triples_follow(tmp_path, monkeypatch):
-    path = str(tmp_path / "kb.sqlite3")
+def test_a_plan_is_answered_at_once_and_its_triples_follow(place, monkeypatch):
     monkeypatch.setattr(journal, "WRITE_DELAY_S", 1.0)  # the checks right after the commit come first, under any load
-    with KnowledgeBase(path, TBOX) as kb:
+    with place.open() as kb:
         _, problem, actions, states = _object_with_problem(kb)
         before = kb.triple_count()
         plan = kb.add_plan(problem.id, "inproc", actions, states)
         assert kb.get_plan(plan.id) == plan
         assert kb.get_state(plan.expected_state_ids[-1]).atoms == frozenset(states[-1])
         assert kb.get_action(plan.actions[0].id) == plan.actions[0]
-        assert _journal_rows(path) == 1 and kb.triple_count() == before  # answered from the journal
+        assert place.journal_rows() == kb.plans_to_write() == 1  # answered from the journal ...
+        assert kb.triple_count() == before
         deadline = time.monotonic() + 10
-        while _journal_rows(path) and time.monotonic() < deadline:  # the writer thread, not a reader, writes it
+        while place.journal_rows() and time.monotonic() < deadline:  # ... written by the writer thread, not a reader
             time.sleep(0.02)
-        assert _journal_rows(path) == 0
+        assert place.journal_rows() == kb.plans_to_write() == 0
         assert kb.triple_count() > before + 100
-    with KnowledgeBase(path, TBOX) as again:  # read back from the triples alone
+    with place.open() as again:  # read back from the triples alone
         assert again.get_plan(plan.id) == plan
 
 
-def test_a_process_killed_before_the_write_out_keeps_its_plan(tmp_path):
-    path = str(tmp_path / "kb.sqlite3")
+def test_a_process_killed_before_the_write_out_keeps_its_plan(place):
     child = textwrap.dedent(f"""
         import os, sys
         from planhrc.kb_service.store import journal
         journal.WRITE_DELAY_S = 600.0  # the writer never gets to it: the process dies first
-        from planhrc.kb_service.store import KnowledgeBase
+        from planhrc.kb_service.store import open_store
         from planhrc.paths import default_tbox_path
         from tests.test_kb_journal import _object_with_problem
-        kb = KnowledgeBase({path!r}, default_tbox_path())
+        kb = open_store({place.db!r}, default_tbox_path())
         _, problem, actions, states = _object_with_problem(kb)
         plan = kb.add_plan(problem.id, "inproc", actions, states)
         print(plan.id, flush=True)
@@ -82,11 +78,11 @@ def test_a_process_killed_before_the_write_out_keeps_its_plan(tmp_path):
     done = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     plan_id = done.stdout.split()[-1]
-    assert _journal_rows(path) == 1
-    with KnowledgeBase(path, TBOX) as kb:  # opening writes the row out before anything is served
-        assert _journal_rows(path) == 0
+    assert place.journal_rows() == 1
+    with place.open() as kb:  # opening writes the row out before anything is served
+        assert place.journal_rows() == kb.plans_to_write() == 0
         plan = kb.get_plan(plan_id)
-    with KnowledgeBase(path, TBOX) as again:
+    with place.open() as again:
         assert again.get_plan(plan_id) == plan
         assert len(plan.actions) == 3
         text = again.export("nt").decode()
@@ -94,26 +90,27 @@ def test_a_process_killed_before_the_write_out_keeps_its_plan(tmp_path):
 
 
 def test_a_failed_write_out_keeps_the_row_and_the_plan(tmp_path, monkeypatch):
+    """The SQLite backend's writer fails to write a plan's triples (the disk full): the row stays, the plan is
+    still answered, and the next write-out writes it."""
     path = str(tmp_path / "kb.sqlite3")
     with KnowledgeBase(path, TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb, "relative")
-        original = KnowledgeBase._flush
-        monkeypatch.setattr(KnowledgeBase, "_flush", lambda self, batch: (_ for _ in ()).throw(OSError("disk full")))
+        original = Abox.flush
+        monkeypatch.setattr(Abox, "flush", lambda self, batch: (_ for _ in ()).throw(OSError("disk full")))
         with kb.transaction():  # inside a transaction the writer waits: nothing is written before the patch
             plan = kb.add_plan(problem.id, "inproc", actions, states)
         with pytest.raises(OSError):
             kb.settle()
-        assert _journal_rows(path) == 1
+        assert journal_rows("sqlite", path) == 1
         assert kb.get_plan(plan.id) == plan  # still answered
-        monkeypatch.setattr(KnowledgeBase, "_flush", original)
+        monkeypatch.setattr(Abox, "flush", original)
         kb.settle()
-        assert _journal_rows(path) == 0
+        assert journal_rows("sqlite", path) == 0
         assert kb.get_plan(plan.id) == plan
 
 
-def test_a_rolled_back_plan_leaves_nothing(tmp_path):
-    path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+def test_a_rolled_back_plan_leaves_nothing(place):
+    with place.open() as kb:
         _, problem, actions, states = _object_with_problem(kb)
         with pytest.raises(RuntimeError):
             with kb.transaction():
@@ -123,15 +120,16 @@ def test_a_rolled_back_plan_leaves_nothing(tmp_path):
             kb.get_plan(plan.id)
         with pytest.raises(NotFoundError):
             kb.get_state(plan.expected_state_ids[0])
-        assert _journal_rows(path) == 0
+        assert place.journal_rows() == kb.plans_to_write() == 0
         assert kb.add_plan(problem.id, "inproc", actions, states).id == plan.id  # no id was used up
 
 
-def test_readers_of_the_triples_see_a_plan_just_adopted():
-    with KnowledgeBase(None, TBOX) as kb:
-        _, problem, actions, states = _object_with_problem(kb)
-        plan = kb.add_plan(problem.id, "inproc", actions, states)
-        assert f"<{ABOX_IRI}{plan.actions[0].id}>" in kb.export("nt").decode()
+def test_readers_of_the_triples_see_a_plan_just_adopted(place):
+    for make in (place.open, lambda: KnowledgeBase(None, TBOX)):  # every backend, and the SQLite store in memory
+        with make() as kb:
+            _, problem, actions, states = _object_with_problem(kb)
+            plan = kb.add_plan(problem.id, "inproc", actions, states)
+            assert f"<{ABOX_IRI}{plan.actions[0].id}>" in kb.export("nt").decode()
 
 
 def test_a_row_holds_the_expected_states_as_changes_and_rows_of_the_layout_before_are_read():
@@ -148,8 +146,10 @@ def test_a_row_holds_the_expected_states_as_changes_and_rows_of_the_layout_befor
     whole = pickle.dumps((journal.WHOLE_STATES, *pickle.loads(row)[1:8], tuple(states)), protocol=5)
     assert decode(whole) == entry
     assert len(row) < len(whole) / 2, (len(row), len(whole))
-    with pytest.raises(ValueError, match="unknown layout"):
+    with pytest.raises(DamagedStoreError, match="unknown layout"):
         decode(pickle.dumps((99, "x")))
+    with pytest.raises(DamagedStoreError, match="does not read back"):
+        decode(row[: len(row) // 2])
 
 
 def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(monkeypatch):
@@ -176,3 +176,22 @@ def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(m
     finally:
         writer.close()
     assert behind >= 15, f"the waiting thread got the store only with {behind} of 20 plans left"
+
+
+def test_a_damaged_journal_row_refuses_the_store_and_leaves_no_thread_behind(tmp_path):
+    """A row this version cannot read (damaged, or written by a newer layout) stops the SQLite store from opening
+    with a DamagedStoreError, before it serves anything, and the threads it had started are stopped."""
+    import sqlite3
+
+    path = str(tmp_path / "kb.sqlite3")
+    with KnowledgeBase(path, TBOX) as kb:
+        _object_with_problem(kb)
+    with sqlite3.connect(path) as conn:
+        conn.execute("INSERT INTO planhrc_plan_journal VALUES ('obj1_plan_1', ?)", (b"\x80\x05not a pickle",))
+    before = {t.name for t in threading.enumerate()}
+    with pytest.raises(DamagedStoreError, match="^plan journal: a row that does not read back"):
+        KnowledgeBase(path, TBOX)
+    deadline = time.monotonic() + 10
+    while {t.name for t in threading.enumerate()} - before and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert {t.name for t in threading.enumerate()} - before == set()

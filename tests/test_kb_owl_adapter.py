@@ -87,14 +87,14 @@ def test_a_new_store_file_gets_small_pages_and_an_old_one_keeps_its_own(tmp_path
     from planhrc.paths import default_tbox_path
 
     with KnowledgeBase(str(tmp_path / "new.sqlite3"), default_tbox_path()) as kb:
-        assert kb._q.page_size() == owl.PAGE_SIZE == 4096
+        assert kb._abox.q.page_size() == owl.PAGE_SIZE == 4096
         kb.create_object(_object(kb))
     old = tmp_path / "old.sqlite3"
     world = owl.World(filename=str(old), exclusive=False)
     world.save()
     world.close()
     with KnowledgeBase(str(old), default_tbox_path()) as kb:
-        assert kb._q.page_size() == 32768
+        assert kb._abox.q.page_size() == 32768
         kb.create_object(_object(kb))
         assert [o.ident for o in kb.list_objects()] == ["obj1"]
 
@@ -130,15 +130,16 @@ def test_a_replanning_perception_writes_little_to_the_log_however_long_the_histo
 
         perceive(20)
         kb.settle()  # the plans' triples too (the store's writer thread writes them behind each answer)
-        db = kb._q.db
-        kb._q._checkpointer.close()  # its copies would race the count (a refused TRUNCATE leaves old frames)
-        kb._q._checkpointer = None
+        quads = kb._abox.q
+        db = quads.db
+        quads._checkpointer.close()  # its copies would race the count (a refused TRUNCATE leaves old frames)
+        quads._checkpointer = None
         assert db.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchall()[0][0] == 0
         db.execute("PRAGMA wal_autocheckpoint = 0")  # the log keeps every page written from here on
         perceive(10)
         kb.settle()
         frames = db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()[0][1]
-        per_perception = frames * kb._q.page_size() / 10
+        per_perception = frames * quads.page_size() / 10
     assert per_perception < 800_000, per_perception
 
 

@@ -1,4 +1,5 @@
-"""The persistent knowledge base: round trips, restart, refused writes, export, TBox file."""
+"""The persistent knowledge base: round trips, restart, refused writes, export, TBox file, on every backend
+(`tests/store_backends.py`)."""
 from __future__ import annotations
 
 import importlib.util
@@ -9,23 +10,18 @@ import pytest
 import rdflib
 from rdflib.compare import isomorphic
 
-from planhrc.kb_service.store.errors import ConflictError, NotFoundError, ValidationError
-from planhrc.kb_service.store.journal import PlanJournal
+from planhrc.kb_service.store.errors import ConflictError, KBError, NotFoundError, ValidationError
+from planhrc.kb_service.store.journal import JournalTable
 from planhrc.kb_service.store.records import ActionSpec, Execution
-from planhrc.kb_service.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase
+from planhrc.kb_service.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase, KnowledgeStore
 from planhrc.model import make_object, snap_angle
 from planhrc.paths import default_tbox_path
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
+from tests.store_backends import kb, place  # noqa: F401 (fixtures)
 from tests.test_kb_scenarios import plan_for
 
 TBOX = default_tbox_path()
-
-
-@pytest.fixture
-def kb():
-    with KnowledgeBase(None, TBOX) as k:
-        yield k
 
 
 def _abs():
@@ -36,7 +32,7 @@ def _rel():
     return make_object("obj2", "relative", 4, 8)
 
 
-def _fill(kb: KnowledgeBase) -> dict:
+def _fill(kb: KnowledgeStore) -> dict:
     """Write one of everything; return what was written."""
     a, r = _abs(), _rel()
     kb.create_object(a)
@@ -60,7 +56,7 @@ def _fill(kb: KnowledgeBase) -> dict:
                 execution=execution, rel_plan=rel_plan)
 
 
-def _snapshot(kb: KnowledgeBase, w: dict) -> dict:
+def _snapshot(kb: KnowledgeStore, w: dict) -> dict:
     plan = kb.get_plan(w["plan"].id)
     kb.settle()  # a plan's triples follow its journal row (kb_service/store/journal.py): count them written
     return dict(
@@ -120,13 +116,12 @@ def test_everything_written_is_read_back(kb):
     assert any(a.spec.cond_eff for a in w["plan"].actions)
 
 
-def test_restart_gives_back_everything(tmp_path):
-    path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+def test_restart_gives_back_everything(place):
+    with place.open() as kb:
         w = _fill(kb)
         before = _snapshot(kb, w)
         issued = kb.new_object_id()
-    with KnowledgeBase(path, TBOX) as kb2:
+    with place.open() as kb2:
         after = _snapshot(kb2, w)
         assert after == before
         assert after["plan"].actions == w["plan"].actions
@@ -236,39 +231,72 @@ def _bad_writes(w):
     }
 
 
-def test_every_bad_write_is_refused_without_a_trace(tmp_path):
-    with KnowledgeBase(str(tmp_path / "kb.sqlite3"), TBOX) as kb:
-        w = _fill(kb)
-        before = _snapshot(kb, w)
-        for label, (write, field) in _bad_writes(w).items():
-            with pytest.raises(ValidationError) as info:
-                write(kb)
-            assert str(info.value).startswith(field), (label, str(info.value))
-            assert _snapshot(kb, w) == before, label
-        next_state = kb.add_state("obj1", "goal", frozenset({("hasorientation", "deg_0", "obj1_j1")}))
-        assert next_state.id == f"obj1_state_{2 + len(before['expected']) + 1}"  # no id was used up
+def test_every_bad_write_is_refused_without_a_trace(kb):
+    w = _fill(kb)
+    before = _snapshot(kb, w)
+    for label, (write, field) in _bad_writes(w).items():
+        with pytest.raises(ValidationError) as info:
+            write(kb)
+        assert str(info.value).startswith(field), (label, str(info.value))
+        assert _snapshot(kb, w) == before, label
+    next_state = kb.add_state("obj1", "goal", frozenset({("hasorientation", "deg_0", "obj1_j1")}))
+    assert next_state.id == f"obj1_state_{2 + len(before['expected']) + 1}"  # no id was used up
 
 
-def test_failure_inside_a_write_rolls_everything_back(kb, monkeypatch):
+def test_a_write_refused_inside_a_transaction_takes_the_transaction_with_it(kb):
     w = _fill(kb)
     before = _snapshot(kb, w)
     a = w["objects"][0]
     actions, states = plan_for(a, w["states"][0].atoms, [(1, True), (2, True)])
-    original = PlanJournal.append
-
-    def append_then_fail(self, entry):
-        original(self, entry)  # the plan's journal row and ids are in the open transaction ...
-        raise OSError("disk full")  # ... when the write fails
-
-    monkeypatch.setattr(PlanJournal, "append", append_then_fail)
-    with pytest.raises(OSError):
-        kb.add_plan(w["problem"].id, "p", actions, states)
-    monkeypatch.undo()
-    with pytest.raises(NotFoundError):
-        kb.get_plan("obj1_plan_2")  # not answered from memory either
+    with pytest.raises(ValidationError, match="^execution.next_step"):
+        with kb.transaction():  # what a re-planning perception writes, the last write refused
+            perceived = kb.add_state("obj1", "perceived", states[0])
+            problem = kb.add_problem("obj1", perceived.id, w["states"][1].id)
+            plan = kb.add_plan(problem.id, "p", actions, states)
+            kb.add_event("obj1", "replan", "", {"plan_id": plan.id})
+            kb.set_execution("obj1", Execution(plan.id, 9, "ready"))
+    for read, ident in ((kb.get_state, perceived.id), (kb.get_problem, problem.id), (kb.get_plan, plan.id),
+                        (kb.get_action, plan.actions[0].id), (kb.get_state, plan.expected_state_ids[0])):
+        with pytest.raises(NotFoundError):
+            read(ident)
+    assert kb.plans_to_write() == 0
     assert _snapshot(kb, w) == before
-    plan = kb.add_plan(w["problem"].id, "p", actions, states)
-    assert plan.id == "obj1_plan_2"
+    assert kb.add_plan(w["problem"].id, "p", actions, states).id == plan.id  # no id was used up
+
+
+def test_failure_inside_a_write_rolls_everything_back():
+    """A write that fails half-way in the SQLite backend (its journal row written, then the disk full)."""
+    with KnowledgeBase(None, TBOX) as kb:
+        w = _fill(kb)
+        before = _snapshot(kb, w)
+        a = w["objects"][0]
+        actions, states = plan_for(a, w["states"][0].atoms, [(1, True), (2, True)])
+        original = JournalTable.append
+
+        def append_then_fail(self, entry):
+            original(self, entry)  # the plan's journal row and ids are in the open transaction ...
+            raise OSError("disk full")  # ... when the write fails
+
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(JournalTable, "append", append_then_fail)
+            with pytest.raises(OSError):
+                kb.add_plan(w["problem"].id, "p", actions, states)
+        with pytest.raises(NotFoundError):
+            kb.get_plan("obj1_plan_2")  # not answered from memory either
+        assert _snapshot(kb, w) == before
+        plan = kb.add_plan(w["problem"].id, "p", actions, states)
+        assert plan.id == "obj1_plan_2"
+
+
+def test_a_file_that_is_no_store_is_refused_in_one_line(tmp_path):
+    (tmp_path / "notes.txt").write_text("shopping list\n" * 100)
+    for path, cause in ((tmp_path / "notes.txt", "file is not a database"),
+                        (tmp_path / "no" / "such" / "kb.sqlite3", f"no folder {tmp_path / 'no' / 'such'}"),
+                        (tmp_path, "it is a folder")):
+        with pytest.raises(KBError) as info:
+            KnowledgeBase(str(path), TBOX)
+        assert str(info.value) == f"db: {path} cannot be opened as a store ({cause})"
+    assert (tmp_path / "notes.txt").read_text().startswith("shopping list")  # left as it was
 
 
 # -- export and TBox ------------------------------------------------------------------------------------

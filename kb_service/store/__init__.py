@@ -1,24 +1,36 @@
-"""The knowledge base of the service, split by responsibility:
+"""The knowledge base of the service: an interface (`interface.KnowledgeStore`) and its SQLite backend, split by
+responsibility.
 
 | module | owns |
 |---|---|
-| `owl` | every use of owlready2's internals (its SQLite tables, storids, literal encoding, reasoner settings) |
-| `abox` | the ABox: objects, states, problems, plans and their actions, over the TBox |
-| `events` | the event log of each object |
-| `execution` | the execution cursor of each object |
-| `responses` | idempotent responses |
-| `export` | RDF export (RDF/XML, Turtle) |
-| `knowledge_base` | `KnowledgeBase`: the parts above in one database, with `transaction()` |
+| `interface` | the protocols the service uses and every backend implements (writes, reads, plan checks, the plan journal, export, retention) |
 | `records`, `errors` | the immutable records the store hands out and its typed errors (root `KBError`) |
+| `names` | the IRIs of the TBox and the ABox, and how each record and ground predicate is named |
+| `checks` | the input checks of every write (pure: they read only the object), `check_plan` -> `CheckedPlan` |
+| `cache` | the one cached get of records (cache -> held in memory -> load -> `NotFoundError`) |
+| `backends` | the backends by name; `open_store(db, tbox)` opens the one a location names |
+| `knowledge_base` | `SqliteStore` (alias `KnowledgeBase`): the SQLite backend, the parts below in one database |
+| `abox` | the SQLite ABox's unit of work: the owlready2 world, names of individuals, counters, `transaction()` |
+| `reads`, `writes`, `triples` | records read back from triples, the writes, and what each record is as triples |
+| `journal`, `backlog` | a new plan's journal row, and the plans written out as triples by a thread behind the answer |
+| `events`, `execution`, `responses` | the event log, the execution cursor, idempotent responses (side tables) |
+| `retention`, `export` | compaction of each object's history; RDF export (N-Triples, RDF/XML, Turtle) |
+| `owl` | every use of owlready2's internals (its SQLite tables, storids, literal encoding, reasoner settings) |
 """
-from .abox import ABOX_IRI, PREDICATES, TBOX_IRI, atom_fragment
-from .errors import ConflictError, DeadlineError, KBError, NotFoundError, ReasonerError, ValidationError
-from .knowledge_base import KnowledgeBase
-from .records import (STATE_KINDS, ActionSpec, CondEffect, Execution, StoredAction, StoredEvent, StoredPlan,
-                      StoredProblem, StoredState)
+from .backends import BACKENDS, open_store
+from .errors import (ConflictError, DamagedStoreError, DeadlineError, KBError, NotFoundError, ReasonerError,
+                     ValidationError)
+from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, Export, KnowledgeStore, PlanChecks, PlanJournal, Reads,
+                        Retention, Writes)
+from .knowledge_base import KnowledgeBase, SqliteStore
+from .names import ABOX_IRI, PREDICATES, TBOX_IRI, atom_fragment
+from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffect, Execution, StoredAction,
+                      StoredEvent, StoredPlan, StoredProblem, StoredState)
 
 __all__ = [
-    "ABOX_IRI", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec", "CondEffect", "ConflictError", "DeadlineError", "Execution",
-    "KBError", "KnowledgeBase", "NotFoundError", "ReasonerError", "StoredAction", "StoredEvent", "StoredPlan",
-    "StoredProblem", "StoredState", "ValidationError", "atom_fragment",
+    "ABOX_IRI", "BACKENDS", "MAX_EVENTS_PAGE", "MAX_SEQ", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec",
+    "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "Execution",
+    "Export", "KBError", "KnowledgeBase", "KnowledgeStore", "NotFoundError", "PlanChecks", "PlanJournal", "Reads",
+    "ReasonerError", "Retention", "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem",
+    "StoredState", "ValidationError", "Writes", "atom_fragment", "open_store",
 ]

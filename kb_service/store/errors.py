@@ -27,3 +27,8 @@ class ReasonerError(KBError):
 class DeadlineError(KBError, DeadlineExceeded):
     """The request's planning (with VAL) did not finish within its deadline; nothing was stored. The one
     `DeadlineExceeded` of planhrc, as the service raises it (a `KBError` too, for the service's handlers)."""
+
+
+class DamagedStoreError(KBError):
+    """What the store reads back is not what it writes (a record without a required fact, a journal row of an
+    unknown layout): the database was changed by something else, or by a newer version."""

@@ -16,10 +16,9 @@ import sqlite3
 from typing import Any, Iterator, Sequence
 
 from .errors import ValidationError
+from .interface import FORMATS
 from .owl import ntriple_lines, other_contexts, reachable, storids_of, subjects_to
 
-FORMATS = ("xml", "turtle", "nt")
-HISTORY = ("current", "all")
 _CHUNK = 500
 
 

@@ -1,14 +1,13 @@
 """The plan journal: a new plan is stored first as one row, in the transaction that adopts it, and written out as
 ABox triples (its actions, expected states and their links, thousands of triples for a 20-link plan) by a thread
-of the store's own soon after.
+of the store's own soon after (`backlog`).
 
-Why: the triples of a 48-step 20 x 12 plan cost a re-planning perception 10 ms (relative) to 57 ms (absolute) of
-SQLite index inserts before its answer, while the robot needs only the plan's first action and the guarantee that
-the plan is stored. The row is that guarantee: it commits with the perception, the problem and the execution
-(all or nothing), and a store opened after a crash writes out every row it finds before it serves anything.
-Until its triples are written, the store answers for the plan from memory (`Abox.get_plan` and friends), and
-every reader of the triples themselves (export, reasoners, retention, the file's rewrite) waits for the writer
-first (`Abox.settle`).
+Why: those triples are SQLite index inserts that the answer to a re-planning perception would otherwise wait
+for, while the robot needs only the plan's first action and the guarantee that the plan is stored (the README's
+re-planning section has the figures). The row is that guarantee: it commits with the perception, the problem and
+the execution (all or nothing), and a store opened after a crash writes out every row it finds before it serves
+anything. Until its triples are written, the store answers for the plan from memory, and every reader of the
+triples themselves (export, reasoners, retention, the file's rewrite) waits for the writer first (`settle`).
 
 A row holds only Python builtins (tuples, strings, numbers, frozensets), pickled: no class of this package is
 named in it, so a newer version reads an older row; only this store writes and reads the table.
@@ -23,6 +22,8 @@ from typing import Any, Callable
 
 from planhrc.model import Atom
 
+from .errors import DamagedStoreError
+from .names import record_name
 from .owl import QuadStore
 from .records import ActionSpec, CondEffect
 
@@ -37,14 +38,14 @@ WHOLE_STATES = 1  # the layout before: every expected state whole (still read, f
 # and a robot's next perception follows its action seconds later.
 WRITE_DELAY_S = 0.05
 # Between two plans the writer pauses this long, so that a request waiting for the store's lock gets it: a lock
-# released and taken again at once by the same thread is not handed to the thread waiting for it, and a request
-# arriving behind ten unwritten plans waited for all of them (30-45 ms, one re-plan in ten, back to back).
+# released and taken again at once by the same thread is not handed to the thread waiting for it, so without the
+# pause a request arriving behind many unwritten plans would wait for all of them.
 YIELD_S = 0.002
 
 
 @dataclass(frozen=True)
 class JournalEntry:
-    """A stored plan as its journal row holds it (what `Abox.add_plan` was given, with its names)."""
+    """A stored plan as its journal row holds it (what `add_plan` was given, with its names)."""
 
     plan_id: str
     object_id: str
@@ -55,12 +56,15 @@ class JournalEntry:
     actions: tuple[ActionSpec, ...]
     expected_states: tuple[frozenset[Atom], ...]
 
+    def state_id(self, step: int) -> str:
+        """The name of expected state `step` (1-based)."""
+        return record_name(self.object_id, "state", self.first_state + step - 1)
+
 
 def encode(entry: JournalEntry) -> bytes:
     """The row: the actions, and the expected states as the first one and, for each next one, the atoms it drops
-    and adds (an action changes a few atoms of a state: a 66-step relative 20 x 12 plan's row is 7 KB instead of
-    34 KB with every state whole, 58 steps absolute 9 KB instead of 142 KB; the row is written in the re-plan's
-    transaction)."""
+    and adds. An action changes a few atoms of a state, so the row is a fraction of the plan's states written
+    whole, and it is written inside the re-plan's transaction, before the answer."""
     actions = tuple((a.name, tuple(a.params), a.pre, a.eff_neg, a.eff_pos,
                      tuple((c.when, c.eff_neg, c.eff_pos) for c in a.cond_eff)) for a in entry.actions)
     states = entry.expected_states
@@ -72,9 +76,13 @@ def encode(entry: JournalEntry) -> bytes:
 
 
 def decode(payload: bytes) -> JournalEntry:
-    data: Any = pickle.loads(payload)
+    try:
+        data: Any = pickle.loads(payload)
+    except (pickle.UnpicklingError, EOFError, ValueError, TypeError) as exc:
+        raise DamagedStoreError(f"plan journal: a row that does not read back ({exc})") from None
     if not isinstance(data, tuple) or not data or data[0] not in (WHOLE_STATES, FORMAT):
-        raise ValueError(f"plan journal: a row of an unknown layout ({data[0] if isinstance(data, tuple) and data else '?'})")
+        found = data[0] if isinstance(data, tuple) and data else "?"
+        raise DamagedStoreError(f"plan journal: a row of an unknown layout ({found})")
     layout, plan_id, object_id, problem_id, planner, created, first_state, actions, states = data
     specs = tuple(ActionSpec(name=n, params=tuple(p), pre=frozenset(pre), eff_neg=frozenset(neg),
                              eff_pos=frozenset(pos),
@@ -93,11 +101,11 @@ def _replayed(count: int, first: frozenset[Atom], changes: tuple[tuple[frozenset
     for dropped, added in changes:
         states.append((states[-1] - dropped) | added)
     if len(states) != count:
-        raise ValueError(f"plan journal: a row holds {len(states)} expected states, its header says {count}")
+        raise DamagedStoreError(f"plan journal: a row holds {len(states)} expected states, its header says {count}")
     return tuple(states)
 
 
-class PlanJournal:
+class JournalTable:
     """The journal's side table (inside the store's transactions)."""
 
     def __init__(self, quads: QuadStore) -> None:

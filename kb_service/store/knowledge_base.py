@@ -1,173 +1,300 @@
-"""The knowledge base the service owns: the ABox (`abox`) with the event log (`events`), the execution cursor
-(`execution`) and idempotent responses (`responses`) in the same SQLite database, and the RDF export (`export`).
+"""The SQLite backend of the knowledge base (`SqliteStore`, also known as `KnowledgeBase`): the ABox (`abox`,
+`reads`, `writes`, `backlog`) with the event log (`events`), the execution cursor (`execution`) and idempotent
+responses (`responses`) in the same SQLite database, retention (`retention`) and the RDF export (`export`). It
+implements `interface.KnowledgeStore`.
 
-Each part validates its input completely before anything is written; every write is one transaction, and
-`transaction()` makes several writes one (all of them commit, or none does).
+Every public method takes the store's lock (one RLock) and refuses a closed store; the parts it puts together
+are called with that lock held. Each write checks its input completely before anything is written; every write
+is one transaction, and `transaction()` makes several writes one (all of them commit, or none does).
 """
 from __future__ import annotations
 
+import logging
 import os
-from typing import Any, Iterator, Sequence
+import sqlite3
+import threading
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator, Self, Sequence
 
-from .abox import ABOX_IRI, TBOX_IRI, Abox
+from planhrc.model import ArticulatedObject, Atom, Perception
+
+from .abox import Abox
+from .backlog import PlanBacklog
+from .cache import R, RecordCache
+from .checks import check_events_page, check_export, check_keep_perceived, check_plan
 from .errors import KBError, NotFoundError, ValidationError
 from .events import EventLog
 from .execution import ExecutionCursor
-from .export import FORMATS, HISTORY, export_rdf, ntriples
-from .records import Execution, StoredEvent
+from .export import export_rdf, ntriples
+from .interface import MAX_EVENTS_PAGE, MAX_SEQ
+from .names import ABOX_IRI, TBOX_IRI
+from .owl import World
+from .reads import Records
+from .records import (ActionSpec, CheckedPlan, Compaction, Execution, StoredAction, StoredEvent, StoredPlan,
+                      StoredProblem, StoredState)
 from .responses import ResponseMemory
-from .retention import DEFAULT_KEEP_PERCEIVED, Compaction, compact_object
+from .retention import compact_object
+from .writes import Writes
 
-MAX_SEQ = 2**63 - 1  # the largest event seq a caller may name (the largest SQLite INTEGER)
-MAX_EVENTS_PAGE = 1000  # the most events one read of the log returns over HTTP (a page, or one poll of a stream)
+__all__ = ["MAX_EVENTS_PAGE", "MAX_SEQ", "KnowledgeBase", "SqliteStore"]
+
+log = logging.getLogger(__name__)
 
 
-class KnowledgeBase(Abox):
-    """TBox + ABox in one owlready2 World on SQLite, with the service's side tables; thread safe (one RLock)."""
+class SqliteStore:
+    """TBox + ABox in one owlready2 World on SQLite (a file, or memory when `path` is None), with the service's
+    side tables; thread safe."""
 
-    def __init__(self, path: str | None, tbox_path: Any) -> None:
-        super().__init__(path, tbox_path)
+    def __init__(self, path: str | None, tbox_path: Path | str) -> None:
+        abox = self._abox = Abox(path, tbox_path)
+        self._guard = abox.guard
         try:
-            self._events = EventLog(self._q)
-            self._execution = ExecutionCursor(self._q)
-            self._responses = ResponseMemory(self._q)
-            self._q.commit()
+            self._records = Records(abox)
+            self._backlog = PlanBacklog(abox, self._records)
+            abox.listen(self._backlog, self._records)
+            self._writes = Writes(abox, self._records, self._backlog)
+            self._events = EventLog(abox.q)
+            self._execution = ExecutionCursor(abox.q)
+            self._responses = ResponseMemory(abox.q)
+            abox.q.commit()
+            self._backlog.recover()  # before anything is served
         except Exception:
-            self.close()
+            abox.q.abandon()
             raise
+        self._backlog.start()
 
-    # -- events -------------------------------------------------------------------------------------------
-    def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
-        with self._lock:
-            self._check_open()
-            ident = self._info(object_id, "object_id").obj.ident
-            text = self._events.check(kind, reason, data)
-            return self._write(lambda: self._events.append(ident, kind, reason, text))
-
-    def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
-        """The object's events after `after_seq`, oldest first, at most `limit` (None: all)."""
-        if isinstance(after_seq, bool) or not isinstance(after_seq, int) or not 0 <= after_seq <= MAX_SEQ:
-            raise ValidationError(f"after_seq: must be an integer from 0 to {MAX_SEQ}, got {after_seq!r}")
-        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
-            raise ValidationError(f"limit: must be a positive integer, got {limit!r}")
-        with self._lock:
-            self._check_open()
-            return self._events.after(self._info(object_id).obj.ident, after_seq, limit)
-
-    # -- execution ----------------------------------------------------------------------------------------
-    def get_execution(self, object_id: str) -> Execution:
-        with self._lock:
-            self._check_open()
-            return self._execution.read(self._info(object_id).obj.ident)
-
-    def set_execution(self, object_id: str, execution: Execution) -> None:
-        with self._lock:
-            self._check_open()
-            ident = self._info(object_id, "object_id").obj.ident
-            if not isinstance(execution, Execution):
-                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
-            plan = None
-            if execution.plan_id is not None:
+    # -- life cycle -------------------------------------------------------------------------------------------
+    def close(self) -> None:
+        self._backlog.stop()  # before the lock: the writer thread may be waiting for it
+        with self._abox.lock:
+            if not self._abox.closed:
                 try:
-                    plan = self.get_plan(execution.plan_id)
-                except NotFoundError:
-                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
-            self._execution.check(ident, execution, plan)
-            self._write(lambda: self._execution.write(ident, execution))
+                    self._backlog.settle()
+                except Exception:  # the rows stay in the journal; the next open writes them out
+                    log.exception("store: writing out journalled plans at close failed")
+                self._abox.close()
 
-    # -- idempotent responses -----------------------------------------------------------------------------
-    def recall_response(self, object_id: str, key: str) -> dict[str, Any] | None:
-        """The response remembered under an idempotency key, or None (the object need not exist)."""
-        with self._lock:
-            self._check_open()
-            return self._responses.recall(object_id, key)
+    def __enter__(self) -> Self:
+        return self
 
-    def remember_response(self, object_id: str, key: str, response: dict[str, Any]) -> None:
-        """Remember the response to an idempotent request; the first response stored under a key wins."""
-        with self._lock:
-            self._check_open()
-            text = self._responses.check(key, response)
-            self._write(lambda: self._responses.remember(object_id, key, text))
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
-    # -- retention ------------------------------------------------------------------------------------------
-    def compact(self, keep_perceived: int = DEFAULT_KEEP_PERCEIVED) -> Compaction:
-        """Apply the retention policy (`retention`) to every object in one transaction: keep each object's current
-        records and its last `keep_perceived` perceived states, delete the rest of its history."""
-        if isinstance(keep_perceived, bool) or not isinstance(keep_perceived, int) or keep_perceived < 1:
-            raise ValidationError(f"keep_perceived: must be a positive integer, got {keep_perceived!r}")
-        with self._lock:
-            self._check_open()
-            self.settle()  # a plan still in the journal is history like any other
-            objects = [o.ident for o in self.list_objects()]
-            shared = {oid: sorted(self._info(oid).orientation_atom_name.values()) for oid in objects}
+    @contextmanager
+    def transaction(self) -> Iterator[None]:
+        with self._guard, self._abox.transaction():
+            yield
 
-            def fill() -> Compaction:
-                individuals = triples = 0
-                for oid in objects:
-                    i, t = compact_object(self._q.db, ABOX_IRI, self._c, self._t, oid, shared[oid], keep_perceived)
-                    individuals, triples = individuals + i, triples + t
-                self._pending[0] -= triples
-                return Compaction(len(objects), individuals, triples)
+    # -- what only this backend has (the reasoners, `planhrc compact --vacuum`) ---------------------------------
+    @property
+    def lock(self) -> threading.RLock:
+        return self._abox.lock
 
-            result = self._write(fill)
-            self._drop_caches()  # records of deleted individuals must not be served from memory
-            return result
+    @property
+    def tbox_path(self) -> Path:
+        return self._abox.tbox_path
+
+    @property
+    def world(self) -> World:
+        """The owlready2 world (read it under `lock`; reasoners work on copies), with every plan written out."""
+        self._backlog.settle()
+        return self._abox.world
+
+    def ntriples(self) -> bytes:
+        """TBox + ABox as owlready2 serialises the world in N-Triples."""
+        with self._guard:
+            self._backlog.settle()
+            return self._abox.q.ntriples()
 
     def rewrite(self) -> tuple[int, int]:
         """Rewrite the store's file (`QuadStore.rewrite`): the space compaction freed goes back to the file system,
         and a file made with 32 KiB pages gets 4 KiB ones. Only on a store no other process has open. The file's
         size in bytes (log included) before and after."""
-        with self._lock:
-            self._check_open()
-            if not self._path:
+        with self._guard:
+            path = self._abox.path
+            if not path:
                 raise KBError("store: an in-memory store has no file to rewrite")
-            self.settle()
-            before = _file_bytes(self._path)
-            self._q.rewrite()
-            return before, _file_bytes(self._path)
+            self._backlog.settle()
+            before = _file_bytes(path)
+            self._abox.q.rewrite()
+            return before, _file_bytes(path)
 
-    # -- whole-ontology views -----------------------------------------------------------------------------
-    def ntriples(self) -> bytes:
-        """TBox + ABox as N-Triples (what the reasoners and `export` read)."""
-        with self._lock:
-            self._check_open()
-            self.settle()
-            return self._q.ntriples()
+    # -- writes -----------------------------------------------------------------------------------------------
+    def new_object_id(self) -> str:
+        with self._guard:
+            return self._writes.new_object_id()
 
+    def create_object(self, obj: ArticulatedObject) -> None:
+        with self._guard:
+            self._writes.create_object(obj)
+
+    def add_state(self, object_id: str, kind: str, atoms: frozenset[Atom],
+                  link_orientations_deg: Sequence[float] | None = None) -> StoredState:
+        with self._guard:
+            return self._writes.add_state(object_id, kind, atoms, link_orientations_deg)
+
+    def add_perception(self, perception: Perception) -> StoredState:
+        with self._guard:
+            return self._writes.add_perception(perception)
+
+    def add_problem(self, object_id: str, init_state_id: str, goal_state_id: str) -> StoredProblem:
+        with self._guard:
+            return self._writes.add_problem(object_id, init_state_id, goal_state_id)
+
+    def add_plan(self, problem_id: str, planner: str, actions: Sequence[ActionSpec],
+                 expected_states: Sequence[frozenset[Atom]], checked: CheckedPlan | None = None) -> StoredPlan:
+        with self._guard:
+            return self._writes.add_plan(problem_id, planner, actions, expected_states, checked)
+
+    def check_plan(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
+                   deadline_at: float | None = None) -> CheckedPlan:
+        with self._guard:  # only to look the object up: the checks read nothing else
+            info = self._records.info(object_id, "object_id")
+        return check_plan(info, tuple(actions), tuple(expected_states), deadline_at)
+
+    def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
+        with self._guard:
+            ident = self._records.info(object_id, "object_id").obj.ident
+            text = self._events.check(kind, reason, data)
+            return self._abox.write(lambda: self._events.append(ident, kind, reason, text))
+
+    def set_execution(self, object_id: str, execution: Execution) -> None:
+        with self._guard:
+            ident = self._records.info(object_id, "object_id").obj.ident
+            if not isinstance(execution, Execution):
+                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
+            plan = None
+            if execution.plan_id is not None:
+                try:
+                    plan = self._records.plans.get(execution.plan_id)
+                except NotFoundError:
+                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
+            self._execution.check(ident, execution, plan)
+            self._abox.write(lambda: self._execution.write(ident, execution))
+
+    def remember_response(self, object_id: str, key: str, response: dict[str, Any]) -> None:
+        with self._guard:
+            text = self._responses.check(key, response)
+            self._abox.write(lambda: self._responses.remember(object_id, key, text))
+
+    # -- reads ------------------------------------------------------------------------------------------------
+    def get_object(self, object_id: str) -> ArticulatedObject:
+        with self._guard:
+            return self._records.info(object_id).obj
+
+    def list_objects(self) -> tuple[ArticulatedObject, ...]:
+        with self._guard:
+            return tuple(self._records.info(ident).obj for ident in self._records.object_ids())
+
+    def get_state(self, state_id: str) -> StoredState:
+        with self._guard:
+            return self._records.states.get(state_id)
+
+    def get_problem(self, problem_id: str) -> StoredProblem:
+        with self._guard:
+            return self._records.problems.get(problem_id)
+
+    def get_plan(self, plan_id: str) -> StoredPlan:
+        with self._guard:
+            return self._records.plans.get(plan_id)
+
+    def get_action(self, action_id: str) -> StoredAction:
+        with self._guard:
+            return self._records.actions.get(action_id)
+
+    def latest_problem(self, object_id: str) -> StoredProblem | None:
+        return self._latest(self._records.problems, object_id)
+
+    def latest_plan(self, object_id: str) -> StoredPlan | None:
+        return self._latest(self._records.plans, object_id)
+
+    def _latest(self, records: RecordCache[R], object_id: str) -> R | None:
+        with self._guard:
+            ident = self._abox.latest(self._records.info(object_id).obj.ident, records.noun)
+            return records.get(ident) if ident else None
+
+    def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
+        check_events_page(after_seq, limit)
+        with self._guard:
+            return self._events.after(self._records.info(object_id).obj.ident, after_seq, limit)
+
+    def get_execution(self, object_id: str) -> Execution:
+        with self._guard:
+            return self._execution.read(self._records.info(object_id).obj.ident)
+
+    def recall_response(self, object_id: str, key: str) -> dict[str, Any] | None:
+        with self._guard:
+            return self._responses.recall(object_id, key)
+
+    def triple_count(self) -> int:
+        self._abox.check_open()
+        return self._abox.triples
+
+    def object_count(self) -> int:
+        self._abox.check_open()
+        return self._abox.objects
+
+    # -- the plan journal -------------------------------------------------------------------------------------
+    def settle(self) -> None:
+        self._backlog.settle()
+
+    def plans_to_write(self) -> int:
+        self._abox.check_open()
+        return len(self._backlog)
+
+    # -- retention --------------------------------------------------------------------------------------------
+    def compact(self, keep_perceived: int) -> Compaction:
+        keep = check_keep_perceived(keep_perceived)
+        with self._guard:
+            self._backlog.settle()  # a plan still in the journal is history like any other
+            abox = self._abox
+            objects = self._records.object_ids()
+            shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+
+            def fill() -> Compaction:
+                individuals = triples = 0
+                for oid in objects:
+                    i, t = compact_object(abox.q.db, ABOX_IRI, abox.c, abox.t, oid, shared[oid], keep)
+                    individuals, triples = individuals + i, triples + t
+                abox.pending_triples -= triples
+                return Compaction(len(objects), individuals, triples)
+
+            result = abox.write(fill)
+            self._records.clear()  # records of deleted individuals must not be served from memory
+            return result
+
+    # -- export -----------------------------------------------------------------------------------------------
     def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
-        """TBox + ABox as N-Triples lines: the current ABox of `object_ids` (None: of every object) when
-        `history` is 'current', every triple when it is 'all' (see `export`). Unknown objects are a NotFoundError
-        before the first line. A file store is read on a connection of the export's own, without the store's lock."""
-        if history not in HISTORY:
-            raise ValidationError(f"history: must be one of {', '.join(HISTORY)}, got {history!r}")
+        """A file store is read on a connection of the export's own, without the store's lock."""
+        check_export(history, object_ids)
         ids = None
-        if history == "current":
-            ids = [o.ident for o in self.list_objects()] if object_ids is None else list(object_ids)
-            for oid in ids:
-                self.get_object(oid)
-        elif object_ids is not None:
-            raise ValidationError("object: the whole history is exported for every object (history=all)")
-        with self._lock:
-            self._check_open()
-            self.settle()  # the export reads triples: every journalled plan's are written first
-            reader = self._q.reader()
+        with self._guard:
+            if history == "current":
+                ids = self._records.object_ids() if object_ids is None else list(object_ids)
+                for oid in ids:
+                    self._records.info(oid)
+            self._backlog.settle()  # the export reads triples: every journalled plan's are written first
+            abox = self._abox
+            reader = abox.q.reader()
             if reader is None:  # an in-memory store: read on its connection, under its lock, at once
-                return iter(list(ntriples(self._q.db, ABOX_IRI, self._c, self._t["staticFactOf"], ids)))
+                return iter(list(ntriples(abox.q.db, ABOX_IRI, abox.c, abox.t["staticFactOf"], ids)))
         return self._read_lines(reader, ids)
 
-    def _read_lines(self, reader: Any, ids: list[str] | None) -> Iterator[str]:
+    def _read_lines(self, reader: sqlite3.Connection, ids: list[str] | None) -> Iterator[str]:
         try:
-            yield from ntriples(reader, ABOX_IRI, self._c, self._t["staticFactOf"], ids)
+            yield from ntriples(reader, ABOX_IRI, self._abox.c, self._abox.t["staticFactOf"], ids)
         finally:
             reader.close()
 
     def export(self, fmt: str = "xml", history: str = "current", object_ids: Sequence[str] | None = None) -> bytes:
-        """TBox + ABox (see `export_lines`) as RDF/XML (`xml`), Turtle (`turtle`) or N-Triples (`nt`)."""
-        if fmt not in FORMATS:
-            raise ValidationError(f"fmt: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        check_export(history, object_ids, fmt)
         text = "".join(self.export_lines(history, object_ids)).encode("utf-8")
         return export_rdf(text, fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
                                       "owl": "http://www.w3.org/2002/07/owl#"})
+
+
+KnowledgeBase = SqliteStore  # the name every caller used before the store had an interface
 
 
 def _file_bytes(path: str) -> int:

@@ -19,7 +19,7 @@ import threading
 from typing import Any, Iterable, Sequence
 
 import owlready2
-from owlready2 import World
+from owlready2 import World as World  # the world type the store and the reasoners pass around
 from owlready2.base import owl_named_individual, owl_ontology, rdf_type
 
 from .errors import KBError
@@ -39,10 +39,9 @@ TABLES: dict[str, tuple[str, ...]] = {
 PAGE_CACHE_KIB = 16_384  # SQLite page cache of the store's connection
 # The page size of a store this adapter creates. owlready2 makes 32 KiB pages, and a re-planning perception
 # dirties a page at the end of each index group it adds to (one per predicate individual, class and argument its
-# triples point at), and every dirty page goes whole to the WAL and, at a checkpoint, into the file. An 8-link
-# object's re-planning perception wrote 1.3 MB of WAL with 32 KiB pages, 0.5 MB with 4 KiB pages; over 3,000
-# perceptions everything the process wrote grew from 3.9 to 10 MB per perception with 32 KiB pages, and from 1.6
-# to 2.3 MB with 4 KiB pages (README, "the store's pages").
+# triples point at), and every dirty page goes whole to the WAL and, at a checkpoint, into the file: smaller pages
+# write less for the same triples, and what the process writes grows less with the history (README, "The store's
+# pages", has the figures; tests/test_kb_owl_adapter.py bounds one perception's log).
 PAGE_SIZE = 4096
 # The WAL is copied into the file by a thread of its own (`Checkpointer`), not inside a commit. Past this many
 # pages the writer copies its last commits itself so that the log restarts, and a log file longer than
@@ -55,7 +54,8 @@ STORE_COUNTER = "current_resource"  # column of the one-row table `store`: the l
 # owlready2's indexes on subject and on object. Queries that ask for the rows of a few individuals of the ABox
 # name them (`INDEXED BY`): left to itself, SQLite's planner (no statistics) reads such a query through the index
 # on the context `c`, or scans the table once the `IN` list is long, and the ABox's context holds every row of the
-# history (/ontology's current ABox took 0.9 s after 4,000 perceptions, 3.8 s after 10,000; see the README).
+# history, so a read of a few individuals would grow with the history (tests/test_kb_owl_adapter.py checks it
+# does not).
 BY_SUBJECT = {"objs": "index_objs_sp", "datas": "index_datas_sp"}
 BY_OBJECT = {"objs": "index_objs_op", "datas": "index_datas_op"}
 
@@ -119,7 +119,16 @@ class QuadStore:
         new = bool(path) and not (os.path.exists(str(path)) and os.path.getsize(str(path)))
         # Not owlready2's default exclusive locking: readers on connections of their own (`reader`) must be able
         # to read the file while this connection writes.
-        self.world = World(filename=str(path), exclusive=False) if path else World()
+        # owlready2 leaves a half-built graph behind when SQLite cannot open the file at all, whose clean-up then
+        # fails noisily: a path no file can be made at is refused before.
+        if path and os.path.isdir(path):
+            raise KBError(f"db: {path} cannot be opened as a store (it is a folder)")
+        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+            raise KBError(f"db: {path} cannot be opened as a store (no folder {os.path.dirname(path)})")
+        try:
+            self.world = World(filename=str(path), exclusive=False) if path else World()
+        except sqlite3.Error as exc:  # not a database, or not readable: the caller's mistake
+            raise KBError(f"db: {path} cannot be opened as a store ({exc})") from None
         self.db: sqlite3.Connection = self.world.graph.db
         self._checkpointer: Checkpointer | None = None
         if new:
@@ -165,7 +174,7 @@ class QuadStore:
 
     def use_wal(self) -> None:
         """WAL + synchronous=NORMAL: a commit does not wait for fsync (durable across process crashes, the last
-        commits may be lost on power loss); the plain journal costs ~13 ms per write."""
+        commits may be lost on power loss); with the plain rollback journal every write would wait for the disk."""
         self.db.commit()
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
@@ -200,6 +209,13 @@ class QuadStore:
             self._checkpointer.close()
             self._checkpointer = None
         self.world.save()
+        self.world.close()
+
+    def abandon(self) -> None:
+        """Close without committing what the open transaction wrote (a store that failed to open)."""
+        if self._checkpointer is not None:
+            self._checkpointer.close()
+            self._checkpointer = None
         self.world.close()
 
     # -- ontologies --------------------------------------------------------------------------------------------

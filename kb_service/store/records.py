@@ -7,8 +7,8 @@ from typing import Any
 from planhrc.model import ActionSpec, Atom, CondEffect
 from planhrc.vocabulary import ExecutionStatus
 
-__all__ = ["STATE_KINDS", "ActionSpec", "CondEffect", "Execution", "StoredAction", "StoredEvent", "StoredPlan",
-           "StoredProblem", "StoredState"]
+__all__ = ["STATE_KINDS", "ActionSpec", "CheckedPlan", "Compaction", "CondEffect", "Execution", "StoredAction",
+           "StoredEvent", "StoredPlan", "StoredProblem", "StoredState"]
 
 STATE_KINDS = ("perceived", "expected", "goal", "initial")
 
@@ -68,3 +68,22 @@ class Execution:
     next_step: int | None  # 1-based step of the next action to dispatch, None when no plan / done
     status: ExecutionStatus
     dispatched_action_id: str | None = None
+
+
+@dataclass(frozen=True)
+class CheckedPlan:
+    """A plan's actions and expected states, checked against their object (`check_plan`) before its write: the
+    write (`add_plan(..., checked=...)`) given these very tuples does not check them again."""
+
+    object_id: str
+    actions: tuple[ActionSpec, ...]
+    expected_states: tuple[frozenset[Atom], ...]
+
+
+@dataclass(frozen=True)
+class Compaction:
+    """What one compaction dropped."""
+
+    objects: int
+    individuals: int
+    triples: int

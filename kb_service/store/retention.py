@@ -10,21 +10,9 @@ it answers 404).
 from __future__ import annotations
 
 import sqlite3
-from dataclasses import dataclass
 
 from .export import current_roots
 from .owl import delete_individuals, reachable, storids_of, subjects_to
-
-DEFAULT_KEEP_PERCEIVED = 100
-
-
-@dataclass(frozen=True)
-class Compaction:
-    """What one compaction dropped."""
-
-    objects: int
-    individuals: int
-    triples: int
 
 
 def perceived_to_keep(db: sqlite3.Connection, object_id: str, keep: int) -> list[str]:

@@ -1,0 +1,54 @@
+"""The one cached get of the store's records: from the cache, else from the records held in memory until they are
+written (a journalled plan, its actions and expected states), else loaded from the backend, else NotFoundError.
+
+Records are immutable, so a cached one is never stale; the cache is dropped whole (after a rollback, or when it
+grows past its limit) and refills on demand. Nothing here depends on a backend: it is given the loader.
+"""
+from __future__ import annotations
+
+from typing import Callable, Generic, Mapping, Protocol, TypeVar
+
+from .errors import NotFoundError
+
+
+class Record(Protocol):
+    @property
+    def id(self) -> str: ...
+
+
+R = TypeVar("R", bound=Record)
+
+
+class RecordCache(Generic[R]):
+    """Records of one kind by id. `held` is shared by every kind (what it holds is told apart by its class)."""
+
+    def __init__(self, noun: str, kind: type[R], load: Callable[[str], R | None], held: Mapping[str, object]) -> None:
+        self.noun = noun
+        self._kind = kind
+        self._load = load
+        self._held = held
+        self._records: dict[str, R] = {}
+
+    def get(self, ident: str) -> R:
+        """The record `ident`; NotFoundError naming the field `<noun>_id` when there is none."""
+        if not isinstance(ident, str):
+            raise NotFoundError(f"{self.noun}_id: no {self.noun} {ident!r}")
+        record = self._records.get(ident)
+        if record is None:
+            held = self._held.get(ident)
+            if isinstance(held, self._kind):
+                return held
+            record = self._load(ident)
+            if record is None:
+                raise NotFoundError(f"{self.noun}_id: no {self.noun} {ident!r}")
+            self._records[ident] = record
+        return record
+
+    def put(self, record: R) -> None:
+        self._records[record.id] = record
+
+    def clear(self) -> None:
+        self._records.clear()
+
+    def __len__(self) -> int:
+        return len(self._records)

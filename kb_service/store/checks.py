@@ -1,0 +1,246 @@
+"""Input checks of the store's writes: every atom, state, observation and plan is checked against its object
+before anything is written, and a refused input names its field (`ValidationError`).
+
+The checks are pure: they read only an `ObjectInfo` (the object and the lookups they need), never the database,
+so a backend calls them before it opens a transaction, and `check_plan` runs outside the store's lock (the
+service runs it while VAL checks the same plan). Nothing here depends on a backend.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from planhrc.model import (
+    HAS_ORIENTATION,
+    ArticulatedObject,
+    Atom,
+    ModelError,
+    Perception,
+    format_atom,
+    orientation_name,
+    perceive,
+)
+
+from .errors import DeadlineError, ValidationError
+from .interface import FORMATS, HISTORY, MAX_SEQ
+from .names import ACTION_CLASSES, COMPLETE_KINDS, PREDICATES, atom_fragment
+from .records import STATE_KINDS, ActionSpec, CheckedPlan, CondEffect
+
+
+class ObjectInfo:
+    """An object and the lookups the checks need (names -> PDDL type, static facts, its orientation atoms)."""
+
+    __slots__ = ("obj", "joints", "types", "static", "static_fragment", "orientation_atom_name",
+                 "orientation_atoms")
+
+    def __init__(self, obj: ArticulatedObject) -> None:
+        self.obj = obj
+        self.joints = obj.joints
+        self.types: dict[str, str] = {}
+        for name in obj.all_links:
+            self.types[name] = "link"
+        for name in obj.joints:
+            self.types[name] = "joint"
+        for name in obj.orientation_names:
+            self.types[name] = "orientation"
+        self.static = obj.static_atoms()
+        self.static_fragment = {atom: atom_fragment(obj, obj.ident, atom) for atom in self.static}
+        # every well-formed HasOrientation atom of the object, with the name of its individual
+        self.orientation_atom_name: dict[Atom, str] = {
+            (HAS_ORIENTATION, o, j): atom_fragment(obj, obj.ident, (HAS_ORIENTATION, o, j))
+            for j in obj.joints for o in obj.orientation_names
+        }
+        self.orientation_atoms = frozenset(self.orientation_atom_name)
+
+
+def check_kind(kind: Any) -> str:
+    if kind not in STATE_KINDS:
+        raise ValidationError(f"kind: must be one of {', '.join(STATE_KINDS)}, got {kind!r}")
+    return str(kind)
+
+
+def check_atom(info: ObjectInfo, atom: Any, field: str) -> Atom:
+    if not isinstance(atom, tuple) or not atom or not all(isinstance(x, str) for x in atom):
+        raise ValidationError(f"{field}: an atom is a tuple of names, got {atom!r}")
+    spec = PREDICATES.get(atom[0])
+    if spec is None:
+        raise ValidationError(f"{field}: atom {format_atom(atom)}: unknown predicate {atom[0]!r}")
+    _, types, _, _ = spec
+    if len(atom) - 1 != len(types):
+        raise ValidationError(
+            f"{field}: atom {format_atom(atom)}: {atom[0]} takes {len(types)} arguments, got {len(atom) - 1}"
+        )
+    for i, (arg, typ) in enumerate(zip(atom[1:], types), start=1):
+        got = info.types.get(arg)
+        if got is None:
+            raise ValidationError(
+                f"{field}: atom {format_atom(atom)}: argument {i} {arg!r} is no {typ} of object {info.obj.ident!r}"
+            )
+        if got != typ:
+            raise ValidationError(
+                f"{field}: atom {format_atom(atom)}: argument {i} {arg!r} is a {got}, expected a {typ}"
+            )
+    return atom
+
+
+def check_state_atoms(info: ObjectInfo, kind: str, atoms: Any, field: str) -> dict[str, Atom]:
+    """Validate a state's atoms; returns joint -> its hasorientation atom."""
+    if not isinstance(atoms, (set, frozenset)):
+        raise ValidationError(f"{field}: expected a frozenset of atoms, got {type(atoms).__name__}")
+    if not atoms:
+        raise ValidationError(f"{field}: a state needs at least one atom")
+    static = info.static
+    # The common case in a few set operations: every atom is a static fact or a well-formed hasorientation
+    # atom of the object, one per joint (a complete state: every joint). Anything else takes the path below,
+    # which finds the first error in a fixed order.
+    rest_set = frozenset(atoms) - static
+    if rest_set <= info.orientation_atoms:
+        by_joint = {atom[2]: atom for atom in rest_set}
+        if len(by_joint) == len(rest_set) and (kind not in COMPLETE_KINDS or len(by_joint) == len(info.joints)):
+            return by_joint
+    by_joint = {}
+    # Static facts of the object are valid by construction; only the rest needs checking. Sorting the rest
+    # makes the first error reported the same on every run.
+    well_formed = info.orientation_atom_name
+    rest = [atom for atom in atoms if atom not in static]
+    try:
+        rest.sort()
+    except TypeError:
+        rest.sort(key=repr)
+    for atom in rest:
+        if atom not in well_formed:
+            check_atom(info, atom, field)
+        if atom[0] == HAS_ORIENTATION:
+            joint = atom[2]
+            if joint in by_joint:
+                raise ValidationError(
+                    f"{field}: two orientations for joint {joint!r} in one state: "
+                    f"{format_atom(by_joint[joint])} and {format_atom(atom)}"
+                )
+            by_joint[joint] = atom
+        elif atom not in info.static:
+            raise ValidationError(f"{field}: atom {format_atom(atom)} is not a fact of object {info.obj.ident!r}")
+    if kind in COMPLETE_KINDS:
+        missing = [j for j in info.joints if j not in by_joint]
+        if missing:
+            raise ValidationError(
+                f"{field}: a {kind} state is complete but has no orientation for joint(s) {', '.join(missing)}"
+            )
+    return by_joint
+
+
+def check_observation(info: ObjectInfo, kind: str, by_joint: dict[str, Atom], values: Any) -> Perception | None:
+    """The observed link orientations of a state (None: none given), agreeing with its atoms."""
+    if values is None:
+        return None
+    obj = info.obj
+    field = "link_orientations_deg"
+    if kind != "perceived":
+        raise ValidationError(f"{field}: only perceived states carry observed link orientations, not {kind!r}")
+    try:
+        perception = perceive(obj, values, field)
+    except ModelError as exc:
+        raise ValidationError(str(exc)) from None
+    for k, deg in zip(obj.joint_indices, perception.joint_values):
+        atom = by_joint.get(obj.joint(k))
+        if atom is not None and atom[1] != orientation_name(deg):
+            raise ValidationError(
+                f"{field}: the observation gives {orientation_name(deg)} for joint {obj.joint(k)}, "
+                f"but atoms say {format_atom(atom)}"
+            )
+    return perception
+
+
+def check_perception(info: ObjectInfo, perception: Perception) -> None:
+    """A perception was validated and snapped where it entered (`model.perceive`): only its size is checked."""
+    n = info.obj.n_links
+    if len(perception.snapped_deg) != n or len(perception.raw_deg) != n:
+        raise ValidationError(f"perception: expected {n} link orientations")
+
+
+def _check_atoms(info: ObjectInfo, atoms: set[Any] | frozenset[Any], field: str) -> None:
+    """`check_atom` on each atom that is not one of the object's known facts (its static facts and its
+    well-formed hasorientation atoms, valid by construction), in a fixed order (the first error is the same on
+    every run)."""
+    rest = [a for a in atoms if a not in info.static and a not in info.orientation_atom_name]
+    for atom in sorted(rest, key=repr):
+        check_atom(info, atom, field)
+
+
+def check_action(info: ObjectInfo, i: int, spec: Any) -> None:
+    field = f"actions[{i}]"
+    if not isinstance(spec, ActionSpec):
+        raise ValidationError(f"{field}: expected an ActionSpec, got {type(spec).__name__}")
+    if spec.name not in ACTION_CLASSES:
+        raise ValidationError(f"{field}.name: must be one of {', '.join(ACTION_CLASSES)}, got {spec.name!r}")
+    if not isinstance(spec.params, tuple) or not spec.params:
+        raise ValidationError(f"{field}.params: expected a non-empty tuple of names")
+    for k, p in enumerate(spec.params):
+        if not isinstance(p, str) or p not in info.types:
+            raise ValidationError(f"{field}.params[{k}]: {p!r} is no link, joint or orientation of object "
+                                  f"{info.obj.ident!r}")
+    for part in ("pre", "eff_neg", "eff_pos"):
+        atoms = getattr(spec, part)
+        if not isinstance(atoms, (set, frozenset)):
+            raise ValidationError(f"{field}.{part}: expected a frozenset of atoms")
+        _check_atoms(info, atoms, f"{field}.{part}")
+    if not isinstance(spec.cond_eff, tuple):
+        raise ValidationError(f"{field}.cond_eff: expected a tuple of CondEffect")
+    for c, ce in enumerate(spec.cond_eff):
+        if not isinstance(ce, CondEffect):
+            raise ValidationError(f"{field}.cond_eff[{c}]: expected a CondEffect, got {type(ce).__name__}")
+        for part in ("when", "eff_neg", "eff_pos"):
+            atoms = getattr(ce, part)
+            if not isinstance(atoms, (set, frozenset)):
+                raise ValidationError(f"{field}.cond_eff[{c}].{part}: expected a frozenset of atoms")
+            _check_atoms(info, atoms, f"{field}.cond_eff[{c}].{part}")
+
+
+def check_plan(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_states: tuple[frozenset[Atom], ...],
+               deadline_at: float | None = None) -> CheckedPlan:
+    """Every check a plan's write makes on its actions and expected states, stopped with a DeadlineError once
+    `deadline_at` (`time.monotonic()`) has passed: a caller's request deadline bounds the check of a huge plan."""
+    if len(expected_states) != len(actions) + 1:
+        raise ValidationError(
+            f"expected_states: a plan of {len(actions)} actions needs {len(actions) + 1} expected states "
+            f"(s^e_1 .. s^e_N+1), got {len(expected_states)}"
+        )
+    for i, spec in enumerate(actions):
+        check_action(info, i, spec)
+    for i, atoms in enumerate(expected_states):
+        if deadline_at is not None and time.monotonic() > deadline_at:
+            raise DeadlineError(f"planning: the deadline passed while the store checked expected state {i + 1} of "
+                                f"{len(expected_states)}")
+        check_state_atoms(info, "expected", atoms, f"expected_states[{i}]")
+    return CheckedPlan(info.obj.ident, actions, expected_states)
+
+
+def is_checked(checked: CheckedPlan | None, object_id: str, actions: tuple[ActionSpec, ...],
+               expected_states: tuple[frozenset[Atom], ...]) -> bool:
+    """Whether `checked` is the check of exactly these objects (the same tuples, not equal ones: a caller that
+    built new ones may have changed them since)."""
+    return (checked is not None and checked.object_id == object_id and checked.actions is actions
+            and checked.expected_states is expected_states)
+
+
+# -- arguments of reads, exports and compaction -------------------------------------------------------------------
+def check_events_page(after_seq: Any, limit: Any) -> None:
+    if isinstance(after_seq, bool) or not isinstance(after_seq, int) or not 0 <= after_seq <= MAX_SEQ:
+        raise ValidationError(f"after_seq: must be an integer from 0 to {MAX_SEQ}, got {after_seq!r}")
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
+        raise ValidationError(f"limit: must be a positive integer, got {limit!r}")
+
+
+def check_keep_perceived(keep_perceived: Any) -> int:
+    if isinstance(keep_perceived, bool) or not isinstance(keep_perceived, int) or keep_perceived < 1:
+        raise ValidationError(f"keep_perceived: must be a positive integer, got {keep_perceived!r}")
+    return keep_perceived
+
+
+def check_export(history: Any, object_ids: Any, fmt: Any = "nt") -> None:
+    if fmt not in FORMATS:
+        raise ValidationError(f"fmt: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    if history not in HISTORY:
+        raise ValidationError(f"history: must be one of {', '.join(HISTORY)}, got {history!r}")
+    if history == "all" and object_ids is not None:
+        raise ValidationError("object: the whole history is exported for every object (history=all)")

@@ -1,0 +1,62 @@
+"""The store's backends as test fixtures: every test that takes `kb` or `place` runs once per backend of
+`BACKENDS` (today `sqlite`). A backend added to the store gets its throwaway location here, in `location`, and
+the store tests run on it.
+
+Import the fixtures into a test module: `from tests.store_backends import kb, place  # noqa: F401 (fixtures)`.
+"""
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from planhrc.kb_service.store import BACKENDS, KnowledgeStore, open_store
+from planhrc.paths import default_tbox_path
+
+
+def location(backend: str, folder: Path) -> str:
+    """Where a throwaway store of `backend` lives (it may be opened, closed and opened again)."""
+    if backend == "sqlite":
+        return str(folder / "kb.sqlite3")
+    raise AssertionError(f"tests/store_backends.py: no throwaway location for the backend {backend!r}")
+
+
+def journal_rows(backend: str, db: str) -> int:
+    """Plans stored as journal rows whose facts are not written out yet, read from the database itself (not from
+    the process that wrote them)."""
+    if backend == "sqlite":
+        with sqlite3.connect(db) as conn:
+            return int(conn.execute("SELECT COUNT(*) FROM planhrc_plan_journal").fetchone()[0])
+    raise AssertionError(f"tests/store_backends.py: no journal reader for the backend {backend!r}")
+
+
+class Place:
+    """One store's location: open it (again) as the service would."""
+
+    def __init__(self, backend: str, db: str) -> None:
+        self.backend = backend
+        self.db = db
+
+    def open(self) -> KnowledgeStore:
+        return open_store(self.db, default_tbox_path())
+
+    def journal_rows(self) -> int:
+        return journal_rows(self.backend, self.db)
+
+    def another(self, folder: Path) -> Place:
+        """A second throwaway store of the same backend."""
+        folder.mkdir(parents=True, exist_ok=True)
+        return Place(self.backend, location(self.backend, folder))
+
+
+@pytest.fixture(params=sorted(BACKENDS))
+def place(request: pytest.FixtureRequest, tmp_path: Path) -> Place:
+    return Place(request.param, location(request.param, tmp_path))
+
+
+@pytest.fixture
+def kb(place: Place) -> Iterator[KnowledgeStore]:
+    with place.open() as store:
+        yield store
