@@ -1,21 +1,17 @@
 """The API contract is the API behaviour: schemathesis tests every operation of a real `planhrc serve` process
 (token set) from its own `/openapi.json`, with every check, and finds no failure: no 5xx, no answer outside the
 documented schemas and statuses, no schema-violating request accepted, and no schema-valid request refused except
-for the rules no JSON Schema can state (tests/contract_rules.py: they depend on the stored object or the
-service's settings).
+for the rules no JSON Schema can state (tests/contract_rules.py: they depend on the stored object, the service's
+settings, or two query parameters together).
 
 Three runs. The first drives schemathesis's generator from Python with the path parameter `object_id` pinned to a
 stored object with a goal, so generated goals and perceptions reach the cooperation model (and the planner)
 instead of stopping at a 404. The second is the `schemathesis run` command with the generated phases (the
 schema's examples, coverage of boundaries and invalid values, fuzzing); the third its stateful phase, sequences
-that follow the OpenAPI links the service declares (a new object to its goal, perceptions and next action; a
-perception to its plan and state; an action to its feedback). By hand, against a service started with a token:
-
-    schemathesis --config-file CONFIG run URL/openapi.json -H "Authorization: Bearer TOKEN" --phases stateful \\
-        --checks all --exclude-checks positive_data_acceptance
-
-with CONFIG as CLI_CONFIG below. A few examples per operation keep each run short; `PLANHRC_FUZZ_EXAMPLES` asks
-for more.
+that follow the OpenAPI links the service declares (a new object to its goal, perceptions and next action; a goal
+to its problem; a perception to its plan and state; an action to its feedback). Both commands use the
+repository's schemathesis.toml, so the same run by hand from the repository's root finds what they find (see
+that file). A few examples per operation keep each run short; `PLANHRC_FUZZ_EXAMPLES` asks for more.
 """
 from __future__ import annotations
 
@@ -40,14 +36,24 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO / "tests") not in sys.path:
     sys.path.insert(0, str(REPO / "tests"))
 
-from contract_rules import RULES_BEYOND_THE_SCHEMA, positive_data_acceptance_beyond_the_schema  # noqa: E402
-from contract_rules import refused_beyond_the_schema  # noqa: E402
 from test_service_integration import running_server  # noqa: E402
+from tests.contract_rules import RULES_BEYOND_THE_SCHEMA, refused_beyond_the_schema  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
 TOKEN = "contract-token"
 EXAMPLES = int(os.environ.get("PLANHRC_FUZZ_EXAMPLES", "6"))
+CONFIG = REPO / "schemathesis.toml"
+
+
+def positive_data_acceptance_but_the_rules(ctx, response, case) -> bool | None:
+    """schemathesis's `positive_data_acceptance`, which lets through only the refusals no schema can state (what
+    schemathesis.toml and tests/contract_rules.py do together for the `schemathesis run` command)."""
+    if refused_beyond_the_schema(case.operation.label, response.status_code, response.content):
+        return None
+    return checks.positive_data_acceptance(ctx, response, case)
+
+
 CHECKS = [
     checks.not_a_server_error,
     checks.response_schema_conformance,
@@ -55,7 +61,7 @@ CHECKS = [
     checks.content_type_conformance,
     checks.negative_data_rejection,
     checks.ignored_auth,
-    positive_data_acceptance_beyond_the_schema,
+    positive_data_acceptance_but_the_rules,
 ]
 
 
@@ -144,44 +150,19 @@ def test_error_bodies_are_the_documented_schema(service):
         assert set(r.json()) == {"detail"} and r.json()["detail"], (status, r.text)
 
 
-# Every check of `schemathesis run`, with `positive_data_acceptance` (a schema-valid request is accepted) replaced by
-# the same check that lets through the refusals no JSON Schema can state (tests/contract_rules.py, loaded as hooks).
-CLI_CHECKS = ["--checks", "all", "--exclude-checks", "positive_data_acceptance"]
-CLI_CONFIG = """
-hooks = "{hooks}"
-generation.max-examples = {examples}
-
-# Sequences are cheap (most requests are refused early): more of them, so that some reach a plan.
-[phases.stateful]
-max-steps = 10
-generation.max-examples = {stateful_examples}
-
-# The stateful phase follows the links the OpenAPI declares, not links schemathesis guesses from parameter names
-# (a guessed `POST /objects` -> `GET /objects/{{object_id}}/plan` expects a plan from a bare object).
-[phases.stateful.inference]
-algorithms = []
-
-[[operations]]
-include-path = "/objects/{{object_id}}/events/stream"
-parameters = {{ "query.timeout_s" = 0.2 }}  # a live stream must end: ask for a short one
-"""
-
-
-def run_schemathesis(tmp_path: Path, phases: list[str], stateful_examples: int) -> tuple[dict, str]:
-    """`schemathesis run` over a fresh service with a token: its JSON report and the end of its output."""
-    hooks = REPO / "tests" / "contract_rules.py"
-    config = tmp_path / "schemathesis.toml"
-    config.write_text(CLI_CONFIG.format(hooks=hooks, examples=max(1, EXAMPLES // 2),
-                                         stateful_examples=stateful_examples))
+def run_schemathesis(tmp_path: Path, phases: list[str], examples: int) -> tuple[dict, str]:
+    """`schemathesis run --checks all` with the repository's schemathesis.toml over a fresh service with a token:
+    its JSON report and its output."""
     report = tmp_path / "report.json"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}  # the config's hooks module, tests.contract_rules
     with running_server(tmp_path / "kb.sqlite3", token=TOKEN) as client:
         run = subprocess.run(
-            [str(Path(sys.executable).with_name("schemathesis")), "--config-file", str(config),
+            [str(Path(sys.executable).with_name("schemathesis")), "--config-file", str(CONFIG),
              "run", f"{client.base_url}/openapi.json", "--header", f"Authorization: Bearer {TOKEN}",
-             "--phases", ",".join(phases), *CLI_CHECKS,
+             "--phases", ",".join(phases), "--checks", "all", "--max-examples", str(examples),
              "--seed", "7", "--workers", "1", "--request-timeout", "60",
              "--continue-on-failure", "--report", "json", "--report-json-path", str(report)],
-            cwd=tmp_path, capture_output=True, text=True, timeout=600)
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     output = run.stdout[-8000:] + run.stderr[-2000:]
     assert report.exists(), output
     summary = json.loads(report.read_text())
@@ -195,7 +176,7 @@ def run_schemathesis(tmp_path: Path, phases: list[str], stateful_examples: int) 
 def test_the_generated_phases_find_nothing(tmp_path):
     """`schemathesis run` over a fresh service: the schema's examples, coverage of boundaries and invalid values,
     and fuzzing pass every check."""
-    summary, _ = run_schemathesis(tmp_path, ["examples", "coverage", "fuzzing"], stateful_examples=1)
+    summary, _ = run_schemathesis(tmp_path, ["examples", "coverage", "fuzzing"], max(1, EXAMPLES // 2))
     assert summary["operations"]["tested"] == summary["operations"]["total"] >= 15, summary["operations"]
 
 
@@ -204,7 +185,7 @@ def test_the_stateful_phase_finds_nothing(tmp_path):
     """The stateful phase follows the declared OpenAPI links from answer to request (a new object to its goal,
     perceptions and next action; a perception to its plan and state; an action to its feedback) and every
     check passes on every step."""
-    summary, stdout = run_schemathesis(tmp_path, ["stateful"], stateful_examples=10 * EXAMPLES)
+    summary, stdout = run_schemathesis(tmp_path, ["stateful"], 10 * EXAMPLES)  # sequences, cheap: more of them
     covered = re.search(r"API Links:\s+(\d+) covered", stdout)  # the stateful phase followed links
     assert covered and int(covered.group(1)) >= 8, stdout[-8000:]
 
