@@ -72,7 +72,10 @@ router = APIRouter(responses={401: ERRORS[401], 404: ERRORS[404], 422: ERRORS[42
 
 def links(status: int, targets: dict[str, tuple[str, str, dict[str, str]]]) -> dict[int | str, dict[str, Any]]:
     """OpenAPI links of a success response: name -> (path, method, {parameter: runtime expression}), so a client
-    (and the contract test's stateful phase) knows which answer feeds which request."""
+    (and the contract test's stateful phase) knows which answer feeds which request. A link is declared only
+    where it holds: its target answers for whatever the response says (a new object has no plan and no problem
+    yet, so no link leads from it to `/plan` or `/pddl/problem`); a link through a nullable id
+    (`plan_id`, `problem_id`, an action's `id`) holds whenever the id is not null."""
     def ref(path: str, method: str) -> str:
         return "#/paths/" + path.replace("~", "~0").replace("/", "~1") + "/" + method
     return {status: {"links": {name: {"operationRef": ref(path, method), "parameters": parameters}
@@ -109,7 +112,8 @@ WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for stat
                  "perceive": (f"{OBJECT}/perceptions", "post", NEW_OBJECT),
                  "take_next_action": (f"{OBJECT}/actions/next", "post", NEW_OBJECT),
                  "events": (f"{OBJECT}/events", "get", NEW_OBJECT),
-                 "pddl_domain": (f"{OBJECT}/pddl/domain", "get", NEW_OBJECT)})},
+                 "pddl_domain": (f"{OBJECT}/pddl/domain", "get", NEW_OBJECT),
+                 "give_up": (f"{OBJECT}/give-up", "post", NEW_OBJECT)})},
              tags=["objects"])
 def create_object(body: ObjectCreate, orch: Orch) -> dict[str, Any]:
     """Create an articulated object in the ABox."""
@@ -131,7 +135,9 @@ def read_object(object_id: str, orch: Orch) -> dict[str, Any]:
 
 
 @router.put("/objects/{object_id}/goal", response_model=GoalPublic, dependencies=Writer,
-            responses={**WRITE_ERRORS, **links(200, {"perceive": (f"{OBJECT}/perceptions", "post", SAME_OBJECT)})},
+            responses={**WRITE_ERRORS, **links(200, {
+                "perceive": (f"{OBJECT}/perceptions", "post", SAME_OBJECT),
+                "read_problem": ("/problems/{problem_id}", "get", {"problem_id": "$response.body#/problem_id"})})},
             tags=["cooperation"])
 def update_goal(object_id: str, body: GoalUpdate, orch: Orch) -> dict[str, Any]:
     """Set the goal configuration.
@@ -149,8 +155,6 @@ def update_goal(object_id: str, body: GoalUpdate, orch: Orch) -> dict[str, Any]:
 @router.post("/objects/{object_id}/perceptions", response_model=DecisionPublic, dependencies=Writer,
              responses={**WRITE_ERRORS, 503: ERRORS[503], **links(200, {
                  "take_next_action": (f"{OBJECT}/actions/next", "post", SAME_OBJECT),
-                 "read_object_plan": (f"{OBJECT}/plan", "get", SAME_OBJECT),
-                 "pddl_problem": (f"{OBJECT}/pddl/problem", "get", SAME_OBJECT),
                  "read_plan": ("/plans/{plan_id}", "get", {"plan_id": "$response.body#/plan_id"}),
                  "read_state": ("/states/{state_id}", "get", {"state_id": "$response.body#/perceived_state_id"})})},
              tags=["cooperation"])
@@ -177,13 +181,14 @@ def create_perception(
 def take_next_action(object_id: str, orch: Orch) -> dict[str, Any] | None:
     """For workers: take the action to execute now, which is marked dispatched (taking it again returns the same
     action); null when there is none (no plan, goal reached, or the last action is done and a perception is due).
-    It changes the execution, so it is a POST and needs the bearer token when one is configured."""
+    It changes the execution, so it is a POST and needs the bearer token when one is configured.
+
+    It replaces `GET /objects/{object_id}/next-action` (a GET must not change state), which is no longer an
+    operation: it answers 410 Gone with an ErrorPublic body naming this route."""
     return orch.take_next_action(object_id)
 
 
-@router.get("/objects/{object_id}/next-action", status_code=410, response_model=ErrorPublic,
-            responses={410: {"model": ErrorPublic, "description": "Moved to POST /objects/{id}/actions/next."}},
-            tags=["cooperation"], deprecated=True)
+@router.get("/objects/{object_id}/next-action", include_in_schema=False)  # documented with its replacement
 def read_next_action_gone(object_id: str) -> JSONResponse:
     """Removed: a GET must not change state. Take the next action with `POST /objects/{id}/actions/next`."""
     return JSONResponse({"detail": NEXT_ACTION_MOVED.format(object_id=object_id)}, status_code=410)
@@ -352,9 +357,18 @@ async def _http_error(request: Request, exc: Exception) -> Response:
 
 async def _request_validation_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, RequestValidationError)  # registered for that type only
-    errors = exc.errors()
-    messages = [f"{_field_path(e.get('loc', ()))}: {e.get('msg', 'invalid')}" for e in errors]
+    messages = [_message(e) for e in exc.errors()]
     return JSONResponse({"detail": "; ".join(messages) or "invalid request"}, status_code=422)
+
+
+def _message(error: dict[str, Any]) -> str:
+    """`field: what is wrong`. A schema's own check says it in its own words (pydantic would prefix "Value
+    error, "), and one over the whole body names its fields itself (`reason: must be null when ...`)."""
+    path = _field_path(error.get("loc", ()))
+    cause = error.get("ctx", {}).get("error") if error.get("type") == "value_error" else None
+    if cause is None:
+        return f"{path}: {error.get('msg', 'invalid')}"
+    return str(cause) if path == "body" else f"{path}: {cause}"
 
 
 def _field_path(loc: tuple | list) -> str:

@@ -1,10 +1,18 @@
 """Request and response bodies of the service. Every schema and every field has a description and examples.
 
+A request schema states every rule about the request itself, so that a body the schema accepts is accepted and
+one it refuses is refused (the contract test checks both): counts of orientations that divide 360, the two forms
+of a goal, a reason only for a failure, printable names. What depends on the stored object (one value per link,
+its allowed orientations, where it lies) or on the service's settings (the largest planning task) is checked by
+the service and refused with a 422 naming the field.
+
 Floats in requests refuse NaN and ±Infinity (the JSON parser accepts the `NaN`/`Infinity` tokens; pydantic
-then rejects them with the field's name), so a malformed perception never reaches the knowledge base.
+then rejects them with the field's name), so a malformed perception never reaches the knowledge base. Integers
+are JSON integers: `4` or `4.0` (JSON Schema's integer), never `"4"` or `true`.
 """
 from __future__ import annotations
 
+import re
 from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -15,23 +23,49 @@ from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, Fai
 # strict: a JSON number, as documented (pydantic's lax mode took `false` for 0.0 and "1.5" for 1.5)
 FiniteFloat = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 TableCoordinate = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-10.0, le=10.0)]  # metres from the robot
-MIN_LINKS, MAX_LINKS = 2, 200  # one bound for both forms of ObjectCreate.links
+# strict: a JSON integer, as documented (lax mode took "4" and true); integral floats are made ints before it
+JsonInt = Annotated[int, Field(strict=True)]
+MIN_LINKS, MAX_LINKS = 2, 200  # one bound for both forms of ObjectCreate.links, and for every list of link values
 SQLITE_MAX_INT = 2**63 - 1  # the largest integer the store (SQLite INTEGER) can hold: the bound of every count and seq
+ORIENTATION_COUNTS = tuple(k for k in range(2, 361) if 360 % k == 0)  # the K that planhrc.model accepts
+
+# What a name may not hold, as one character class that reads the same in Python, in ECMA-262 (the schema's
+# `pattern`) and in Rust: control characters (C0, DEL, C1), the line and paragraph separators, invisible
+# formatting (soft hyphen, zero-width and direction marks and overrides, word joiners, the byte order mark,
+# interlinear annotation) and the non-characters U+FFFE and U+FFFF. So every output (log line, console, RDF/XML
+# export) shows a name as it was sent.
+NOT_PRINTABLE = r"\x00-\x1f\x7f-\x9f\u00ad\u200b-\u200f\u2028-\u202e\u2060-\u206f\ufeff\ufff9-\ufffb\ufffe\uffff"
+PRINTABLE_PATTERN = f"^[^{NOT_PRINTABLE}]*$"
+_NOT_PRINTABLE = re.compile(f"[{NOT_PRINTABLE}]")
 
 
 def _printable(value: str) -> str:
-    """Names are printable text (no control, line-break or format characters), so every output shows them as sent."""
-    if not value.isprintable():
-        bad = next(c for c in value if not c.isprintable())
-        raise ValueError(f"must be printable characters only, got {bad!r}")
+    bad = _NOT_PRINTABLE.search(value)
+    if bad:
+        raise ValueError(f"must be printable characters only, got {bad.group()!r}")
     return value
 
 
-PrintableName = Annotated[str, AfterValidator(_printable)]
+PrintableName = Annotated[str, AfterValidator(_printable), Field(json_schema_extra={"pattern": PRINTABLE_PATTERN})]
 
 
-def _config(description: str, example: dict[str, Any]) -> ConfigDict:
-    return ConfigDict(json_schema_extra={"description": description, "examples": [example]}, extra="forbid")
+def _integral(value: Any) -> Any:
+    """4.0 is the JSON integer 4 (JSON Schema's `integer` counts it), so it is taken as 4; 4.5 stays a float
+    for the strict check to refuse."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+def _orientation_count(k: int) -> int:
+    if k not in ORIENTATION_COUNTS:
+        raise ValueError(f"360 must be divisible by K and K >= 2, got {k}")
+    return k
+
+
+def _config(description: str, example: dict[str, Any], rules: dict[str, Any] | None = None) -> ConfigDict:
+    """A model's description, example and `rules`: JSON Schema keywords over several fields (`oneOf`, `if`...)
+    that the model's own validator enforces."""
+    return ConfigDict(json_schema_extra={"description": description, "examples": [example], **(rules or {})},
+                      extra="forbid")
 
 
 # -- objects ------------------------------------------------------------------------------------------------
@@ -51,14 +85,17 @@ class ObjectCreate(BaseModel):
 
     name: PrintableName = Field(default="", max_length=200, description="Human-readable name (printable characters).",
                                 examples=["rod"])
-    links: Annotated[int, Field(ge=MIN_LINKS, le=MAX_LINKS)] | Annotated[
+    links: Annotated[JsonInt, Field(ge=MIN_LINKS, le=MAX_LINKS)] | Annotated[
         list[LinkSpec], Field(min_length=MIN_LINKS, max_length=MAX_LINKS)
     ] = Field(
-        description="Number of links (each 0.155 m long), or the list of links in chain order.",
+        description="Number of links (each 0.155 m long), or the list of links in chain order. Links x "
+        "orientations may not exceed the service's largest planning task (setting max_task_size, "
+        "PLANHRC_MAX_TASK_SIZE: 14400 by default); a larger object is refused with 422.",
         examples=[4, [{"name": "l1", "length_m": 0.155}, {"name": "l2", "length_m": 0.2}]],
     )
-    orientations: int = Field(
-        ge=2, le=360, description="K, the number of allowed orientations; 360 must be divisible by K.", examples=[4, 8]
+    orientations: Annotated[JsonInt, AfterValidator(_orientation_count)] = Field(
+        description="K, the number of allowed orientations: 360 must be divisible by K.", examples=[4, 8],
+        json_schema_extra={"enum": list(ORIENTATION_COUNTS)},
     )
     formulation: Formulation = Field(
         description="Planning formulation: joints carry relative angles, or absolute link orientations.",
@@ -72,6 +109,11 @@ class ObjectCreate(BaseModel):
         "body and reach. Without it the object is abstract (no geometric checks).",
         examples=[[0.6, 0.39]],
     )
+
+    @field_validator("links", "orientations", mode="before")
+    @classmethod
+    def _json_integer(cls, value: Any) -> Any:
+        return _integral(value)
 
 
 class LinkPublic(BaseModel):
@@ -126,26 +168,37 @@ class ObjectPublic(BaseModel):
 
 
 # -- goals and perceptions --------------------------------------------------------------------------------
+def _only(given: str, absent: str) -> dict[str, Any]:
+    """The JSON Schema of a body that gives `given` (a list) and leaves `absent` out or null."""
+    return {"required": [given], "properties": {given: {"type": "array"}, absent: {"type": "null"}}}
+
+
 class GoalUpdate(BaseModel):
     model_config = _config(
-        "A goal configuration: either every link's orientation, or one angle per joint (null = any).",
+        "A goal configuration: either every link's orientation, or one angle per joint (null = any). Exactly "
+        "one of the two is given (the other is left out or null).",
         {"link_orientations_deg": [0, 90, 90, 180]},
+        {"oneOf": [_only("link_orientations_deg", "joint_angles_deg"),
+                   _only("joint_angles_deg", "link_orientations_deg")]},
     )
 
     link_orientations_deg: list[FiniteFloat] | None = Field(
-        default=None,
+        default=None, min_length=MIN_LINKS, max_length=MAX_LINKS,
         description="Absolute orientation of every link l1..lN, in degrees clockwise; each must be an allowed "
-        "orientation. Relative objects use only the differences.",
+        "orientation. Relative objects use only the differences. Every link has one (unlike a perception, no "
+        "null).",
         examples=[[0, 90, 90, 180]],
     )
     joint_angles_deg: list[FiniteFloat | None] | None = Field(
-        default=None,
+        default=None, min_length=MIN_LINKS - 1, max_length=MAX_LINKS,
         description="One value per joint: the N-1 relative angles (relative formulation) or the N link "
-        "orientations (absolute formulation); null leaves that joint free (a partial goal).",
+        "orientations (absolute formulation); null leaves that joint free (a partial goal), but at least one "
+        "joint has a value.",
         examples=[[90, 0, 90], [90, None, 90]],
+        json_schema_extra={"contains": {"type": "number"}},  # at least one joint has a value
     )
     allow_infeasible: bool = Field(
-        default=False,
+        default=False, strict=True,  # true or false, as documented (lax mode took 0 and "yes")
         description="Accept a goal configuration that does not lie on the table (off the table, inside the "
         "robot, folded onto itself); without it such a goal is refused with 422 naming the links.",
         examples=[False],
@@ -186,10 +239,12 @@ class PerceptionCreate(BaseModel):
     )
 
     link_orientations_deg: list[FiniteFloat | None] = Field(
+        min_length=MIN_LINKS, max_length=MAX_LINKS,
         description="Measured absolute orientation of every link l1..lN, in degrees clockwise seen from above; "
         "snapped to the nearest allowed orientation. null = the link was not seen: such a perception changes "
         "nothing and is answered with the decision incomplete_perception; at least one link must be seen.",
         examples=[[1.7, 88.9, 91.2, 179.4], [1.7, None, 91.2, 179.4]],
+        json_schema_extra={"contains": {"type": "number"}},  # at least one link seen
     )
 
     base_point_xy: list[TableCoordinate] | None = Field(
@@ -287,7 +342,12 @@ class DecisionPublic(BaseModel):
 
 
 class FeedbackCreate(BaseModel):
-    model_config = _config("A worker's report on a dispatched action.", {"outcome": "succeeded"})
+    model_config = _config(
+        "A worker's report on a dispatched action. A reason is given only for an action that did not succeed.",
+        {"outcome": "succeeded"},
+        {"if": {"properties": {"outcome": {"const": ActionOutcome.SUCCEEDED.value}}},
+         "then": {"properties": {"reason": {"type": "null"}}}},
+    )
 
     outcome: ActionOutcome = Field(
         description="succeeded, failed (nothing moved) or partial (moved, but not the whole step).",

@@ -1,12 +1,17 @@
-"""The API contract is the API behaviour: schemathesis fuzzes every operation of a real `planhrc serve` process
-(token set) from its own `/openapi.json` and finds no 5xx and no answer outside the documented schemas.
+"""The API contract is the API behaviour: schemathesis tests every operation of a real `planhrc serve` process
+(token set) from its own `/openapi.json`, with every check, and finds no failure: no 5xx, no answer outside the
+documented schemas and statuses, no schema-violating request accepted, and no schema-valid request refused except
+for the rules no JSON Schema can state (tests/contract_rules.py: they depend on the stored object, the service's
+settings, or two query parameters together).
 
-Two runs. The first drives schemathesis's generator from Python with the path parameter `object_id` pinned to a
+Three runs. The first drives schemathesis's generator from Python with the path parameter `object_id` pinned to a
 stored object with a goal, so generated goals and perceptions reach the cooperation model (and the planner)
-instead of stopping at a 404. The second is the `schemathesis run` command with all four phases (the schema's
-examples, coverage of boundaries and invalid values, fuzzing, and stateful sequences that follow the OpenAPI
-links from `POST /objects` to the routes taking its id). A few examples per operation keep each run short;
-`PLANHRC_FUZZ_EXAMPLES` asks for more.
+instead of stopping at a 404. The second is the `schemathesis run` command with the generated phases (the
+schema's examples, coverage of boundaries and invalid values, fuzzing); the third its stateful phase, sequences
+that follow the OpenAPI links the service declares (a new object to its goal, perceptions and next action; a goal
+to its problem; a perception to its plan and state; an action to its feedback). Both commands use the
+repository's schemathesis.toml, so the same run by hand from the repository's root finds what they find (see
+that file). A few examples per operation keep each run short; `PLANHRC_FUZZ_EXAMPLES` asks for more.
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ import httpx
 import pytest
 
 schemathesis = pytest.importorskip("schemathesis")
+import jsonschema_rs  # noqa: E402  (schemathesis's own schema validator)
 from hypothesis import HealthCheck, Phase, given, settings  # noqa: E402
 from hypothesis.errors import Unsatisfiable  # noqa: E402
 from schemathesis import GenerationMode, checks  # noqa: E402
@@ -31,11 +37,23 @@ if str(REPO / "tests") not in sys.path:
     sys.path.insert(0, str(REPO / "tests"))
 
 from test_service_integration import running_server  # noqa: E402
+from tests.contract_rules import RULES_BEYOND_THE_SCHEMA, refused_beyond_the_schema  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
 TOKEN = "contract-token"
 EXAMPLES = int(os.environ.get("PLANHRC_FUZZ_EXAMPLES", "6"))
+CONFIG = REPO / "schemathesis.toml"
+
+
+def positive_data_acceptance_but_the_rules(ctx, response, case) -> bool | None:
+    """schemathesis's `positive_data_acceptance`, which lets through only the refusals no schema can state (what
+    schemathesis.toml and tests/contract_rules.py do together for the `schemathesis run` command)."""
+    if refused_beyond_the_schema(case.operation.label, response.status_code, response.content):
+        return None
+    return checks.positive_data_acceptance(ctx, response, case)
+
+
 CHECKS = [
     checks.not_a_server_error,
     checks.response_schema_conformance,
@@ -43,6 +61,7 @@ CHECKS = [
     checks.content_type_conformance,
     checks.negative_data_rejection,
     checks.ignored_auth,
+    positive_data_acceptance_but_the_rules,
 ]
 
 
@@ -131,51 +150,116 @@ def test_error_bodies_are_the_documented_schema(service):
         assert set(r.json()) == {"detail"} and r.json()["detail"], (status, r.text)
 
 
-# Every check of `schemathesis run` except `positive_data_acceptance`, which expects every schema-valid request to
-# be accepted: the service refuses some with a 422 naming the field for rules that hold between values and a JSON
-# schema cannot state (a perception has one value per link of *that* object, 360 must be divisible by K, a goal
-# gives exactly one of its two forms, `history=all` is for every object).
-CLI_EXCLUDED_CHECKS = ["positive_data_acceptance"]
-CLI_PHASES = ["examples", "coverage", "fuzzing", "stateful"]
-CLI_CONFIG = f"""
-generation.max-examples = {max(1, EXAMPLES // 2)}
-
-# Sequences are cheap (most requests are refused early): more of them, so that some reach a plan.
-[phases.stateful]
-max-steps = 10
-generation.max-examples = {5 * EXAMPLES}
-
-# The stateful phase follows the links the OpenAPI declares, not links schemathesis guesses from parameter names
-# (a guessed `POST /objects` -> `GET /objects/{{object_id}}/plan` expects a plan from a bare object).
-[phases.stateful.inference]
-algorithms = []
-
-[[operations]]
-include-path = "/objects/{{object_id}}/events/stream"
-parameters = {{ "query.timeout_s" = 0.2 }}  # a live stream must end: ask for a short one
-"""
-
-
-def test_every_schemathesis_phase_finds_nothing(tmp_path):
-    """`schemathesis run` over a fresh service: examples, coverage, fuzzing and stateful phases all pass, with
-    every check but one (see CLI_EXCLUDED_CHECKS); the stateful phase follows the declared links."""
-    (tmp_path / "schemathesis.toml").write_text(CLI_CONFIG)
+def run_schemathesis(tmp_path: Path, phases: list[str], examples: int) -> tuple[dict, str]:
+    """`schemathesis run --checks all` with the repository's schemathesis.toml over a fresh service with a token:
+    its JSON report and its output."""
     report = tmp_path / "report.json"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}  # the config's hooks module, tests.contract_rules
     with running_server(tmp_path / "kb.sqlite3", token=TOKEN) as client:
         run = subprocess.run(
-            [str(Path(sys.executable).with_name("schemathesis")), "--config-file", str(tmp_path / "schemathesis.toml"),
+            [str(Path(sys.executable).with_name("schemathesis")), "--config-file", str(CONFIG),
              "run", f"{client.base_url}/openapi.json", "--header", f"Authorization: Bearer {TOKEN}",
-             "--phases", ",".join(CLI_PHASES), "--checks", "all", "--exclude-checks", ",".join(CLI_EXCLUDED_CHECKS),
+             "--phases", ",".join(phases), "--checks", "all", "--max-examples", str(examples),
              "--seed", "7", "--workers", "1", "--request-timeout", "60",
              "--continue-on-failure", "--report", "json", "--report-json-path", str(report)],
-            cwd=tmp_path, capture_output=True, text=True, timeout=600)
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    output = run.stdout[-8000:] + run.stderr[-2000:]
+    assert report.exists(), output
     summary = json.loads(report.read_text())
-    output = run.stdout[-6000:] + run.stderr[-2000:]
     assert run.returncode == 0 and not summary["failures"] and not summary["errors"], output
-    assert {name: phase["status"] for name, phase in summary["phases"].items()} == dict.fromkeys(CLI_PHASES, "success"), output
+    assert {name: phase["status"] for name, phase in summary["phases"].items()
+            if name in phases} == dict.fromkeys(phases, "success"), output
+    return summary, run.stdout
+
+
+@pytest.mark.slow
+def test_the_generated_phases_find_nothing(tmp_path):
+    """`schemathesis run` over a fresh service: the schema's examples, coverage of boundaries and invalid values,
+    and fuzzing pass every check."""
+    summary, _ = run_schemathesis(tmp_path, ["examples", "coverage", "fuzzing"], max(1, EXAMPLES // 2))
     assert summary["operations"]["tested"] == summary["operations"]["total"] >= 15, summary["operations"]
-    covered = re.search(r"API Links:\s+(\d+) covered", run.stdout)  # the stateful phase followed links
-    assert covered and int(covered.group(1)) >= 3, output
+
+
+@pytest.mark.slow
+def test_the_stateful_phase_finds_nothing(tmp_path):
+    """The stateful phase follows the declared OpenAPI links from answer to request (a new object to its goal,
+    perceptions and next action; a perception to its plan and state; an action to its feedback) and every
+    check passes on every step."""
+    summary, stdout = run_schemathesis(tmp_path, ["stateful"], 10 * EXAMPLES)  # sequences, cheap: more of them
+    covered = re.search(r"API Links:\s+(\d+) covered", stdout)  # the stateful phase followed links
+    assert covered and int(covered.group(1)) >= 8, stdout[-8000:]
+
+
+def test_the_rules_beyond_the_schema_are_exactly_those_the_service_answers(service):
+    """The refusals the contract test lets through are the service's own answers, word for word, and nothing
+    else: a schema-level refusal on the same operations is not one of them."""
+    client, oid = service  # 3 links, 4 orientations, relative
+    beyond = {
+        "POST /objects": client.post("/objects", json={"links": 200, "orientations": 360, "formulation": "relative"}),
+        "PUT /objects/{object_id}/goal": client.put(f"/objects/{oid}/goal", json={"joint_angles_deg": [45, 0]}),
+        "POST /objects/{object_id}/perceptions": client.post(f"/objects/{oid}/perceptions",
+                                                             json={"link_orientations_deg": [0, 0]}),
+        "GET /ontology": client.get("/ontology", params={"history": "all", "object": oid}),
+    }
+    assert set(beyond) == set(RULES_BEYOND_THE_SCHEMA)
+    for label, r in beyond.items():
+        assert refused_beyond_the_schema(label, r.status_code, r.content), (label, r.status_code, r.text)
+    for label, body in (("PUT /objects/{object_id}/goal", {"joint_angles_deg": [None, None]}),
+                        ("POST /objects/{object_id}/perceptions", {"link_orientations_deg": [None, None, None]})):
+        method, path = label.split(" ")
+        r = client.request(method, path.format(object_id=oid), json=body)
+        assert r.status_code == 422 and not refused_beyond_the_schema(label, r.status_code, r.content), r.text
+
+
+OBJECT = {"links": 3, "orientations": 4, "formulation": "relative"}
+GOAL, PERCEPTION, FEEDBACK = "/objects/{oid}/goal", "/objects/{oid}/perceptions", "/objects/{oid}/actions/a9/feedback"
+# (schema, method, path, body, accepted): what the schema says of a body is what the service does with it
+AGREEMENT = [
+    ("ObjectCreate", "POST", "/objects", {**OBJECT, "links": 3.0, "orientations": 4.0}, True),
+    ("ObjectCreate", "POST", "/objects", {**OBJECT, "links": "3"}, False),
+    ("ObjectCreate", "POST", "/objects", {**OBJECT, "orientations": True}, False),
+    ("ObjectCreate", "POST", "/objects", {**OBJECT, "orientations": 7}, False),
+    ("ObjectCreate", "POST", "/objects", {**OBJECT, "name": "rod\u00a02 \U0007c0e9"}, True),
+    ("ObjectCreate", "POST", "/objects", {**OBJECT, "name": "rod\u200b"}, False),
+    ("ObjectCreate", "POST", "/objects", {**OBJECT, "name": "rod\n"}, False),
+    ("GoalUpdate", "PUT", GOAL, {"link_orientations_deg": [0, 90, 90], "joint_angles_deg": None}, True),
+    ("GoalUpdate", "PUT", GOAL, {"joint_angles_deg": [90, None]}, True),
+    ("GoalUpdate", "PUT", GOAL, {"link_orientations_deg": [0, None, 90]}, False),
+    ("GoalUpdate", "PUT", GOAL, {"link_orientations_deg": [0, 90, 90], "joint_angles_deg": [90, 0]}, False),
+    ("GoalUpdate", "PUT", GOAL, {"link_orientations_deg": None}, False),
+    ("GoalUpdate", "PUT", GOAL, {"joint_angles_deg": [None, None]}, False),
+    ("GoalUpdate", "PUT", GOAL, {"joint_angles_deg": [90, 0], "allow_infeasible": 0}, False),
+    ("PerceptionCreate", "POST", PERCEPTION, {"link_orientations_deg": [1.5, None, 3]}, True),
+    ("PerceptionCreate", "POST", PERCEPTION, {"link_orientations_deg": [None, None, None]}, False),
+    ("FeedbackCreate", "POST", FEEDBACK, {"outcome": "failed", "reason": "stall"}, True),
+    ("FeedbackCreate", "POST", FEEDBACK, {"outcome": "succeeded", "reason": None}, True),
+    ("FeedbackCreate", "POST", FEEDBACK, {"outcome": "succeeded", "reason": "stall"}, False),
+    ("GiveUpCreate", "POST", "/objects/{oid}/give-up", {"reason": "stuck", "message": "tab\there"}, False),
+]
+
+
+@pytest.mark.parametrize("name, method, path, body, accepted", AGREEMENT,
+                         ids=[f"{row[0]}-{i}" for i, row in enumerate(AGREEMENT)])
+def test_the_schema_says_what_the_service_accepts(service, name, method, path, body, accepted):
+    """A body the published schema accepts is not refused as invalid (a 404 or 409 for the object's state is
+    fine), and one it refuses gets a 422 whose one-line message starts with the field; schemathesis's schema
+    validator decides, as in the runs above."""
+    client, oid = service
+    doc = client.get("/openapi.json").json()
+    validator = jsonschema_rs.validator_for({"$ref": f"#/components/schemas/{name}", "components": doc["components"]})
+    assert validator.is_valid(body) is accepted, (name, body)
+    r = client.request(method, path.format(oid=oid), json=body)
+    if accepted:
+        assert r.status_code in (200, 201, 404, 409), (body, r.text)
+    else:
+        detail = r.json()["detail"]
+        fields = [field for field in body if detail.startswith(field)]
+        assert r.status_code == 422 and fields and "\n" not in detail and "Value error" not in detail, (body, r.text)
+
+
+def _targets(links: dict[str, dict]) -> set[str]:
+    return {link["operationRef"].removeprefix("#/paths/").rsplit("/", 1)[0].replace("~1", "/").replace("~0", "~")
+            for link in links.values()}
 
 
 def test_the_openapi_links_lead_from_a_new_object_to_its_routes(service):
@@ -183,11 +267,28 @@ def test_the_openapi_links_lead_from_a_new_object_to_its_routes(service):
     doc = client.get("/openapi.json").json()
     created = doc["paths"]["/objects"]["post"]["responses"]["201"]["links"]
     taken = doc["paths"]["/objects/{object_id}/actions/next"]["post"]["responses"]["200"]["links"]
+    perceived = doc["paths"]["/objects/{object_id}/perceptions"]["post"]["responses"]["200"]["links"]
     assert {"set_goal", "perceive", "take_next_action"} <= set(created)
     assert taken["feedback"]["parameters"] == {"object_id": "$request.path.object_id", "action_id": "$response.body#/id"}
-    for link in (*created.values(), *taken.values()):
+    assert perceived["read_plan"]["parameters"] == {"plan_id": "$response.body#/plan_id"}
+    every = [link for path in doc["paths"].values() for op in path.values()
+             for answer in op["responses"].values() for link in answer.get("links", {}).values()]
+    assert len(every) >= 12
+    for link in every:
         path, method = link["operationRef"].removeprefix("#/paths/").rsplit("/", 1)
         assert method in doc["paths"][path.replace("~1", "/").replace("~0", "~")], link
+    # links only where they hold: a new object has no plan and no problem, nor has every perceived one
+    not_yet = {"/objects/{object_id}/plan", "/objects/{object_id}/pddl/problem"}
+    assert not not_yet & (_targets(created) | _targets(perceived))
+
+
+def test_the_retired_route_is_no_operation_and_its_replacement_says_so(service):
+    client, oid = service
+    doc = client.get("/openapi.json").json()
+    assert "/objects/{object_id}/next-action" not in doc["paths"]
+    assert "410" in doc["paths"]["/objects/{object_id}/actions/next"]["post"]["description"]
+    r = client.get(f"/objects/{oid}/next-action")
+    assert r.status_code == 410 and r.json() == {"detail": r.json()["detail"]} and "POST" in r.json()["detail"]
 
 
 def test_a_405_names_every_method_of_the_path(service):
