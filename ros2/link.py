@@ -66,6 +66,8 @@ class Ros2Link:
         except ProtocolError:
             self.close()
             raise
+        # A writer may see the bridge's reader before that reader sees it, and what is sent in between is lost.
+        threading.Event().wait(0.5)
 
     def _spin(self) -> None:
         while self.context.ok():
