@@ -45,7 +45,7 @@ ROS2_VARIANTS: dict[str, tuple[str, str]] = {
 
 # Commands that load native libraries printing to file descriptor 1 (PyBullet): their fd 1 is diverted so that
 # only the command's own output reaches stdout.
-NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench", "ros2-bench"})
+NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench"})
 
 # What the optional extras (pyproject.toml) provide: a command whose extra is missing says what to install
 # before it starts, instead of failing half-way. (command, sub-command or None) -> (extra, modules it needs)

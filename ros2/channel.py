@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
-from collections import Counter
+from collections import Counter, OrderedDict
 from typing import Any, Callable
 
 from builtin_interfaces.msg import Duration
@@ -39,13 +39,16 @@ log = logging.getLogger(__name__)
 
 # events after which the object's execution or goal changed: the object topic is published again
 OBJECT_EVENTS = frozenset({"goal_set", "dispatched", "feedback", "worker_gave_up"})
+# How many handled requests (with an id) are remembered: a request sent again is answered again, not redone.
+REMEMBERED_REQUESTS = 64
 
 
-def qos_of(spec: topics.TopicSpec) -> QoSProfile:
+def qos_of(spec: topics.TopicSpec, depth: int | None = None) -> QoSProfile:
+    """The topic's QoS; a subscriber may keep a deeper queue (`depth`) than the topic's publishers."""
     durability = (DurabilityPolicy.TRANSIENT_LOCAL if spec.durability is topics.Durability.TRANSIENT_LOCAL
                   else DurabilityPolicy.VOLATILE)
-    return QoSProfile(depth=spec.depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=durability)
+    return QoSProfile(depth=depth or spec.depth, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=durability)
 
 
 class ObjectChannel:
@@ -66,6 +69,10 @@ class ObjectChannel:
         self.counts: Counter[str] = Counter()
         self.last_refusal = ""
         self.last_decision = ""
+        # (topic, request id) -> the decision text it got (perceptions) or None: what a request sent again gets
+        self.handled: OrderedDict[tuple[str, str], str | None] = OrderedDict()
+        self.last_answer: dict[tuple[str, str], str] = {}
+        self.plan: dict[str, Any] | None = None  # the last plan read (plans never change once stored)
         group = MutuallyExclusiveCallbackGroup()
         name = lambda spec: spec.name(self.object_id)  # noqa: E731
         self.pub: dict[str, Any] = {
@@ -84,6 +91,8 @@ class ObjectChannel:
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         request = ("perceived", stamp_id(*stamp))
         with self.lock:
+            if self._answered_again(request):
+                return
             try:
                 reading = read_joint_state("perceived", msg.name, msg.position, self.n_links)
                 decision = self.kb.post_perception(self.object_id, reading.link_orientations_deg,
@@ -92,7 +101,9 @@ class ObjectChannel:
                 self._refuse(request, exc)
                 return
             answer = decision.raw
-            self.pub["decision"].publish(String(data=decision_text(answer, stamp)))
+            text = decision_text(answer, stamp)
+            self.pub["decision"].publish(String(data=text))
+            self._remember(request, text)
             self.answered[decision_key(answer["decision"], answer.get("perceived_state_id"), answer["reason"])] += 1
             self.counts["perceptions"] += 1
             detail = ""
@@ -103,6 +114,8 @@ class ObjectChannel:
     def on_goal(self, msg: JointState) -> None:
         request = ("goal", stamp_id(msg.header.stamp.sec, msg.header.stamp.nanosec))
         with self.lock:
+            if self._answered_again(request):
+                return
             try:
                 reading = read_joint_state("goal", msg.name, msg.position, self.n_links, complete=True)
                 self.kb.set_goal(self.object_id, link_orientations_deg=reading.link_orientations_deg)
@@ -121,6 +134,8 @@ class ObjectChannel:
                 return
             action_id = feedback.action_id or self.dispatched_action_id
             request = ("feedback", feedback.request_id or action_id)
+            if feedback.request_id and self._answered_again(request):
+                return
             try:
                 if action_id is None:
                     raise Ros2Error("feedback.action_id: no action was dispatched here; name the action")
@@ -137,6 +152,8 @@ class ObjectChannel:
             try:
                 give_up = read_give_up(msg.data)
                 request = ("give_up", give_up.request_id)
+                if give_up.request_id and self._answered_again(request):
+                    return
                 self.kb.give_up(self.object_id, give_up.reason, give_up.message)
             except Ros2Error as exc:
                 self._refuse(("give_up", None), exc)
@@ -220,7 +237,7 @@ class ObjectChannel:
         self.counts["decisions"] += 1
         plan_id = answer.get("plan_id")
         if plan_id and plan_id != self.shown_plan_id:
-            self.pub["plan"].publish(String(data=json.dumps(self.kb.read_plan(plan_id), separators=(",", ":"))))
+            self.pub["plan"].publish(String(data=json.dumps(self._read_plan(plan_id), separators=(",", ":"))))
             self.shown_plan_id = plan_id
         if answer["decision"] == DecisionKind.HUMAN_HELP_REQUESTED or self.help_shown:
             self.help_shown = answer["decision"] == DecisionKind.HUMAN_HELP_REQUESTED
@@ -245,7 +262,28 @@ class ObjectChannel:
                                                   "detail": detail}
         body = {"object": self.obj, "goal_state": self.goal_state if self.obj.get("goal_state_id") else None,
                 "answer_to": answer_to}
-        self.pub["object"].publish(String(data=json.dumps(body, separators=(",", ":"))))
+        text = json.dumps(body, separators=(",", ":"))
+        self.pub["object"].publish(String(data=text))
+        if request is not None and request[1]:
+            self.handled.setdefault((request[0], request[1]), None)
+            self.last_answer[(request[0], request[1])] = text
+            while len(self.handled) > REMEMBERED_REQUESTS:
+                self.last_answer.pop(self.handled.popitem(last=False)[0], None)
+
+    def _remember(self, request: tuple[str, str], decision: str) -> None:
+        self.handled[request] = decision
+
+    def _answered_again(self, request: tuple[str, str | None]) -> bool:
+        """A request the bridge handled already (sent again after a lost answer, or twice): its answers go out
+        again and nothing is redone. A request without an id (stamp 0) is always new."""
+        if not request[1] or request[1] == stamp_id(0, 0) or (request[0], request[1]) not in self.last_answer:
+            return False
+        key = (request[0], request[1])
+        decision = self.handled.get(key)
+        if decision is not None:
+            self.pub["decision"].publish(String(data=decision))
+        self.pub["object"].publish(String(data=self.last_answer[key]))
+        return True
 
     def _publish_markers(self, reading: JointReading | None, turn: tuple[int, int, float] | None) -> None:
         perceived = None if reading is None else reading.link_orientations_deg
@@ -281,7 +319,12 @@ class ObjectChannel:
     def _plan_step(self, plan_id: str | None, action_id: str | None) -> dict[str, Any] | None:
         if not plan_id or not action_id:
             return None
-        return next((s for s in self.kb.read_plan(plan_id).get("steps", []) if s.get("id") == action_id), None)
+        return next((s for s in self._read_plan(plan_id).get("steps", []) if s.get("id") == action_id), None)
+
+    def _read_plan(self, plan_id: str) -> dict[str, Any]:
+        if self.plan is None or self.plan.get("id") != plan_id:
+            self.plan = self.kb.read_plan(plan_id)
+        return self.plan
 
     def _refuse(self, request: tuple[str, str | None], exc: Exception) -> None:
         """A request that changed nothing: say so on the object topic, in the log and in the diagnostics."""

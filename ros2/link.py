@@ -1,7 +1,7 @@
 """The worker's link to the service over ROS 2: the calls the worker makes on `KBClient`, made through the
 bridge's topics instead of HTTP (rclpy).
 
-Each request is published and then answered by the bridge: a perception by the decision topic (matched by the
+Each request is published (again every RESEND_S seconds until answered) and answered by the bridge: a perception by the decision topic (matched by the
 JointState's stamp) and the object topic (`answer_to` the same stamp, after the bridge dispatched the next action);
 a goal, a feedback or a give-up by the object topic's `answer_to`. A refusal raises `ProtocolError` with the
 bridge's reason, as a refused HTTP request does. The node spins on a thread of its own in a context of its own,
@@ -13,6 +13,7 @@ import itertools
 import json
 import math
 import threading
+import time
 import uuid
 from typing import Any, Callable, Sequence
 
@@ -32,6 +33,10 @@ from .channel import qos_of
 from .convert import joint_state_fields, stamp_id
 
 _names = itertools.count(1)
+# A request not answered within this time is sent again (same id: the bridge answers it again, does not redo it).
+# Discovery can match a writer to the bridge's reader before the reader knows the writer; what is sent in between
+# is lost, and a busy machine widens that window.
+RESEND_S = 1.0
 
 
 class Ros2Link:
@@ -44,6 +49,8 @@ class Ros2Link:
         self.node = Node(f"planhrc_worker_{next(_names)}", context=self.context)
         self.cond = threading.Condition()
         self.decisions: dict[tuple[int, int], dict[str, Any]] = {}
+        self.received_at: dict[tuple[int, int], float] = {}  # perf_counter() when each decision arrived
+        self.other_decisions = 0  # decisions other callers caused (with an event_seq), as they arrive
         self.answers: dict[tuple[str, str | None], dict[str, Any]] = {}
         self.plans: dict[str, dict[str, Any]] = {}
         self.latest: dict[str, Any] | None = None
@@ -54,7 +61,8 @@ class Ros2Link:
                                            (topics.FEEDBACK, String), (topics.GIVE_UP, String))}
         for spec, handler in ((topics.DECISION, self._on_decision), (topics.OBJECT, self._on_object),
                               (topics.PLAN, self._on_plan)):
-            self.node.create_subscription(String, spec.name(object_id), handler, qos_of(spec))
+            # a deep queue: every answer counts, and two may arrive before this node takes the first
+            self.node.create_subscription(String, spec.name(object_id), handler, qos_of(spec, depth=100))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, name=f"ros2-link-{object_id}", daemon=True)
@@ -66,8 +74,6 @@ class Ros2Link:
         except ProtocolError:
             self.close()
             raise
-        # A writer may see the bridge's reader before that reader sees it, and what is sent in between is lost.
-        threading.Event().wait(0.5)
 
     def _spin(self) -> None:
         while self.context.ok():
@@ -80,12 +86,16 @@ class Ros2Link:
 
     # -- what comes in ------------------------------------------------------------------------------------
     def _on_decision(self, msg: String) -> None:
+        arrived = time.perf_counter()
         body = json.loads(msg.data)
         stamp = body.get("perception_stamp")
-        if stamp:
-            with self.cond:
+        with self.cond:
+            if stamp:
                 self.decisions[(int(stamp[0]), int(stamp[1]))] = body
-                self.cond.notify_all()
+                self.received_at[(int(stamp[0]), int(stamp[1]))] = arrived
+            elif body.get("event_seq") is not None:
+                self.other_decisions += 1
+            self.cond.notify_all()
 
     def _on_object(self, msg: String) -> None:
         body = json.loads(msg.data)
@@ -107,6 +117,18 @@ class Ros2Link:
             if not self.cond.wait_for(ready, timeout=timeout_s or self.timeout_s):
                 raise ProtocolError(f"{what}: no answer on {topics.NAMESPACE}/{self.object_id}/ within "
                                     f"{timeout_s or self.timeout_s:g} s (is `planhrc ros2-bridge` serving it?)")
+
+    def _send(self, publisher: Any, msg: Any, ready: Callable[[], bool], what: str) -> None:
+        """Publish `msg` until `ready()` (an answer came), sending it again every RESEND_S seconds."""
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            publisher.publish(msg)
+            with self.cond:
+                if self.cond.wait_for(ready, timeout=max(0.0, min(RESEND_S, deadline - time.monotonic()))):
+                    return
+            if time.monotonic() >= deadline:
+                raise ProtocolError(f"{what}: no answer on {topics.NAMESPACE}/{self.object_id}/ within "
+                                    f"{self.timeout_s:g} s (is `planhrc ros2-bridge` serving it?)")
 
     def _answer(self, topic: str, request_id: str) -> dict[str, Any]:
         key = (topic, request_id)
@@ -153,8 +175,9 @@ class Ros2Link:
         if link_orientations_deg is None or joint_angles_deg is not None or allow_infeasible:
             raise ProtocolError("goal: over ROS 2 a goal is every link's orientation (link_orientations_deg)")
         msg = self._joint_state(link_orientations_deg, None)
-        self.pub["goal"].publish(msg)
-        body = self._answer("goal", stamp_id(msg.header.stamp.sec, msg.header.stamp.nanosec))
+        key = ("goal", stamp_id(msg.header.stamp.sec, msg.header.stamp.nanosec))
+        self._send(self.pub["goal"], msg, lambda: key in self.answers, "goal")
+        body = self._answer(*key)
         return {"goal_state_id": body["object"]["goal_state_id"]}
 
     def post_perception(self, object_id: str, link_orientations_deg: Sequence[float | None],
@@ -163,8 +186,7 @@ class Ros2Link:
         msg = self._joint_state(link_orientations_deg, base_point_xy)
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         key = ("perceived", stamp_id(*stamp))
-        self.pub["perceived"].publish(msg)
-        self._wait(lambda: stamp in self.decisions or key in self.answers, "perceived")
+        self._send(self.pub["perceived"], msg, lambda: stamp in self.decisions or key in self.answers, "perceived")
         if stamp not in self.decisions:  # refused before it reached the service
             self._answer(*key)
         self._wait(lambda: key in self.answers, "perceived")  # the bridge has dispatched the next action, if any
@@ -195,15 +217,17 @@ class Ros2Link:
             body["reason"] = str(reason)
         if measured_deg is not None and math.isfinite(measured_deg):
             body["measured_deg"] = float(measured_deg)
-        self.pub["feedback"].publish(String(data=json.dumps(body)))
-        return self._answer("feedback", request_id)["object"]["execution"]
+        key = ("feedback", request_id)
+        self._send(self.pub["feedback"], String(data=json.dumps(body)), lambda: key in self.answers, "feedback")
+        return self._answer(*key)["object"]["execution"]
 
     def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:
         self._check(object_id)
         request_id = str(uuid.uuid4())
-        self.pub["give_up"].publish(String(data=json.dumps({"reason": reason, "message": message,
-                                                            "request_id": request_id})))
-        return self._answer("give_up", request_id)["object"]
+        msg = String(data=json.dumps({"reason": reason, "message": message, "request_id": request_id}))
+        key = ("give_up", request_id)
+        self._send(self.pub["give_up"], msg, lambda: key in self.answers, "give_up")
+        return self._answer(*key)["object"]
 
     def _check(self, object_id: str) -> None:
         if object_id != self.object_id:

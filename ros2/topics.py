@@ -65,7 +65,9 @@ HELP = TopicSpec("help", "std_msgs/msg/String", Direction.OUT, Durability.TRANSI
                  "the current help request as JSON {help: [{link, to_deg, sentence}], reason}; help [] when none")
 PLAN = TopicSpec("plan", "std_msgs/msg/String", Direction.OUT, Durability.TRANSIENT_LOCAL, 1,
                  "the plan being followed as JSON (the body of GET /plans/{id})")
-OBJECT = TopicSpec("object", "std_msgs/msg/String", Direction.OUT, Durability.TRANSIENT_LOCAL, 1,
+# depth 10, not 1: it carries the answers to requests, and a writer keeping only the last sample may replace an
+# answer not yet acknowledged by the next object message
+OBJECT = TopicSpec("object", "std_msgs/msg/String", Direction.OUT, Durability.TRANSIENT_LOCAL, 10,
                    "the object after each change as JSON {object, goal_state, answer_to}: `answer_to` says which "
                    "request from ROS 2 was handled, and whether it was refused and why")
 

@@ -75,7 +75,7 @@ def main() -> int:
 
     for suffix, msg_type, depth, latched in (("decision", String, 10, True), ("next_action", JointTrajectory, 10, False),
                                              ("markers", MarkerArray, 1, True), ("help", String, 1, True),
-                                             ("plan", String, 1, True), ("object", String, 1, True)):
+                                             ("plan", String, 1, True), ("object", String, 100, True)):
         node.create_subscription(msg_type, f"{base}/{suffix}", keep(suffix), qos(depth, latched))
     node.create_subscription(DiagnosticArray, "/diagnostics", keep("/diagnostics"), qos(10, False))
     pubs = {"perceived": node.create_publisher(JointState, f"{base}/perceived", qos(10, False)),

@@ -160,7 +160,7 @@ def test_every_topic_is_under_the_objects_namespace_with_its_qos():
     assert "/planhrc/objects/obj3/perceived" in names and "/planhrc/objects/obj3/decision" in names
     assert topics.DECISION.qos_text == "reliable, transient local, depth 10"
     assert topics.NEXT_ACTION.durability is topics.Durability.VOLATILE
-    assert {s.suffix for s in topics.OBJECT_TOPICS if s.durability is topics.Durability.TRANSIENT_LOCAL} == {
+    assert topics.OBJECT.depth == 10 and {s.suffix for s in topics.OBJECT_TOPICS if s.durability is topics.Durability.TRANSIENT_LOCAL} == {
         "decision", "markers", "help", "plan", "object"}
 
 
