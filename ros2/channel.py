@@ -118,7 +118,8 @@ class ObjectChannel:
                 return
             try:
                 reading = read_joint_state("goal", msg.name, msg.position, self.n_links, complete=True)
-                self.kb.set_goal(self.object_id, link_orientations_deg=reading.link_orientations_deg)
+                goal = [v for v in reading.link_orientations_deg if v is not None]  # complete: every link
+                self.kb.set_goal(self.object_id, link_orientations_deg=goal)
             except (Ros2Error, ProtocolError) as exc:
                 self._refuse(request, exc)
                 return
