@@ -211,13 +211,13 @@ def ensure_ros2_environment() -> "Path":
     are manylinux builds: elsewhere this says so and creates nothing."""
     if not sys.platform.startswith("linux"):
         raise SetupError("the ROS 2 wheels are built for Linux only: .venv-ros2 was not created")
-    digest = ros2_digest()
-    if ROS2_STAMP.exists() and ROS2_STAMP.read_text().strip() == digest and ros2_python().exists():
-        return ros2_python()
     if ROS2_VENV.exists() and not (ROS2_VENV / "pyvenv.cfg").exists():
         raise SetupError(f"{ROS2_VENV} does not look like a virtual environment (no pyvenv.cfg); remove it yourself")
     if ROS2_VENV.exists() and (not ROS2_STAMP.exists() or ros2_venv_version() != sys.version_info[:2]):
         shutil.rmtree(ROS2_VENV)  # half-made, or made by another interpreter: start again
+    digest = ros2_digest()
+    if ROS2_STAMP.exists() and ROS2_STAMP.read_text().strip() == digest and ros2_python().exists():
+        return ros2_python()
     if not ros2_python().exists():
         say("creating .venv-ros2 (ROS 2 wheels from PyPI)")
         venv.EnvBuilder(with_pip=True).create(ROS2_VENV)

@@ -18,7 +18,6 @@ from collections import Counter, OrderedDict
 from typing import Any, Callable
 
 from builtin_interfaces.msg import Duration
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -52,8 +51,8 @@ def qos_of(spec: topics.TopicSpec, depth: int | None = None) -> QoSProfile:
 
 
 class ObjectChannel:
-    """The topics of one object and the bridge's handling of them. Callbacks of one object run one at a time
-    (their own callback group); the event stream's thread takes the same lock."""
+    """The topics of one object and the bridge's handling of them, on a node of the object's own: its callbacks run
+    one at a time on that node's executor thread; the event stream's thread takes the same lock."""
 
     def __init__(self, node: Node, kb: KBClient, obj: dict[str, Any], frame_id: str) -> None:
         self.node, self.kb, self.frame_id = node, kb, frame_id
@@ -73,7 +72,6 @@ class ObjectChannel:
         self.handled: OrderedDict[tuple[str, str], str | None] = OrderedDict()
         self.last_answer: dict[tuple[str, str], str] = {}
         self.plan: dict[str, Any] | None = None  # the last plan read (plans never change once stored)
-        group = MutuallyExclusiveCallbackGroup()
         name = lambda spec: spec.name(self.object_id)  # noqa: E731
         self.pub: dict[str, Any] = {
             spec.suffix: node.create_publisher(msg_type, name(spec), qos_of(spec))
@@ -83,7 +81,7 @@ class ObjectChannel:
         handlers: tuple[tuple[topics.TopicSpec, type, Callable[[Any], None]], ...] = (
             (topics.PERCEIVED, JointState, self.on_perceived), (topics.GOAL, JointState, self.on_goal),
             (topics.FEEDBACK, String, self.on_feedback), (topics.GIVE_UP, String, self.on_give_up))
-        self.subs = [node.create_subscription(msg_type, name(spec), handler, qos_of(spec), callback_group=group)
+        self.subs = [node.create_subscription(msg_type, name(spec), handler, qos_of(spec))
                      for spec, msg_type, handler in handlers]
 
     # -- requests from ROS 2 ------------------------------------------------------------------------------

@@ -1,18 +1,19 @@
 """The worker's link to the service over ROS 2: the calls the worker makes on `KBClient`, made through the
 bridge's topics instead of HTTP (rclpy).
 
-Each request is published (again every RESEND_S seconds until answered) and answered by the bridge: a perception by the decision topic (matched by the
-JointState's stamp) and the object topic (`answer_to` the same stamp, after the bridge dispatched the next action);
-a goal, a feedback or a give-up by the object topic's `answer_to`. A refusal raises `ProtocolError` with the
-bridge's reason, as a refused HTTP request does. The node spins on a thread of its own in a context of its own,
-so the link can live inside a process that runs other rclpy nodes.
+Each request is published (again every RESEND_S seconds until answered) and answered by the bridge: a perception
+by the decision topic (matched by the JointState's stamp) and the object topic (`answer_to` the same stamp, after
+the bridge dispatched the next action); a goal, a feedback or a give-up by the object topic's `answer_to`. A
+refusal raises `ProtocolError` with the bridge's reason, as a refused HTTP request does. The link's node has a
+context of its own (so it can live in a process that runs other rclpy nodes) and is spun by the calling thread
+while it waits for an answer: no thread hands a message over to another on the way (that cost a perception
+several milliseconds on a busy machine).
 """
 from __future__ import annotations
 
 import itertools
 import json
 import math
-import threading
 import time
 import uuid
 from typing import Any, Callable, Sequence
@@ -47,7 +48,6 @@ class Ros2Link:
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node(f"planhrc_worker_{next(_names)}", context=self.context)
-        self.cond = threading.Condition()
         self.decisions: dict[tuple[int, int], dict[str, Any]] = {}
         self.received_at: dict[tuple[int, int], float] = {}  # perf_counter() when each decision arrived
         self.other_decisions = 0  # decisions other callers caused (with an event_seq), as they arrive
@@ -65,8 +65,6 @@ class Ros2Link:
             self.node.create_subscription(String, spec.name(object_id), handler, qos_of(spec, depth=100))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, name=f"ros2-link-{object_id}", daemon=True)
-        self.thread.start()
         try:
             self._wait(lambda: self.latest is not None and all(p.get_subscription_count() > 0
                                                                for p in self.pub.values()),
@@ -75,57 +73,50 @@ class Ros2Link:
             self.close()
             raise
 
-    def _spin(self) -> None:
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.1)
-            except Exception:  # the context was shut down while waiting: the link is closing
-                if self.context.ok():
-                    raise
-                return
-
     # -- what comes in ------------------------------------------------------------------------------------
     def _on_decision(self, msg: String) -> None:
         arrived = time.perf_counter()
         body = json.loads(msg.data)
         stamp = body.get("perception_stamp")
-        with self.cond:
-            if stamp:
-                self.decisions[(int(stamp[0]), int(stamp[1]))] = body
-                self.received_at[(int(stamp[0]), int(stamp[1]))] = arrived
-            elif body.get("event_seq") is not None:
-                self.other_decisions += 1
-            self.cond.notify_all()
+        if stamp:
+            self.decisions[(int(stamp[0]), int(stamp[1]))] = body
+            self.received_at[(int(stamp[0]), int(stamp[1]))] = arrived
+        elif body.get("event_seq") is not None:
+            self.other_decisions += 1
 
     def _on_object(self, msg: String) -> None:
         body = json.loads(msg.data)
-        with self.cond:
-            self.latest = body
-            answer = body.get("answer_to")
-            if answer:
-                self.answers[(answer["topic"], answer.get("request_id"))] = body
-            self.cond.notify_all()
+        self.latest = body
+        answer = body.get("answer_to")
+        if answer:
+            self.answers[(answer["topic"], answer.get("request_id"))] = body
 
     def _on_plan(self, msg: String) -> None:
         plan = json.loads(msg.data)
-        with self.cond:
-            self.plans[plan["id"]] = plan
-            self.cond.notify_all()
+        self.plans[plan["id"]] = plan
+
+    def _spin_until(self, ready: Callable[[], bool], timeout_s: float) -> bool:
+        """Take what arrives until `ready()` or `timeout_s` passes."""
+        deadline = time.monotonic() + timeout_s
+        while not ready():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            self.executor.spin_once(timeout_sec=min(left, 0.1))
+        return True
 
     def _wait(self, ready: Callable[[], bool], what: str, timeout_s: float | None = None) -> None:
-        with self.cond:
-            if not self.cond.wait_for(ready, timeout=timeout_s or self.timeout_s):
-                raise ProtocolError(f"{what}: no answer on {topics.NAMESPACE}/{self.object_id}/ within "
-                                    f"{timeout_s or self.timeout_s:g} s (is `planhrc ros2-bridge` serving it?)")
+        if not self._spin_until(ready, timeout_s or self.timeout_s):
+            raise ProtocolError(f"{what}: no answer on {topics.NAMESPACE}/{self.object_id}/ within "
+                                f"{timeout_s or self.timeout_s:g} s (is `planhrc ros2-bridge` serving it?)")
 
     def _send(self, publisher: Any, msg: Any, ready: Callable[[], bool], what: str) -> None:
         """Publish `msg` until `ready()` (an answer came), sending it again every RESEND_S seconds."""
         deadline = time.monotonic() + self.timeout_s
         while True:
             publisher.publish(msg)
-            with self.cond:
-                if self.cond.wait_for(ready, timeout=max(0.0, min(RESEND_S, deadline - time.monotonic()))):
-                    return
+            if self._spin_until(ready, max(0.0, min(RESEND_S, deadline - time.monotonic()))):
+                return
             if time.monotonic() >= deadline:
                 raise ProtocolError(f"{what}: no answer on {topics.NAMESPACE}/{self.object_id}/ within "
                                     f"{self.timeout_s:g} s (is `planhrc ros2-bridge` serving it?)")
@@ -133,8 +124,7 @@ class Ros2Link:
     def _answer(self, topic: str, request_id: str) -> dict[str, Any]:
         key = (topic, request_id)
         self._wait(lambda: key in self.answers, topic)
-        with self.cond:
-            body = self.answers.pop(key)
+        body = self.answers.pop(key)
         if not body["answer_to"]["ok"]:
             raise ProtocolError(f"{topic}: refused by the bridge: {body['answer_to']['detail']}")
         return body
@@ -200,8 +190,7 @@ class Ros2Link:
             return None
         key = ("perceived", stamp_id(*self.last_perception))
         action = self.decisions[self.last_perception].get("next_action")
-        with self.cond:
-            body = self.answers.get(key)
+        body = self.answers.get(key)
         execution = (body or {}).get("object", {}).get("execution") or {}
         if action is None or execution.get("dispatched_action_id") != action.get("id"):
             return None
@@ -234,10 +223,9 @@ class Ros2Link:
             raise ProtocolError(f"object_id: this link serves {self.object_id}, not {object_id}")
 
     def close(self) -> None:
-        self.context.try_shutdown()
-        self.thread.join(timeout=2.0)
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
+        self.context.try_shutdown()
 
     def __enter__(self) -> "Ros2Link":
         return self
