@@ -79,3 +79,28 @@ def _descends(pid: int, ancestor: int) -> bool:
     while pid in table and pid != ancestor:
         pid = table[pid][0]
     return pid == ancestor
+
+
+def test_planhrc_worker_over_ros2_reaches_the_goal_through_a_running_bridge(tmp_path):
+    from planhrc.client import KBClient
+
+    from .servers import TOKEN, serving
+    from .test_ros2_bridge import bridge
+
+    _, env = demo_command(ROS2_PYTHON, tmp_path)
+    env["PLANHRC_TOKEN"] = TOKEN
+    with serving(tmp_path / "kb.sqlite3", env={"PLANHRC_TOKEN": TOKEN}) as url, KBClient(url, token=TOKEN) as kb:
+        oid = kb.create_object("paper-3-4", 3, 4, "relative", base_point_xy=(0.7, 0.2325))["id"]
+        with bridge(url, env, tmp_path / "bridge.log", "--object", oid):
+            worker = subprocess.run(
+                [str(ROS2_PYTHON), "-m", "planhrc.cli", "worker", "--ros2", "--object", oid, "--perception", "fallback",
+                 "--initial", "90,90,90", "--base", "0.7,0.2325", "--goal", "90,180,270", "--max-steps", "12",
+                 "--out", str(tmp_path / "worker")], env=env, capture_output=True, text=True, timeout=600)
+        assert worker.returncode == 0, worker.stderr[-3000:]
+        summary = json.loads(worker.stdout)
+        assert summary["reached_goal"] and summary["decisions"][-1] == "goal_reached"
+        kinds = [e["kind"] for e in kb.read_events(oid)]
+        # every request of the worker reached the service through the bridge: the goal, perceptions, dispatches
+        # and the feedback of each action
+        assert kinds.count("dispatched") == kinds.count("feedback") == len(summary["outcomes"]) > 0
+        assert "goal_set" in kinds and kinds[-1] == "goal_reached"
