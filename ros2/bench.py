@@ -105,8 +105,9 @@ def run_ros2_bench(samples: int, links: int, orientations: int, seed: int) -> di
                             times[(kind, door)].append(seconds)
                         else:
                             other[(kind, door)] += 1
-    parts = {kind: {door: summary_ms(times[(kind, door)]) | {"other_decisions": other[(kind, door)]}
-                    for door in DOORS} for kind in KINDS}
+    parts: dict[str, dict[str, Any]] = {
+        kind: {door: summary_ms(times[(kind, door)]) | {"other_decisions": other[(kind, door)]} for door in DOORS}
+        for kind in KINDS}
     for kind in KINDS:
         parts[kind]["median_added_ms"] = round(
             (percentile(times[(kind, "ros2")], 0.5) - percentile(times[(kind, "http")], 0.5)) * 1000, 2)
