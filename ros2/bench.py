@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from planhrc.cli_args import int_in, non_negative_int, writable_dir
-from planhrc.stats import percentile
+from planhrc.stats import cpu_model, percentile
 
 TARGET_MS = 5.0  # the target: ROS 2 adds at most this much at the median
 # a pause after each request and what follows it: the bridge's reads and markers, the service's writing of the
@@ -115,7 +115,7 @@ def run_ros2_bench(samples: int, links: int, orientations: int, seed: int) -> di
         "command": f"planhrc ros2-bench --samples {samples} --links {links} --orientations {orientations} "
                    f"--seed {seed}",
         "object": {"links": links, "orientations": orientations, "formulation": "relative"},
-        "machine": {"cpu": _cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
+        "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
                     "load_start": round(load_start, 2), "load_end": round(os.getloadavg()[0], 2)},
         **parts,
         "median_added_ms": parts["replan"]["median_added_ms"],
@@ -169,13 +169,3 @@ def markdown(report: dict[str, Any]) -> str:
         "plan.",
         "",
     ])
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
