@@ -200,3 +200,11 @@ def test_sigterm_stops_the_bridge_at_once_and_leaves_nothing_running(service, ro
     lines = [line for line in log.read_text(errors="replace").splitlines() if line.strip()]
     assert lines[-1] == "planhrc ros2-bridge: terminated" and "Traceback" not in log.read_text()
     assert subprocess.run(["pgrep", "-g", str(proc.pid)], capture_output=True).returncode == 1
+
+
+def test_an_unknown_object_is_refused_in_one_line(service, ros_env, tmp_path):
+    result = subprocess.run([str(ROS2_PYTHON), "-m", "planhrc.cli", "ros2-bridge", "--kb", service, "--object", "obj9"],
+                            env=ros_env, capture_output=True, text=True, timeout=120)
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert lines[-1].startswith("planhrc ros2-bridge: --object: obj9: GET /objects/obj9: 404")
