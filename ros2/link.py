@@ -6,8 +6,7 @@ by the decision topic (matched by the JointState's stamp) and the object topic (
 the bridge dispatched the next action); a goal, a feedback or a give-up by the object topic's `answer_to`. A
 refusal raises `ProtocolError` with the bridge's reason, as a refused HTTP request does. The link's node has a
 context of its own (so it can live in a process that runs other rclpy nodes) and is spun by the calling thread
-while it waits for an answer: no thread hands a message over to another on the way (that cost a perception
-several milliseconds on a busy machine).
+while it waits for an answer: no thread hands a message over to another on the way (docs/ros2.md).
 """
 from __future__ import annotations
 

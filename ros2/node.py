@@ -4,10 +4,9 @@
 the service's list is read again every `poll_s` seconds), publishes its health on /diagnostics once a second,
 and spins until Ctrl-C or SIGTERM (the command line's handlers unwind the stack; everything is closed then).
 Each object has a node of its own; every node is spun by one single-threaded executor on the main thread, so
-requests are handled one at a time, in the order they are taken. Callbacks run on other threads (a multi-threaded
-executor, or an executor per object on a thread of its own) cost a perception 5-9 ms more on a busy 2-core machine
-(alternating runs of `planhrc ros2-bench`, load average 4-7): a re-plan of one object now waits for the request
-before it, whichever object that was.
+requests are handled one at a time, in the order they are taken: a re-plan of one object waits for the request
+before it, whichever object that was. Callbacks handed to other threads (a multi-threaded executor, or an executor
+per object on a thread of its own) made every perception markedly slower on a busy machine (docs/ros2.md).
 """
 from __future__ import annotations
 
