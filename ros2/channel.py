@@ -236,8 +236,11 @@ class ObjectChannel:
         self.counts["decisions"] += 1
         plan_id = answer.get("plan_id")
         if plan_id and plan_id != self.shown_plan_id:
-            self.pub["plan"].publish(String(data=json.dumps(self._read_plan(plan_id), separators=(",", ":"))))
-            self.shown_plan_id = plan_id
+            try:
+                self.pub["plan"].publish(String(data=json.dumps(self._read_plan(plan_id), separators=(",", ":"))))
+                self.shown_plan_id = plan_id
+            except ProtocolError as exc:  # the next decision tries again; the answers below still go out
+                log.warning("%s: plan %s not published (%s)", self.object_id, plan_id, exc)
         if answer["decision"] == DecisionKind.HUMAN_HELP_REQUESTED or self.help_shown:
             self.help_shown = answer["decision"] == DecisionKind.HUMAN_HELP_REQUESTED
             help_body = {"help": (answer.get("help") or []) if self.help_shown else [], "reason": answer["reason"]}
