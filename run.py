@@ -7,6 +7,11 @@ a task.
     python3 ./run.py setup            # only create or update .venv
     python3 ./run.py lock             # rewrite constraints.txt from .venv (pip freeze)
     python3 ./run.py planhrc ARGS...  # any `planhrc` command inside the environment
+    python3 ./run.py ros2-bridge --kb URL [ARGS...]  # the ROS 2 bridge, in `.venv-ros2`
+
+`.venv-ros2` (made on first use of `ros2-bridge`, and by `test` so that the ROS 2 tests have their peers) holds
+planhrc with the `sim` and `ros2` extras, pinned by constraints.txt and ros2-constraints.txt. The ROS 2 wheels stay
+out of `.venv`: they install a start-up hook that re-launches every interpreter of their environment.
 
 The environment gets planhrc (editable) with the `sim` and `test` extras, pinned by constraints.txt (the
 versions the suite last passed with), so every machine resolves the same versions. Each step says what it does in
@@ -41,7 +46,17 @@ CONSTRAINTS_HEADER = """\
 # Regenerate with `python3 ./run.py lock` (delete this file first to let pip resolve fresh versions, then run the
 # suite before locking).
 """
-TASKS = ("demo", "test", "setup", "planhrc", "lock")
+ROS2_VENV = ROOT / ".venv-ros2"
+ROS2_STAMP = ROS2_VENV / ".planhrc-installed"
+ROS2_LOG = ROS2_VENV / "install.log"
+ROS2_CONSTRAINTS = ROOT / "ros2-constraints.txt"
+ROS2_EXTRAS = "sim,ros2"
+ROS2_CONSTRAINTS_HEADER = """\
+# The ROS 2 wheels of .venv-ros2 (ROS 2 Kilted from PyPI), pinned beside constraints.txt, which pins the rest.
+# Used as `pip install -c constraints.txt -c ros2-constraints.txt ...` by run.py. Regenerate with
+# `python3 ./run.py lock` (it writes both files when .venv-ros2 exists).
+"""
+TASKS = ("demo", "test", "setup", "planhrc", "lock", "ros2-bridge")
 
 
 class SetupError(Exception):
@@ -251,6 +266,75 @@ def run_task(cmd: "list[str]") -> int:
             child.terminate()
 
 
+def ros2_python() -> "Path":
+    return ROS2_VENV / "bin/python"
+
+
+def ros2_venv_version() -> "tuple[int, ...]":
+    """(major, minor) of the interpreter `.venv-ros2` was made with, from its pyvenv.cfg (not by running it: its
+    start-up hook re-launches the interpreter)."""
+    text = (ROS2_VENV / "pyvenv.cfg").read_text(encoding="utf-8")
+    match = re.search(r"^version(?:_info)?\s*=\s*(\d+)\.(\d+)", text, re.MULTILINE)
+    return (int(match.group(1)), int(match.group(2))) if match else ()
+
+
+def ros2_digest() -> str:
+    digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes())
+    for pins in (CONSTRAINTS, ROS2_CONSTRAINTS):
+        if pins.exists():
+            digest.update(pins.read_bytes())
+    digest.update(ROS2_EXTRAS.encode())
+    digest.update(".".join(map(str, sys.version_info[:2])).encode())
+    return digest.hexdigest()
+
+
+def ensure_ros2_environment() -> "Path":
+    """Create `.venv-ros2` (planhrc with the sim and ros2 extras) when it is missing or stale. The ROS 2 wheels
+    are manylinux builds: elsewhere this says so and creates nothing."""
+    if not sys.platform.startswith("linux"):
+        raise SetupError("the ROS 2 wheels are built for Linux only: .venv-ros2 was not created")
+    if ROS2_VENV.exists() and not (ROS2_VENV / "pyvenv.cfg").exists():
+        raise SetupError(f"{ROS2_VENV} does not look like a virtual environment (no pyvenv.cfg); remove it yourself")
+    if ROS2_VENV.exists() and (not ROS2_STAMP.exists() or ros2_venv_version() != sys.version_info[:2]):
+        shutil.rmtree(ROS2_VENV)  # half-made, or made by another interpreter: start again
+    digest = ros2_digest()
+    if ROS2_STAMP.exists() and ROS2_STAMP.read_text().strip() == digest and ros2_python().exists():
+        return ros2_python()
+    if not ros2_python().exists():
+        say("creating .venv-ros2 (ROS 2 wheels from PyPI)")
+        venv.EnvBuilder(with_pip=True).create(ROS2_VENV)
+    ROS2_STAMP.unlink(missing_ok=True)
+    say(f"installing planhrc with ROS 2's rclpy into .venv-ros2 (log: {shown(ROS2_LOG)})")
+    pins = [arg for path in (CONSTRAINTS, ROS2_CONSTRAINTS) if path.exists() for arg in ("-c", str(path))]
+    py = str(ros2_python())
+    run_logged([py, "-m", "pip", "install", "--upgrade", "pip", *pins], ROS2_LOG, "upgrading pip in .venv-ros2")
+    run_logged([py, "-m", "pip", "install", *pins, "-e", f"{ROOT}[{ROS2_EXTRAS}]"], ROS2_LOG,
+               "installing planhrc into .venv-ros2")
+    ROS2_STAMP.write_text(digest)
+    return ros2_python()
+
+
+def write_ros2_constraints(py: str) -> None:
+    """ros2-constraints.txt := what `pip freeze` of `.venv-ros2` adds to constraints.txt (the ROS 2 wheels)."""
+    frozen = subprocess.run([py, "-m", "pip", "freeze", "--exclude-editable"], check=True, capture_output=True,
+                            text=True).stdout
+    core = {line.split("==")[0].lower() for line in CONSTRAINTS.read_text().splitlines() if "==" in line}
+    lines = sorted((l for l in frozen.splitlines() if "==" in l and l.split("==")[0].lower() not in core
+                    and not l.lower().startswith("planhrc")), key=str.lower)
+    ROS2_CONSTRAINTS.write_text(ROS2_CONSTRAINTS_HEADER + "\n".join(lines) + "\n")
+    say(f"wrote {ROS2_CONSTRAINTS.name}: {len(lines)} pinned distributions")
+
+
+def try_ros2_environment() -> None:
+    """For the test task: make `.venv-ros2` if it can be made; otherwise the ROS 2 tests skip, saying why."""
+    try:
+        ensure_ros2_environment()
+    except InstallFailed as exc:
+        say(f"{exc}\nThe ROS 2 tests will skip.")
+    except (SetupError, OSError) as exc:
+        say(f".venv-ros2 could not be made ({exc}): the ROS 2 tests will skip")
+
+
 def main(argv: "list[str]") -> int:
     if not argv or argv[0] in {"-h", "--help"}:
         print(__doc__)
@@ -264,6 +348,7 @@ def main(argv: "list[str]") -> int:
         py = str(ensure_environment())
         if task == "test":
             ensure_chromium()
+            try_ros2_environment()
     except InstallFailed as exc:
         say(f"{exc}\nRun the same command again to retry: the environment will be repaired.")
         return 1
@@ -277,10 +362,18 @@ def main(argv: "list[str]") -> int:
         return 0
     if task == "lock":
         write_constraints(py)
+        if ros2_python().exists():
+            write_ros2_constraints(str(ros2_python()))
         return 0
     if task == "test":
         say(" ".join(["running the tests: pytest", *rest]))
         cmd = [py, "-m", "pytest", *rest]
+    elif task == "ros2-bridge":
+        try:
+            cmd = [str(ensure_ros2_environment()), "-m", "planhrc.cli", "ros2-bridge", *rest]
+        except SetupError as exc:
+            say(f"cannot make .venv-ros2: {exc}")
+            return 1
     elif task == "demo":
         say(" ".join(["running the demo: planhrc demo", *rest]))
         cmd = [py, "-m", "planhrc.cli", "demo", *rest]

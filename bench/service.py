@@ -33,7 +33,7 @@ import httpx
 from planhrc.cli_args import SubParsers
 from planhrc.service_process import RunningService as Server
 from planhrc.service_process import running_service as start_service
-from planhrc.stats import percentile
+from planhrc.stats import cpu_model, percentile
 from planhrc.vocabulary import DecisionKind
 
 TOKEN = "service-bench-token"
@@ -419,7 +419,7 @@ def run_service_bench(args: argparse.Namespace) -> int:
     if unknown:
         print(f"planhrc service-bench: --parts: unknown part(s) {', '.join(sorted(unknown))}", file=sys.stderr)
         return 2
-    report: dict[str, Any] = {"machine": {"cpu": _cpu_model(), "cores": os.cpu_count(),
+    report: dict[str, Any] = {"machine": {"cpu": cpu_model(), "cores": os.cpu_count(),
                                           "python": platform.python_version(),
                                           "load_at_start": round(os.getloadavg()[0], 2)}}
     try:
@@ -539,13 +539,3 @@ def _growth(first: float | None, last: float | None) -> str:
     if not first or not last:
         return "not measured"
     return f"{first} -> {last} ms ({last / first - 1:+.0%})"
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"

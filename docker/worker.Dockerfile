@@ -24,6 +24,7 @@ COPY robot_sim ./robot_sim
 COPY ontology ./ontology
 COPY pipeline ./pipeline
 COPY bench ./bench
+COPY ros2 ./ros2
 RUN pip install --no-cache-dir --no-deps -c constraints.txt . && rm -rf build
 # 3. An unprivileged user that owns nothing but the output folder.
 RUN groupadd --system --gid 10001 planhrc \

@@ -35,6 +35,14 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser", "what the simulated cell measures"),
     "service-bench": ("planhrc.bench.service", "add_service_bench_parser",
                       "the KB service measured with a long history, over HTTP"),
+    "ros2-bridge": ("planhrc.ros2.cli", "add_bridge_parser", "serve the KB service's objects on a ROS 2 graph"),
+    "ros2-bench": ("planhrc.ros2.bench", "add_ros2_bench_parser", "perception to decision over ROS 2 and over HTTP"),
+}
+# `worker --ros2` and `demo --ros2`: the same commands, registered by the ROS 2 layer (which gives the worker its
+# link through the bridge's topics); the robot's modules never import that layer.
+ROS2_VARIANTS: dict[str, tuple[str, str]] = {
+    "worker": ("planhrc.ros2.robot_cli", "add_worker_parser"),
+    "demo": ("planhrc.ros2.robot_cli", "add_demo_parser"),
 }
 
 # Commands that load native libraries printing to file descriptor 1 (PyBullet): their fd 1 is diverted so that
@@ -84,6 +92,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
         if name != wanted:  # only the command that runs is imported
             sub.add_parser(name, help=help_text)
             continue
+        module, func = command_entry(name, argv)
         add: Callable[[SubParsers], object] = getattr(importlib.import_module(module), func)
         add(sub)
     return parser
@@ -91,6 +100,13 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
 
 def wanted_command(argv: list[str]) -> str | None:
     return next((a for a in argv if a in COMMANDS), None)
+
+
+def command_entry(name: str, argv: list[str]) -> tuple[str, str]:
+    """(module, parser function) of a command: the ROS 2 layer's variant when `--ros2` follows its name."""
+    if name in ROS2_VARIANTS and "--ros2" in argv[argv.index(name) + 1:]:
+        return ROS2_VARIANTS[name]
+    return COMMANDS[name][0], COMMANDS[name][1]
 
 
 def missing_dependency(exc: ImportError) -> str:
@@ -209,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
                 quiet = wanted in NATIVE_STDOUT_COMMANDS and not verbose
                 try:
                     with fd_silenced(2) if quiet else nullcontext():
-                        importlib.import_module(COMMANDS[wanted][0])
+                        importlib.import_module(command_entry(wanted, argv)[0])
                 except ImportError as exc:
                     return _unavailable(wanted, exc)
             return _run(argv)

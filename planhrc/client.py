@@ -18,11 +18,12 @@ applied twice. 4xx answers are not retried: they raise `ProtocolError` with the 
 """
 from __future__ import annotations
 
+import json
 import logging
 import time
 import uuid
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import httpx
 
@@ -209,6 +210,9 @@ class KBClient:
         sentence); the service records it and answers `{"event_seq": ...}`."""
         return self._object("POST", f"/objects/{object_id}/give-up", {"reason": reason, "message": message})
 
+    def list_objects(self) -> list[dict[str, Any]]:
+        return self._list("GET", "/objects")
+
     def read_object(self, object_id: str) -> dict[str, Any]:
         return self._object("GET", f"/objects/{object_id}")
 
@@ -218,13 +222,37 @@ class KBClient:
     def read_state(self, state_id: str) -> dict[str, Any]:
         return self._object("GET", f"/states/{state_id}")
 
-    def read_events(self, object_id: str) -> list[dict[str, Any]]:
-        """Every event of the object (decisions with their reasons), oldest first."""
-        path = f"/objects/{object_id}/events"
-        events = self._request("GET", path)
-        if not isinstance(events, list):
-            raise ProtocolError(f"GET {path}: expected a JSON list, got {type(events).__name__}")
-        return events
+    def read_events(self, object_id: str, after_seq: int = 0) -> list[dict[str, Any]]:
+        """A page of the object's events after `after_seq` (decisions with their reasons), oldest first."""
+        path = f"/objects/{object_id}/events" + (f"?after_seq={int(after_seq)}" if after_seq else "")
+        return self._list("GET", path)
+
+    def stream_events(self, object_id: str, after_seq: int = 0, timeout_s: float = 10.0) -> Iterator[dict[str, Any]]:
+        """The object's events after `after_seq` as the service stores them (its Server-Sent Events stream), for
+        up to `timeout_s` seconds; then the iterator ends and the caller goes on from the last `seq` it saw.
+        Transport errors are not retried here: they raise ProtocolError, and the caller reconnects."""
+        path = f"/objects/{object_id}/events/stream"
+        params = {"after_seq": int(after_seq), "timeout_s": timeout_s}
+        try:
+            with self._http.stream("GET", path, params=params, timeout=timeout_s + 30.0) as response:
+                if response.status_code >= 400:
+                    response.read()
+                    raise ProtocolError(f"GET {path}: {response.status_code} {_detail(response)}", response.status_code)
+                for line in response.iter_lines():
+                    if line.startswith("data:"):
+                        event = json.loads(line[5:])
+                        if not isinstance(event, dict):
+                            raise ProtocolError(f"GET {path}: expected JSON objects, got {type(event).__name__}")
+                        yield event
+        except httpx.TransportError as exc:
+            raise ProtocolError(f"GET {path}: {type(exc).__name__}: {exc}") from None
+
+    def _list(self, method: str, path: str) -> list[dict[str, Any]]:
+        """`_request` for a route that answers a JSON list of objects."""
+        items = self._request(method, path)
+        if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
+            raise ProtocolError(f"{method} {path}: expected a JSON list of objects, got {type(items).__name__}")
+        return items
 
     def health(self) -> dict[str, Any]:
         return self._object("GET", "/health")

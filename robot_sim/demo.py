@@ -19,10 +19,10 @@ import statistics
 import sys
 import time
 from collections import Counter
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -32,6 +32,7 @@ from planhrc.service_process import ServiceStartError, running_service
 from planhrc.geometry import configuration_feasible
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import SceneSpec, is_feasible, random_orientations
+from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.vocabulary import ActionOutcome, DecisionKind, Infeasible
 
 if TYPE_CHECKING:
@@ -121,6 +122,11 @@ def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interven
                         base_point_xy=spec.base_xy)
 
 
+# (service URL, token, object id, episode folder) -> the worker's link to the service for that object (the ROS 2
+# layer's: a bridge and its topics); without one the worker talks HTTP through the demo's KBClient
+WorkerLink = Callable[[str, "str | None", str, Path], AbstractContextManager[ServiceLink]]
+
+
 @contextmanager
 def kb_service(out_dir: Path, token: str, startup_timeout_s: float = 90.0) -> Iterator[str]:
     """`planhrc serve` as a child process on a free loopback port (`planhrc.service_process`); yields its URL,
@@ -144,7 +150,7 @@ def serve_until_interrupted(url: str) -> None:
 
 
 def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir: Path, gui: bool,
-                perception: str, max_steps: int, seed: int) -> dict[str, Any]:
+                perception: str, max_steps: int, seed: int, worker_link: WorkerLink | None = None) -> dict[str, Any]:
     from planhrc.robot_sim.worker import run_worker
 
     spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg,
@@ -154,9 +160,12 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         obj = kb.create_object(scenario.name, len(scenario.initial_deg), scenario.orientations,
                                scenario.formulation, base_point_xy=spec.base_xy)
         print(f"[demo] watch {scenario.name} live: {kb_url}/?object={obj['id']}", flush=True)
-        summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
-                             token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
-                             seed=seed, kb=kb)
+        links: AbstractContextManager[ServiceLink] = (
+            nullcontext(kb) if worker_link is None else worker_link(kb_url, token, obj["id"], out_dir))
+        with links as link:
+            summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
+                                 token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
+                                 seed=seed, kb=link)
         events = kb.read_events(obj["id"])
     decisions = [e for e in events if e["kind"] in {str(kind) for kind in DecisionKind}]
     counts = Counter(e["kind"] for e in decisions)
@@ -248,7 +257,7 @@ def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
 
 def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str | None = None,
              token: str | None = None, episodes: int = 1, perception: str = "camera", max_steps: int = 40,
-             seed: int = 0, keep_serving: bool = False) -> dict[str, Any]:
+             seed: int = 0, keep_serving: bool = False, worker_link: WorkerLink | None = None) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     if scenario_name == "random":
         scenarios = [random_scenario(seed + i) for i in range(episodes)]
@@ -262,7 +271,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
     def run_all(url: str, tok: str | None) -> None:
         for i, sc in enumerate(scenarios):
             folder = out_dir / f"episode-{i + 1:03d}"  # the worker's own records stay beside the demo's summary
-            result = run_episode(url, tok, sc, folder, gui, perception, max_steps, seed + i)
+            result = run_episode(url, tok, sc, folder, gui, perception, max_steps, seed + i, worker_link)
             results.append(result)
             print(f"[demo] {sc.name}: {'goal reached' if result['reached_goal'] else result['stop_reason']} "
                   f"in {result['time_to_goal_s']:.1f} s, {len(result['actions'])} actions, "
@@ -275,6 +284,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
             "reached_goal": sum(r["reached_goal"] for r in results),
             "reached_goal_without_human_assist": sum(r["reached_goal"] and not r["human_assists"] for r in results),
             "perception": perception,
+            "worker_link": "ros2" if worker_link is not None else "http",
             "wall_s": round(time.perf_counter() - started, 3),
             **aggregate(results),
             "results": results,
@@ -295,7 +305,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
     return summarize()
 
 
-def add_demo_parser(subparsers: SubParsers) -> None:
+def add_demo_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("demo", help="KB service + Baxter worker: one cooperation scenario to the end",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default="fig13", choices=sorted(DEMO_SCENARIOS) + ["random"])
@@ -312,18 +322,26 @@ def add_demo_parser(subparsers: SubParsers) -> None:
     p.add_argument("--seed", type=non_negative_int, default=0)
     p.add_argument("--keep-serving", action="store_true",
                    help="leave the started service (and its console at /) up after the episodes, until Ctrl-C")
+    p.add_argument("--ros2", action="store_true",
+                   help="the worker talks to the service over ROS 2 through a `planhrc ros2-bridge` (in .venv-ros2)")
     p.set_defaults(func=run_demo_cli)
+    return p
 
 
-def run_demo_cli(args: argparse.Namespace) -> int:
+def run_demo_cli(args: argparse.Namespace, worker_link: WorkerLink | None = None) -> int:
+    """The demo's command; `worker_link` is given by the ROS 2 layer for `--ros2`."""
     from planhrc.robot_sim.worker import display_problem
 
+    if args.ros2 and worker_link is None:
+        print("planhrc demo: --ros2: the ROS 2 link is made by `planhrc demo --ros2` in .venv-ros2", file=sys.stderr)
+        return 2
     if args.gui and (problem := display_problem()):
         print(f"planhrc demo: --gui: {problem}", file=sys.stderr)
         return 2
     try:
         summary = run_demo(args.scenario, Path(args.out), args.gui, args.kb, args.token, args.episodes,
-                           args.perception, args.max_steps, args.seed, keep_serving=args.keep_serving)
+                           args.perception, args.max_steps, args.seed, keep_serving=args.keep_serving,
+                           worker_link=worker_link)
     except (SimError, ProtocolError) as exc:
         print(f"planhrc demo: {exc}", file=sys.stderr)
         return 1

@@ -44,6 +44,7 @@ from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_fram
                                        draw_configurations, step_caption, write_movie)
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
+from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.robot_sim.skills import ActionResult, Interrupt, Robot, RotationAction, perform_action
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, Infeasible, StopReason
 
@@ -147,7 +148,7 @@ def _joint_index(name: str) -> int:
     return int(match.group(1))
 
 
-def _read_goal_differences(kb: KBClient, obj: dict[str, Any]) -> dict[int, float]:
+def _read_goal_differences(kb: ServiceLink, obj: dict[str, Any]) -> dict[int, float]:
     """The goal as link K -> wanted theta_K - theta_(K-1), read from the service (empty when unknown)."""
     state_id = obj.get("goal_state_id")
     if not state_id:
@@ -161,7 +162,7 @@ def _read_goal_differences(kb: KBClient, obj: dict[str, Any]) -> dict[int, float
     return goal_differences(str(obj.get("formulation", "relative")), values)
 
 
-def _following_action(kb: KBClient, action: dict[str, Any]) -> tuple[int, int, float] | None:
+def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int, float] | None:
     """(turned, held, delta) of the plan's action after `action`, or None."""
     plan_id, step = action.get("plan_id"), action.get("step")
     if not plan_id or step is None:
@@ -200,14 +201,15 @@ def run_worker(
     goal_link_orientations_deg: Sequence[float] | None = None,
     sigma_deg: float = 1.0,
     seed: int = 0,
-    kb: KBClient | None = None,
+    kb: ServiceLink | None = None,
     record_motion: bool = True,
     record_frames: bool = True,
 ) -> WorkerSummary:
     """Run the cooperation loop against the KB service until the goal is reached, or it cannot go on.
 
     `record_frames=False` skips the camera frames and the GIF when perceiving without the camera (faster);
-    `record_motion=False` leaves out the GIF's frames taken half-way through each action.
+    `record_motion=False` leaves out the GIF's frames taken half-way through each action. `kb` is the link to
+    the service (default: a `KBClient` on `kb_url`; the ROS 2 layer passes its link through the bridge's topics).
     """
     if perception not in ("camera", "fallback"):
         raise SimError(f"perception: must be 'camera' or 'fallback', got {perception!r}")
@@ -215,7 +217,7 @@ def run_worker(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     own_kb = kb is None
-    kb = kb or KBClient(kb_url, token=token)
+    kb = kb if kb is not None else KBClient(kb_url, token=token)
     client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
     scene: Scene | None = None
     try:
@@ -260,7 +262,7 @@ def run_worker(
         if scene is not None:
             scene.close()
         client.disconnect()
-        if own_kb:
+        if isinstance(kb, KBClient) and own_kb:
             kb.close()
 
 
@@ -534,7 +536,7 @@ def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], 
     return ActionResult(outcome, result.reason, f"in single steps: {result.message}", total, reached)
 
 
-def _feedback(kb: KBClient, object_id: str, action_id: str, outcome: ActionOutcome, message: str,
+def _feedback(kb: ServiceLink, object_id: str, action_id: str, outcome: ActionOutcome, message: str,
               reason: FailureReason | None = None, measured_deg: float | None = None) -> None:
     """Post an action's outcome with its sentence and, for a failed or partial one, its reason and the turned
     link's measured orientation."""
@@ -543,7 +545,7 @@ def _feedback(kb: KBClient, object_id: str, action_id: str, outcome: ActionOutco
     kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
 
 
-def _give_up(kb: KBClient, object_id: str, reason: GiveUpReason, message: str) -> None:
+def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str) -> None:
     """Tell the service the worker stops (it records the reason and dispatches nothing until a perception)."""
     log.warning("giving up on %s: %s", object_id, message)
     kb.give_up(object_id, reason, message[:500])
@@ -635,7 +637,10 @@ def display_problem() -> str | None:
 def add_worker_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("worker", help="run the simulated Baxter worker against the KB service",
                               description="Perceive, ask the KB service for actions and execute them in PyBullet.")
-    p.add_argument("--kb", type=http_url, required=True, help="base URL of the KB service, e.g. http://127.0.0.1:8000")
+    p.add_argument("--kb", type=http_url, default=None,
+                   help="base URL of the KB service, e.g. http://127.0.0.1:8000 (required unless --ros2)")
+    p.add_argument("--ros2", action="store_true",
+                   help="talk to the service over ROS 2, through the topics of a running `planhrc ros2-bridge`")
     p.add_argument("--object", required=True, dest="object_id", help="object id in the KB service")
     p.add_argument("--gui", action="store_true", help="show the PyBullet GUI")
     p.add_argument("--token", default=None, help="bearer token for the service's writes")
@@ -653,7 +658,14 @@ def add_worker_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     return p
 
 
-def run_worker_cli(args: argparse.Namespace) -> int:
+def run_worker_cli(args: argparse.Namespace, link: ServiceLink | None = None) -> int:
+    """The worker's command; `link` is given by the ROS 2 layer for `--ros2`."""
+    if args.kb is None and not args.ros2:
+        print("planhrc worker: --kb: required (or --ros2, through a running ROS 2 bridge)", file=sys.stderr)
+        return 2
+    if args.ros2 and link is None:
+        print("planhrc worker: --ros2: the ROS 2 link is made by `planhrc worker --ros2` in .venv-ros2", file=sys.stderr)
+        return 2
     if args.gui and (problem := display_problem()):
         print(f"planhrc worker: --gui: {problem}", file=sys.stderr)
         return 2
@@ -663,8 +675,11 @@ def run_worker_cli(args: argparse.Namespace) -> int:
     spec = None
     try:
         if args.initial is not None or args.base is not None:
-            with KBClient(args.kb, token=args.token) as kb:
-                obj = kb.read_object(args.object_id)
+            if link is not None:
+                obj = link.read_object(args.object_id)
+            else:
+                with KBClient(args.kb, token=args.token) as kb:
+                    obj = kb.read_object(args.object_id)
             links = obj["links"]
             kwargs: dict[str, Any] = {"n_links": len(links), "link_length_m": float(links[0]["length_m"])}
             if args.initial is not None:
@@ -672,8 +687,8 @@ def run_worker_cli(args: argparse.Namespace) -> int:
             if args.base is not None:
                 kwargs["base_point_xy"] = tuple(args.base)
             spec = SceneSpec(**kwargs)
-        summary = run_worker(args.kb, args.object_id, spec, args.scenario, args.out, args.gui, args.max_steps,
-                             args.token, args.perception, args.goal, args.sigma, args.seed)
+        summary = run_worker(args.kb or "", args.object_id, spec, args.scenario, args.out, args.gui, args.max_steps,
+                             args.token, args.perception, args.goal, args.sigma, args.seed, kb=link)
     except (ProtocolError, SimError) as exc:
         print(f"planhrc worker: {exc}", file=sys.stderr)
         return 1

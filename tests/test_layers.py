@@ -9,9 +9,11 @@
     2 planner      planhrc.planner
     3 pipeline     planhrc.pipeline (the folder pipeline/)
     4 service      planhrc.kb_service (HTTP, service layer, the knowledge-base store, reasoners)
-    5 top          planhrc (the lazy facade), planhrc.cli, planhrc.bench (the folder bench/), planhrc.robot_sim
+    5 top          planhrc (the lazy facade), planhrc.cli, planhrc.bench (the folder bench/), planhrc.robot_sim,
+                   planhrc.ros2 (the folder ros2/: the ROS 2 bridge)
 
-`planhrc.robot_sim` may import only layer 0 and the client. A module missing from `LAYERS` fails the test, so a
+`planhrc.robot_sim` may import only layer 0 and the client. `planhrc.ros2` may import only layer 0, the client
+and the robot's public names (nothing starting with `_`); nothing else imports it. A module missing from `LAYERS` fails the test, so a
 new module is placed on purpose.
 """
 from __future__ import annotations
@@ -25,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # folder of the repository -> its import name (the package-dir mapping of pyproject.toml)
 PACKAGES = {"planhrc": "planhrc", "kb_service": "planhrc.kb_service", "translator": "planhrc.translator",
             "planner": "planhrc.planner", "robot_sim": "planhrc.robot_sim", "ontology": "planhrc.ontology",
-            "pipeline": "planhrc.pipeline", "bench": "planhrc.bench"}
+            "pipeline": "planhrc.pipeline", "bench": "planhrc.bench", "ros2": "planhrc.ros2"}
 
 # Longest prefix wins.
 LAYERS: dict[str, float] = {
@@ -40,9 +42,12 @@ LAYERS: dict[str, float] = {
     "planhrc.kb_service": 4,
     "planhrc": 5, "planhrc.cli": 5, "planhrc.bench": 5,
     "planhrc.robot_sim": 5,
+    "planhrc.ros2": 5,
 }
 # Besides its own package, robot_sim reaches only these layers (the service only over HTTP).
 ROBOT_SIM_MAY_IMPORT = {0, 0.5}
+# Besides its own package, the ROS 2 layer reaches only these layers and the robot (the service only over HTTP).
+ROS2_MAY_IMPORT = {0, 0.5}
 
 
 def layer_of(module: str) -> float | None:
@@ -101,7 +106,14 @@ def test_no_import_points_up(module):
         layer = layer_of(target)
         if layer is None or own is None:
             continue
-        if module.startswith("planhrc.robot_sim"):
+        if not module.startswith("planhrc.ros2") and target.startswith("planhrc.ros2"):
+            upward.append(f"{target} (the ROS 2 layer: nothing imports it)")
+        elif module.startswith("planhrc.ros2"):
+            allowed = (target.startswith(("planhrc.ros2", "planhrc.robot_sim")) or layer in ROS2_MAY_IMPORT)
+            private = target.startswith("planhrc.robot_sim") and target.rsplit(".", 1)[-1].startswith("_")
+            if not allowed or private:
+                upward.append(f"{target} (the ROS 2 layer reaches the service over HTTP, the robot by public names)")
+        elif module.startswith("planhrc.robot_sim"):
             if not target.startswith("planhrc.robot_sim") and layer not in ROBOT_SIM_MAY_IMPORT:
                 upward.append(f"{target} (layer {layer}; the worker reaches the service only over HTTP)")
         elif layer > own:
