@@ -282,7 +282,7 @@ def _signature(action: RotationAction) -> tuple[int, int, float, int]:
     return action.turned_link, action.held_link, round(action.delta_deg, 3), action.macro_steps
 
 
-def _loop(kb: KBClient, object_id: str, scene: Scene, robot: Robot, camera: CameraPerception, perceiver: Perceiver,
+def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: CameraPerception, perceiver: Perceiver,
           human: Human, scenario: Scenario, context: HumanContext, max_steps: int, run: _Run,
           record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3) -> StopReason:
     """Perceive -> decide -> act until the goal; returns why it stopped.

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from planhrc.cli_args import int_in, non_negative_int, writable_dir
+from planhrc.cli_args import int_in, non_negative_int, SubParsers, writable_dir
 from planhrc.stats import cpu_model, percentile
 
 TARGET_MS = 5.0  # the target: ROS 2 adds at most this much at the median
@@ -38,7 +38,7 @@ KINDS = ("replan", "unseen")
 EXPECTED = {"replan": "replan", "unseen": "incomplete_perception"}
 
 
-def add_ros2_bench_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_ros2_bench_parser(subparsers: SubParsers) -> None:
     p = subparsers.add_parser("ros2-bench", help="perception to decision over ROS 2 and over HTTP, in one run",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--samples", type=int_in(5), default=60, help="perceptions through each door")

@@ -72,16 +72,15 @@ class ObjectChannel:
         self.handled: OrderedDict[tuple[str, str], str | None] = OrderedDict()
         self.last_answer: dict[tuple[str, str], str] = {}
         self.plan: dict[str, Any] | None = None  # the last plan read (plans never change once stored)
-        name = lambda spec: spec.name(self.object_id)  # noqa: E731
         self.pub: dict[str, Any] = {
-            spec.suffix: node.create_publisher(msg_type, name(spec), qos_of(spec))
+            spec.suffix: node.create_publisher(msg_type, spec.name(self.object_id), qos_of(spec))
             for spec, msg_type in ((topics.DECISION, String), (topics.NEXT_ACTION, JointTrajectory),
                                    (topics.MARKERS, MarkerArray), (topics.HELP, String), (topics.PLAN, String),
                                    (topics.OBJECT, String))}
         handlers: tuple[tuple[topics.TopicSpec, type, Callable[[Any], None]], ...] = (
             (topics.PERCEIVED, JointState, self.on_perceived), (topics.GOAL, JointState, self.on_goal),
             (topics.FEEDBACK, String, self.on_feedback), (topics.GIVE_UP, String, self.on_give_up))
-        self.subs = [node.create_subscription(msg_type, name(spec), handler, qos_of(spec))
+        self.subs = [node.create_subscription(msg_type, spec.name(self.object_id), handler, qos_of(spec))
                      for spec, msg_type, handler in handlers]
 
     # -- requests from ROS 2 ------------------------------------------------------------------------------

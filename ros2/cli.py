@@ -17,7 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-from planhrc.cli_args import http_url, positive_float
+from planhrc.cli_args import http_url, positive_float, SubParsers
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +31,7 @@ def rclpy_problem(command: str) -> str | None:
     return None
 
 
-def add_bridge_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_bridge_parser(subparsers: SubParsers) -> None:
     p = subparsers.add_parser("ros2-bridge", help="serve a running KB service's objects on a ROS 2 graph",
                               description="A ROS 2 node between a running KB service (HTTP) and ROS 2 topics under "
                                           "/planhrc/objects/<id>/ (see docs/ros2.md).")

@@ -207,7 +207,8 @@ class Ros2Link:
             body["measured_deg"] = float(measured_deg)
         key = ("feedback", request_id)
         self._send(self.pub["feedback"], String(data=json.dumps(body)), lambda: key in self.answers, "feedback")
-        return self._answer(*key)["object"]["execution"]
+        execution: dict[str, Any] = self._answer(*key)["object"]["execution"]
+        return execution
 
     def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:
         self._check(object_id)
@@ -215,7 +216,8 @@ class Ros2Link:
         msg = String(data=json.dumps({"reason": reason, "message": message, "request_id": request_id}))
         key = ("give_up", request_id)
         self._send(self.pub["give_up"], msg, lambda: key in self.answers, "give_up")
-        return self._answer(*key)["object"]
+        answer: dict[str, Any] = self._answer(*key)["object"]
+        return answer
 
     def _check(self, object_id: str) -> None:
         if object_id != self.object_id:

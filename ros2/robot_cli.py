@@ -10,6 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
+from planhrc.cli_args import SubParsers
 from planhrc.robot_sim.demo import add_demo_parser as add_robot_demo
 from planhrc.robot_sim.demo import run_demo_cli as run_robot_demo
 from planhrc.robot_sim.worker import add_worker_parser as add_robot_worker
@@ -18,7 +19,7 @@ from planhrc.robot_sim.worker import run_worker_cli as run_robot_worker
 from .cli import rclpy_problem, running_bridge
 
 
-def add_worker_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_worker_parser(subparsers: SubParsers) -> None:
     add_robot_worker(subparsers).set_defaults(func=run_worker_cli)
 
 
@@ -32,7 +33,7 @@ def run_worker_cli(args: argparse.Namespace) -> int:
         return run_robot_worker(args, link=link)
 
 
-def add_demo_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_demo_parser(subparsers: SubParsers) -> None:
     add_robot_demo(subparsers).set_defaults(func=run_demo_cli)
 
 
