@@ -36,7 +36,7 @@ QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
           "SERVICE, a graph it does not have, or an answer over the result-size limit (the message says which)."},
     503: {"model": ERRORS[422]["model"], "description": "The query did not finish within the service's time limit."},
 }
-SPARQL_CONTENT = {media: {} for media in (*RESULT_TYPES, *GRAPH_TYPES)}
+SPARQL_CONTENT: dict[str, dict[str, Any]] = {media: {} for media in (*RESULT_TYPES, *GRAPH_TYPES)}
 
 router = APIRouter(responses={401: ERRORS[401], 422: ERRORS[422]})
 
@@ -49,7 +49,8 @@ class ReasoningCreate(BaseModel):
 
 
 async def get_knowledge(request: Request) -> KnowledgeService:
-    return request.app.state.knowledge  # type: ignore[no-any-return]
+    knowledge: KnowledgeService = request.app.state.knowledge
+    return knowledge
 
 
 Knowledge = Annotated[KnowledgeService, Depends(get_knowledge)]

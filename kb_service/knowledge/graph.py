@@ -156,7 +156,8 @@ class KnowledgeGraph:
             roots = self.store.current_roots(oid)
             if roots == self._roots.get(oid):
                 continue
-            abox = parse_lines(line for line in self.store.export_lines("current", [oid]) if line.startswith(_ABOX_LINE))
+            lines = self.store.export_lines("current", [oid])
+            abox = parse_lines(line for line in lines if line.startswith(_ABOX_LINE))
             self._abox.replace(oid, abox)
             self._entailed.replace(oid, entail(abox, self.vocabulary))
             self._roots[oid] = roots

@@ -222,9 +222,10 @@ def _media(accept: str | None, types: Mapping[str, str]) -> tuple[str, str]:
 
 
 def _serialize(result: SPARQLResult, fmt: str) -> bytes:
+    out: bytes | str | None
     if result.type in ("CONSTRUCT", "DESCRIBE"):
         assert result.graph is not None
         out = result.graph.serialize(format=fmt, encoding="utf-8")
     else:
         out = result.serialize(format=fmt, encoding="utf-8")
-    return out if isinstance(out, bytes) else str(out).encode("utf-8")
+    return out if isinstance(out, bytes) else str(out or "").encode("utf-8")
