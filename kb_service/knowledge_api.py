@@ -3,7 +3,7 @@ subsumption check between two states and reasoning jobs. Mounted by `app.create_
 chooses the status codes of its errors:
 
 QueryError (malformed query, update, SERVICE, unknown graph, answer over the size limit) -> 400 (the SPARQL
-Protocol's "malformed query"), BusyError (the reasoning queue is full) -> 503 with Retry-After; DeadlineError
+Protocol's "malformed query"), BusyError (the reasoning queue is full) -> 429 with Retry-After; DeadlineError
 (a query past its time limit) -> 503, NotFoundError -> 404 and ValidationError -> 422 as everywhere.
 
 Reads follow the service's token policy for reads (the request guard counts `POST /sparql` as a read: a query
@@ -30,6 +30,9 @@ FORM = "application/x-www-form-urlencoded"
 UPDATE_REFUSED = ("update: this endpoint is read-only; SPARQL Update (INSERT, DELETE, LOAD, CLEAR, CREATE, DROP, "
                   "...) is refused")
 RETRY_AFTER_S = 5
+# A query by GET travels in the request line, which the HTTP server reads only up to a size (percent-encoded, a
+# character may take 12 bytes): longer queries go by POST, whose body has the service's own limit.
+GET_QUERY_CHARS = 1000
 
 QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
     400: {"model": ERRORS[422]["model"], "description": "Not a query this endpoint answers: malformed, an update, "
@@ -62,9 +65,11 @@ Knowledge = Annotated[KnowledgeService, Depends(get_knowledge)]
 def read_sparql(
     knowledge: Knowledge,
     request: Request,
-    query: Annotated[str, Query(max_length=100_000, description="A SPARQL 1.1 query.")],
-    default_graph_uri: Annotated[list[str] | None, Query(alias="default-graph-uri")] = None,
-    named_graph_uri: Annotated[list[str] | None, Query(alias="named-graph-uri")] = None,
+    query: Annotated[str, Query(max_length=GET_QUERY_CHARS, description="A SPARQL 1.1 query (longer: by POST).")],
+    default_graph_uri: Annotated[list[Annotated[str, Field(max_length=200)]] | None,
+                                 Query(alias="default-graph-uri", max_length=4)] = None,
+    named_graph_uri: Annotated[list[Annotated[str, Field(max_length=200)]] | None,
+                               Query(alias="named-graph-uri", max_length=4)] = None,
 ) -> Response:
     """A SPARQL 1.1 query (the SPARQL Protocol's query by GET) over the TBox, the current ABox of every object and
     the facts the TBox entails from it (the default graph), with the graphs `http://planhrc.org/graph/tbox`,
@@ -78,7 +83,7 @@ def read_sparql(
 @router.post("/sparql", tags=["knowledge"], openapi_extra={"requestBody": {"content": {
              SPARQL_QUERY: {"schema": {"type": "string"}},
              FORM: {"schema": {"type": "object", "properties": {"query": {"type": "string"}}}}}}},
-             responses={200: {"content": SPARQL_CONTENT, "description": "As GET."}, **QUERY_ERRORS})
+             responses={200: {"content": SPARQL_CONTENT, "description": "As GET."}, **QUERY_ERRORS, 413: ERRORS[413]})
 async def create_sparql_query(knowledge: Knowledge, request: Request) -> Response:
     """The same query by POST: a form (`query=...`) or the query itself (`Content-Type: application/sparql-query`).
     An update (`update=...`, `application/sparql-update`) is refused: the endpoint is read-only."""
@@ -132,8 +137,10 @@ def read_subsumption(state_id: str, by_state_id: str, knowledge: Knowledge) -> d
 
 # -- reasoning ------------------------------------------------------------------------------------------------
 @router.post("/reasoning", dependencies=[Depends(require_writer)], tags=["knowledge"], status_code=200,
-             responses={202: {"description": "The job runs on; its answer will be at Location."},
-                        503: {"model": ERRORS[422]["model"], "description": "Too many reasoning jobs at once."}})
+             responses={202: {"description": "The job runs on; its answer will be at Location."}, 400: ERRORS[400],
+                        404: ERRORS[404], 413: ERRORS[413],
+                        429: {"model": ERRORS[422]["model"], "description": "Too many reasoning jobs at once; "
+                              "Retry-After says when to try again."}})
 def create_reasoning(body: ReasoningCreate, knowledge: Knowledge) -> JSONResponse:
     """Run a DL reasoner (consistency, classification, the SWRL rules) on the live ABox, off the request path.
     The answer is the result when the job finishes within the service's `reasoning_answer_wait_s`, else 202 with
@@ -159,7 +166,7 @@ def install_knowledge_errors(app: FastAPI) -> None:
         return JSONResponse({"detail": str(exc)}, status_code=400)
 
     async def busy(request: Request, exc: Exception) -> JSONResponse:
-        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": str(RETRY_AFTER_S)})
+        return JSONResponse({"detail": str(exc)}, status_code=429, headers={"Retry-After": str(RETRY_AFTER_S)})
 
     app.add_exception_handler(QueryError, bad_query)
     app.add_exception_handler(BusyError, busy)

@@ -127,7 +127,7 @@ class Settings(BaseSettings):
     reasoning_queue: int = Field(
         default=2, ge=1, le=64,
         description="Reasoning jobs waiting or running at once (they run one at a time); more are refused with "
-        "503 until one finishes.",
+        "429 until one finishes.",
     )
     reasoning_answer_wait_s: float = Field(
         default=2.0, ge=0, le=60,

@@ -20,7 +20,8 @@ def page(browser, tmp_path_factory):  # noqa: F811
         with httpx.Client(base_url=base, timeout=30, headers={"Authorization": f"Bearer {TOKEN}"}) as client:
             oid = client.post("/objects", json={"name": "rod", "links": 4, "orientations": 4,
                                                 "formulation": "relative"}).json()["id"]
-            assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]}).status_code == 200
+            goal = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
+            assert goal.status_code == 200
             assert client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0, 0]}).json()[
                 "decision"] == "replan"
             outside: list[str] = []

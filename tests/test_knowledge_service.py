@@ -164,6 +164,6 @@ def test_reasoning_refuses_more_jobs_than_its_queue(tmp_path):
             first = client.post("/reasoning", json={"reasoner": "hermit"})
             second = client.post("/reasoning", json={"reasoner": "hermit"})
             assert first.status_code == 202 and first.headers["location"] == f"/reasoning/{first.json()['id']}"
-            assert second.status_code == 503 and "reasoning_queue" in second.json()["detail"]
+            assert second.status_code == 429 and "reasoning_queue" in second.json()["detail"]
             assert second.headers["retry-after"]
             httpx.get(f"{base}/health").raise_for_status()

@@ -139,6 +139,7 @@ class KnowledgeGraph:
         self._revision: int | None = None
         self._inferred_stale = True  # read at the first refresh, then after each reasoning job stored its facts
         self._roots: dict[str, tuple[str, ...]] = {}
+        self.version = 0  # grows whenever a refresh changed something
         self.objects_read = 0  # objects whose current ABox was read again (tests and the benchmark look)
 
     def graph(self, iri: URIRef) -> Graph:
@@ -149,6 +150,7 @@ class KnowledgeGraph:
         revision = self.store.revision()
         if revision == self._revision:
             return
+        self.version += 1
         ids = [obj.ident for obj in self.store.list_objects()]
         for gone in set(self._roots) - set(ids):
             self._drop(gone)

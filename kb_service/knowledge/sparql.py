@@ -17,7 +17,7 @@ from itertools import islice
 from typing import Any, Mapping, Sequence
 
 from pyparsing import ParseException
-from rdflib import URIRef
+from rdflib import RDF, BNode, URIRef, Variable
 from rdflib.graph import Graph, ReadOnlyGraphAggregate
 from rdflib.plugins.sparql.algebra import translateQuery
 from rdflib.plugins.sparql.evaluate import evalPart
@@ -72,6 +72,7 @@ class SparqlEngine:
         self.timeout_s = timeout_s
         self.max_results = max_results
         self._prepared: OrderedDict[str, Query] = OrderedDict()
+        self._counts: tuple[int, Graph, _Counts] | None = None  # kept while the graph's version is the same
 
     def run(self, request: SparqlRequest) -> SparqlAnswer:
         started = time.monotonic()
@@ -110,8 +111,11 @@ class SparqlEngine:
 
     def _evaluate(self, query: Query, defaults: Sequence[URIRef]) -> tuple[SPARQLResult, int]:
         ctx = QueryContext(self.graph.dataset)  # no dataset clause: rdflib would copy (or fetch) graphs
-        ctx.graph = _union([self.graph.graph(iri) for iri in defaults])
+        filled = {iri for iri in GRAPHS.values() if len(self.graph.graph(iri))}
+        # the dataset's own union when it is the default graph (one index lookup a pattern, not one a graph)
+        ctx.graph = self.graph.dataset if filled <= set(defaults) else _union([self.graph.graph(i) for i in defaults])
         ctx.prologue = query.prologue
+        _order_patterns(query.algebra, self._counts_of(ctx.graph))
         try:
             res: dict[str, Any] = dict(evalPart(ctx, query.algebra))
             if res["type_"] == "SELECT":
@@ -127,6 +131,13 @@ class SparqlEngine:
             raise QueryError(f"query: the answer has more than {self.max_results} results (the service's "
                              "sparql_max_results); ask for fewer, e.g. with LIMIT and OFFSET")
         return SPARQLResult(res), rows
+
+
+    def _counts_of(self, graph: Graph) -> _Counts:
+        kept = self._counts
+        if kept is None or kept[0] != self.graph.version or kept[1] is not graph:
+            kept = self._counts = (self.graph.version, graph, _Counts(graph))
+        return kept[2]
 
 
 def prepare(text: str) -> Query:
@@ -179,6 +190,64 @@ def _from_clause(query: Query) -> tuple[URIRef, ...]:
     defaults = [d["default"] for d in clause if "default" in d]
     _graphs([d["named"] for d in clause if "named" in d], "FROM NAMED")
     return _graphs(defaults, "FROM")
+
+
+class _Counts:
+    """How many triples of a graph match a pattern's constant terms (up to `CAP`), counted once a query."""
+
+    CAP = 2_000
+
+    def __init__(self, graph: Graph) -> None:
+        self.graph = graph
+        self.known: dict[tuple[Any, Any, Any], int] = {}
+
+    def __call__(self, pattern: tuple[Any, Any, Any]) -> int:
+        found = self.known.get(pattern)
+        if found is None:
+            found = self.known[pattern] = sum(1 for _ in islice(self.graph.triples(pattern), self.CAP))
+        return found
+
+
+def _order_patterns(node: object, counts: _Counts, bound: frozenset[Any] = frozenset()) -> None:
+    """Order the triple patterns of every basic graph pattern so that each one joins what came before and the
+    fewest matches come first. rdflib's own order puts every pattern with two constant terms first, and two
+    `?x a C` patterns on unrelated variables then make a product (every perceived state times every
+    predicate individual)."""
+    if isinstance(node, CompValue):
+        if node.name == "BGP" and "triples" in node and len(node["triples"]) > 1:
+            node["triples"] = _greedy(list(node["triples"]), counts, bound)
+        if node.name == "Join" and "lazy" in node and node["lazy"]:
+            # rdflib evaluates p2 once per solution of p1: p1's variables are bound in p2
+            _order_patterns(node["p1"], counts, bound)
+            _order_patterns(node["p2"], counts, bound | frozenset(node["p1"]["_vars"]))
+            return
+        for value in node.values():
+            _order_patterns(value, counts, bound)
+    elif isinstance(node, (list, tuple)):
+        for value in node:
+            _order_patterns(value, counts, bound)
+
+
+def _greedy(patterns: list[tuple[Any, Any, Any]], counts: _Counts, given: frozenset[Any]) -> list[tuple[Any, Any, Any]]:
+    def variable(term: Any) -> bool:
+        return isinstance(term, (Variable, BNode))
+
+    bound: set[Any] = set(given)
+    out = []
+    while patterns:
+        def cost(t: tuple[Any, Any, Any]) -> tuple[bool, int, bool, int]:
+            joins = any(variable(x) and x in bound for x in t)
+            known = sum(1 for x in t if not variable(x) or x in bound)
+            # a known value (not a class) picks out few subjects; a known subject, few values
+            value_known = t[1] != RDF.type and (not variable(t[2]) or t[2] in bound)
+            return (bool(bound) and not joins, -known, not value_known,
+                    counts(tuple(None if variable(x) else x for x in t)))
+
+        best = min(patterns, key=cost)
+        patterns.remove(best)
+        out.append(best)
+        bound.update(x for x in best if variable(x))
+    return out
 
 
 class _Union(ReadOnlyGraphAggregate):
