@@ -11,6 +11,7 @@ import time
 import httpx
 import pytest
 
+from planhrc.bench.knowledge import CURRENT_STATE_QUERY
 from planhrc.kb_service.store import KnowledgeBase
 from planhrc.kb_service.store.owl import RDF_TYPE
 from planhrc.model import is_subsumed
@@ -21,13 +22,7 @@ SPARQLWrapper = pytest.importorskip("SPARQLWrapper", reason="SPARQLWrapper is in
 
 pytestmark = pytest.mark.integration
 
-CURRENT = """PREFIX planhrc: <http://planhrc.org/ontology/planhrc.owl#>
-SELECT ?object ?joint ?deg WHERE {
-  { SELECT ?object (MAX(?t) AS ?latest) WHERE {
-      ?s a planhrc:PerceivedState ; planhrc:stateOf ?object ; planhrc:createdAt ?t } GROUP BY ?object }
-  ?state a planhrc:PerceivedState ; planhrc:stateOf ?object ; planhrc:createdAt ?latest ; planhrc:madeof ?p .
-  ?p a planhrc:HasOrientation ; planhrc:arg1 ?joint ; planhrc:arg2 ?o . ?o planhrc:degrees ?deg .
-} ORDER BY ?object ?joint"""
+CURRENT = CURRENT_STATE_QUERY  # the console's first example too
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +56,7 @@ def test_sparqlwrapper_reads_the_current_state_of_every_object(served):
     answer = wrapper(base, CURRENT, SPARQLWrapper.JSON).queryAndConvert()
     got: dict[str, list[int]] = {}
     for b in answer["results"]["bindings"]:
-        got.setdefault(b["object"]["value"].rsplit("#", 1)[1], []).append(int(b["deg"]["value"]))
+        got.setdefault(b["object"]["value"].rsplit("#", 1)[1], []).append(int(b["degrees"]["value"]))
     for oid, (formulation, angles) in made.items():
         want = angles if formulation == "absolute" else [(b - a) % 360 for a, b in zip(angles, angles[1:])]
         assert got[oid] == want
