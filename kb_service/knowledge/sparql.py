@@ -241,7 +241,8 @@ def _greedy(patterns: list[tuple[Any, Any, Any]], counts: _Counts, given: frozen
             # a known value (not a class) picks out few subjects; a known subject, few values
             value_known = t[1] != RDF.type and (not variable(t[2]) or t[2] in bound)
             return (bool(bound) and not joins, -known, not value_known,
-                    counts(tuple(None if variable(x) else x for x in t)))
+                    counts((None if variable(t[0]) else t[0], None if variable(t[1]) else t[1],
+                            None if variable(t[2]) else t[2])))
 
         best = min(patterns, key=cost)
         patterns.remove(best)
