@@ -7,7 +7,8 @@ Each part starts its own `planhrc serve` process on a fresh SQLite file and driv
   re-planning perception's p50/p95, every read route's latency, `/ontology`'s size, the server's RSS and the
   worst wait of `/health` while the slowest read runs;
 * **contention** — another object's worst perception latency while a large absolute object plans;
-* **refusal** — the time to refuse a 150 MB body without the token, and over the size limit with it.
+* **refusal** — the time to refuse a 150 MB body without the token, and over the size limit with it;
+* **knowledge** — SPARQL, subsumption over HTTP and reasoning jobs after a long history (`bench.knowledge`).
 
 Prints one JSON document on stdout (`--out DIR` also writes `service-bench.json` and a Markdown table).
 """
@@ -392,8 +393,9 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("service-bench", help="measure the KB service with a long history (not a test)",
                               description=__doc__.splitlines()[0] if __doc__ else None)
     p.add_argument("--parts", default="objects,history,contention,refusal",
-                   help="comma-separated: objects, history, side-by-side, contention, refusal (side-by-side: the "
-                   "first and last --checkpoints on two services at once, measured in alternating rounds)")
+                   help="comma-separated: objects, history, side-by-side, contention, refusal, knowledge (side-by-side: "
+                   "the first and last --checkpoints on two services at once, measured in alternating rounds; "
+                   "knowledge: after the last --checkpoints perceptions)")
     p.add_argument("--objects", type=_int_list, default=[1, 200, 1000], help="stored-object counts (1,200,1000)")
     p.add_argument("--checkpoints", type=_int_list, default=[100, 1000, 10000],
                    help="perception counts on one object at which to measure (100,1000,10000)")
@@ -415,7 +417,7 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
 
 def run_service_bench(args: argparse.Namespace) -> int:
     parts = {p.strip() for p in args.parts.split(",") if p.strip()}
-    unknown = parts - {"objects", "history", "side-by-side", "contention", "refusal"}
+    unknown = parts - {"objects", "history", "side-by-side", "contention", "refusal", "knowledge"}
     if unknown:
         print(f"planhrc service-bench: --parts: unknown part(s) {', '.join(sorted(unknown))}", file=sys.stderr)
         return 2
@@ -438,6 +440,11 @@ def run_service_bench(args: argparse.Namespace) -> int:
         if "contention" in parts:
             report["contention"] = bench_contention(args.big_links, args.big_orientations, args.samples, args.seed,
                                                     args.planning_workers)
+        if "knowledge" in parts:
+            from .knowledge import bench_knowledge  # it builds on this module's helpers
+
+            report["knowledge"] = bench_knowledge(max(args.checkpoints), args.samples, args.links, args.orientations,
+                                                  args.seed)
     except (RuntimeError, httpx.HTTPError) as exc:
         print(f"planhrc service-bench: {exc}", file=sys.stderr)
         return 1
@@ -483,6 +490,10 @@ def markdown(report: dict[str, Any]) -> str:
         lines += [f"| {r['perceptions']} | {r['p50_ms']} ms | {r['p95_ms']} ms | {r['server_cpu_ms']} ms "
                   f"| {r['rss_mb']} MB |" for r in sbs["rows"]]
         lines.append("")
+    if "knowledge" in report:
+        from .knowledge import knowledge_markdown
+
+        lines += knowledge_markdown(report["knowledge"])
     lines += [f"* {line}" for line in targets(report)] + [""]
     if "contention" in report:
         c = report["contention"]

@@ -15,6 +15,9 @@ from planhrc.settings import Settings, get_settings
 from .api import install_error_handlers, router
 from .console import install_console
 from .guard import GuardPolicy, RequestGuard
+from .knowledge.service import KnowledgeService
+from .knowledge_api import install_knowledge_errors
+from .knowledge_api import router as knowledge_router
 from .locks import ObjectLocks
 from .orchestrator import Orchestrator
 from .planning_pool import PlanningPool
@@ -60,6 +63,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.kb = kb
         pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
         orchestrator = app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks(), pool)
+        knowledge = app.state.knowledge = KnowledgeService(kb, settings)
         log.info("knowledge base open: %s", settings.db_path or "in memory")
         freeze_heap()
         stop = threading.Event()
@@ -74,6 +78,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             stop.set()
             if compactor is not None:
                 compactor.join(timeout=60)
+            knowledge.close()
             orchestrator.close()
             pool.close()
             kb.close()
@@ -94,6 +99,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         token=settings.token, read_token=settings.read_token, protect_reads=settings.protect_reads,
         max_body_bytes=settings.max_body_bytes))
     install_error_handlers(app)
+    install_knowledge_errors(app)
     app.include_router(router)
+    app.include_router(knowledge_router)
     install_console(app, protect_reads=settings.protect_reads)
     return app

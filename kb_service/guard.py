@@ -9,7 +9,8 @@ A pure ASGI middleware, in front of FastAPI's routing and body parsing:
 3. a body without a length (chunked) is read only up to the limit, and cut there with 413.
 
 Refusals are JSON `{"detail": "..."}` like every other error of the service. Only the routes of the knowledge
-base are guarded for reads (`/objects…`, `/plans…`, `/states…`, `/problems…`, `/ontology`); `/health`, the API
+base are guarded for reads (`/objects…`, `/plans…`, `/states…`, `/problems…`, `/ontology`, `/sparql` (by GET or
+POST), `/reasoning…`); `/health`, the API
 docs and the console's static page stay open so a person can reach the page that asks for the token.
 """
 from __future__ import annotations
@@ -26,7 +27,8 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
-DATA_PREFIXES = ("/objects", "/plans", "/states", "/problems", "/ontology")
+DATA_PREFIXES = ("/objects", "/plans", "/states", "/problems", "/ontology", "/sparql", "/reasoning")
+READ_POSTS = frozenset({"/sparql"})  # a SPARQL query by POST changes nothing: a read, with the read token too
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,7 @@ class RequestGuard:
     def _refuse_before_body(self, method: str, path: str, headers: dict[str, str]) -> tuple[int, str] | None:
         policy = self.policy
         auth = headers.get("authorization")
-        if method not in READ_METHODS:
+        if method not in READ_METHODS and path not in READ_POSTS:
             if policy.token and not token_matches(auth, policy.token):
                 return 401, "Authorization: this request changes the knowledge base and needs 'Bearer <token>'"
         elif policy.protect_reads and is_data_path(path):

@@ -110,6 +110,30 @@ class Settings(BaseSettings):
         description="The service compacts its store this often (seconds; 0: never). `planhrc compact` runs it "
         "on a store by hand.",
     )
+    sparql_timeout_s: float = Field(
+        default=5.0, gt=0, le=600,
+        description="Time one SPARQL query may take (waiting for the query before it included); a longer one is "
+        "stopped and answered 503.",
+    )
+    sparql_max_results: int = Field(
+        default=10_000, ge=1, le=10_000_000,
+        description="Most solutions (SELECT) or triples (CONSTRUCT, DESCRIBE) one SPARQL answer may hold; a query "
+        "with more is answered 400 and asked to use LIMIT.",
+    )
+    reasoning_timeout_s: float = Field(
+        default=120.0, gt=0, le=3600,
+        description="Time one reasoning job (POST /reasoning: the DL reasoner on the live ABox) may take.",
+    )
+    reasoning_queue: int = Field(
+        default=2, ge=1, le=64,
+        description="Reasoning jobs waiting or running at once (they run one at a time); more are refused with "
+        "429 until one finishes.",
+    )
+    reasoning_answer_wait_s: float = Field(
+        default=2.0, ge=0, le=60,
+        description="POST /reasoning waits this long for its job: a job done by then is answered with its result "
+        "(200), a longer one with 202 and the job's location.",
+    )
     crash_in_perception_write: int = Field(
         default=0, ge=0,
         description="For crash tests only: the service kills itself (SIGKILL) inside the store write of its N-th "

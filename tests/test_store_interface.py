@@ -11,14 +11,14 @@ from typing import Generic, Protocol
 
 import pytest
 
-from planhrc.kb_service.store import (BACKENDS, Export, KBError, KnowledgeStore, PlanChecks, PlanJournal, Reads,
-                                      Retention, SqliteStore, Writes, open_store)
+from planhrc.kb_service.store import (BACKENDS, Export, Inferences, KBError, KnowledgeStore, PlanChecks, PlanJournal,
+                                      Reads, Retention, SqliteStore, Writes, open_store)
 from planhrc.kb_service.store.backends import backend_of
 from planhrc.paths import default_tbox_path
 from tests.store_backends import kb, place  # noqa: F401 (fixtures)
 from tests.test_types import REPO, stage_namespace
 
-PROTOCOLS = (Writes, Reads, PlanChecks, PlanJournal, Export, Retention, KnowledgeStore)
+PROTOCOLS = (Writes, Reads, PlanChecks, PlanJournal, Export, Retention, Inferences, KnowledgeStore)
 
 
 def members(protocol: type) -> list[str]:

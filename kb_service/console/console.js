@@ -399,6 +399,7 @@ async function logEvent(event) {
     who.textContent = actor[1];
     li.appendChild(who);
   }
+  if (DECISIONS.has(event.kind) && event.data.perceived_state_id) addWhyNot(li, event);
   const log = $("log");
   log.prepend(li);  // newest first
   if (DECISIONS.has(event.kind) && event.data.perceived_state_id) {
@@ -520,7 +521,119 @@ function setupOperator() {
   });
 }
 
+// -- "why not?": the subsumption of a decision's perceived state by the goal and the expected state ------------
+function addWhyNot(li, event) {
+  const button = document.createElement("button");
+  button.type = "button";
+  button.className = "why-button";
+  button.textContent = "why not?";
+  button.title = "is the perceived state within the goal and the state the plan expects? which atoms are missing?";
+  const out = document.createElement("ul");
+  out.className = "why-not";
+  button.addEventListener("click", async () => {
+    out.replaceChildren();
+    const targets = [];
+    if (view.obj && view.obj.goal_state_id) targets.push(["goal", view.obj.goal_state_id]);
+    const plan = view.plan, step = event.data.next_step;
+    if (plan && plan.id === event.data.plan_id && step && plan.expected_states[step - 1]) {
+      targets.push([`expected state s^e_${step}`, plan.expected_states[step - 1].id]);
+    }
+    if (!targets.length) { whyLine(out, "no goal to compare with", "error"); return; }
+    for (const [label, id] of targets) {
+      try {
+        const a = await api("GET", `states/${encodeURIComponent(event.data.perceived_state_id)}/subsumed-by/${encodeURIComponent(id)}`);
+        if (a.subsumed) { whyLine(out, `within the ${label} (${a.atoms_checked} atoms hold)`, "ok"); continue; }
+        const joints = a.differs.map((d) => `${shortName(d.joint)} is ${d.has ? d.has.replace("deg_", "") + "°" : "unknown"}, wants ${d.wants.replace("deg_", "")}°`);
+        whyLine(out, `not within the ${label}: ${a.missing.length} of ${a.atoms_checked} atoms missing — ${joints.join("; ") || a.missing.join(" ")}`, "missing");
+      } catch (err) {
+        whyLine(out, err.message, "error");
+      }
+    }
+  });
+  li.append(button, out);
+}
+
+function whyLine(list, text, cls) {
+  const item = document.createElement("li");
+  item.className = cls;
+  item.textContent = text;
+  list.appendChild(item);
+}
+
+// -- the query panel ----------------------------------------------------------------------------------------
+const QUERY_EXAMPLES = [
+  ["current state of every object", `SELECT ?object ?joint ?degrees WHERE {
+  { SELECT ?object (MAX(?t) AS ?latest) WHERE {
+      ?s a planhrc:PerceivedState ; planhrc:stateOf ?object ; planhrc:createdAt ?t } GROUP BY ?object }
+  ?state a planhrc:PerceivedState ; planhrc:stateOf ?object ; planhrc:createdAt ?latest ; planhrc:madeof ?p .
+  ?p a planhrc:HasOrientation ; planhrc:arg1 ?joint ; planhrc:arg2 ?o . ?o planhrc:degrees ?degrees .
+} ORDER BY ?object ?joint`],
+  ["goal of every object", `SELECT ?object ?joint ?degrees WHERE {
+  ?state a planhrc:GoalState ; planhrc:stateOf ?object ; planhrc:madeof ?p .
+  ?p a planhrc:HasOrientation ; planhrc:arg1 ?joint ; planhrc:arg2 ?o . ?o planhrc:degrees ?degrees .
+} ORDER BY ?object ?joint`],
+  ["turning a joint moves (entailed chain)", `SELECT ?joint ?turns ?affects WHERE {
+  ?joint planhrc:turns ?turns ; planhrc:affectsJoint ?affects .
+} ORDER BY ?joint ?affects`],
+  ["relative angles of the latest perceptions (SWRL)", `SELECT ?observation ?relative WHERE {
+  ?observation planhrc:relativeOrientation ?o . ?o planhrc:degrees ?relative .
+} ORDER BY ?observation`],
+  ["facts in each graph", `SELECT ?graph (COUNT(*) AS ?facts) WHERE { GRAPH ?graph { ?s ?p ?o } } GROUP BY ?graph`],
+];
+
+function setupQueries() {
+  const select = $("query-example");
+  QUERY_EXAMPLES.forEach(([label], i) => {
+    const option = document.createElement("option");
+    option.value = String(i);
+    option.textContent = label;
+    select.appendChild(option);
+  });
+  const pick = () => { $("query-text").value = QUERY_EXAMPLES[Number(select.value)][1]; };
+  select.addEventListener("change", pick);
+  pick();
+  $("query-form").addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    $("query-error").textContent = "";
+    $("query-status").textContent = "running…";
+    $("query-result").replaceChildren();
+    const headers = { Accept: "application/sparql-results+json", "Content-Type": "application/x-www-form-urlencoded" };
+    const token = $("token").value.trim();
+    if (token) headers.Authorization = `Bearer ${token}`;
+    const started = performance.now();
+    try {
+      const response = await fetch("sparql", { method: "POST", headers, body: new URLSearchParams({ query: $("query-text").value }) });
+      const data = await response.json();
+      if (!response.ok) throw new ApiError(data.detail || `HTTP ${response.status}`);
+      showResults(data, performance.now() - started);
+    } catch (err) {
+      $("query-status").textContent = "";
+      $("query-error").textContent = err.message;
+    }
+  });
+}
+
+function showResults(data, ms) {
+  const box = $("query-result");
+  if ("boolean" in data) {
+    box.textContent = data.boolean ? "yes" : "no";
+    $("query-status").textContent = `answered in ${ms.toFixed(0)} ms`;
+    return;
+  }
+  const vars = data.head.vars, rows = data.results.bindings;
+  const table = document.createElement("table");
+  const head = table.insertRow();
+  vars.forEach((v) => { const th = document.createElement("th"); th.textContent = v; head.appendChild(th); });
+  for (const row of rows) {
+    const tr = table.insertRow();
+    vars.forEach((v) => { tr.insertCell().textContent = row[v] ? row[v].value.replace(/^.*[#/]/, (m) => (row[v].type === "uri" ? "" : m)) : ""; });
+  }
+  box.appendChild(table);
+  $("query-status").textContent = `${rows.length} row${rows.length === 1 ? "" : "s"} in ${ms.toFixed(0)} ms`;
+}
+
 setupOperator();
 setupPlanSteps();
+setupQueries();
 loadObjects();
 setInterval(() => { if (!view.objectId) loadObjects(); }, 2000);  // objects created while nobody is selected

@@ -13,15 +13,15 @@ responsibility.
 | `abox` | the SQLite ABox's unit of work: the owlready2 world, names of individuals, counters, `transaction()` |
 | `reads`, `writes`, `triples` | records read back from triples, the writes, and what each record is as triples |
 | `journal`, `backlog` | a new plan's journal row, and the plans written out as triples by a thread behind the answer |
-| `events`, `execution`, `responses` | the event log, the execution cursor, idempotent responses (side tables) |
+| `events`, `execution`, `responses`, `inferred` | the event log, the execution cursor, idempotent responses, what a reasoner inferred (side tables) |
 | `retention`, `export` | compaction of each object's history; RDF export (N-Triples, RDF/XML, Turtle) |
 | `owl` | every use of owlready2's internals (its SQLite tables, storids, literal encoding, reasoner settings) |
 """
 from .backends import BACKENDS, open_store
 from .errors import (ConflictError, DamagedStoreError, DeadlineError, KBError, NotFoundError, ReasonerError,
                      ValidationError)
-from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, Export, KnowledgeStore, PlanChecks, PlanJournal, Reads,
-                        Retention, Writes)
+from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, Export, Inferences, KnowledgeStore, PlanChecks, PlanJournal,
+                        Reads, Retention, Writes)
 from .knowledge_base import KnowledgeBase, SqliteStore
 from .names import ABOX_IRI, PREDICATES, TBOX_IRI, atom_fragment
 from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffect, Execution, StoredAction,
@@ -30,7 +30,7 @@ from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffe
 __all__ = [
     "ABOX_IRI", "BACKENDS", "MAX_EVENTS_PAGE", "MAX_SEQ", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec",
     "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "Execution",
-    "Export", "KBError", "KnowledgeBase", "KnowledgeStore", "NotFoundError", "PlanChecks", "PlanJournal", "Reads",
+    "Export", "Inferences", "KBError", "KnowledgeBase", "KnowledgeStore", "NotFoundError", "PlanChecks", "PlanJournal", "Reads",
     "ReasonerError", "Retention", "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem",
     "StoredState", "ValidationError", "Writes", "atom_fragment", "open_store",
 ]

@@ -112,6 +112,7 @@ class Abox:
         self.objects = len(self.q.subjects(RDF_TYPE, self.t["ArticulatedObject"], self.c))
         self.pending_triples = 0  # written by the open transaction
         self.pending_objects = 0
+        self.revision = 0  # commits since the store was opened (`Reads.revision`)
         self.iri_sid: dict[str, int] = {}
         self.sid_name: dict[int, str] = {}
         self._listeners: tuple[TransactionListener, ...] = ()
@@ -268,6 +269,7 @@ class Abox:
         self.triples += self.pending_triples
         self.objects += self.pending_objects
         self.pending_triples = self.pending_objects = 0
+        self.revision += 1
         for listener in self._listeners:
             listener.committed()
 

@@ -9,6 +9,7 @@
 | `PlanJournal` | plans stored as one journal row each and written out behind the answer (`settle`, `plans_to_write`) |
 | `Export` | the TBox with the ABox as RDF: N-Triples lines, or bytes in a format |
 | `Retention` | compaction of each object's history |
+| `Inferences` | what a DL reasoner inferred, kept apart from the asserted facts |
 | `KnowledgeStore` | all of them, and closing: what a backend must offer |
 
 Records are the frozen dataclasses of `records`; ids are the readable IRI fragments of `names`, whatever the
@@ -113,6 +114,11 @@ class Reads(Protocol):
         """Objects stored (kept by every commit: no scan, no lock)."""
         ...
 
+    def revision(self) -> int:
+        """A number that changes with every committed write (no scan, no lock): a reader that keeps something
+        built from the store (the SPARQL graph) builds it again only when this changed."""
+        ...
+
 
 @runtime_checkable
 class PlanChecks(Protocol):
@@ -146,6 +152,13 @@ class Export(Protocol):
         """The same as RDF in one of `FORMATS`."""
         ...
 
+    def current_roots(self, object_id: str) -> tuple[str, ...]:
+        """The ids the object's current ABox starts from: the object, its goal, its latest perceived state, the
+        plan its execution follows (else its latest plan) and its latest problem. The current export is every
+        fact reachable from them; records are immutable, so while these ids stay the same so does that export.
+        An unknown object is a `NotFoundError`."""
+        ...
+
 
 @runtime_checkable
 class Retention(Protocol):
@@ -156,7 +169,21 @@ class Retention(Protocol):
 
 
 @runtime_checkable
-class KnowledgeStore(Writes, Reads, PlanChecks, PlanJournal, Export, Retention, Protocol):
+class Inferences(Protocol):
+    """Facts a DL reasoner inferred, as N-Triples lines under a scope (`"all"`, or an object's id): kept apart
+    from the asserted facts, so that no export, read or reasoner mistakes them for what was stored."""
+
+    def replace_inferred(self, scope: str, lines: Sequence[str]) -> int:
+        """Replace every line kept under `scope` by `lines` in one transaction; how many are kept now."""
+        ...
+
+    def inferred_lines(self) -> Iterator[str]:
+        """Every inferred line of every scope (a line kept under two scopes comes twice)."""
+        ...
+
+
+@runtime_checkable
+class KnowledgeStore(Writes, Reads, PlanChecks, PlanJournal, Export, Retention, Inferences, Protocol):
     """What a backend must offer: every protocol above, and closing (the store is also its own context manager)."""
 
     def close(self) -> None: ...

@@ -26,7 +26,8 @@ from .checks import check_events_page, check_export, check_keep_perceived, check
 from .errors import KBError, NotFoundError, ValidationError
 from .events import EventLog
 from .execution import ExecutionCursor
-from .export import export_rdf, ntriples
+from .export import current_roots, export_rdf, ntriples
+from .inferred import InferredFacts
 from .interface import MAX_EVENTS_PAGE, MAX_SEQ
 from .names import ABOX_IRI, TBOX_IRI
 from .owl import World
@@ -57,6 +58,7 @@ class SqliteStore:
             self._events = EventLog(abox.q)
             self._execution = ExecutionCursor(abox.q)
             self._responses = ResponseMemory(abox.q)
+            self._inferred = InferredFacts(abox.q)
             abox.q.commit()
             self._backlog.recover()  # before anything is served
         except Exception:
@@ -235,6 +237,10 @@ class SqliteStore:
         self._abox.check_open()
         return self._abox.objects
 
+    def revision(self) -> int:
+        self._abox.check_open()
+        return self._abox.revision
+
     # -- the plan journal -------------------------------------------------------------------------------------
     def settle(self) -> None:
         self._backlog.settle()
@@ -292,6 +298,22 @@ class SqliteStore:
         text = "".join(self.export_lines(history, object_ids)).encode("utf-8")
         return export_rdf(text, fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
                                       "owl": "http://www.w3.org/2002/07/owl#"})
+
+
+    def current_roots(self, object_id: str) -> tuple[str, ...]:
+        with self._guard:
+            self._records.info(object_id)
+            return tuple(dict.fromkeys(current_roots(self._abox.q.db, object_id)))
+
+    # -- inferences -------------------------------------------------------------------------------------------
+    def replace_inferred(self, scope: str, lines: Sequence[str]) -> int:
+        checked = InferredFacts.check(scope, lines)
+        with self._guard:
+            return self._abox.write(lambda: self._inferred.replace(scope, checked))
+
+    def inferred_lines(self) -> Iterator[str]:
+        with self._guard:
+            return iter(list(self._inferred.lines()))
 
 
 KnowledgeBase = SqliteStore  # the name every caller used before the store had an interface

@@ -432,6 +432,19 @@ def facts_in(world: World, ontology_iri: str) -> int:
                + db.execute("SELECT COUNT(*) FROM datas WHERE c=?", (c,)).fetchone()[0])
 
 
+def ntriples_in(world: World, ontology_iri: str) -> list[str]:
+    """The triples of the ontology `ontology_iri` of `world` as N-Triples lines (what a reasoner inferred, e.g.)."""
+    c = world.get_ontology(ontology_iri).graph.c
+    return list(ntriple_lines(world.graph.db, "t.c = ?", [c]))
+
+
+def load_ntriples(world: World, ontology_iri: str, lines: Sequence[str]) -> None:
+    """Load N-Triples lines into the ontology `ontology_iri` of `world`."""
+    data = "".join(lines).encode("utf-8")
+    if data.strip():
+        world.get_ontology(ontology_iri).load(fileobj=io.BytesIO(data), format="ntriples", reload=True)
+
+
 # -- what the adapter relies on ----------------------------------------------------------------------------------
 def check_internals() -> None:
     """Verify every owlready2 internal this module relies on; raise OwlInternalsError naming what changed."""

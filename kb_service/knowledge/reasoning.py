@@ -1,0 +1,146 @@
+"""A DL reasoner (Pellet or HermiT) on the live ABox: consistency, classification and the SWRL rules on a copy of
+the current ABox (of one object, or of every object) with the TBox, read through the store's interface
+(`Export.export_lines`), so it runs on any backend and never writes into the asserted facts.
+
+What the reasoner inferred comes back as N-Triples lines, for the store to keep apart (`Inferences`). An
+inconsistent ABox is explained by Pellet (`pellet explain --inconsistent`, whichever reasoner found it): the
+axioms of one minimal inconsistent subset, and the ABox individuals they name.
+"""
+from __future__ import annotations
+
+import re
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import owlready2
+from owlready2 import World
+
+from ..reasoner import INFERENCES_IRI, REASONERS, _configure_java, drop_builtin_rules, reason_in_place
+from ..store import ABOX_IRI, TBOX_IRI, ReasonerError, ValidationError
+from ..store.interface import Export
+from ..store.owl import load_ntriples, ntriples_in, pellet_command
+
+EXPLANATION_AXIOMS = 50  # axioms of an explanation shown at most
+_ABOX_LINE = "<" + ABOX_IRI
+_NAME = re.compile(r"\b(obj\d+[A-Za-z0-9_]*|deg_\d+)\b")
+
+
+@dataclass(frozen=True)
+class ReasoningRequest:
+    reasoner: str
+    object_id: str | None = None
+
+
+@dataclass(frozen=True)
+class ReasoningResult:
+    consistent: bool
+    reasoner: str
+    object_id: str | None
+    inferred: tuple[str, ...]  # N-Triples lines
+    seconds: float
+    notes: tuple[str, ...] = ()
+    individuals: tuple[str, ...] = ()  # inconsistent: the ABox individuals the explanation names
+    axioms: tuple[str, ...] = ()  # inconsistent: the axioms of the explanation
+
+    def public(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"consistent": self.consistent, "reasoner": self.reasoner, "object_id": self.object_id,
+                               "inferred": len(self.inferred), "seconds": round(self.seconds, 3),
+                               "notes": list(self.notes)}
+        if not self.consistent:
+            out["individuals"] = list(self.individuals)
+            out["axioms"] = list(self.axioms)
+        return out
+
+
+def check_request(reasoner: object, object_id: object) -> ReasoningRequest:
+    if reasoner not in REASONERS:
+        raise ValidationError(f"reasoner: must be one of {', '.join(sorted(REASONERS))}, got {reasoner!r}")
+    if object_id is not None and (not isinstance(object_id, str) or not object_id):
+        raise ValidationError("object_id: must be an object's id")
+    return ReasoningRequest(str(reasoner), object_id)
+
+
+def reason(store: Export, request: ReasoningRequest, timeout_s: float) -> ReasoningResult:
+    """Run the reasoner on a copy of the current ABox (of `request.object_id`, else of every object)."""
+    started = time.monotonic()
+    lines = list(store.export_lines("current", None if request.object_id is None else [request.object_id]))
+    world = World()
+    try:
+        load_ntriples(world, TBOX_IRI.rstrip("#"), [line for line in lines if not line.startswith(_ABOX_LINE)])
+        load_ntriples(world, ABOX_IRI.rstrip("#"), [line for line in lines if line.startswith(_ABOX_LINE)])
+        notes: list[str] = []
+        if request.reasoner == "hermit":
+            dropped = drop_builtin_rules(world)
+            if dropped:
+                notes.append(f"HermiT does not support SWRL built-in atoms: {dropped} rule(s) using them (the "
+                             "relative angles) were left out")
+        remaining = max(1.0, timeout_s - (time.monotonic() - started))
+        consistent, _ = reason_in_place(world, request.reasoner, remaining)
+        if not consistent:
+            remaining = max(1.0, timeout_s - (time.monotonic() - started))
+            axioms = explain_inconsistency(world, remaining)
+            names = sorted({n for axiom in axioms for n in _NAME.findall(axiom)})
+            return ReasoningResult(False, request.reasoner, request.object_id, (), time.monotonic() - started,
+                                   tuple(notes), tuple(names), tuple(axioms[:EXPLANATION_AXIOMS]))
+        inferred = tuple(line for line in ntriples_in(world, INFERENCES_IRI) if line.startswith(_ABOX_LINE))
+        return ReasoningResult(True, request.reasoner, request.object_id, inferred, time.monotonic() - started,
+                               tuple(notes))
+    finally:
+        world.close()
+
+
+def explain_inconsistency(world: World, timeout_s: float) -> list[str]:
+    """The axioms of one explanation of the inconsistency of `world`, by `pellet explain --inconsistent`."""
+    _configure_java()
+    with tempfile.TemporaryDirectory(prefix="planhrc-explain-") as tmp:
+        path = Path(tmp) / "abox.owl"
+        world.save(str(path), format="rdfxml")
+        command = pellet_command(owlready2.JAVA_EXE) + ["explain", "--inconsistent", "--ignore-imports", str(path)]
+        try:
+            proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            raise ReasonerError(f"pellet explain: no answer within {timeout_s:g} s") from None
+        except OSError as exc:
+            raise ReasonerError(f"pellet explain: cannot start Java: {exc}") from None
+    return parse_explanation(proc.stdout)
+
+
+def parse_explanation(text: str) -> list[str]:
+    """The axiom lines of Pellet's explanation (indented lines after 'Explanation'), namespaces dropped."""
+    lines = text.splitlines()
+    start = next((i for i, line in enumerate(lines) if "xplanation" in line), None)
+    if start is None:
+        return []
+    axioms: list[str] = []
+    open_parts: list[str] = []  # Pellet prints a long axiom over several lines, one argument a line
+    for line in lines[start + 1:]:
+        part = re.sub(r"^\d+\)\s*", "", line.strip())
+        if not part:
+            continue
+        open_parts.append(part)
+        text = " ".join(open_parts)
+        if text.count("(") <= text.count(")"):
+            axioms.append(_short(text))
+            open_parts = []
+    if open_parts:
+        axioms.append(_short(" ".join(open_parts)))
+    return axioms
+
+
+def _short(text: str) -> str:
+    for iri in (TBOX_IRI, ABOX_IRI):
+        text = text.replace(iri, "")
+    return text
+
+
+def scope_of(request: ReasoningRequest) -> str:
+    """Where the store keeps what this request inferred: per object, or `all`."""
+    return request.object_id or "all"
+
+
+def reasoner_names() -> Sequence[str]:
+    return sorted(REASONERS)
