@@ -41,6 +41,7 @@ from .schemas import (
     ObjectPublic,
     PerceptionCreate,
     SQLITE_MAX_INT,
+    QUERY_INTEGRAL,
     PlanPublic,
     ProblemPublic,
     StatePublic,
@@ -283,8 +284,8 @@ def read_ontology(
 def list_events(
     object_id: str,
     orch: Orch,
-    after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT, description="Return events after this seq.")] = 0,
-    limit: Annotated[int, Query(ge=1, le=MAX_EVENTS_PAGE, description="At most this many events.")] = MAX_EVENTS_PAGE,
+    after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT, description="Return events after this seq."), QUERY_INTEGRAL] = 0,
+    limit: Annotated[int, Query(ge=1, le=MAX_EVENTS_PAGE, description="At most this many events."), QUERY_INTEGRAL] = MAX_EVENTS_PAGE,
 ) -> list[dict[str, Any]]:
     """A page of the object's log, oldest first: every decision with its reason, goals, dispatches and feedback.
     The next page starts after the last `seq` returned (`after_seq`); a page never holds more than
@@ -298,8 +299,8 @@ def stream_object_events(
     object_id: str,
     request: Request,
     orch: Orch,
-    after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT, description="Send events after this seq.")] = 0,
-    max_events: Annotated[int | None, Query(ge=1, le=SQLITE_MAX_INT, description="Stop after this many events.")] = None,
+    after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT, description="Send events after this seq."), QUERY_INTEGRAL] = 0,
+    max_events: Annotated[int | None, Query(ge=1, le=SQLITE_MAX_INT, description="Stop after this many events."), QUERY_INTEGRAL] = None,
     timeout_s: Annotated[float | None, Query(gt=0, le=86400, description="Stop after this many seconds.")] = None,
     last_event_id: Annotated[str | None, Header()] = None,
 ) -> StreamingResponse:

@@ -47,7 +47,7 @@ router = APIRouter(responses={401: ERRORS[401], 422: ERRORS[422]})
 class ReasoningCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
     reasoner: Literal["pellet", "hermit"] = Field(description="The DL reasoner to run.")
-    object_id: str | None = Field(default=None, max_length=200,
+    object_id: str | None = Field(default=None, min_length=1, max_length=200,
                                   description="Only this object's current ABox (with the TBox); else every object's.")
 
 
@@ -80,7 +80,7 @@ def read_sparql(
                                             tuple(named_graph_uri or ())))
 
 
-@router.post("/sparql", tags=["knowledge"], openapi_extra={"requestBody": {"content": {
+@router.post("/sparql", tags=["knowledge"], openapi_extra={"requestBody": {"required": True, "content": {
              SPARQL_QUERY: {"schema": {"type": "string"}},
              FORM: {"schema": {"type": "object", "properties": {"query": {"type": "string"}}}}}}},
              responses={200: {"content": SPARQL_CONTENT, "description": "As GET."}, **QUERY_ERRORS, 413: ERRORS[413]})

@@ -12,10 +12,11 @@ are JSON integers: `4` or `4.0` (JSON Schema's integer), never `"4"` or `true`.
 """
 from __future__ import annotations
 
+import math
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 from planhrc.model import Formulation
 from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason
@@ -53,6 +54,25 @@ def _integral(value: Any) -> Any:
     """4.0 is the JSON integer 4 (JSON Schema's `integer` counts it), so it is taken as 4; 4.5 stays a float
     for the strict check to refuse."""
     return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+def _query_integral(value: Any) -> Any:
+    """A query parameter's integer as a JSON Schema `integer` may be written: `12`, `12.0` or `1.2e1` (a client
+    that serialises numbers as floats writes large ones with an exponent); anything else is left for the integer
+    check to refuse."""
+    if isinstance(value, str):
+        try:
+            return int(value)
+        except ValueError:
+            try:
+                number = float(value)
+            except ValueError:
+                return value
+            return int(number) if math.isfinite(number) and number.is_integer() else value
+    return value
+
+
+QUERY_INTEGRAL = BeforeValidator(_query_integral)  # after a query parameter's Query(...) in its Annotated[int, ...]
 
 
 def _orientation_count(k: int) -> int:

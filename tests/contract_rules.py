@@ -21,6 +21,8 @@ import schemathesis
 from schemathesis.specs.openapi.checks import is_unexpected_http_status_case
 
 _GOAL_FIELD = r"(link_orientations_deg|joint_angles_deg)"
+_SPARQL_REFUSAL = (r"query: (empty|not SPARQL 1\.1|cannot be evaluated|this endpoint is read-only|SERVICE is refused"
+                   r"|send one query)|(default|named)-graph-uri: no graph ")
 RULES_BEYOND_THE_SCHEMA: dict[str, re.Pattern[str]] = {
     # the service's setting max_task_size
     "POST /objects": re.compile(r"links, orientations: \d+ links x \d+ orientations = \d+ is over the largest "
@@ -33,13 +35,19 @@ RULES_BEYOND_THE_SCHEMA: dict[str, re.Pattern[str]] = {
     "POST /objects/{object_id}/perceptions": re.compile(r"link_orientations_deg: expected \d+ values \(one per link\)"),
     # two query parameters together
     "GET /ontology": re.compile(r"object: the whole history is exported for every object \(history=all\)$"),
+    # the SPARQL 1.1 grammar (any string is schema-valid, not every string is a query: the Protocol's 400), and the
+    # graphs this endpoint holds
+    "GET /sparql": re.compile(_SPARQL_REFUSAL),
+    "POST /sparql": re.compile(_SPARQL_REFUSAL),
 }
+# the status of each rule's refusal: 422 (a field the schema cannot check), but 400 for a malformed SPARQL query
+RULE_STATUS: dict[str, int] = {"GET /sparql": 400, "POST /sparql": 400}
 
 
 def refused_beyond_the_schema(label: str, status_code: int, body: bytes) -> bool:
     """Whether an answer is the service refusing, for one of the rules above, a request its schema accepts."""
     rule = RULES_BEYOND_THE_SCHEMA.get(label)
-    if rule is None or status_code != 422:
+    if rule is None or status_code != RULE_STATUS.get(label, 422):
         return False
     try:
         detail = json.loads(body)["detail"]
@@ -54,7 +62,7 @@ def refusals_beyond_the_schema(ctx: Any, response: Any, case: Any) -> bool | Non
     the listed rules (there, and only there, schemathesis.toml lets `positive_data_acceptance` take a 422)."""
     positive = case.meta is not None and case.meta.generation.mode.is_positive
     label = case.operation.label
-    if (not positive or response.status_code != 422 or label not in RULES_BEYOND_THE_SCHEMA
+    if (not positive or response.status_code != RULE_STATUS.get(label, 422) or label not in RULES_BEYOND_THE_SCHEMA
             or is_unexpected_http_status_case(case)):
         return None
     if not refused_beyond_the_schema(label, response.status_code, response.content):

@@ -200,6 +200,8 @@ def test_the_rules_beyond_the_schema_are_exactly_those_the_service_answers(servi
         "POST /objects/{object_id}/perceptions": client.post(f"/objects/{oid}/perceptions",
                                                              json={"link_orientations_deg": [0, 0]}),
         "GET /ontology": client.get("/ontology", params={"history": "all", "object": oid}),
+        "GET /sparql": client.get("/sparql", params={"query": "SELECT ?s WHERE {"}),
+        "POST /sparql": client.post("/sparql", content="", headers={"Content-Type": "application/sparql-query"}),
     }
     assert set(beyond) == set(RULES_BEYOND_THE_SCHEMA)
     for label, r in beyond.items():
