@@ -1,0 +1,361 @@
+"""The PostgreSQL backend of the knowledge base (`PostgresStore`): the ABox as rows of triples (`schema`, `rows`),
+written by the backend-neutral writes (`writes`, `triples`) through this backend's unit of work (`session`) and read
+back by `records`, with the event log, the execution cursor and idempotent responses as tables beside it, retention
+and the RDF export (`history`). It implements `interface.KnowledgeStore`, and what replicas need
+(`replicas.ObjectLocking`, `event_feed`).
+
+Every public method takes the store's lock and refuses a closed store. Each write checks its input completely
+before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan's
+triples are written with it, in its transaction (COPY), so every process reads a plan from the rows as soon as it
+commits: there is no journal to settle.
+
+The TBox is read by each process from its file (an in-memory owlready2 world, for the TBox's lines of the export);
+its digest is kept in the database, and a process whose TBox differs from the one the store was written with says
+so in its log.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator, Self, Sequence
+
+from planhrc.model import ArticulatedObject, Atom, Perception
+from planhrc.vocabulary import ExecutionStatus
+
+from ..cache import R, RecordCache
+from ..checks import check_events_page, check_export, check_keep_perceived, check_plan
+from ..errors import DamagedStoreError, KBError, NotFoundError, ValidationError
+from ..events import EventLog
+from ..execution import ExecutionCursor
+from ..export import export_rdf
+from ..journal import JournalEntry
+from ..names import ABOX_IRI, TBOX_IRI, counter_name
+from ..owl import QuadStore, ntriple_lines
+from ..records import (ActionSpec, CheckedPlan, Compaction, Execution, StoredAction, StoredEvent, StoredPlan,
+                       StoredProblem, StoredState)
+from ..responses import ResponseMemory
+from ..triples import plan_triples
+from ..writes import Writes
+from .history import abox_lines, compact_object
+from .records import PgRecords
+from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
+from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES, shown_location
+from .session import Session
+
+log = logging.getLogger(__name__)
+
+
+class InlinePlans:
+    """A new plan's triples, written in the transaction that stores it (`unit.PlanAdopter`)."""
+
+    def __init__(self, session: Session, records: PgRecords) -> None:
+        self._session = session
+        self._records = records
+
+    def adopt(self, entry: JournalEntry) -> StoredPlan:
+        batch = self._session.batch()
+        plan_triples(self._session, batch, self._records.info(entry.object_id), entry)
+        self._session.flush(batch)
+        plan, states = entry.records()
+        self._records.plans.put(plan)
+        for action in plan.actions:
+            self._records.actions.put(action)
+        for state in states:
+            self._records.states.put(state)
+        return plan
+
+
+class PostgresStore:
+    """TBox (from its file) + ABox and the service's tables in one PostgreSQL database; thread safe."""
+
+    def __init__(self, db: str | None, tbox_path: Path | str, password: str | None = None) -> None:
+        if not db:
+            raise KBError("db: a PostgreSQL store needs a URL (postgresql://user@host:port/database)")
+        self.tbox_path = Path(tbox_path)
+        if not self.tbox_path.is_file():
+            raise KBError(f"tbox_path: no such file {self.tbox_path}")
+        self._password = password
+        self._tbox_lines = _tbox_lines(self.tbox_path)
+        session = self._session = Session(db, password)
+        self._guard = session.guard
+        try:
+            self._prepare(hashlib.sha256(self.tbox_path.read_bytes()).hexdigest())
+            self._records = PgRecords(session)
+            session.listen(self._records)
+            self._writes = Writes(session, self._records, InlinePlans(session, self._records))
+        except BaseException:
+            session.close()
+            raise
+        log.info("store: PostgreSQL at %s", shown_location(db))
+
+    def _prepare(self, tbox_digest: str) -> None:
+        """Create the tables of a new database (one process at a time), refuse one of another schema, count."""
+        s = self._session
+        with s.transaction():
+            s.execute("SELECT pg_advisory_xact_lock(%s)", (SCHEMA_LOCK,))
+            for sql in TABLES:
+                s.execute(sql)
+            meta = dict(s.execute("SELECT key, value FROM planhrc_meta").fetchall())
+            if meta.get("schema", SCHEMA_VERSION) != SCHEMA_VERSION:
+                raise DamagedStoreError(f"db: the database holds a store of schema {meta['schema']}, this version "
+                                        f"reads schema {SCHEMA_VERSION}")
+            if not meta:
+                s.execute("INSERT INTO planhrc_meta VALUES ('schema', %s)", (SCHEMA_VERSION,))
+                s.execute("INSERT INTO planhrc_triple (s, p, o) VALUES (%s, %s, %s)",
+                          (ABOX_ONTOLOGY, RDF_TYPE, OWL + "Ontology"))
+            if meta.get("tbox_sha256") != tbox_digest:
+                if "tbox_sha256" in meta:
+                    log.warning("TBox %s differs from the one this database was written with", self.tbox_path)
+                s.execute("INSERT INTO planhrc_meta VALUES ('tbox_sha256', %s) ON CONFLICT (key) "
+                          "DO UPDATE SET value = EXCLUDED.value", (tbox_digest,))
+            row = s.execute("SELECT count(*) FROM planhrc_triple").fetchone()
+            s.triples = len(self._tbox_lines) + int(row[0] if row else 0)
+            row = s.execute("SELECT count(*) FROM planhrc_triple WHERE o = %s AND p = %s",
+                            (TBOX_IRI + "ArticulatedObject", RDF_TYPE)).fetchone()
+            s.objects = int(row[0] if row else 0)
+
+    # -- life cycle -------------------------------------------------------------------------------------------
+    def close(self) -> None:
+        with self._session.lock:
+            if not self._session.closed:
+                self._session.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @contextmanager
+    def transaction(self) -> Iterator[None]:
+        with self._guard, self._session.transaction():
+            yield
+
+    # -- what only this backend has: replicas -------------------------------------------------------------------
+    def lock_object(self, object_id: str) -> None:
+        with self._guard:
+            if not self._session.depth:
+                raise KBError("internal: lock_object outside a transaction() (it would be released at once)")
+            self._session.execute("SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))",
+                                  (LOCK_NAMESPACE + object_id,))
+
+    def event_feed(self) -> EventFeed:
+        """A feed of the events every process commits (`replicas.EventFeed`); the caller closes it."""
+        self._session.check_open()
+        return EventFeed(self._session.db, self._password)
+
+    # -- writes -----------------------------------------------------------------------------------------------
+    def new_object_id(self) -> str:
+        with self._guard:
+            return self._writes.new_object_id()
+
+    def create_object(self, obj: ArticulatedObject) -> None:
+        with self._guard:
+            self._writes.create_object(obj)
+
+    def add_state(self, object_id: str, kind: str, atoms: frozenset[Atom],
+                  link_orientations_deg: Sequence[float] | None = None) -> StoredState:
+        with self._guard:
+            return self._writes.add_state(object_id, kind, atoms, link_orientations_deg)
+
+    def add_perception(self, perception: Perception) -> StoredState:
+        with self._guard:
+            return self._writes.add_perception(perception)
+
+    def add_problem(self, object_id: str, init_state_id: str, goal_state_id: str) -> StoredProblem:
+        with self._guard:
+            return self._writes.add_problem(object_id, init_state_id, goal_state_id)
+
+    def add_plan(self, problem_id: str, planner: str, actions: Sequence[ActionSpec],
+                 expected_states: Sequence[frozenset[Atom]], checked: CheckedPlan | None = None) -> StoredPlan:
+        with self._guard:
+            return self._writes.add_plan(problem_id, planner, actions, expected_states, checked)
+
+    def check_plan(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
+                   deadline_at: float | None = None) -> CheckedPlan:
+        with self._guard:  # only to look the object up: the checks read nothing else
+            info = self._records.info(object_id, "object_id")
+        return check_plan(info, tuple(actions), tuple(expected_states), deadline_at)
+
+    def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
+        with self._guard:
+            ident = self._records.info(object_id, "object_id").obj.ident
+            text = EventLog.check(kind, reason, data)
+            s = self._session
+
+            def fill() -> StoredEvent:
+                seq = s.next_counter(counter_name(ident, "event"))
+                created = time.time()
+                s.execute("INSERT INTO planhrc_event VALUES (%s, %s, %s, %s, %s::json, %s)",
+                          (ident, seq, kind, reason, text, created))
+                s.execute("SELECT pg_notify(%s, %s)", (EVENT_CHANNEL, f"{ident} {seq}"))
+                return StoredEvent(seq, ident, kind, reason, json.loads(text), created)
+
+            return s.write(fill)
+
+    def set_execution(self, object_id: str, execution: Execution) -> None:
+        with self._guard:
+            ident = self._records.info(object_id, "object_id").obj.ident
+            if not isinstance(execution, Execution):
+                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
+            plan = None
+            if execution.plan_id is not None:
+                try:
+                    plan = self._records.plans.get(execution.plan_id)
+                except NotFoundError:
+                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
+            ExecutionCursor.check(ident, execution, plan)
+            row = (ident, execution.plan_id, execution.next_step, ExecutionStatus(execution.status).value,
+                   execution.dispatched_action_id)
+            self._session.write(lambda: self._session.execute(
+                "INSERT INTO planhrc_execution VALUES (%s, %s, %s, %s, %s) ON CONFLICT (object_id) DO UPDATE SET "
+                "plan_id = EXCLUDED.plan_id, next_step = EXCLUDED.next_step, status = EXCLUDED.status, "
+                "dispatched_action_id = EXCLUDED.dispatched_action_id", row))
+
+    def remember_response(self, object_id: str, key: str, response: dict[str, Any]) -> None:
+        with self._guard:
+            text = ResponseMemory.check(key, response)
+            self._session.write(lambda: self._session.execute(
+                "INSERT INTO planhrc_response VALUES (%s, %s, %s::json) ON CONFLICT DO NOTHING",
+                (str(object_id), key, text)))
+
+    # -- reads ------------------------------------------------------------------------------------------------
+    def get_object(self, object_id: str) -> ArticulatedObject:
+        with self._guard:
+            return self._records.info(object_id).obj
+
+    def list_objects(self) -> tuple[ArticulatedObject, ...]:
+        with self._guard:
+            return tuple(self._records.info(ident).obj for ident in self._records.object_ids())
+
+    def get_state(self, state_id: str) -> StoredState:
+        with self._guard:
+            return self._records.states.get(state_id)
+
+    def get_problem(self, problem_id: str) -> StoredProblem:
+        with self._guard:
+            return self._records.problems.get(problem_id)
+
+    def get_plan(self, plan_id: str) -> StoredPlan:
+        with self._guard:
+            return self._records.plans.get(plan_id)
+
+    def get_action(self, action_id: str) -> StoredAction:
+        with self._guard:
+            return self._records.actions.get(action_id)
+
+    def latest_problem(self, object_id: str) -> StoredProblem | None:
+        return self._latest(self._records.problems, object_id)
+
+    def latest_plan(self, object_id: str) -> StoredPlan | None:
+        return self._latest(self._records.plans, object_id)
+
+    def _latest(self, records: RecordCache[R], object_id: str) -> R | None:
+        with self._guard:
+            ident = self._session.latest(self._records.info(object_id).obj.ident, records.noun)
+            return records.get(ident) if ident else None
+
+    def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
+        check_events_page(after_seq, limit)
+        with self._guard:
+            ident = self._records.info(object_id).obj.ident
+            rows = self._session.execute(
+                "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id = %s AND seq > %s "
+                "ORDER BY seq LIMIT %s", (ident, after_seq, limit)).fetchall()
+        return tuple(StoredEvent(int(seq), ident, kind, reason, data, float(created))
+                     for seq, kind, reason, data, created in rows)
+
+    def get_execution(self, object_id: str) -> Execution:
+        with self._guard:
+            ident = self._records.info(object_id).obj.ident
+            row = self._session.execute("SELECT plan_id, next_step, status, dispatched_action_id FROM "
+                                        "planhrc_execution WHERE object_id = %s", (ident,)).fetchone()
+        if row is None:
+            return Execution(plan_id=None, next_step=None, status=ExecutionStatus.IDLE)
+        plan_id, next_step, status, dispatched = row
+        return Execution(plan_id, next_step, ExecutionStatus(status), dispatched)
+
+    def recall_response(self, object_id: str, key: str) -> dict[str, Any] | None:
+        with self._guard:
+            row = self._session.execute("SELECT response FROM planhrc_response WHERE object_id = %s AND key = %s",
+                                        (str(object_id), str(key))).fetchone()
+        return dict(row[0]) if row else None
+
+    def triple_count(self) -> int:
+        self._session.check_open()
+        return self._session.triples
+
+    def object_count(self) -> int:
+        self._session.check_open()
+        return self._session.objects
+
+    # -- the plan journal: none (a plan's triples are written with it) ----------------------------------------
+    def settle(self) -> None:
+        self._session.check_open()
+
+    def plans_to_write(self) -> int:
+        self._session.check_open()
+        return 0
+
+    # -- retention --------------------------------------------------------------------------------------------
+    def compact(self, keep_perceived: int) -> Compaction:
+        keep = check_keep_perceived(keep_perceived)
+        with self._guard:
+            s = self._session
+            objects = self._records.object_ids()
+            shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+
+            def fill() -> Compaction:
+                individuals = triples = 0
+                for oid in objects:
+                    i, t = compact_object(s.conn, oid, shared[oid], keep)
+                    individuals, triples = individuals + i, triples + t
+                s.pending_triples -= triples
+                return Compaction(len(objects), individuals, triples)
+
+            result = s.write(fill)
+            self._records.clear()  # records of deleted individuals must not be served from memory
+            return result
+
+    # -- export -----------------------------------------------------------------------------------------------
+    def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
+        """Read on a connection of the export's own, in one snapshot, without the store's lock."""
+        check_export(history, object_ids)
+        ids = None
+        with self._guard:
+            if history == "current":
+                ids = self._records.object_ids() if object_ids is None else list(object_ids)
+                for oid in ids:
+                    self._records.info(oid)
+            reader = self._session.reader()
+        return self._read_lines(reader, ids)
+
+    def _read_lines(self, reader: Any, ids: list[str] | None) -> Iterator[str]:
+        try:
+            yield from self._tbox_lines
+            yield from abox_lines(reader, ids)
+        finally:
+            reader.close()
+
+    def export(self, fmt: str = "xml", history: str = "current", object_ids: Sequence[str] | None = None) -> bytes:
+        check_export(history, object_ids, fmt)
+        text = "".join(self.export_lines(history, object_ids)).encode("utf-8")
+        return export_rdf(text, fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
+                                      "owl": "http://www.w3.org/2002/07/owl#"})
+
+
+def _tbox_lines(tbox_path: Path) -> tuple[str, ...]:
+    """The TBox as N-Triples lines, as the SQLite store exports it (owlready2 reads the file into memory)."""
+    quads = QuadStore(None)
+    try:
+        try:
+            quads.load_ontology(TBOX_IRI, tbox_path.read_bytes(), reload=False)
+        except Exception as exc:  # owlready2 raises several kinds for a file that is no ontology
+            raise KBError(f"tbox_path: {tbox_path} does not read as an ontology ({exc})") from None
+        return tuple(ntriple_lines(quads.db, "1"))
+    finally:
+        quads.abandon()
