@@ -1,4 +1,4 @@
-"""The PostgreSQL store's tables, and its database location as an operator may see it (never its password).
+"""The PostgreSQL store's tables.
 
 The ABox is one table of triples, `planhrc_triple (s, p, o, lit, dt)`, with the same IRIs the SQLite store gives
 its individuals (`names`): an object property's row has the object's IRI in `o`; a data property's row has the
@@ -7,8 +7,6 @@ same N-Triples). The service's side tables (events, execution cursor, idempotent
 beside it, in the same transactions.
 """
 from __future__ import annotations
-
-from urllib.parse import urlsplit, urlunsplit
 
 from ..names import ABOX_IRI
 
@@ -38,24 +36,3 @@ TABLES = (
 )
 # Two processes opening a new database at once must not both create it: creation holds this lock.
 SCHEMA_LOCK = 0x706C616E68726301  # "planhrc\x01"
-
-
-def shown_location(db: str) -> str:
-    """The URL as logs and errors may show it: a password is replaced by `***`."""
-    try:
-        parts = urlsplit(db)
-        if parts.password is None:
-            return db
-        netloc = parts.netloc.rsplit("@", 1)
-        user = (parts.username or "") + ":***"
-        return urlunsplit(parts._replace(netloc=f"{user}@{netloc[1]}"))
-    except ValueError:
-        return "<a database URL that does not parse>"
-
-
-def url_password(db: str) -> bool:
-    """Whether a database URL carries a password."""
-    try:
-        return urlsplit(db).password is not None
-    except ValueError:
-        return False

@@ -20,7 +20,8 @@ from ..abox import TransactionListener
 from ..errors import KBError, UnavailableError
 from ..names import ABOX_IRI, TBOX_IRI, counter_name, record_name
 from .rows import RowBatch
-from .schema import RDF_TYPE, shown_location
+from ..location import shown_location
+from .schema import RDF_TYPE
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")

@@ -43,7 +43,8 @@ from ..writes import Writes
 from .history import abox_lines, compact_object
 from .records import PgRecords
 from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
-from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES, shown_location
+from ..location import shown_location
+from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
 
 log = logging.getLogger(__name__)
