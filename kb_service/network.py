@@ -16,6 +16,8 @@ import stat
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
+from pydantic import SecretStr
+
 from .store.errors import KBError
 from .store.location import url_password
 
@@ -77,11 +79,11 @@ def resolve_secrets(settings: Settings, given: set[str], name: Name, warnings: l
     if settings.db_password_file:
         if settings.db_password is not None:
             raise SettingsProblem(f"{name('db_password_file')} and PLANHRC_DB_PASSWORD: give the password one way")
-        update["db_password"] = read_secret(settings.db_password_file, name("db_password_file"), warnings)
+        update["db_password"] = SecretStr(read_secret(settings.db_password_file, name("db_password_file"), warnings))
     if "db_path" in given and _url_password(settings.db_path):
         warnings.append(f"{name('db_path')}: the URL's password shows in the process list (ps) of every user of "
                         f"this machine; use {name('db_password_file')}, PGPASSFILE or PLANHRC_DB")
-    return settings.model_copy(update=update) if update else settings
+    return settings.model_copy(update=update) if update else settings  # values of the fields' types: no validation
 
 
 def check_exposure(settings: Settings, name: Name, warnings: list[str]) -> None:
@@ -109,12 +111,13 @@ def check_exposure(settings: Settings, name: Name, warnings: list[str]) -> None:
             raise SettingsProblem(
                 f"{name('host')}: {settings.host} is not a loopback address, and without a token anyone who reaches "
                 f"{where} may set goals and post perceptions that the robot then acts on; give a token "
-                f"({name('token_file')} or PLANHRC_TOKEN), or say {name('insecure')} to serve without one")
+                "(--token-file or PLANHRC_TOKEN_FILE, or PLANHRC_TOKEN), or say --insecure (PLANHRC_INSECURE) to "
+                "serve without one")
         warnings.append(f"{name('insecure')}: serving {where} without a token: anyone who reaches it may set goals "
                         "and post perceptions that the robot then acts on")
     elif not settings.ssl_certfile:
         warnings.append(f"{name('host')}: the token travels in clear text to {where}; serve HTTPS "
-                        f"({name('ssl_certfile')}) or behind a TLS reverse proxy")
+                        "(--ssl-certfile and --ssl-keyfile) or behind a TLS reverse proxy")
 
 
 def _url_password(db: str | None) -> bool:

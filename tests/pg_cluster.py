@@ -24,6 +24,11 @@ from typing import Callable
 from planhrc.service_process import free_port
 
 USER = "planhrc"  # the cluster's superuser (trust authentication on loopback and its socket)
+PASSWORD_USER = "secured"  # a role that must give its password (the tests of password files create it)
+HBA = f"""local all all trust
+host all {PASSWORD_USER} 127.0.0.1/32 scram-sha-256
+host all all 127.0.0.1/32 trust
+"""
 SERVER_USER = "postgres"  # who runs the server when the tests run as root (Debian's package creates it)
 PR_SET_PDEATHSIG = 1
 
@@ -87,6 +92,7 @@ class Cluster:
         if done.returncode:
             self.close()
             raise ClusterUnavailable(f"initdb failed: {done.stderr.decode(errors='replace')[-500:]}")
+        (data / "pg_hba.conf").write_text(HBA)
         self._server: subprocess.Popen[bytes] | None = subprocess.Popen(
             [str(bindir / "postgres"), "-D", str(data), "-p", str(self.port), "-k", str(self.folder),
              "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off", "-c", "synchronous_commit=off",
@@ -126,6 +132,22 @@ class Cluster:
         with psycopg.connect(self.url, autocommit=True) as conn:
             conn.execute(f'CREATE DATABASE "{name}"')
         return f"postgresql://{USER}@127.0.0.1:{self.port}/{name}"
+
+    def database_with_password(self, password: str) -> str:
+        """A new database owned by a role that must give `password` (once: the role is made on first use); its
+        URL, without the password."""
+        import psycopg
+        from psycopg import sql
+
+        url = self.database("secured")
+        name = url.rsplit("/", 1)[1]
+        with psycopg.connect(self.url, autocommit=True) as conn:
+            if conn.execute("SELECT 1 FROM pg_roles WHERE rolname = %s", (PASSWORD_USER,)).fetchone() is None:
+                conn.execute(sql.SQL("CREATE ROLE {} LOGIN PASSWORD {}").format(
+                    sql.Identifier(PASSWORD_USER), sql.Literal(password)))
+            conn.execute(sql.SQL("ALTER DATABASE {} OWNER TO {}").format(sql.Identifier(name),
+                                                                       sql.Identifier(PASSWORD_USER)))
+        return f"postgresql://{PASSWORD_USER}@127.0.0.1:{self.port}/{name}"
 
     def server_pid(self) -> int | None:
         return self._server.pid if self._server is not None else None
