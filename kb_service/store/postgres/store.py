@@ -50,6 +50,16 @@ from .session import Session
 log = logging.getLogger(__name__)
 
 
+# An event in one round trip: the object's next seq (its counter's row lock orders the object's events, across
+# processes too), the row, and its announcement to the feed (`replicas.EventFeed`), sent when the transaction commits.
+_APPEND_EVENT = (
+    "WITH c AS (INSERT INTO planhrc_counter AS c (name, value) VALUES (%s, 1) ON CONFLICT (name) "
+    "DO UPDATE SET value = c.value + 1 RETURNING value), "
+    "e AS (INSERT INTO planhrc_event SELECT %s, value, %s, %s, %s::json, %s FROM c RETURNING seq) "
+    "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
+)
+
+
 class InlinePlans:
     """A new plan's triples, written in the transaction that stores it (`unit.PlanAdopter`)."""
 
@@ -189,12 +199,11 @@ class PostgresStore:
             s = self._session
 
             def fill() -> StoredEvent:
-                seq = s.next_counter(counter_name(ident, "event"))
                 created = time.time()
-                s.execute("INSERT INTO planhrc_event VALUES (%s, %s, %s, %s, %s::json, %s)",
-                          (ident, seq, kind, reason, text, created))
-                s.execute("SELECT pg_notify(%s, %s)", (EVENT_CHANNEL, f"{ident} {seq}"))
-                return StoredEvent(seq, ident, kind, reason, json.loads(text), created)
+                row = s.execute(_APPEND_EVENT, (counter_name(ident, "event"), ident, kind, reason, text, created,
+                                                EVENT_CHANNEL, ident)).fetchone()
+                assert row is not None
+                return StoredEvent(int(row[0]), ident, kind, reason, json.loads(text), created)
 
             return s.write(fill)
 
