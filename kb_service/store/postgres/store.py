@@ -23,27 +23,24 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Self, Sequence
 
-from planhrc.model import ArticulatedObject, Atom, Perception
+from planhrc.model import ArticulatedObject
 from planhrc.vocabulary import ExecutionStatus
 
-from ..cache import R, RecordCache
-from ..checks import check_events_page, check_export, check_keep_perceived, check_plan
-from ..errors import DamagedStoreError, KBError, NotFoundError, ValidationError
+from ..checks import check_events_page, check_export, check_keep_perceived
+from ..errors import DamagedStoreError, KBError
 from ..events import EventLog
-from ..execution import ExecutionCursor
-from ..export import export_rdf
+from ..facade import StoreFacade
 from ..journal import JournalEntry
-from ..names import ABOX_IRI, TBOX_IRI, counter_name
+from ..location import shown_location
+from ..names import TBOX_IRI, counter_name
 from ..owl import QuadStore, ntriple_lines
-from ..records import (ActionSpec, CheckedPlan, Compaction, Execution, StoredAction, StoredEvent, StoredPlan,
-                       StoredProblem, StoredState)
+from ..records import Compaction, Execution, StoredEvent, StoredPlan
 from ..responses import ResponseMemory
 from ..triples import plan_triples
 from ..writes import Writes
 from .history import abox_lines, compact_object
 from .records import PgRecords
 from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
-from ..location import shown_location
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
 
@@ -80,8 +77,10 @@ class InlinePlans:
         return plan
 
 
-class PostgresStore:
+class PostgresStore(StoreFacade):
     """TBox (from its file) + ABox and the service's tables in one PostgreSQL database; thread safe."""
+
+    _records: PgRecords
 
     def __init__(self, db: str | None, tbox_path: Path | str, password: str | None = None) -> None:
         if not db:
@@ -159,39 +158,7 @@ class PostgresStore:
         self._session.check_open()
         return EventFeed(self._session.db, self._password)
 
-    # -- writes -----------------------------------------------------------------------------------------------
-    def new_object_id(self) -> str:
-        with self._guard:
-            return self._writes.new_object_id()
-
-    def create_object(self, obj: ArticulatedObject) -> None:
-        with self._guard:
-            self._writes.create_object(obj)
-
-    def add_state(self, object_id: str, kind: str, atoms: frozenset[Atom],
-                  link_orientations_deg: Sequence[float] | None = None) -> StoredState:
-        with self._guard:
-            return self._writes.add_state(object_id, kind, atoms, link_orientations_deg)
-
-    def add_perception(self, perception: Perception) -> StoredState:
-        with self._guard:
-            return self._writes.add_perception(perception)
-
-    def add_problem(self, object_id: str, init_state_id: str, goal_state_id: str) -> StoredProblem:
-        with self._guard:
-            return self._writes.add_problem(object_id, init_state_id, goal_state_id)
-
-    def add_plan(self, problem_id: str, planner: str, actions: Sequence[ActionSpec],
-                 expected_states: Sequence[frozenset[Atom]], checked: CheckedPlan | None = None) -> StoredPlan:
-        with self._guard:
-            return self._writes.add_plan(problem_id, planner, actions, expected_states, checked)
-
-    def check_plan(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
-                   deadline_at: float | None = None) -> CheckedPlan:
-        with self._guard:  # only to look the object up: the checks read nothing else
-            info = self._records.info(object_id, "object_id")
-        return check_plan(info, tuple(actions), tuple(expected_states), deadline_at)
-
+    # -- writes (the rest: `facade.StoreFacade`) ------------------------------------------------------------
     def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
         with self._guard:
             ident = self._records.info(object_id, "object_id").obj.ident
@@ -209,16 +176,7 @@ class PostgresStore:
 
     def set_execution(self, object_id: str, execution: Execution) -> None:
         with self._guard:
-            ident = self._records.info(object_id, "object_id").obj.ident
-            if not isinstance(execution, Execution):
-                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
-            plan = None
-            if execution.plan_id is not None:
-                try:
-                    plan = self._records.plans.get(execution.plan_id)
-                except NotFoundError:
-                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
-            ExecutionCursor.check(ident, execution, plan)
+            ident = self._checked_execution(object_id, execution)
             row = (ident, execution.plan_id, execution.next_step, ExecutionStatus(execution.status).value,
                    execution.dispatched_action_id)
             self._session.write(lambda: self._session.execute(
@@ -233,41 +191,9 @@ class PostgresStore:
                 "INSERT INTO planhrc_response VALUES (%s, %s, %s::json) ON CONFLICT DO NOTHING",
                 (str(object_id), key, text)))
 
-    # -- reads ------------------------------------------------------------------------------------------------
-    def get_object(self, object_id: str) -> ArticulatedObject:
-        with self._guard:
-            return self._records.info(object_id).obj
-
-    def list_objects(self) -> tuple[ArticulatedObject, ...]:
-        with self._guard:
-            return tuple(self._records.info(ident).obj for ident in self._records.object_ids())
-
-    def get_state(self, state_id: str) -> StoredState:
-        with self._guard:
-            return self._records.states.get(state_id)
-
-    def get_problem(self, problem_id: str) -> StoredProblem:
-        with self._guard:
-            return self._records.problems.get(problem_id)
-
-    def get_plan(self, plan_id: str) -> StoredPlan:
-        with self._guard:
-            return self._records.plans.get(plan_id)
-
-    def get_action(self, action_id: str) -> StoredAction:
-        with self._guard:
-            return self._records.actions.get(action_id)
-
-    def latest_problem(self, object_id: str) -> StoredProblem | None:
-        return self._latest(self._records.problems, object_id)
-
-    def latest_plan(self, object_id: str) -> StoredPlan | None:
-        return self._latest(self._records.plans, object_id)
-
-    def _latest(self, records: RecordCache[R], object_id: str) -> R | None:
-        with self._guard:
-            ident = self._session.latest(self._records.info(object_id).obj.ident, records.noun)
-            return records.get(ident) if ident else None
+    # -- reads (the rest: `facade.StoreFacade`) -------------------------------------------------------------
+    def _latest_id(self, object_id: str, noun: str) -> str | None:
+        return self._session.latest(object_id, noun)
 
     def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
         check_events_page(after_seq, limit)
@@ -350,12 +276,6 @@ class PostgresStore:
             yield from abox_lines(reader, ids)
         finally:
             reader.close()
-
-    def export(self, fmt: str = "xml", history: str = "current", object_ids: Sequence[str] | None = None) -> bytes:
-        check_export(history, object_ids, fmt)
-        text = "".join(self.export_lines(history, object_ids)).encode("utf-8")
-        return export_rdf(text, fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
-                                      "owl": "http://www.w3.org/2002/07/owl#"})
 
 
 def _tbox_lines(tbox_path: Path) -> tuple[str, ...]:
