@@ -34,7 +34,11 @@ def journal_rows(backend: str, db: str) -> int:
         with sqlite3.connect(db) as conn:
             return int(conn.execute("SELECT COUNT(*) FROM planhrc_plan_journal").fetchone()[0])
     if backend == "postgresql":
-        return 0  # a plan's triples are written with it: there is no journal
+        import psycopg
+
+        with psycopg.connect(db) as conn:
+            row = conn.execute("SELECT count(*) FROM planhrc_plan_journal").fetchone()
+            return int(row[0]) if row else 0
     raise AssertionError(f"tests/store_backends.py: no journal reader for the backend {backend!r}")
 
 
@@ -45,11 +49,6 @@ class Place:
         self.backend = backend
         self.db = db
         self.cluster = cluster
-
-    @property
-    def journals(self) -> bool:
-        """Whether the backend stores a plan as a journal row first (its triples follow behind the answer)."""
-        return self.backend == "sqlite"
 
     def open(self) -> KnowledgeStore:
         return open_store(self.db, default_tbox_path())

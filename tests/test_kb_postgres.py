@@ -16,9 +16,11 @@ import rdflib
 from rdflib.compare import isomorphic
 
 from planhrc.kb_service.store import TBOX_IRI, KBError, KnowledgeBase, KnowledgeStore, open_store
+from planhrc.kb_service.store import journal
 from planhrc.kb_service.store.records import Execution
 from planhrc.model import make_object, snap_angle
 from planhrc.paths import default_tbox_path
+from tests.store_backends import journal_rows
 from tests.test_kb_scenarios import plan_for
 
 TBOX = default_tbox_path()
@@ -189,6 +191,31 @@ def test_two_stores_on_one_database_see_each_others_writes(pg_url):
         assert two.list_objects() == (obj,)
         one.add_event(obj.ident, "k", "", {})
         assert two.add_event(obj.ident, "k", "", {}).seq == 2  # one order of events per object
+
+
+def test_a_plan_journalled_by_one_process_is_read_and_written_out_by_another(pg_url, monkeypatch):
+    """A plan's journal row is the plan for every process until its triples are written, and any process writes
+    it out (`kb_service/store/postgres/journal.py`)."""
+    monkeypatch.setattr(journal, "WRITE_DELAY_S", 600.0)  # neither writer thread gets to it: the test does
+    with open_store(pg_url, TBOX) as one, open_store(pg_url, TBOX) as two:
+        obj = make_object("obj1", "absolute", 4, 8)
+        one.create_object(obj)
+        start = one.add_state("obj1", "perceived", obj.state([0, 0, 0, 0]))
+        actions, states = plan_for(obj, start.atoms, [(1, True), (3, False), (2, True)])
+        goal = one.add_state("obj1", "goal", states[-1])
+        plan = one.add_plan(one.add_problem("obj1", start.id, goal.id).id, "inproc", actions, states)
+        assert journal_rows("postgresql", pg_url) == one.plans_to_write() == 1
+        assert two.get_action(plan.actions[2].id) == plan.actions[2]  # from the row, in another process
+        assert two.get_state(plan.expected_state_ids[1]).atoms == frozenset(states[1])
+        assert two.get_plan(plan.id) == plan
+        before = two.triple_count()
+        assert f"{plan.actions[0].id}>" in two.export("nt").decode()  # the export writes it out first
+        assert journal_rows("postgresql", pg_url) == 0 and two.triple_count() > before + 100
+        one.settle()
+        assert one.plans_to_write() == 0 and one.get_plan(plan.id) == plan
+    with open_store(pg_url, TBOX) as three:  # from the triples alone
+        assert three.get_plan(plan.id) == plan
+        assert [three.get_state(s).atoms for s in plan.expected_state_ids] == [frozenset(s) for s in states]
 
 
 def test_the_object_lock_holds_a_second_process_until_the_commit(pg_url):

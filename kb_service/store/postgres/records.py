@@ -3,7 +3,8 @@ store's identity map, as `reads.Records` is the SQLite store's (a `unit.RecordsO
 `TransactionListener` of its `Session`).
 
 A record is read with a query or two per kind of individual it is made of (the record, its predicate individuals,
-its observations), whatever its size. A predicate individual that belongs to its object (a static fact, an
+its observations), whatever its size. A plan whose triples are not written yet (`journal`) is read from its journal
+row, which is looked up first: a row turns into triples in one transaction, so one or the other is found. A predicate individual that belongs to its object (a static fact, an
 orientation of a joint) is known by its name (`names.atom_fragment`, the names every write gives them); an action's
 own predicates are read. Every method is called with the store's lock held.
 """
@@ -15,7 +16,8 @@ from planhrc.model import ArticulatedObject, Atom, Formulation, natural_key
 
 from ..cache import RecordCache, object_info
 from ..checks import ObjectInfo
-from ..errors import DamagedStoreError, NotFoundError, ValidationError
+from ..errors import DamagedStoreError
+from ..journal import JournalEntry, decode
 from ..names import ABOX_IRI, ACTION_CLASSES, PREDICATE_OF_CLASS, PREDICATES, STATE_CLASSES, TBOX_IRI
 from ..records import ActionSpec, CondEffect, StoredAction, StoredPlan, StoredProblem, StoredState
 from .rows import Individual, individuals
@@ -35,7 +37,7 @@ class PgRecords:
         self.session = session
         self.objects: dict[str, ObjectInfo] = {}
         self._atom_of: dict[str, dict[str, Atom]] = {}  # object id -> name of its own predicate -> atom
-        held: dict[str, object] = {}  # nothing is held: a plan's rows are written with it
+        held: dict[str, object] = {}  # a journalled plan's records are read from its row, in any process
         self.states = RecordCache("state", StoredState, self._load_state, held)
         self.problems = RecordCache("problem", StoredProblem, self._load_problem, held)
         self.plans = RecordCache("plan", StoredPlan, self._load_plan, held)
@@ -53,6 +55,24 @@ class PgRecords:
 
     def rolled_back(self) -> None:
         self.clear()  # records cached during a rolled-back transaction were never stored
+
+    def put_entry(self, entry: JournalEntry) -> StoredPlan:
+        """Cache a journalled plan's records (its actions and expected states); the plan's."""
+        plan, states = entry.records()
+        self.plans.put(plan)
+        for action in plan.actions:
+            self.actions.put(action)
+        for state in states:
+            self.states.put(state)
+        return plan
+
+    def _journalled(self, sql: str, params: tuple[Any, ...]) -> JournalEntry | None:
+        row = self.session.execute("SELECT payload FROM planhrc_plan_journal WHERE " + sql, params).fetchone()
+        if row is None:
+            return None
+        entry = decode(bytes(row[0]))
+        self.put_entry(entry)
+        return entry
 
     # -- rows ---------------------------------------------------------------------------------------------
     def describe(self, names: Sequence[str]) -> dict[str, Individual]:
@@ -111,6 +131,10 @@ class PgRecords:
 
     # -- loaders of the cached kinds ------------------------------------------------------------------------
     def _load_state(self, state_id: str) -> StoredState | None:
+        object_id, _, number = state_id.rpartition("_state_")
+        if number.isdigit() and self._journalled("object_id = %s AND first_state <= %s AND last_state >= %s",
+                                                 (object_id, int(number), int(number))):
+            return self.states.get(state_id)
         state = self.describe([state_id]).get(state_id)
         kind = next((k for k, cls in STATE_CLASSES.items() if state and cls in state.types), None)
         if state is None or kind is None:
@@ -136,6 +160,9 @@ class PgRecords:
                              float(problem.value("createdAt")))
 
     def _load_action(self, action_id: str) -> StoredAction | None:
+        plan_id, _, step = action_id.rpartition("_a")
+        if step.isdigit() and self._journalled("plan_id = %s", (plan_id,)):
+            return self.actions.get(action_id)
         return self._load_actions([action_id]).get(action_id)
 
     def _load_actions(self, action_ids: Sequence[str]) -> dict[str, StoredAction]:
@@ -162,6 +189,8 @@ class PgRecords:
         return out
 
     def _load_plan(self, plan_id: str) -> StoredPlan | None:
+        if self._journalled("plan_id = %s", (plan_id,)):
+            return self.plans.get(plan_id)
         plan = self._get(plan_id, "Plan")
         if plan is None:
             return None

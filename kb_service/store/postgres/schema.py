@@ -4,7 +4,7 @@ The ABox is one table of triples, `planhrc_triple (s, p, o, lit, dt)`, with the 
 its individuals (`names`): an object property's row has the object's IRI in `o`; a data property's row has the
 literal's lexical form in `lit` and its datatype IRI in `dt` (the forms owlready2 writes, so both stores export the
 same N-Triples). The service's side tables (events, execution cursor, idempotent responses, counters) are tables
-beside it, in the same transactions.
+beside it, in the same transactions, and so is the plan journal.
 """
 from __future__ import annotations
 
@@ -33,6 +33,9 @@ TABLES = (
     " status text NOT NULL, dispatched_action_id text)",
     "CREATE TABLE IF NOT EXISTS planhrc_response (object_id text NOT NULL, key text NOT NULL, response json NOT NULL,"
     " PRIMARY KEY (object_id, key))",
+    # Plans whose triples are not written yet (`journal`), oldest first; a row names the expected states it holds.
+    "CREATE TABLE IF NOT EXISTS planhrc_plan_journal (seq bigserial PRIMARY KEY, plan_id text UNIQUE NOT NULL,"
+    " object_id text NOT NULL, first_state bigint NOT NULL, last_state bigint NOT NULL, payload bytea NOT NULL)",
 )
 # Two processes opening a new database at once must not both create it: creation holds this lock.
 SCHEMA_LOCK = 0x706C616E68726301  # "planhrc\x01"

@@ -5,9 +5,9 @@ and the RDF export (`history`). It implements `interface.KnowledgeStore`, and wh
 (`replicas.ObjectLocking`, `event_feed`).
 
 Every public method takes the store's lock and refuses a closed store. Each write checks its input completely
-before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan's
-triples are written with it, in its transaction (COPY), so every process reads a plan from the rows as soon as it
-commits: there is no journal to settle.
+before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan is
+stored as a journal row and its triples are written behind the answer (`journal`), as in the SQLite store; every
+process reads it from its row until then.
 
 The TBox is read by each process from its file (an in-memory owlready2 world, for the TBox's lines of the export);
 its digest is kept in the database, and a process whose TBox differs from the one the store was written with says
@@ -30,15 +30,14 @@ from ..checks import check_events_page, check_export, check_keep_perceived
 from ..errors import DamagedStoreError, KBError
 from ..events import EventLog
 from ..facade import StoreFacade
-from ..journal import JournalEntry
 from ..location import shown_location
 from ..names import TBOX_IRI, counter_name
 from ..owl import QuadStore, ntriple_lines
-from ..records import Compaction, Execution, StoredEvent, StoredPlan
+from ..records import Compaction, Execution, StoredEvent
 from ..responses import ResponseMemory
-from ..triples import plan_triples
 from ..writes import Writes
 from .history import abox_lines, compact_object
+from .journal import PgJournal
 from .records import PgRecords
 from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
@@ -55,26 +54,6 @@ _APPEND_EVENT = (
     "e AS (INSERT INTO planhrc_event SELECT %s, value, %s, %s, %s::json, %s FROM c RETURNING seq) "
     "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
 )
-
-
-class InlinePlans:
-    """A new plan's triples, written in the transaction that stores it (`unit.PlanAdopter`)."""
-
-    def __init__(self, session: Session, records: PgRecords) -> None:
-        self._session = session
-        self._records = records
-
-    def adopt(self, entry: JournalEntry) -> StoredPlan:
-        batch = self._session.batch()
-        plan_triples(self._session, batch, self._records.info(entry.object_id), entry)
-        self._session.flush(batch)
-        plan, states = entry.records()
-        self._records.plans.put(plan)
-        for action in plan.actions:
-            self._records.actions.put(action)
-        for state in states:
-            self._records.states.put(state)
-        return plan
 
 
 class PostgresStore(StoreFacade):
@@ -95,11 +74,14 @@ class PostgresStore(StoreFacade):
         try:
             self._prepare(hashlib.sha256(self.tbox_path.read_bytes()).hexdigest())
             self._records = PgRecords(session)
-            session.listen(self._records)
-            self._writes = Writes(session, self._records, InlinePlans(session, self._records))
+            self._journal = PgJournal(session, self._records)
+            session.listen(self._records, self._journal)
+            self._writes = Writes(session, self._records, self._journal)
+            self._journal.recover()  # before anything is served
         except BaseException:
             session.close()
             raise
+        self._journal.start()
         log.info("store: PostgreSQL at %s", shown_location(db))
 
     def _prepare(self, tbox_digest: str) -> None:
@@ -130,8 +112,13 @@ class PostgresStore(StoreFacade):
 
     # -- life cycle -------------------------------------------------------------------------------------------
     def close(self) -> None:
+        self._journal.stop()  # before the lock: the writer thread may be waiting for it
         with self._session.lock:
             if not self._session.closed:
+                try:
+                    self._journal.settle()
+                except Exception:  # the rows stay in the journal; the next open writes them out
+                    log.exception("store: writing out journalled plans at close failed")
                 self._session.close()
 
     def __enter__(self) -> Self:
@@ -229,18 +216,20 @@ class PostgresStore(StoreFacade):
         self._session.check_open()
         return self._session.objects
 
-    # -- the plan journal: none (a plan's triples are written with it) ----------------------------------------
+    # -- the plan journal -------------------------------------------------------------------------------------
     def settle(self) -> None:
-        self._session.check_open()
+        with self._guard:
+            self._journal.settle()
 
     def plans_to_write(self) -> int:
         self._session.check_open()
-        return 0
+        return len(self._journal)
 
     # -- retention --------------------------------------------------------------------------------------------
     def compact(self, keep_perceived: int) -> Compaction:
         keep = check_keep_perceived(keep_perceived)
         with self._guard:
+            self._journal.settle()  # a plan still in the journal is history like any other
             s = self._session
             objects = self._records.object_ids()
             shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
@@ -267,6 +256,7 @@ class PostgresStore(StoreFacade):
                 ids = self._records.object_ids() if object_ids is None else list(object_ids)
                 for oid in ids:
                     self._records.info(oid)
+            self._journal.settle()  # the export reads triples: every journalled plan's are written first
             reader = self._session.reader()
         return self._read_lines(reader, ids)
 
