@@ -261,3 +261,23 @@ def test_the_event_feed_announces_each_event_once_it_commits(pg_url):
         with pytest.raises(KBError):
             one.add_event("obj1", "k", "", {"x": object()})
         assert feed.wait(0.3) == []  # a refused event is not announced
+
+
+def test_a_connection_the_server_dropped_fails_one_request_and_is_opened_again(pg_url, pg_cluster):
+    """The server ends the store's connection (a restart, an administrator): the request that finds it lost fails
+    with UnavailableError, nothing of it written, and the next request connects again."""
+    import psycopg
+
+    from planhrc.kb_service.store.errors import UnavailableError
+
+    with open_store(pg_url, TBOX) as kb:
+        obj = make_object("obj1", "relative", 3, 4)
+        kb.create_object(obj)
+        with psycopg.connect(pg_cluster.url, autocommit=True) as admin:
+            admin.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = %s "
+                          "AND application_name = 'planhrc'", (pg_url.rsplit("/", 1)[1],))
+        with pytest.raises(UnavailableError, match="^db: the connection to the database was lost"):
+            kb.add_state("obj1", "perceived", obj.state([0, 90]))
+        state = kb.add_state("obj1", "perceived", obj.state([0, 90]))
+        assert kb.get_state(state.id).atoms == obj.state([0, 90])
+        assert state.id == "obj1_state_1"  # the failed request used up nothing
