@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import socket
 import sys
 from pathlib import Path
@@ -78,7 +79,11 @@ def check_serve_settings(settings, given: set[str], warnings: list[str] | None =
     from planhrc.planner.registry import PLANNERS, available_planners
 
     def name(field: str) -> str:
-        return SERVE_OPTIONS[field] if field in given else f"PLANHRC_{field.upper()}"
+        if field in given:
+            return SERVE_OPTIONS[field]
+        if field == "db_path" and os.environ.get("PLANHRC_DB"):  # the store's variable has two names
+            return "PLANHRC_DB"
+        return f"PLANHRC_{field.upper()}"
 
     if settings.planner not in PLANNERS:
         raise SettingsProblem(f"{name('planner')}: unknown planner {settings.planner!r}; "

@@ -38,7 +38,7 @@ CASES = [
     (["serve", "--db", "/proc/nope/kb.sqlite3"], {}, "--db"),
     # serve: the store's server, secrets, a service open to the network, TLS
     (["serve", "--db", "postgresql://planhrc@127.0.0.1:1/kb"], {}, "--db"),
-    (["serve"], {"PLANHRC_DB": "mysql://planhrc@127.0.0.1:1/kb"}, "PLANHRC_DB"),
+    (["serve"], {"PLANHRC_DB": "mysql://planhrc@127.0.0.1:1/kb"}, "PLANHRC_DB: no store backend for mysql://"),
     (["serve", "--host", "0.0.0.0"], {}, "--host"),
     (["serve"], {"PLANHRC_HOST": "0.0.0.0"}, "PLANHRC_HOST"),
     (["serve", "--token-file", "/proc/nope/token"], {}, "--token-file"),
