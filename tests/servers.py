@@ -28,7 +28,10 @@ def store_location(backend: str, folder: Path, request: pytest.FixtureRequest) -
     throwaway PostgreSQL cluster (`tests/conftest.py`)."""
     if backend == "sqlite":
         return str(folder / "kb.sqlite3")
-    return str(request.getfixturevalue("pg_cluster").database())
+    cluster = request.getfixturevalue("pg_cluster")
+    url = str(cluster.database())
+    request.addfinalizer(lambda: cluster.drop(url))
+    return url
 
 
 def serve_env(env: Mapping[str, str] | None = None) -> dict[str, str]:

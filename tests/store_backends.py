@@ -45,10 +45,11 @@ def journal_rows(backend: str, db: str) -> int:
 class Place:
     """One store's location: open it (again) as the service would."""
 
-    def __init__(self, backend: str, db: str, cluster: Cluster | None = None) -> None:
+    def __init__(self, backend: str, db: str, cluster: Cluster | None = None, made: list[str] | None = None) -> None:
         self.backend = backend
         self.db = db
         self.cluster = cluster
+        self.made = [db] if made is None else made  # the databases of this test (dropped after it)
 
     def open(self) -> KnowledgeStore:
         return open_store(self.db, default_tbox_path())
@@ -59,13 +60,19 @@ class Place:
     def another(self, folder: Path) -> Place:
         """A second throwaway store of the same backend."""
         folder.mkdir(parents=True, exist_ok=True)
-        return Place(self.backend, location(self.backend, folder, self.cluster), self.cluster)
+        db = location(self.backend, folder, self.cluster)
+        self.made.append(db)
+        return Place(self.backend, db, self.cluster, self.made)
 
 
 @pytest.fixture(params=sorted(BACKENDS))
-def place(request: pytest.FixtureRequest, tmp_path: Path) -> Place:
+def place(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Place]:
     cluster = request.getfixturevalue("pg_cluster") if request.param == "postgresql" else None
-    return Place(request.param, location(request.param, tmp_path, cluster), cluster)
+    made = Place(request.param, location(request.param, tmp_path, cluster), cluster)
+    yield made
+    if cluster is not None:
+        for db in made.made:
+            cluster.drop(db)
 
 
 @pytest.fixture

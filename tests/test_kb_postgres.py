@@ -5,11 +5,13 @@ the per-object lock, the event feed) works. The rest of the store suite runs on 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
 import rdflib
@@ -28,8 +30,10 @@ CREATED_AT = rdflib.URIRef(TBOX_IRI + "createdAt")
 
 
 @pytest.fixture
-def pg_url(pg_cluster) -> str:
-    return pg_cluster.database()
+def pg_url(pg_cluster) -> Iterator[str]:
+    url = pg_cluster.database()
+    yield url
+    pg_cluster.drop(url)
 
 
 def _history(kb: KnowledgeStore) -> None:
@@ -281,3 +285,32 @@ def test_a_connection_the_server_dropped_fails_one_request_and_is_opened_again(p
         state = kb.add_state("obj1", "perceived", obj.state([0, 90]))
         assert kb.get_state(state.id).atoms == obj.state([0, 90])
         assert state.id == "obj1_state_1"  # the failed request used up nothing
+
+
+def test_a_test_process_killed_leaves_no_server_behind(pg_cluster):
+    """The throwaway cluster's server dies with the process that started it, even one killed with SIGKILL."""
+    child = textwrap.dedent("""
+        import os, signal
+        from tests.pg_cluster import Cluster
+        cluster = Cluster()
+        print(cluster.server_pid(), cluster.folder, flush=True)
+        os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    env = {**os.environ, "PYTHONPATH": os.getcwd()}
+    done = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, timeout=120, env=env)
+    pid, folder = done.stdout.split()
+    try:
+        deadline = time.monotonic() + 30
+        while _alive(int(pid)) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _alive(int(pid)), f"postgres {pid} outlived the process that started it"
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)  # what a killed run leaves: its folder in the temporary folder
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except FileNotFoundError:
+        return False
