@@ -130,6 +130,10 @@ def test_the_reasoners_read_the_postgresql_store_as_owl(pg_url):
         pg.create_object(rel)
         state = pg.add_state("obj2", "perceived", rel.state([90, 0]), [0.0, 90.0, 90.0])
         assert derive_relative_orientations(pg, state.id) == (90, 0)
+    from planhrc.kb_service.check import check_ontology
+
+    checked = check_ontology(TBOX, pg_url, "pellet", timeout_s=120)  # `planhrc ontology check --db postgresql://`
+    assert checked.consistent and checked.report.inferred_facts >= reports[1].inferred_facts
 
 
 def test_acknowledged_writes_survive_a_process_killed_mid_transaction(pg_url):

@@ -21,7 +21,7 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 """
 from .backends import BACKENDS, open_store
 from .errors import (ConflictError, DamagedStoreError, DeadlineError, KBError, NotFoundError, ReasonerError,
-                     ValidationError)
+                     UnavailableError, ValidationError)
 from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, Export, KnowledgeStore, PlanChecks, PlanJournal, Reads,
                         Retention, Writes)
 from .knowledge_base import KnowledgeBase, SqliteStore
@@ -34,5 +34,5 @@ __all__ = [
     "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "Execution",
     "Export", "KBError", "KnowledgeBase", "KnowledgeStore", "NotFoundError", "PlanChecks", "PlanJournal", "Reads",
     "ReasonerError", "Retention", "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem",
-    "StoredState", "ValidationError", "Writes", "atom_fragment", "open_store",
+    "StoredState", "UnavailableError", "ValidationError", "Writes", "atom_fragment", "open_store",
 ]
