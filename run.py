@@ -225,26 +225,59 @@ def write_constraints(py: str) -> None:
     say(f"wrote {CONSTRAINTS.name}: {len(lines)} pinned distributions")
 
 
+def apt_usable() -> bool:
+    """Whether Debian's packages can be installed here (root, with apt-get)."""
+    return os.name == "posix" and os.geteuid() == 0 and Path("/usr/bin/apt-get").exists()
+
+
+def apt_install(package: str, purpose: str) -> bool:
+    """`apt-get install` one Debian package (after `apt-get update`), its output in APT_LOG; whether it worked (a
+    failure is said in one line, naming the log)."""
+    say(f"installing Debian's {package} for {purpose} (log: {shown(APT_LOG)})")
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    try:
+        run_logged(["apt-get", "update"], APT_LOG, "apt-get update", env=env)
+        run_logged(["apt-get", "install", "-y", "--no-install-recommends", package], APT_LOG,
+                   f"apt-get install {package}", env=env)
+    except InstallFailed as exc:
+        say(f"{exc}\nThe tests of {purpose} will skip.")
+        return False
+    return True
+
+
 def ensure_chromium() -> None:
     """The browser tests drive Debian's Chromium: install the `chromium` package when it is missing and apt is
     usable (as root). Otherwise say why; those tests then skip with the same reason."""
     if CHROMIUM.exists():
         return
-    if os.name != "posix" or os.geteuid() != 0 or not Path("/usr/bin/apt-get").exists():
+    if not apt_usable():
         say(f"{CHROMIUM} is missing and apt-get cannot be used here (needs root on Debian): "
             "the browser tests will skip")
         return
-    say(f"installing Debian's chromium for the browser tests (log: {shown(APT_LOG)})")
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    try:
-        run_logged(["apt-get", "update"], APT_LOG, "apt-get update", env=env)
-        run_logged(["apt-get", "install", "-y", "--no-install-recommends", "chromium"], APT_LOG,
-                   "apt-get install chromium", env=env)
-    except InstallFailed as exc:
-        say(f"{exc}\nThe browser tests will skip.")
-        return
-    if not CHROMIUM.exists():
+    if apt_install("chromium", "the browser tests") and not CHROMIUM.exists():
         say(f"apt-get installed chromium but {CHROMIUM} is not there: the browser tests will skip")
+
+
+def postgresql_bindir() -> "Path | None":
+    """The folder of PostgreSQL's initdb and postgres (Debian keeps them in /usr/lib/postgresql/N/bin)."""
+    found = shutil.which("initdb")
+    folders = [Path(found).resolve().parent] if found else []
+    folders += sorted(Path("/usr/lib/postgresql").glob("*/bin"), reverse=True)
+    return next((f for f in folders if (f / "initdb").exists() and (f / "postgres").exists()), None)
+
+
+def ensure_postgresql() -> None:
+    """The PostgreSQL store's tests start a throwaway cluster with Debian's server: install the `postgresql`
+    package when it is missing and apt is usable (as root). Otherwise say why; those tests then skip (in CI they
+    fail: there they must run)."""
+    if postgresql_bindir() is not None:
+        return
+    if not apt_usable():
+        say("PostgreSQL (initdb, postgres) is missing and apt-get cannot be used here (needs root on Debian): "
+            "the PostgreSQL store's tests will skip")
+        return
+    if apt_install("postgresql", "the PostgreSQL store") and postgresql_bindir() is None:
+        say("apt-get installed postgresql but its initdb is not there: the PostgreSQL store's tests will skip")
 
 
 def on_sigterm(signum: int, frame: object) -> None:
@@ -348,6 +381,7 @@ def main(argv: "list[str]") -> int:
         py = str(ensure_environment())
         if task == "test":
             ensure_chromium()
+            ensure_postgresql()
             try_ros2_environment()
     except InstallFailed as exc:
         say(f"{exc}\nRun the same command again to retry: the environment will be repaired.")

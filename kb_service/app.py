@@ -21,16 +21,18 @@ from .knowledge_api import router as knowledge_router
 from .locks import ObjectLocks
 from .orchestrator import Orchestrator
 from .planning_pool import PlanningPool
+from .store.location import shown_location
 
 log = logging.getLogger(__name__)
 
 
 def open_knowledge_base(settings: Settings):
-    """Open the store named by the settings (':memory:' or None: a throwaway in-memory store)."""
-    from planhrc.kb_service.store import KnowledgeBase
+    """Open the store named by the settings (a SQLite file, ':memory:' or None for a throwaway in-memory store, or
+    a PostgreSQL URL)."""
+    from planhrc.kb_service.store import open_store
 
-    path = None if settings.db_path in (None, "", ":memory:") else settings.db_path
-    return KnowledgeBase(path, settings.tbox_path)
+    password = settings.db_password.get_secret_value() if settings.db_password else None
+    return open_store(settings.db_path, settings.tbox_path, password)
 
 
 def compact_on_schedule(kb, settings: Settings, stop: threading.Event) -> None:
@@ -64,7 +66,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
         orchestrator = app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks(), pool)
         knowledge = app.state.knowledge = KnowledgeService(kb, settings)
-        log.info("knowledge base open: %s", settings.db_path or "in memory")
+        log.info("knowledge base open: %s", shown_location(settings.db_path) if settings.db_path else "in memory")
         freeze_heap()
         stop = threading.Event()
         compactor = None

@@ -12,6 +12,7 @@ from planhrc.cli_args import int_in, positive_float, positive_int, tbox_file
 from planhrc.paths import default_tbox_path
 
 from .store.errors import KBError
+from .store.location import shown_location
 from .reasoner import REASONERS, ReasonerReport, run_reasoner
 
 
@@ -34,15 +35,16 @@ def check_ontology(tbox_path: Path | str, db_path: str | None, reasoner: str, ti
     """
     from owlready2 import World
 
-    from .store import TBOX_IRI, KnowledgeBase
+    from .store import TBOX_IRI, open_store
+    from .store.backends import backend_of
 
     tbox_path = Path(tbox_path)
     if not tbox_path.is_file():
         raise KBError(f"tbox: no such file {tbox_path}")
     if db_path is not None:
-        if not Path(db_path).is_file():
+        if backend_of(db_path) == "sqlite" and not Path(db_path).is_file():
             raise KBError(f"db: no such file {db_path}")
-        with KnowledgeBase(db_path, tbox_path) as kb:
+        with open_store(db_path, tbox_path) as kb:  # a server's password: PGPASSFILE or PGPASSWORD
             report = run_reasoner(kb, reasoner, timeout_s)
     else:
         world = World()
@@ -60,7 +62,8 @@ def add_ontology_parser(subparsers: Any) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="ontology_command", required=True, metavar="SUBCOMMAND")
     check = sub.add_parser("check", help="consistency, classes and inferred facts of the TBox (and a stored ABox)")
     check.add_argument("--reasoner", choices=list(REASONERS), default="pellet")
-    check.add_argument("--db", default=None, help="SQLite knowledge base whose ABox to include")
+    check.add_argument("--db", default=None,
+                       help="store whose ABox to include: a SQLite file or a PostgreSQL URL (password: PGPASSFILE)")
     check.add_argument("--tbox", type=tbox_file, default=None, help="TBox file (default: the repository's)")
     check.add_argument("--timeout", type=positive_float, default=300.0, help="reasoner time limit in seconds")
     bench = sub.add_parser("bench-subsumption", help="p50/p95 of one in-process subsumption check (20 links)")
@@ -86,7 +89,7 @@ def run_ontology(args: argparse.Namespace) -> int:
         return 1
     r = result.report
     print(f"reasoner: {result.reasoner}")
-    print(f"ontology: {result.tbox_path}" + (f" + ABox {result.db_path}" if result.db_path else ""))
+    print(f"ontology: {result.tbox_path}" + (f" + ABox {shown_location(result.db_path)}" if result.db_path else ""))
     print(f"consistent: {'yes' if r.consistent else 'no'}")
     print(f"classes: {r.classes}")
     print(f"inferred facts: {r.inferred_facts}")

@@ -6,16 +6,23 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import socket
 import sys
 from pathlib import Path
 
+from .network import SettingsProblem, check_exposure, resolve_secrets
+from .store.backends import backend_of
 from .store.errors import KBError
 
+__all__ = ["SERVE_OPTIONS", "SettingsProblem", "add_compact_parser", "add_serve_parser", "check_serve_settings",
+           "main", "run_compact", "run_serve"]
 
 # Settings field -> the option that sets it, to name the right one in an error.
-SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "token": "--token",
-                 "read_token": "--read-token", "protect_reads": "--protect-reads", "tbox_path": "--tbox",
+SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "db_password_file": "--db-password-file",
+                 "token": "--token", "token_file": "--token-file", "read_token": "--read-token",
+                 "read_token_file": "--read-token-file", "protect_reads": "--protect-reads", "insecure": "--insecure",
+                 "ssl_certfile": "--ssl-certfile", "ssl_keyfile": "--ssl-keyfile", "tbox_path": "--tbox",
                  "planner": "--planner", "log_level": "--log-level"}
 
 
@@ -30,11 +37,27 @@ def add_serve_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--host", default=None, help="interface to bind (default 127.0.0.1, env PLANHRC_HOST)")
     p.add_argument("--port", type=port, default=None, help="TCP port (default 8000, env PLANHRC_PORT)")
     p.add_argument("--db", default=None,
-                   help="SQLite file of the ABox (default planhrc.sqlite3, env PLANHRC_DB_PATH; ':memory:' for none)")
+                   help="the store: a SQLite file (default planhrc.sqlite3; ':memory:' for none) or a PostgreSQL URL "
+                   "postgresql://user@host:port/database (env PLANHRC_DB or PLANHRC_DB_PATH)")
+    p.add_argument("--db-password-file", default=None, metavar="FILE",
+                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE and "
+                   "PGPASSWORD work too)")
     p.add_argument("--token", default=None,
-                   help="bearer token required for writes (env PLANHRC_TOKEN; default: no authentication)")
+                   help="bearer token required for writes (env PLANHRC_TOKEN; default: no authentication); the "
+                   "process list shows it: prefer --token-file")
+    p.add_argument("--token-file", default=None, metavar="FILE",
+                   help="file holding the bearer token (env PLANHRC_TOKEN_FILE)")
     p.add_argument("--read-token", default=None,
                    help="read-only bearer token, accepted for reads when reads are protected (env PLANHRC_READ_TOKEN)")
+    p.add_argument("--read-token-file", default=None, metavar="FILE",
+                   help="file holding the read-only bearer token (env PLANHRC_READ_TOKEN_FILE)")
+    p.add_argument("--insecure", action="store_true", default=None,
+                   help="serve an address other than loopback without a token (env PLANHRC_INSECURE): refused "
+                   "otherwise, warned at every start")
+    p.add_argument("--ssl-certfile", default=None, metavar="FILE",
+                   help="serve HTTPS with this certificate (PEM; env PLANHRC_SSL_CERTFILE)")
+    p.add_argument("--ssl-keyfile", default=None, metavar="FILE",
+                   help="the certificate's private key (PEM; env PLANHRC_SSL_KEYFILE)")
     p.add_argument("--protect-reads", action="store_true", default=None,
                    help="reads of the knowledge base need a token too (env PLANHRC_PROTECT_READS)")
     p.add_argument("--tbox", type=tbox_file, default=None,
@@ -45,20 +68,22 @@ def add_serve_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     return p
 
 
-class SettingsProblem(KBError):
-    """A setting the service cannot start with; the message names the option or variable."""
-
-
-def check_serve_settings(settings, given: set[str]) -> None:
+def check_serve_settings(settings, given: set[str], warnings: list[str] | None = None):
     """Refuse, before anything starts, settings the service would only trip over later (a planner name, the
-    TBox, the store's folder, a busy port). Raises SettingsProblem naming the option or `PLANHRC_*` variable."""
+    TBox, the store's folder or server, a busy port, a service open to the network without a token, TLS files that
+    do not load). Raises SettingsProblem naming the option or `PLANHRC_*` variable; returns the settings with the
+    secrets read from their files, and adds to `warnings` what it can start with but should not."""
     from uvicorn.config import LOG_LEVELS
 
     from planhrc.cli_args import tbox_problem, writable_dir
     from planhrc.planner.registry import PLANNERS, available_planners
 
     def name(field: str) -> str:
-        return SERVE_OPTIONS[field] if field in given else f"PLANHRC_{field.upper()}"
+        if field in given:
+            return SERVE_OPTIONS[field]
+        if field == "db_path" and os.environ.get("PLANHRC_DB"):  # the store's variable has two names
+            return "PLANHRC_DB"
+        return f"PLANHRC_{field.upper()}"
 
     if settings.planner not in PLANNERS:
         raise SettingsProblem(f"{name('planner')}: unknown planner {settings.planner!r}; "
@@ -74,7 +99,12 @@ def check_serve_settings(settings, given: set[str]) -> None:
                               f"choose from {', '.join(LOG_LEVELS)}")
     if problem := tbox_problem(settings.tbox_path):
         raise SettingsProblem(f"{name('tbox_path')}: {problem}")
-    if settings.db_path not in (None, "", ":memory:"):
+    warnings = [] if warnings is None else warnings
+    settings = resolve_secrets(settings, given, name, warnings)
+    check_exposure(settings, name, warnings)
+    if backend_of(settings.db_path) != "sqlite":
+        check_store_server(settings, name("db_path"))
+    elif settings.db_path not in (None, "", ":memory:"):
         db = Path(settings.db_path)
         if db.is_dir():
             raise SettingsProblem(f"{name('db_path')}: {db} is a folder")
@@ -89,6 +119,27 @@ def check_serve_settings(settings, given: set[str]) -> None:
         except OSError as exc:
             raise SettingsProblem(f"{name('port')}/{name('host')}: cannot listen on {settings.host}:{settings.port} "
                                   f"({exc.strerror or exc})") from None
+    return settings
+
+
+def check_store_server(settings, option: str) -> None:
+    """A store on a database server: its backend exists and the server answers (one connection, closed)."""
+    from .store import BACKENDS
+
+    backend = backend_of(settings.db_path)
+    if backend not in BACKENDS:
+        raise SettingsProblem(f"{option}: no store backend for {backend}:// (this version has: "
+                              f"{', '.join(sorted(BACKENDS))})")
+    try:
+        from .store.postgres.session import connect
+    except ImportError as exc:
+        raise SettingsProblem(f"{option}: a PostgreSQL store needs psycopg 3: pip install 'planhrc[postgresql]' "
+                              f"({exc})") from None
+    password = settings.db_password.get_secret_value() if settings.db_password else None
+    try:
+        connect(settings.db_path, password, "planhrc-check").close()
+    except KBError as exc:
+        raise SettingsProblem(f"{option}: {str(exc).split(': ', 1)[-1]}") from None
 
 
 def run_serve(args: argparse.Namespace) -> int:
@@ -101,23 +152,28 @@ def run_serve(args: argparse.Namespace) -> int:
     from .app import create_app
 
     overrides = {key: value for key, value in {
-        "host": args.host, "port": args.port, "db_path": args.db, "token": args.token,
-        "read_token": args.read_token, "protect_reads": args.protect_reads,
+        "host": args.host, "port": args.port, "db_path": args.db, "db_password_file": args.db_password_file,
+        "token": args.token, "token_file": args.token_file, "read_token": args.read_token,
+        "read_token_file": args.read_token_file, "protect_reads": args.protect_reads, "insecure": args.insecure,
+        "ssl_certfile": args.ssl_certfile, "ssl_keyfile": args.ssl_keyfile,
         "tbox_path": args.tbox, "planner": args.planner, "log_level": args.log_level,
     }.items() if value is not None}
+    warnings: list[str] = []
     try:
-        settings = make_settings(**overrides)
-        check_serve_settings(settings, set(overrides))
+        settings = check_serve_settings(make_settings(**overrides), set(overrides), warnings)
     except ValidationError as exc:
         print(f"planhrc serve: {settings_error_line(exc, {f: SERVE_OPTIONS[f] for f in overrides})}", file=sys.stderr)
         return 2
     except SettingsProblem as exc:
         print(f"planhrc serve: {exc}", file=sys.stderr)
         return 2
+    for warning in warnings:  # at every start, whatever the log level
+        print(f"planhrc serve: warning: {warning}", file=sys.stderr, flush=True)
     level = settings.log_level.lower()
     logging.basicConfig(level=logging.DEBUG if level == "trace" else level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=level,
+                ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
                 # an open event stream (a console page) must not keep a stopping service alive
                 timeout_graceful_shutdown=2)
     return 0
@@ -131,13 +187,16 @@ def add_compact_parser(subparsers: argparse._SubParsersAction) -> argparse.Argum
         description="Compact a store: keep each object's current records (goal, latest problem, current plan and "
         "what they refer to) and its last N perceived states, delete the rest of its history. Run it on a store "
         "no service is writing; a running service compacts its own store every PLANHRC_COMPACT_EVERY_S seconds.")
-    p.add_argument("--db", default=None, help="SQLite file of the store (default planhrc.sqlite3, env PLANHRC_DB_PATH)")
+    p.add_argument("--db", default=None,
+                   help="the store: a SQLite file (default planhrc.sqlite3) or a PostgreSQL URL (env PLANHRC_DB)")
+    p.add_argument("--db-password-file", default=None, metavar="FILE",
+                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE, or libpq's PGPASSFILE)")
     p.add_argument("--keep", type=int, default=None,
                    help="perceived states kept per object (default 100, env PLANHRC_KEEP_PERCEIVED)")
     p.add_argument("--tbox", type=tbox_file, default=None, help="TBox OWL file (default: the repository's)")
     p.add_argument("--vacuum", action="store_true",
-                   help="then rewrite the file: the space the dropped history held goes back to the file system, "
-                   "and a store made before stores had 4 KiB pages gets them")
+                   help="then rewrite the SQLite file: the space the dropped history held goes back to the file "
+                   "system, and a store made before stores had 4 KiB pages gets them (PostgreSQL: its own VACUUM)")
     p.set_defaults(func=run_compact)
     return p
 
@@ -148,29 +207,43 @@ def run_compact(args: argparse.Namespace) -> int:
     from planhrc.cli_args import settings_error_line
     from planhrc.settings import make_settings
 
-    from .store import KBError, KnowledgeBase
+    from .store import KBError, SqliteStore, open_store
+    from .store.location import shown_location
 
-    options = {"db_path": "--db", "keep_perceived": "--keep", "tbox_path": "--tbox"}
-    overrides = {key: value for key, value in {"db_path": args.db, "keep_perceived": args.keep,
-                                               "tbox_path": args.tbox}.items() if value is not None}
+    options = {"db_path": "--db", "db_password_file": "--db-password-file", "keep_perceived": "--keep",
+               "tbox_path": "--tbox"}
+    overrides = {key: value for key, value in {"db_path": args.db, "db_password_file": args.db_password_file,
+                                               "keep_perceived": args.keep, "tbox_path": args.tbox}.items()
+                 if value is not None}
     try:
         settings = make_settings(**overrides)
+        settings = resolve_secrets(settings, set(overrides), lambda f: options.get(f, f"PLANHRC_{f.upper()}"), [])
     except ValidationError as exc:
         print(f"planhrc compact: {settings_error_line(exc, {f: options[f] for f in overrides})}", file=sys.stderr)
         return 2
-    db_option = "--db" if "db_path" in overrides else "PLANHRC_DB_PATH"
-    if settings.db_path in (None, "", ":memory:") or not Path(settings.db_path).is_file():
+    except SettingsProblem as exc:
+        print(f"planhrc compact: {exc}", file=sys.stderr)
+        return 2
+    db_option = "--db" if "db_path" in overrides else "PLANHRC_DB"
+    sqlite = backend_of(settings.db_path) == "sqlite"
+    if sqlite and (settings.db_path in (None, "", ":memory:") or not Path(settings.db_path).is_file()):
         print(f"planhrc compact: {db_option}: no store file {settings.db_path!r}", file=sys.stderr)
         return 2
+    if args.vacuum and not sqlite:
+        print(f"planhrc compact: --vacuum rewrites a SQLite file; the space of a store on a database server is the "
+              f"server's to reclaim (PostgreSQL: VACUUM)", file=sys.stderr)
+        return 2
+    where = shown_location(str(settings.db_path))
+    password = settings.db_password.get_secret_value() if settings.db_password else None
     try:
-        with KnowledgeBase(settings.db_path, settings.tbox_path) as kb:
+        with open_store(settings.db_path, settings.tbox_path, password) as kb:
             done = kb.compact(settings.keep_perceived)
-            print(f"compacted {settings.db_path}: {done.individuals} individuals and {done.triples} triples dropped "
+            print(f"compacted {where}: {done.individuals} individuals and {done.triples} triples dropped "
                   f"from {done.objects} objects (the last {settings.keep_perceived} perceived states of each kept)",
                   flush=True)
-            if args.vacuum:
+            if args.vacuum and isinstance(kb, SqliteStore):
                 before, after = kb.rewrite()
-                print(f"rewrote {settings.db_path}: {before / 1e6:.1f} MB -> {after / 1e6:.1f} MB")
+                print(f"rewrote {where}: {before / 1e6:.1f} MB -> {after / 1e6:.1f} MB")
     except KBError as exc:
         print(f"planhrc compact: {exc}", file=sys.stderr)
         return 1

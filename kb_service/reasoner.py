@@ -24,7 +24,7 @@ from owlready2.rule import BuiltinAtom
 
 from planhrc.model import AFFECTED, Atom
 
-from .store import ABOX_IRI, TBOX_IRI, KnowledgeBase
+from .store import ABOX_IRI, TBOX_IRI, KnowledgeBase, KnowledgeStore
 from .store.errors import ReasonerError
 from .store.owl import facts_in, iri_pairs, reasoner_subprocess_kwargs
 
@@ -69,11 +69,14 @@ def _configure_java() -> None:
     owlready2.JAVA_EXE = str(java)
 
 
-def copy_world(source: Union[World, KnowledgeBase]) -> World:
-    """A fresh in-memory world holding every ontology of `source` (TBox, ABox, ...), one by one."""
+def copy_world(source: Union[World, KnowledgeBase, KnowledgeStore]) -> World:
+    """A fresh in-memory world holding every ontology of `source` (TBox, ABox, ...), one by one; a store of
+    another backend is read back from its export (`world_from_export`)."""
     if isinstance(source, KnowledgeBase):
         with source.lock:
             return copy_world(source.world)
+    if not isinstance(source, World):
+        return world_from_export(source, getattr(source, "tbox_path"))
     target = World()
     for onto in list(source.ontologies.values()):
         buf = io.BytesIO()
@@ -83,6 +86,17 @@ def copy_world(source: Union[World, KnowledgeBase]) -> World:
         buf.seek(0)
         target.get_ontology(onto.base_iri).load(fileobj=buf, format="ntriples")
     return target
+
+
+def world_from_export(store: KnowledgeStore, tbox_path: Path | str) -> World:
+    """A fresh world of the TBox file and the store's whole ABox as its export gives it (N-Triples): the
+    ontology a DL reasoner reads from any backend, whatever it keeps the facts in."""
+    abox = ABOX_IRI.rstrip("#")
+    lines = "".join(line for line in store.export_lines("all") if line.startswith(f"<{abox}"))
+    world = World()
+    world.get_ontology(TBOX_IRI).load(fileobj=io.BytesIO(Path(tbox_path).read_bytes()))
+    world.get_ontology(ABOX_IRI).load(fileobj=io.BytesIO(lines.encode("utf-8")), format="ntriples")
+    return world
 
 
 def drop_builtin_rules(world: World) -> int:
@@ -125,7 +139,7 @@ def reason_in_place(world: World, name: str, timeout_s: float) -> tuple[bool, fl
         return consistent, time.perf_counter() - t0
 
 
-def run_reasoner(world_or_kb: Union[World, KnowledgeBase], name: str, timeout_s: float = 120.0) -> ReasonerReport:
+def run_reasoner(world_or_kb: Union[World, KnowledgeBase, KnowledgeStore], name: str, timeout_s: float = 120.0) -> ReasonerReport:
     """Check consistency and classify a copy of the ontology; count the named classes and inferred facts."""
     if name not in REASONERS:
         raise ReasonerError(f"reasoner: must be one of {', '.join(REASONERS)}, got {name!r}")

@@ -8,7 +8,7 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any
 
-from pydantic import Field
+from pydantic import AliasChoices, Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from planhrc.paths import default_tbox_path
@@ -17,12 +17,23 @@ from planhrc.paths import default_tbox_path
 class Settings(BaseSettings):
     """Where the knowledge base lives, how the service listens, and how plans are made."""
 
-    model_config = SettingsConfigDict(env_prefix="PLANHRC_", extra="ignore", frozen=True)
+    model_config = SettingsConfigDict(env_prefix="PLANHRC_", extra="ignore", frozen=True, populate_by_name=True)
 
     db_path: str | None = Field(
         default="planhrc.sqlite3",
-        description="SQLite file of the ABox, relative to the current directory; ':memory:' or None for a "
-        "throwaway store (tests).",
+        validation_alias=AliasChoices("PLANHRC_DB", "PLANHRC_DB_PATH"),
+        description="Where the store lives: a SQLite file of the ABox, relative to the current directory (':memory:' "
+        "or None for a throwaway store, tests), or a PostgreSQL URL `postgresql://user@host:port/database` "
+        "(environment PLANHRC_DB or PLANHRC_DB_PATH).",
+    )
+    db_password_file: str | None = Field(
+        default=None,
+        description="File holding the PostgreSQL password (its first line). Without it libpq's own PGPASSWORD, "
+        "PGPASSFILE or ~/.pgpass apply; a password in the URL works but shows in the process list.",
+    )
+    db_password: SecretStr | None = Field(
+        default=None,
+        description="The PostgreSQL password itself (read from `db_password_file` by the command line).",
     )
     tbox_path: str = Field(default_factory=lambda: str(default_tbox_path()), description="OWL file of the TBox.")
     host: str = Field(default="127.0.0.1", description="Interface the HTTP service binds to.")
@@ -31,6 +42,20 @@ class Settings(BaseSettings):
         default=None,
         description="When set, every request that changes something needs `Authorization: Bearer <token>`.",
     )
+    token_file: str | None = Field(
+        default=None,
+        description="File holding the bearer token (its first line): a secret the process list does not show.",
+    )
+    insecure: bool = Field(
+        default=False,
+        description="Serve on an address other than loopback without a token (anyone who reaches the port may "
+        "set goals and post perceptions the robot acts on); without it such a service refuses to start. The "
+        "service warns at every start.",
+    )
+    ssl_certfile: str | None = Field(
+        default=None, description="TLS certificate (PEM) of the HTTP service: it then serves HTTPS (uvicorn).")
+    ssl_keyfile: str | None = Field(
+        default=None, description="Private key (PEM) of `ssl_certfile`, unless the certificate file holds it.")
     planner: str = Field(default="inproc", description="Planner backend name (see planner/).")
     fallback_planner: str | None = Field(
         default="fd-lama",
@@ -91,6 +116,8 @@ class Settings(BaseSettings):
         description="A second, read-only bearer token: accepted for reads of the knowledge base when "
         "`protect_reads` is on, never for writes.",
     )
+    read_token_file: str | None = Field(
+        default=None, description="File holding the read-only bearer token (its first line).")
     protect_reads: bool = Field(
         default=False,
         description="Reads of the knowledge base (objects, states, problems, plans, events, ontology) need the "

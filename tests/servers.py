@@ -1,4 +1,5 @@
-"""One way for the tests to run `planhrc serve` as a real process on a loopback port."""
+"""One way for the tests to run `planhrc serve` as a real process on a loopback port, on a SQLite file or on a
+database of the session's PostgreSQL cluster (`store_location`)."""
 from __future__ import annotations
 
 import os
@@ -9,6 +10,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import httpx
+import pytest
 
 from planhrc.service_process import RunningService, free_port, running_service, wait_until_serving  # noqa: F401
 from planhrc.service_process import serve_command as _serve_command
@@ -21,6 +23,17 @@ def serve_command(port: int, db: Path, args: Sequence[str] = ()) -> list[str]:
     return _serve_command(port, db, ("--log-level", "warning", *args))
 
 
+def store_location(backend: str, folder: Path, request: pytest.FixtureRequest) -> str:
+    """A fresh store of `backend` for a served service: a file in `folder`, or a new database of the session's
+    throwaway PostgreSQL cluster (`tests/conftest.py`)."""
+    if backend == "sqlite":
+        return str(folder / "kb.sqlite3")
+    cluster = request.getfixturevalue("pg_cluster")
+    url = str(cluster.database())
+    request.addfinalizer(lambda: cluster.drop(url))
+    return url
+
+
 def serve_env(env: Mapping[str, str] | None = None) -> dict[str, str]:
     """The test process's environment without its `PLANHRC_*` settings, plus `env`."""
     out = {k: v for k, v in os.environ.items() if not k.startswith("PLANHRC_")}
@@ -30,22 +43,23 @@ def serve_env(env: Mapping[str, str] | None = None) -> dict[str, str]:
 
 
 @contextmanager
-def serving(db: Path, port: int | None = None, args: Sequence[str] = (),
-            env: Mapping[str, str] | None = None) -> Iterator[str]:
+def serving(db: Path | str, port: int | None = None, args: Sequence[str] = (),
+            env: Mapping[str, str] | None = None, folder: Path | None = None) -> Iterator[str]:
     """`planhrc serve` on `db` until it answers /health; yields its base URL, stops it (its process group)
-    afterwards. The server's output goes to `serve-<port>.log` beside the database and is shown if it exits
-    early."""
-    with served(db, port, args, env) as server:
+    afterwards. The server's output goes to `serve-<port>.log` beside the database (in `folder` for a database
+    server's URL) and is shown if it exits early."""
+    with served(db, port, args, env, folder) as server:
         yield server.url
 
 
 @contextmanager
-def served(db: Path, port: int | None = None, args: Sequence[str] = (),
-           env: Mapping[str, str] | None = None) -> Iterator[RunningService]:
+def served(db: Path | str, port: int | None = None, args: Sequence[str] = (),
+           env: Mapping[str, str] | None = None, folder: Path | None = None) -> Iterator[RunningService]:
     """`serving`, yielding the running service (its URL and process id)."""
     port = port or free_port()
-    with running_service(db, port=port, args=("--log-level", "warning", *args), env=serve_env(env), cwd=db.parent,
-                         log_path=db.parent / f"serve-{port}.log") as server:
+    folder = folder or Path(db).parent
+    with running_service(db, port=port, args=("--log-level", "warning", *args), env=serve_env(env), cwd=folder,
+                         log_path=folder / f"serve-{port}.log") as server:
         yield server
 
 

@@ -209,12 +209,27 @@ def test_constraints_pin_everything_the_environment_installs():
     """constraints.txt pins every distribution that planhrc with run.py's extras pulls in (mypy, schemathesis and
     the linters of the test extra too), at the version installed here: a fresh `run.py setup` resolves nothing
     new. `python3 ./run.py lock` rewrites the file."""
-    extras = set(load_run_py(REPO).EXTRAS.split(",")) | {"sim", "reasoner", "bench"}  # `all` names these
+    extras = set(load_run_py(REPO).EXTRAS.split(",")) | {"sim", "reasoner", "bench", "postgresql"}  # `all` names these
     pins, required = _pins(), _required(extras)
     missing = sorted(set(required) - set(pins))
     assert not missing, f"not pinned in constraints.txt: {missing} (run `python3 ./run.py lock`)"
     differ = {name: (pins[name], version) for name, version in required.items() if pins[name] != version}
     assert not differ, f"constraints.txt pins other versions than installed: {differ}"
+
+
+def test_postgresql_is_found_or_its_absence_said_in_one_line(monkeypatch, capsys):
+    """`run.py test` installs Debian's postgresql when initdb is missing and apt-get is usable; where it is not
+    (not root, not Debian), it says in one line that the PostgreSQL store's tests will skip, and installs nothing."""
+    run_py = load_run_py(REPO)
+    bindir = run_py.postgresql_bindir()
+    if bindir is not None:
+        assert (bindir / "initdb").exists() and (bindir / "postgres").exists()
+    monkeypatch.setattr(run_py, "postgresql_bindir", lambda: None)
+    monkeypatch.setattr(run_py, "apt_usable", lambda: False)
+    monkeypatch.setattr(run_py, "apt_install", lambda *a: pytest.fail("apt-get must not run here"))
+    run_py.ensure_postgresql()
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "apt-get cannot be used here" in lines[0] and "will skip" in lines[0], lines
 
 
 def test_run_py_parses_on_old_interpreters():

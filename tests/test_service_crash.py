@@ -7,7 +7,7 @@ import time
 import httpx
 import pytest
 
-from tests.servers import TOKEN, served, settled_health, token_client
+from tests.servers import TOKEN, served, settled_health, store_location, token_client
 
 
 def _perceive(client: httpx.Client, oid: str, links: list[float], key: str) -> httpx.Response:
@@ -23,9 +23,11 @@ def _dead(pid: int) -> bool:
         return True
 
 
-def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path):
-    db = tmp_path / "kb.sqlite3"
-    with served(db, env={"PLANHRC_TOKEN": TOKEN, "PLANHRC_CRASH_IN_PERCEPTION_WRITE": "3"}) as server, \
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path, backend, request):
+    db = store_location(backend, tmp_path, request)
+    with served(db, env={"PLANHRC_TOKEN": TOKEN, "PLANHRC_CRASH_IN_PERCEPTION_WRITE": "3"},
+                folder=tmp_path) as server, \
             token_client(server) as client:
         oid = client.post("/objects", json={"name": "rod", "links": 3, "orientations": 4,
                                             "formulation": "relative"}).json()["id"]
@@ -41,7 +43,7 @@ def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path):
             time.sleep(0.05)
         assert _dead(server.pid)
 
-    with served(db, env={"PLANHRC_TOKEN": TOKEN}) as server, token_client(server) as client:
+    with served(db, env={"PLANHRC_TOKEN": TOKEN}, folder=tmp_path) as server, token_client(server) as client:
         after = client.get("/health").json()  # counted by a scan of the tables at start-up
         assert (after["objects"], after["triples"]) == (health["objects"], health["triples"])
         assert client.get(f"/objects/{oid}/events").json() == events

@@ -18,18 +18,18 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO / "tests") not in sys.path:  # the simulated worker lives beside this file (any pytest import mode)
     sys.path.insert(0, str(REPO / "tests"))
 
-from tests.servers import serving  # noqa: E402
+from tests.servers import serving, store_location  # noqa: E402
 from test_service_api import drive_to_goal, links_of, move, noisy, perceive  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
 
 @contextmanager
-def running_server(db: Path, token: str | None = None) -> Iterator[httpx.Client]:
+def running_server(db: Path | str, token: str | None = None, folder: Path | None = None) -> Iterator[httpx.Client]:
     env = {"PLANHRC_MERGE_MACRO_STEPS": "false"}  # one plan step per action: the episodes name expected states
     if token:
         env["PLANHRC_TOKEN"] = token
-    with serving(db, env=env) as base:
+    with serving(db, env=env, folder=folder) as base:
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         with httpx.Client(base_url=base, timeout=30, headers=headers) as client:
             yield client
@@ -41,9 +41,10 @@ def create(client: httpx.Client, formulation: str = "relative", links: int = 4, 
     return r.json()["id"]
 
 
-def test_whole_episode_then_restart_on_the_same_database(tmp_path):
-    db = tmp_path / "kb.sqlite3"
-    with running_server(db) as c:
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_whole_episode_then_restart_on_the_same_database(tmp_path, backend, request):
+    db = store_location(backend, tmp_path, request)
+    with running_server(db, folder=tmp_path) as c:
         oid = create(c)
         assert c.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 180, 180, 0]}).status_code == 200
         links = [0.0, 0.0, 0.0, 0.0]
@@ -94,7 +95,7 @@ def test_whole_episode_then_restart_on_the_same_database(tmp_path):
         for kind in ("replan", "continue", "resume", "goal_reached", "feedback", "dispatched"):
             assert kind in kinds
 
-    with running_server(db) as c:
+    with running_server(db, folder=tmp_path) as c:
         assert c.get(f"/objects/{oid}").json() == obj
         assert c.get(f"/objects/{oid}/plan").json() == plan
         assert plan["id"] == plan_id

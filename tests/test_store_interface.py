@@ -13,6 +13,7 @@ import pytest
 
 from planhrc.kb_service.store import (BACKENDS, Export, Inferences, KBError, KnowledgeStore, PlanChecks, PlanJournal,
                                       Reads, Retention, SqliteStore, Writes, open_store)
+from planhrc.kb_service.store.errors import UnavailableError
 from planhrc.kb_service.store.backends import backend_of
 from planhrc.paths import default_tbox_path
 from tests.store_backends import kb, place  # noqa: F401 (fixtures)
@@ -82,11 +83,23 @@ def test_a_store_that_differs_from_the_protocol_is_caught():
 def test_a_location_names_its_backend():
     assert backend_of(None) == backend_of("/var/lib/planhrc/kb.sqlite3") == "sqlite"
     assert backend_of("postgresql://planhrc@db:5432/kb") == "postgresql"
-    assert set(BACKENDS) >= {"sqlite"}
-    with open_store(None, default_tbox_path()) as store:
-        assert isinstance(store, SqliteStore) and store.object_count() == 0
-    with pytest.raises(KBError, match=r"^db: no store backend for postgresql:// \(this version has: sqlite"):
-        open_store("postgresql://planhrc@db:5432/kb", default_tbox_path())
+    assert backend_of("postgres://planhrc@db/kb") == "postgresql"
+    assert set(BACKENDS) == {"sqlite", "postgresql"}
+    for memory in (None, "", ":memory:"):
+        with open_store(memory, default_tbox_path()) as store:
+            assert isinstance(store, SqliteStore) and store.object_count() == 0
+    with pytest.raises(KBError, match=r"^db: no store backend for mysql:// \(this version has: postgresql, sqlite\)$"):
+        open_store("mysql://planhrc@db:3306/kb", default_tbox_path())
+    with pytest.raises(KBError, match=r"^db_password: the embedded SQLite store takes no password"):
+        open_store(None, default_tbox_path(), password="secret")
+
+
+def test_a_server_that_cannot_be_reached_is_refused_in_one_line_without_its_password():
+    with pytest.raises(UnavailableError) as info:  # port 1 of loopback: nobody listens there
+        open_store("postgresql://planhrc:hunter2@127.0.0.1:1/kb", default_tbox_path())
+    message = str(info.value)
+    assert message.startswith("db: cannot connect to postgresql://planhrc:***@127.0.0.1:1/kb (")
+    assert "hunter2" not in message and "\n" not in message
 
 
 def _stub(class_name: str, retyped: tuple[str, str, str] | None = None) -> str:

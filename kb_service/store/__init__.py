@@ -1,5 +1,5 @@
-"""The knowledge base of the service: an interface (`interface.KnowledgeStore`) and its SQLite backend, split by
-responsibility.
+"""The knowledge base of the service: an interface (`interface.KnowledgeStore`) and its backends, SQLite (the
+default) and PostgreSQL (`postgres/`, an optional dependency), split by responsibility.
 
 | module | owns |
 |---|---|
@@ -8,7 +8,8 @@ responsibility.
 | `names` | the IRIs of the TBox and the ABox, and how each record and ground predicate is named |
 | `checks` | the input checks of every write (pure: they read only the object), `check_plan` -> `CheckedPlan` |
 | `cache` | the one cached get of records (cache -> held in memory -> load -> `NotFoundError`) |
-| `backends` | the backends by name; `open_store(db, tbox)` opens the one a location names |
+| `backends`, `location` | the backends by name; `open_store(db, tbox)` opens the one a location names; a location as it may be shown (no password) |
+| `unit`, `facade` | what the shared writes ask of a backend's unit of work; what every backend's store class does alike |
 | `knowledge_base` | `SqliteStore` (alias `KnowledgeBase`): the SQLite backend, the parts below in one database |
 | `abox` | the SQLite ABox's unit of work: the owlready2 world, names of individuals, counters, `transaction()` |
 | `reads`, `writes`, `triples` | records read back from triples, the writes, and what each record is as triples |
@@ -16,10 +17,11 @@ responsibility.
 | `events`, `execution`, `responses`, `inferred` | the event log, the execution cursor, idempotent responses, what a reasoner inferred (side tables) |
 | `retention`, `export` | compaction of each object's history; RDF export (N-Triples, RDF/XML, Turtle) |
 | `owl` | every use of owlready2's internals (its SQLite tables, storids, literal encoding, reasoner settings) |
+| `postgres` | `PostgresStore`: the ABox as rows of triples in PostgreSQL, the side tables beside it, what replicas need |
 """
 from .backends import BACKENDS, open_store
 from .errors import (ConflictError, DamagedStoreError, DeadlineError, KBError, NotFoundError, ReasonerError,
-                     ValidationError)
+                     UnavailableError, ValidationError)
 from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, Export, Inferences, KnowledgeStore, PlanChecks, PlanJournal,
                         Reads, Retention, Writes)
 from .knowledge_base import KnowledgeBase, SqliteStore
@@ -32,5 +34,5 @@ __all__ = [
     "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "Execution",
     "Export", "Inferences", "KBError", "KnowledgeBase", "KnowledgeStore", "NotFoundError", "PlanChecks", "PlanJournal", "Reads",
     "ReasonerError", "Retention", "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem",
-    "StoredState", "ValidationError", "Writes", "atom_fragment", "open_store",
+    "StoredState", "UnavailableError", "ValidationError", "Writes", "atom_fragment", "open_store",
 ]

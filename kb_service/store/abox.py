@@ -17,7 +17,7 @@ import logging
 import threading
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Protocol, TypeVar
+from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence, TypeVar
 
 from .errors import DamagedStoreError, KBError
 from .names import ABOX_IRI, TBOX_IRI, TBOX_TERMS, counter_name, record_name
@@ -165,6 +165,20 @@ class Abox:
     def forget_names(self) -> None:
         self.iri_sid.clear()
         self.sid_name.clear()
+
+    # -- what the backend-neutral writes ask (`unit.AboxWriter`) ------------------------------------------
+    def existing(self, names: Sequence[str]) -> list[str]:
+        return [name for name in names if self.sid(name) is not None]
+
+    def has_class(self, name: str, cls: str) -> bool:
+        sid = self.sid(name)
+        return sid is not None and self.is_a(sid, cls)
+
+    def batch(self) -> Batch:
+        return Batch(self.t)
+
+    def note_object(self) -> None:
+        self.pending_objects += 1
 
     # -- triples of one individual ------------------------------------------------------------------------
     def is_a(self, sid: int, cls: str) -> bool:

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import logging
 
-from .abox import Abox, Batch
+from .abox import Abox
 from .journal import JournalEntry, JournalTable, PlanWriter
-from .names import action_name
 from .reads import Held, Records
-from .records import StoredAction, StoredPlan, StoredState
+from .records import StoredPlan
 from .triples import plan_triples
 
 log = logging.getLogger(__name__)
@@ -74,17 +73,12 @@ class PlanBacklog:
         self._adopted = []
 
     def _hold(self, entry: JournalEntry) -> StoredPlan:
-        ident = entry.object_id
-        actions = tuple(StoredAction(action_name(entry.plan_id, step), step, spec)
-                        for step, spec in enumerate(entry.actions, start=1))
-        state_ids = tuple(entry.state_id(step) for step in range(1, len(entry.expected_states) + 1))
+        record, states = entry.records()
         held = self._records.held
-        for sid, atoms in zip(state_ids, entry.expected_states):
-            held[sid] = StoredState(sid, ident, "expected", frozenset(atoms), entry.created_at)
-        for a in actions:
+        for state in states:
+            held[state.id] = state
+        for a in record.actions:
             held[a.id] = a
-        record = StoredPlan(entry.plan_id, ident, entry.problem_id, entry.planner, actions, state_ids,
-                            entry.created_at)
         held[entry.plan_id] = record
         return record
 
@@ -121,7 +115,7 @@ class PlanBacklog:
         info = self._records.info(entry.object_id)
 
         def fill() -> None:
-            b = Batch(self._abox.t)
+            b = self._abox.batch()
             plan_triples(self._abox, b, info, entry)
             self._abox.flush(b)
             self._table.remove(entry.plan_id)

@@ -32,3 +32,8 @@ class DeadlineError(KBError, DeadlineExceeded):
 class DamagedStoreError(KBError):
     """What the store reads back is not what it writes (a record without a required fact, a journal row of an
     unknown layout): the database was changed by something else, or by a newer version."""
+
+
+class UnavailableError(KBError):
+    """The store's database server cannot be reached now (down, restarting, or the connection was cut); nothing of
+    the request was written, and the same request may succeed later."""

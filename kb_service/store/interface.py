@@ -1,5 +1,5 @@
 """What the service asks of its knowledge base, as protocols a backend implements (the SQLite/owlready2 store,
-`knowledge_base.SqliteStore`, today), split by responsibility:
+`knowledge_base.SqliteStore`, and the PostgreSQL store, `postgres.PostgresStore`), split by responsibility:
 
 | protocol | what it offers |
 |---|---|

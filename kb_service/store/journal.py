@@ -23,9 +23,9 @@ from typing import Any, Callable
 from planhrc.model import Atom
 
 from .errors import DamagedStoreError
-from .names import record_name
+from .names import action_name, record_name
 from .owl import QuadStore
-from .records import ActionSpec, CondEffect
+from .records import ActionSpec, CondEffect, StoredAction, StoredPlan, StoredState
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +59,16 @@ class JournalEntry:
     def state_id(self, step: int) -> str:
         """The name of expected state `step` (1-based)."""
         return record_name(self.object_id, "state", self.first_state + step - 1)
+
+    def records(self) -> tuple[StoredPlan, tuple[StoredState, ...]]:
+        """The plan's record (with its actions) and its expected states', as the store hands them out."""
+        actions = tuple(StoredAction(action_name(self.plan_id, step), step, spec)
+                        for step, spec in enumerate(self.actions, start=1))
+        states = tuple(StoredState(self.state_id(step), self.object_id, "expected", frozenset(atoms), self.created_at)
+                       for step, atoms in enumerate(self.expected_states, start=1))
+        plan = StoredPlan(self.plan_id, self.object_id, self.problem_id, self.planner, actions,
+                          tuple(s.id for s in states), self.created_at)
+        return plan, states
 
 
 def encode(entry: JournalEntry) -> bytes:

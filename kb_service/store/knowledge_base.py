@@ -1,7 +1,8 @@
 """The SQLite backend of the knowledge base (`SqliteStore`, also known as `KnowledgeBase`): the ABox (`abox`,
 `reads`, `writes`, `backlog`) with the event log (`events`), the execution cursor (`execution`) and idempotent
 responses (`responses`) in the same SQLite database, retention (`retention`) and the RDF export (`export`). It
-implements `interface.KnowledgeStore`.
+implements `interface.KnowledgeStore`; what every backend does alike (the writes and reads of records) is
+`facade.StoreFacade`'s.
 
 Every public method takes the store's lock (one RLock) and refuses a closed store; the parts it puts together
 are called with that lock held. Each write checks its input completely before anything is written; every write
@@ -17,23 +18,20 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Self, Sequence
 
-from planhrc.model import ArticulatedObject, Atom, Perception
-
 from .abox import Abox
 from .backlog import PlanBacklog
-from .cache import R, RecordCache
-from .checks import check_events_page, check_export, check_keep_perceived, check_plan
-from .errors import KBError, NotFoundError, ValidationError
+from .checks import check_events_page, check_export, check_keep_perceived
+from .errors import KBError
 from .events import EventLog
 from .execution import ExecutionCursor
-from .export import current_roots, export_rdf, ntriples
+from .facade import StoreFacade
+from .export import current_roots, ntriples
 from .inferred import InferredFacts
 from .interface import MAX_EVENTS_PAGE, MAX_SEQ
-from .names import ABOX_IRI, TBOX_IRI
+from .names import ABOX_IRI
 from .owl import World
 from .reads import Records
-from .records import (ActionSpec, CheckedPlan, Compaction, Execution, StoredAction, StoredEvent, StoredPlan,
-                      StoredProblem, StoredState)
+from .records import Compaction, Execution, StoredEvent
 from .responses import ResponseMemory
 from .retention import compact_object
 from .writes import Writes
@@ -43,9 +41,11 @@ __all__ = ["MAX_EVENTS_PAGE", "MAX_SEQ", "KnowledgeBase", "SqliteStore"]
 log = logging.getLogger(__name__)
 
 
-class SqliteStore:
+class SqliteStore(StoreFacade):
     """TBox + ABox in one owlready2 World on SQLite (a file, or memory when `path` is None), with the service's
     side tables; thread safe."""
+
+    _records: Records
 
     def __init__(self, path: str | None, tbox_path: Path | str) -> None:
         abox = self._abox = Abox(path, tbox_path)
@@ -122,39 +122,7 @@ class SqliteStore:
             self._abox.q.rewrite()
             return before, _file_bytes(path)
 
-    # -- writes -----------------------------------------------------------------------------------------------
-    def new_object_id(self) -> str:
-        with self._guard:
-            return self._writes.new_object_id()
-
-    def create_object(self, obj: ArticulatedObject) -> None:
-        with self._guard:
-            self._writes.create_object(obj)
-
-    def add_state(self, object_id: str, kind: str, atoms: frozenset[Atom],
-                  link_orientations_deg: Sequence[float] | None = None) -> StoredState:
-        with self._guard:
-            return self._writes.add_state(object_id, kind, atoms, link_orientations_deg)
-
-    def add_perception(self, perception: Perception) -> StoredState:
-        with self._guard:
-            return self._writes.add_perception(perception)
-
-    def add_problem(self, object_id: str, init_state_id: str, goal_state_id: str) -> StoredProblem:
-        with self._guard:
-            return self._writes.add_problem(object_id, init_state_id, goal_state_id)
-
-    def add_plan(self, problem_id: str, planner: str, actions: Sequence[ActionSpec],
-                 expected_states: Sequence[frozenset[Atom]], checked: CheckedPlan | None = None) -> StoredPlan:
-        with self._guard:
-            return self._writes.add_plan(problem_id, planner, actions, expected_states, checked)
-
-    def check_plan(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
-                   deadline_at: float | None = None) -> CheckedPlan:
-        with self._guard:  # only to look the object up: the checks read nothing else
-            info = self._records.info(object_id, "object_id")
-        return check_plan(info, tuple(actions), tuple(expected_states), deadline_at)
-
+    # -- writes (the rest: `facade.StoreFacade`) ------------------------------------------------------------
     def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
         with self._guard:
             ident = self._records.info(object_id, "object_id").obj.ident
@@ -163,16 +131,7 @@ class SqliteStore:
 
     def set_execution(self, object_id: str, execution: Execution) -> None:
         with self._guard:
-            ident = self._records.info(object_id, "object_id").obj.ident
-            if not isinstance(execution, Execution):
-                raise ValidationError(f"execution: expected an Execution, got {type(execution).__name__}")
-            plan = None
-            if execution.plan_id is not None:
-                try:
-                    plan = self._records.plans.get(execution.plan_id)
-                except NotFoundError:
-                    raise ValidationError(f"execution.plan_id: no plan {execution.plan_id!r}") from None
-            self._execution.check(ident, execution, plan)
+            ident = self._checked_execution(object_id, execution)
             self._abox.write(lambda: self._execution.write(ident, execution))
 
     def remember_response(self, object_id: str, key: str, response: dict[str, Any]) -> None:
@@ -180,41 +139,9 @@ class SqliteStore:
             text = self._responses.check(key, response)
             self._abox.write(lambda: self._responses.remember(object_id, key, text))
 
-    # -- reads ------------------------------------------------------------------------------------------------
-    def get_object(self, object_id: str) -> ArticulatedObject:
-        with self._guard:
-            return self._records.info(object_id).obj
-
-    def list_objects(self) -> tuple[ArticulatedObject, ...]:
-        with self._guard:
-            return tuple(self._records.info(ident).obj for ident in self._records.object_ids())
-
-    def get_state(self, state_id: str) -> StoredState:
-        with self._guard:
-            return self._records.states.get(state_id)
-
-    def get_problem(self, problem_id: str) -> StoredProblem:
-        with self._guard:
-            return self._records.problems.get(problem_id)
-
-    def get_plan(self, plan_id: str) -> StoredPlan:
-        with self._guard:
-            return self._records.plans.get(plan_id)
-
-    def get_action(self, action_id: str) -> StoredAction:
-        with self._guard:
-            return self._records.actions.get(action_id)
-
-    def latest_problem(self, object_id: str) -> StoredProblem | None:
-        return self._latest(self._records.problems, object_id)
-
-    def latest_plan(self, object_id: str) -> StoredPlan | None:
-        return self._latest(self._records.plans, object_id)
-
-    def _latest(self, records: RecordCache[R], object_id: str) -> R | None:
-        with self._guard:
-            ident = self._abox.latest(self._records.info(object_id).obj.ident, records.noun)
-            return records.get(ident) if ident else None
+    # -- reads (the rest: `facade.StoreFacade`) -------------------------------------------------------------
+    def _latest_id(self, object_id: str, noun: str) -> str | None:
+        return self._abox.latest(object_id, noun)
 
     def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
         check_events_page(after_seq, limit)
@@ -236,10 +163,6 @@ class SqliteStore:
     def object_count(self) -> int:
         self._abox.check_open()
         return self._abox.objects
-
-    def revision(self) -> int:
-        self._abox.check_open()
-        return self._abox.revision
 
     # -- the plan journal -------------------------------------------------------------------------------------
     def settle(self) -> None:
@@ -293,12 +216,11 @@ class SqliteStore:
         finally:
             reader.close()
 
-    def export(self, fmt: str = "xml", history: str = "current", object_ids: Sequence[str] | None = None) -> bytes:
-        check_export(history, object_ids, fmt)
-        text = "".join(self.export_lines(history, object_ids)).encode("utf-8")
-        return export_rdf(text, fmt, {"planhrc": TBOX_IRI, "abox": ABOX_IRI,
-                                      "owl": "http://www.w3.org/2002/07/owl#"})
 
+
+    def revision(self) -> int:
+        self._abox.check_open()
+        return self._abox.revision
 
     def current_roots(self, object_id: str) -> tuple[str, ...]:
         with self._guard:

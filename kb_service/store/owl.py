@@ -331,7 +331,8 @@ class QuadStore:
 
 
 # -- N-Triples straight from the tables ---------------------------------------------------------------------------
-def _escape(text: str) -> str:
+def escape_literal(text: str) -> str:
+    """A literal's lexical form as N-Triples writes it between quotes."""
     return text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n").replace("\r", "\\r")
 
 
@@ -353,7 +354,7 @@ def ntriple_lines(db: sqlite3.Connection, where: str, params: Sequence[Any] = ()
     q = (f"SELECT rs.iri, t.s, rp.iri, t.o, t.d, rd.iri FROM {table('datas')} LEFT JOIN resources rs ON rs.storid = t.s "
          "JOIN resources rp ON rp.storid = t.p LEFT JOIN resources rd ON rd.storid = t.d WHERE " + where)
     for s_iri, s, p_iri, o, d, d_iri in db.execute(q, params):
-        text = f'"{_escape(str(o))}"'
+        text = f'"{escape_literal(str(o))}"'
         if isinstance(d, str) and d.startswith("@"):
             text += d
         elif d_iri:

@@ -11,7 +11,7 @@ from typing import Sequence
 from planhrc.model import ArticulatedObject, Atom, Formulation, natural_key
 
 from .abox import Abox
-from .cache import RecordCache
+from .cache import RecordCache, object_info
 from .checks import ObjectInfo
 from .errors import DamagedStoreError, NotFoundError, ValidationError
 from .names import ACTION_CLASSES, PREDICATE_OF_CLASS, PREDICATES, STATE_CLASSES
@@ -65,16 +65,7 @@ class Records:
     # -- objects --------------------------------------------------------------------------------------------
     def info(self, object_id: str, field: str | None = None) -> ObjectInfo:
         """The object's info; unknown -> ValidationError naming `field` (writes) or NotFoundError (reads)."""
-        info = self.objects.get(object_id) if isinstance(object_id, str) else None
-        if info is None and isinstance(object_id, str):
-            obj = self._load_object(object_id)
-            if obj is not None:
-                info = self.objects[object_id] = ObjectInfo(obj)
-        if info is None:
-            if field is None:
-                raise NotFoundError(f"object_id: no object {object_id!r}")
-            raise ValidationError(f"{field}: no object {object_id!r}")
-        return info
+        return object_info(self.objects, self._load_object, object_id, field)
 
     def object_ids(self) -> list[str]:
         sids = self.abox.q.subjects(RDF_TYPE, self.abox.t["ArticulatedObject"], self.abox.c)

@@ -1,5 +1,5 @@
 """What each record is as ABox triples: an object (links, joints, orientations, static facts), a state, an action
-and a plan, added to a `Batch` that the caller flushes in its transaction.
+and a plan, added to a batch (`unit.TripleBatch`) that the caller flushes in its transaction, on every backend.
 
 A state's and an action's atoms are linked in a fixed order (`state_order`, `action_order`), so the same records
 give the same triples; for a journalled plan that order is worked out when the plan is written out, behind the
@@ -11,11 +11,11 @@ import time
 
 from planhrc.model import HAS_ORIENTATION, Atom, Perception, orientation_name
 
-from .abox import Abox, Batch
 from .checks import ObjectInfo
 from .journal import JournalEntry
 from .names import ACTION_CLASSES, PREDICATES, STATE_CLASSES, action_name, atom_fragment, counter_name, record_name
 from .records import ActionSpec
+from .unit import AboxNames, TripleBatch
 
 # Writing order of a state: (lists only its non-static atoms?, the atoms it links with madeof, sorted).
 StateOrder = tuple[bool, tuple[Atom, ...]]
@@ -41,7 +41,7 @@ def action_order(spec: ActionSpec) -> ActionOrder:
     return parts, conds
 
 
-def add_predicate(b: Batch, name: str, atom: Atom) -> str:
+def add_predicate(b: TripleBatch, name: str, atom: Atom) -> str:
     cls, _, props, _ = PREDICATES[atom[0]]
     b.individual(name, cls)
     for prop, arg in zip(props, atom[1:]):
@@ -49,16 +49,16 @@ def add_predicate(b: Batch, name: str, atom: Atom) -> str:
     return name
 
 
-def shared_predicate(abox: Abox, b: Batch, info: ObjectInfo, atom: Atom) -> str:
+def shared_predicate(abox: AboxNames, b: TripleBatch, info: ObjectInfo, atom: Atom) -> str:
     """The object's individual for a HasOrientation atom, created in this batch on first use."""
     name = info.orientation_atom_name[atom]
-    if name in b.shared or abox.sid(name) is not None:
+    if name in b.shared or abox.existing([name]):
         return name
     b.shared.add(name)
     return add_predicate(b, name, atom)
 
 
-def object_triples(abox: Abox, b: Batch, info: ObjectInfo) -> None:
+def object_triples(abox: AboxNames, b: TripleBatch, info: ObjectInfo) -> None:
     """An object: its links in chain order, its joints, its allowed orientations (shared by every object that
     has them) and its static facts."""
     obj = info.obj
@@ -86,8 +86,7 @@ def object_triples(abox: Abox, b: Batch, info: ObjectInfo) -> None:
         b.data(joint, "chainIndex", k)
         b.rel(o, "hasJoint", joint)
     for deg, name in zip(obj.orientation_degrees, obj.orientation_names):
-        sid = abox.sid(name)
-        if sid is None or not abox.is_a(sid, "Orientation"):
+        if not abox.has_class(name, "Orientation"):
             b.individual(name, "Orientation")
             b.data(name, "degrees", deg)
         b.rel(o, "allowedOrientation", name)
@@ -97,7 +96,7 @@ def object_triples(abox: Abox, b: Batch, info: ObjectInfo) -> None:
 
 
 def state_triples(
-    abox: Abox, b: Batch, info: ObjectInfo, kind: str, atoms: frozenset[Atom],
+    abox: AboxNames, b: TripleBatch, info: ObjectInfo, kind: str, atoms: frozenset[Atom],
     observation: Perception | None, step: int | None, created_at: float,
     state_id: str | None = None, order: StateOrder | None = None,
 ) -> str:
@@ -128,7 +127,7 @@ def state_triples(
     return state_id
 
 
-def action_triples(abox: Abox, b: Batch, info: ObjectInfo, aid: str, step: int, spec: ActionSpec,
+def action_triples(abox: AboxNames, b: TripleBatch, info: ObjectInfo, aid: str, step: int, spec: ActionSpec,
                    order: ActionOrder | None = None) -> None:
     b.individual(aid, ACTION_CLASSES[spec.name])
     b.data(aid, "stepIndex", step)
@@ -161,7 +160,7 @@ def action_triples(abox: Abox, b: Batch, info: ObjectInfo, aid: str, step: int, 
                 b.rel(cid, prop, pred(atom))
 
 
-def plan_triples(abox: Abox, b: Batch, info: ObjectInfo, entry: JournalEntry) -> None:
+def plan_triples(abox: AboxNames, b: TripleBatch, info: ObjectInfo, entry: JournalEntry) -> None:
     """A journalled plan: the plan, its actions in order and its expected states, with the names its journal row
     gave them."""
     action_orders = [action_order(spec) for spec in entry.actions]

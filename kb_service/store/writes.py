@@ -2,31 +2,30 @@
 
 Each write checks its whole input first (`checks`), then adds its triples in one transaction (`Abox.write`; inside
 `transaction()` it joins the open one), then caches the record it hands back. A plan is journalled, not written
-as triples (`backlog`). Every method is called with the store's lock held.
+as triples (`backlog`), or its triples written at once, as the backend's `unit.PlanAdopter` chooses. Every method
+is called with the store's lock held. Nothing here names a backend: each gives its `unit.AboxWriter`.
 """
 from __future__ import annotations
 
 import time
-from typing import Sequence
+from typing import Any, Sequence
 
 from planhrc.model import ArticulatedObject, Atom, Perception
 
-from .abox import Abox, Batch
-from .backlog import PlanBacklog
 from .checks import (ObjectInfo, check_kind, check_observation, check_perception, check_plan, check_state_atoms,
                      is_checked)
 from .errors import ConflictError, NotFoundError, ValidationError
 from .journal import JournalEntry
 from .names import ABOX_IRI, COMPLETE_KINDS, counter_name, record_name
-from .reads import Records
 from .records import ActionSpec, CheckedPlan, StoredPlan, StoredProblem, StoredState
 from .triples import object_triples, state_triples
+from .unit import AboxWriter, PlanAdopter, RecordsOfWrites
 
 
 class Writes:
-    """The writes of one SQLite ABox."""
+    """The writes of one ABox, whatever its backend."""
 
-    def __init__(self, abox: Abox, records: Records, backlog: PlanBacklog) -> None:
+    def __init__(self, abox: AboxWriter[Any], records: RecordsOfWrites, backlog: PlanAdopter) -> None:
         self._abox = abox
         self._records = records
         self._backlog = backlog
@@ -38,7 +37,7 @@ class Writes:
         def fill() -> str:
             while True:
                 ident = f"obj{abox.next_counter('object')}"
-                if abox.sid(ident) is None:
+                if not abox.existing([ident]):
                     return ident
 
         return abox.write(fill)
@@ -47,16 +46,16 @@ class Writes:
         abox = self._abox
         if not isinstance(obj, ArticulatedObject):
             raise ValidationError(f"object: expected an ArticulatedObject, got {type(obj).__name__}")
-        clashes = [n for n in (obj.ident,) + obj.all_links + obj.joints if abox.sid(n) is not None]
+        clashes = abox.existing((obj.ident,) + obj.all_links + obj.joints)
         if clashes:
             raise ConflictError(f"object.ident: {obj.ident!r} already exists (IRI {ABOX_IRI}{clashes[0]})")
         info = ObjectInfo(obj)
 
         def fill() -> None:
-            b = Batch(abox.t)
+            b = abox.batch()
             object_triples(abox, b, info)
             abox.flush(b)
-            abox.pending_objects += 1
+            abox.note_object()
 
         abox.write(fill)
         self._records.objects[obj.ident] = info
@@ -93,7 +92,7 @@ class Writes:
         created = time.time()
 
         def fill() -> str:
-            b = Batch(abox.t)
+            b = abox.batch()
             state_id = state_triples(abox, b, info, kind, atoms, observation, None, created)
             abox.flush(b)
             return state_id
@@ -121,7 +120,7 @@ class Writes:
         ident = info.obj.ident
 
         def fill() -> str:
-            b = Batch(abox.t)
+            b = abox.batch()
             pid = record_name(ident, "problem", abox.next_counter(counter_name(ident, "problem")))
             b.individual(pid, "Problem")
             b.rel(pid, "aboutObject", ident)

@@ -1,0 +1,199 @@
+"""The PostgreSQL ABox's unit of work (`unit.AboxWriter`): one connection, its transactions, the store's counters
+and which individuals are stored.
+
+The connection runs in autocommit mode, so a read outside a transaction holds no snapshot open; a write, or a
+`transaction()` block, is one `BEGIN ... COMMIT`, and nested blocks join the outermost one. What reacts to a commit
+or a rollback (the record caches) registers as a `TransactionListener`. Every method here is called with `lock`
+held; the store takes it (`guard`), which also reconnects a connection the server dropped (between transactions
+only: a transaction cut off is rolled back, never replayed) and turns a lost connection into `UnavailableError`.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator, Sequence, TypeVar
+
+import psycopg
+
+from ..abox import TransactionListener
+from ..errors import KBError, UnavailableError
+from ..names import ABOX_IRI, TBOX_IRI, counter_name, record_name
+from .rows import RowBatch
+from ..location import shown_location
+from .schema import RDF_TYPE
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+Connection = psycopg.Connection[tuple[Any, ...]]
+CONNECT_TIMEOUT_S = 10
+
+
+def connect(db: str, password: str | None, what: str = "planhrc") -> Connection:
+    """A connection in autocommit mode; a server that cannot be reached is a one-line `UnavailableError` naming
+    the location (without its password)."""
+    try:
+        return psycopg.connect(db, password=password, autocommit=True, connect_timeout=CONNECT_TIMEOUT_S,
+                               application_name=what)
+    except psycopg.OperationalError as exc:
+        reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise UnavailableError(f"db: cannot connect to {shown_location(db)} ({reason})") from None
+    except psycopg.ProgrammingError as exc:  # a URL libpq does not parse
+        raise KBError(f"db: {shown_location(db)} is no PostgreSQL location ({exc})") from None
+
+
+class Guard:
+    """`with guard:` holds the store's lock, refuses a closed store and reconnects a dropped connection; a
+    connection lost inside is an `UnavailableError`."""
+
+    __slots__ = ("_session",)
+
+    def __init__(self, session: Session) -> None:
+        self._session = session
+
+    def __enter__(self) -> None:
+        session = self._session
+        session.lock.acquire()
+        try:
+            if session.closed:
+                raise KBError("knowledge base: closed")
+            if not session.depth and session.conn.broken:
+                session.reconnect()
+        except BaseException:
+            session.lock.release()
+            raise
+
+    def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
+        self._session.lock.release()
+        if isinstance(exc, psycopg.OperationalError):
+            raise UnavailableError(f"db: the connection to the database was lost ({str(exc).strip()[:200]}); "
+                                   "nothing of this request was written") from None
+
+
+class Session:
+    """One connection to the store's database, in one transaction at a time."""
+
+    def __init__(self, db: str, password: str | None) -> None:
+        self.lock = threading.RLock()
+        self.db = db
+        self._password = password
+        self.conn = connect(db, password)
+        self.closed = False
+        self.depth = 0
+        self.known: set[str] = set()  # individuals known to be stored (never deleted: objects, their parts)
+        # /health reads these without a query: counted once at open, then kept by this process's commits.
+        self.triples = self.objects = 0
+        self.pending_triples = self.pending_objects = 0
+        self._listeners: tuple[TransactionListener, ...] = ()
+        self.guard = Guard(self)
+
+    def listen(self, *listeners: TransactionListener) -> None:
+        self._listeners = listeners
+
+    def reconnect(self) -> None:
+        log.warning("store: the connection to %s was lost; connecting again", shown_location(self.db))
+        self.conn.close()
+        self.conn = connect(self.db, self._password)
+
+    def reader(self) -> Connection:
+        """A connection of its own in one read-only snapshot (an export reads it without the store's lock);
+        the caller closes it."""
+        conn = connect(self.db, self._password, "planhrc-export")
+        conn.execute("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY")
+        return conn
+
+    def check_open(self) -> None:
+        if self.closed:
+            raise KBError("knowledge base: closed")
+
+    def close(self) -> None:
+        self.closed = True
+        self.conn.close()
+
+    def execute(self, sql: str, params: Sequence[Any] = ()) -> psycopg.Cursor[tuple[Any, ...]]:
+        return self.conn.execute(sql, params)
+
+    # -- what the backend-neutral writes ask (`unit.AboxWriter`) ------------------------------------------
+    def existing(self, names: Sequence[str]) -> list[str]:
+        unknown = [ABOX_IRI + name for name in names if name not in self.known]
+        if unknown:
+            rows = self.execute("SELECT DISTINCT s FROM planhrc_triple WHERE s = ANY(%s)", (unknown,))
+            self.known.update(s[len(ABOX_IRI):] for (s,) in rows)
+        return [name for name in names if name in self.known]
+
+    def has_class(self, name: str, cls: str) -> bool:
+        return self.execute("SELECT 1 FROM planhrc_triple WHERE s = %s AND p = %s AND o = %s LIMIT 1",
+                            (ABOX_IRI + name, RDF_TYPE, TBOX_IRI + cls)).fetchone() is not None
+
+    def next_counter(self, name: str) -> int:
+        return self.reserve_counter(name, 1)
+
+    def reserve_counter(self, name: str, count: int) -> int:
+        row = self.execute("INSERT INTO planhrc_counter AS c (name, value) VALUES (%s, %s) ON CONFLICT (name) "
+                           "DO UPDATE SET value = c.value + EXCLUDED.value RETURNING value", (name, count)).fetchone()
+        assert row is not None
+        return int(row[0]) - count + 1
+
+    def latest(self, object_id: str, kind: str) -> str | None:
+        """The newest record `<object>_<kind>_<n>`: n is the object's counter."""
+        row = self.execute("SELECT value FROM planhrc_counter WHERE name = %s",
+                           (counter_name(object_id, kind),)).fetchone()
+        return record_name(object_id, kind, row[0]) if row and row[0] else None
+
+    def batch(self) -> RowBatch:
+        return RowBatch()
+
+    def flush(self, batch: RowBatch) -> None:
+        """Every row of the batch in one COPY (inside the open transaction)."""
+        if batch.rows:
+            with self.conn.cursor().copy("COPY planhrc_triple (s, p, o, lit, dt) FROM STDIN") as copy:
+                for row in batch.rows:
+                    copy.write_row(row)
+        self.known.update(batch.new)
+        self.pending_triples += len(batch.rows)
+
+    def note_object(self) -> None:
+        self.pending_objects += 1
+
+    # -- transactions ---------------------------------------------------------------------------------------
+    def write(self, fill: Callable[[], T]) -> T:
+        """Run `fill()` in one transaction; roll back on any error. Inside `transaction()` it only adds to the
+        open transaction, which commits or rolls back as a whole."""
+        if self.depth:
+            return fill()
+        with self.transaction():
+            return fill()
+
+    @contextmanager
+    def transaction(self) -> Iterator[None]:
+        if self.depth:
+            self.depth += 1
+            try:
+                yield
+            finally:
+                self.depth -= 1
+            return
+        self.depth = 1
+        try:
+            with self.conn.transaction():
+                yield
+        except BaseException:
+            self._rolled_back()
+            raise
+        else:
+            self._committed()
+        finally:
+            self.depth = 0
+
+    def _committed(self) -> None:
+        self.triples += self.pending_triples
+        self.objects += self.pending_objects
+        self.pending_triples = self.pending_objects = 0
+        for listener in self._listeners:
+            listener.committed()
+
+    def _rolled_back(self) -> None:
+        self.pending_triples = self.pending_objects = 0
+        self.known.clear()  # names created by the rolled-back transaction are not stored
+        for listener in self._listeners:
+            listener.rolled_back()

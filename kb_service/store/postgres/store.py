@@ -1,0 +1,281 @@
+"""The PostgreSQL backend of the knowledge base (`PostgresStore`): the ABox as rows of triples (`schema`, `rows`),
+written by the backend-neutral writes (`writes`, `triples`) through this backend's unit of work (`session`) and read
+back by `records`, with the event log, the execution cursor and idempotent responses as tables beside it, retention
+and the RDF export (`history`). It implements `interface.KnowledgeStore`, and what replicas need
+(`replicas.ObjectLocking`, `event_feed`).
+
+Every public method takes the store's lock and refuses a closed store. Each write checks its input completely
+before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan is
+stored as a journal row and its triples are written behind the answer (`journal`), as in the SQLite store; every
+process reads it from its row until then.
+
+The TBox is read by each process from its file (an in-memory owlready2 world, for the TBox's lines of the export);
+its digest is kept in the database, and a process whose TBox differs from the one the store was written with says
+so in its log.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator, Self, Sequence
+
+from planhrc.model import ArticulatedObject
+from planhrc.vocabulary import ExecutionStatus
+
+from ..checks import check_events_page, check_export, check_keep_perceived
+from ..errors import DamagedStoreError, KBError
+from ..events import EventLog
+from ..facade import StoreFacade
+from ..location import shown_location
+from ..names import TBOX_IRI, counter_name
+from ..owl import QuadStore, ntriple_lines
+from ..records import Compaction, Execution, StoredEvent
+from ..responses import ResponseMemory
+from ..writes import Writes
+from .history import abox_lines, compact_object
+from .journal import PgJournal
+from .records import PgRecords
+from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
+from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
+from .session import Session
+
+log = logging.getLogger(__name__)
+
+
+# An event in one round trip: the object's next seq (its counter's row lock orders the object's events, across
+# processes too), the row, and its announcement to the feed (`replicas.EventFeed`), sent when the transaction commits.
+_APPEND_EVENT = (
+    "WITH c AS (INSERT INTO planhrc_counter AS c (name, value) VALUES (%s, 1) ON CONFLICT (name) "
+    "DO UPDATE SET value = c.value + 1 RETURNING value), "
+    "e AS (INSERT INTO planhrc_event SELECT %s, value, %s, %s, %s::json, %s FROM c RETURNING seq) "
+    "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
+)
+
+
+class PostgresStore(StoreFacade):
+    """TBox (from its file) + ABox and the service's tables in one PostgreSQL database; thread safe."""
+
+    _records: PgRecords
+
+    def __init__(self, db: str | None, tbox_path: Path | str, password: str | None = None) -> None:
+        if not db:
+            raise KBError("db: a PostgreSQL store needs a URL (postgresql://user@host:port/database)")
+        self.tbox_path = Path(tbox_path)
+        if not self.tbox_path.is_file():
+            raise KBError(f"tbox_path: no such file {self.tbox_path}")
+        self._password = password
+        self._tbox_lines = _tbox_lines(self.tbox_path)
+        session = self._session = Session(db, password)
+        self._guard = session.guard
+        try:
+            self._prepare(hashlib.sha256(self.tbox_path.read_bytes()).hexdigest())
+            self._records = PgRecords(session)
+            self._journal = PgJournal(session, self._records)
+            session.listen(self._records, self._journal)
+            self._writes = Writes(session, self._records, self._journal)
+            self._journal.recover()  # before anything is served
+        except BaseException:
+            session.close()
+            raise
+        self._journal.start()
+        log.info("store: PostgreSQL at %s", shown_location(db))
+
+    def _prepare(self, tbox_digest: str) -> None:
+        """Create the tables of a new database (one process at a time), refuse one of another schema, count."""
+        s = self._session
+        with s.transaction():
+            s.execute("SELECT pg_advisory_xact_lock(%s)", (SCHEMA_LOCK,))
+            for sql in TABLES:
+                s.execute(sql)
+            meta = dict(s.execute("SELECT key, value FROM planhrc_meta").fetchall())
+            if meta.get("schema", SCHEMA_VERSION) != SCHEMA_VERSION:
+                raise DamagedStoreError(f"db: the database holds a store of schema {meta['schema']}, this version "
+                                        f"reads schema {SCHEMA_VERSION}")
+            if not meta:
+                s.execute("INSERT INTO planhrc_meta VALUES ('schema', %s)", (SCHEMA_VERSION,))
+                s.execute("INSERT INTO planhrc_triple (s, p, o) VALUES (%s, %s, %s)",
+                          (ABOX_ONTOLOGY, RDF_TYPE, OWL + "Ontology"))
+            if meta.get("tbox_sha256") != tbox_digest:
+                if "tbox_sha256" in meta:
+                    log.warning("TBox %s differs from the one this database was written with", self.tbox_path)
+                s.execute("INSERT INTO planhrc_meta VALUES ('tbox_sha256', %s) ON CONFLICT (key) "
+                          "DO UPDATE SET value = EXCLUDED.value", (tbox_digest,))
+            row = s.execute("SELECT count(*) FROM planhrc_triple").fetchone()
+            s.triples = len(self._tbox_lines) + int(row[0] if row else 0)
+            row = s.execute("SELECT count(*) FROM planhrc_triple WHERE o = %s AND p = %s",
+                            (TBOX_IRI + "ArticulatedObject", RDF_TYPE)).fetchone()
+            s.objects = int(row[0] if row else 0)
+
+    # -- life cycle -------------------------------------------------------------------------------------------
+    def close(self) -> None:
+        self._journal.stop()  # before the lock: the writer thread may be waiting for it
+        with self._session.lock:
+            if not self._session.closed:
+                try:
+                    self._journal.settle()
+                except Exception:  # the rows stay in the journal; the next open writes them out
+                    log.exception("store: writing out journalled plans at close failed")
+                self._session.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @contextmanager
+    def transaction(self) -> Iterator[None]:
+        with self._guard, self._session.transaction():
+            yield
+
+    # -- what only this backend has: replicas -------------------------------------------------------------------
+    def lock_object(self, object_id: str) -> None:
+        with self._guard:
+            if not self._session.depth:
+                raise KBError("internal: lock_object outside a transaction() (it would be released at once)")
+            self._session.execute("SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))",
+                                  (LOCK_NAMESPACE + object_id,))
+
+    def event_feed(self) -> EventFeed:
+        """A feed of the events every process commits (`replicas.EventFeed`); the caller closes it."""
+        self._session.check_open()
+        return EventFeed(self._session.db, self._password)
+
+    # -- writes (the rest: `facade.StoreFacade`) ------------------------------------------------------------
+    def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
+        with self._guard:
+            ident = self._records.info(object_id, "object_id").obj.ident
+            text = EventLog.check(kind, reason, data)
+            s = self._session
+
+            def fill() -> StoredEvent:
+                created = time.time()
+                row = s.execute(_APPEND_EVENT, (counter_name(ident, "event"), ident, kind, reason, text, created,
+                                                EVENT_CHANNEL, ident)).fetchone()
+                assert row is not None
+                return StoredEvent(int(row[0]), ident, kind, reason, json.loads(text), created)
+
+            return s.write(fill)
+
+    def set_execution(self, object_id: str, execution: Execution) -> None:
+        with self._guard:
+            ident = self._checked_execution(object_id, execution)
+            row = (ident, execution.plan_id, execution.next_step, ExecutionStatus(execution.status).value,
+                   execution.dispatched_action_id)
+            self._session.write(lambda: self._session.execute(
+                "INSERT INTO planhrc_execution VALUES (%s, %s, %s, %s, %s) ON CONFLICT (object_id) DO UPDATE SET "
+                "plan_id = EXCLUDED.plan_id, next_step = EXCLUDED.next_step, status = EXCLUDED.status, "
+                "dispatched_action_id = EXCLUDED.dispatched_action_id", row))
+
+    def remember_response(self, object_id: str, key: str, response: dict[str, Any]) -> None:
+        with self._guard:
+            text = ResponseMemory.check(key, response)
+            self._session.write(lambda: self._session.execute(
+                "INSERT INTO planhrc_response VALUES (%s, %s, %s::json) ON CONFLICT DO NOTHING",
+                (str(object_id), key, text)))
+
+    # -- reads (the rest: `facade.StoreFacade`) -------------------------------------------------------------
+    def _latest_id(self, object_id: str, noun: str) -> str | None:
+        return self._session.latest(object_id, noun)
+
+    def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
+        check_events_page(after_seq, limit)
+        with self._guard:
+            ident = self._records.info(object_id).obj.ident
+            rows = self._session.execute(
+                "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id = %s AND seq > %s "
+                "ORDER BY seq LIMIT %s", (ident, after_seq, limit)).fetchall()
+        return tuple(StoredEvent(int(seq), ident, kind, reason, data, float(created))
+                     for seq, kind, reason, data, created in rows)
+
+    def get_execution(self, object_id: str) -> Execution:
+        with self._guard:
+            ident = self._records.info(object_id).obj.ident
+            row = self._session.execute("SELECT plan_id, next_step, status, dispatched_action_id FROM "
+                                        "planhrc_execution WHERE object_id = %s", (ident,)).fetchone()
+        if row is None:
+            return Execution(plan_id=None, next_step=None, status=ExecutionStatus.IDLE)
+        plan_id, next_step, status, dispatched = row
+        return Execution(plan_id, next_step, ExecutionStatus(status), dispatched)
+
+    def recall_response(self, object_id: str, key: str) -> dict[str, Any] | None:
+        with self._guard:
+            row = self._session.execute("SELECT response FROM planhrc_response WHERE object_id = %s AND key = %s",
+                                        (str(object_id), str(key))).fetchone()
+        return dict(row[0]) if row else None
+
+    def triple_count(self) -> int:
+        self._session.check_open()
+        return self._session.triples
+
+    def object_count(self) -> int:
+        self._session.check_open()
+        return self._session.objects
+
+    # -- the plan journal -------------------------------------------------------------------------------------
+    def settle(self) -> None:
+        with self._guard:
+            self._journal.settle()
+
+    def plans_to_write(self) -> int:
+        self._session.check_open()
+        return len(self._journal)
+
+    # -- retention --------------------------------------------------------------------------------------------
+    def compact(self, keep_perceived: int) -> Compaction:
+        keep = check_keep_perceived(keep_perceived)
+        with self._guard:
+            self._journal.settle()  # a plan still in the journal is history like any other
+            s = self._session
+            objects = self._records.object_ids()
+            shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+
+            def fill() -> Compaction:
+                individuals = triples = 0
+                for oid in objects:
+                    i, t = compact_object(s.conn, oid, shared[oid], keep)
+                    individuals, triples = individuals + i, triples + t
+                s.pending_triples -= triples
+                return Compaction(len(objects), individuals, triples)
+
+            result = s.write(fill)
+            self._records.clear()  # records of deleted individuals must not be served from memory
+            return result
+
+    # -- export -----------------------------------------------------------------------------------------------
+    def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
+        """Read on a connection of the export's own, in one snapshot, without the store's lock."""
+        check_export(history, object_ids)
+        ids = None
+        with self._guard:
+            if history == "current":
+                ids = self._records.object_ids() if object_ids is None else list(object_ids)
+                for oid in ids:
+                    self._records.info(oid)
+            self._journal.settle()  # the export reads triples: every journalled plan's are written first
+            reader = self._session.reader()
+        return self._read_lines(reader, ids)
+
+    def _read_lines(self, reader: Any, ids: list[str] | None) -> Iterator[str]:
+        try:
+            yield from self._tbox_lines
+            yield from abox_lines(reader, ids)
+        finally:
+            reader.close()
+
+
+def _tbox_lines(tbox_path: Path) -> tuple[str, ...]:
+    """The TBox as N-Triples lines, as the SQLite store exports it (owlready2 reads the file into memory)."""
+    quads = QuadStore(None)
+    try:
+        try:
+            quads.load_ontology(TBOX_IRI, tbox_path.read_bytes(), reload=False)
+        except Exception as exc:  # owlready2 raises several kinds for a file that is no ontology
+            raise KBError(f"tbox_path: {tbox_path} does not read as an ontology ({exc})") from None
+        return tuple(ntriple_lines(quads.db, "1"))
+    finally:
+        quads.abandon()
