@@ -5,7 +5,7 @@ import gc
 import logging
 import threading
 from contextlib import asynccontextmanager
-from typing import AsyncIterator
+from typing import AsyncIterator, Callable
 
 from fastapi import FastAPI
 
@@ -16,24 +16,21 @@ from .api import install_error_handlers, router
 from .console import install_console
 from .guard import GuardPolicy, RequestGuard
 from .locks import ObjectLocks
-from .orchestrator import Orchestrator
 from .planning_pool import PlanningPool
+from .store import KBError, KnowledgeBase
+from .usecases import close_context, open_context
 
 log = logging.getLogger(__name__)
 
 
-def open_knowledge_base(settings: Settings):
+def open_knowledge_base(settings: Settings) -> KnowledgeBase:
     """Open the store named by the settings (':memory:' or None: a throwaway in-memory store)."""
-    from planhrc.kb_service.store import KnowledgeBase
-
     path = None if settings.db_path in (None, "", ":memory:") else settings.db_path
     return KnowledgeBase(path, settings.tbox_path)
 
 
-def compact_on_schedule(kb, settings: Settings, stop: threading.Event) -> None:
+def compact_on_schedule(kb: KnowledgeBase, settings: Settings, stop: threading.Event) -> None:
     """Compact the store every `compact_every_s` seconds until `stop` is set (the retention policy)."""
-    from planhrc.kb_service.store import KBError
-
     while not stop.wait(settings.compact_every_s):
         try:
             done = kb.compact(settings.keep_perceived)
@@ -50,16 +47,18 @@ def freeze_heap() -> None:
     gc.freeze()
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
-    """The planHRC knowledge-base service: a KnowledgeBase is opened at start-up and closed at shutdown."""
+def create_app(settings: Settings | None = None,
+               open_store: Callable[[Settings], KnowledgeBase] = open_knowledge_base) -> FastAPI:
+    """The planHRC knowledge-base service: a KnowledgeBase is opened at start-up (`open_store`, by default the
+    one the settings name) and closed at shutdown."""
     settings = settings or get_settings()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        kb = open_knowledge_base(settings)
+        kb = open_store(settings)
         app.state.kb = kb
         pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
-        orchestrator = app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks(), pool)
+        context = app.state.context = open_context(kb, settings, ObjectLocks(), pool)
         log.info("knowledge base open: %s", settings.db_path or "in memory")
         freeze_heap()
         stop = threading.Event()
@@ -74,7 +73,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             stop.set()
             if compactor is not None:
                 compactor.join(timeout=60)
-            orchestrator.close()
+            close_context(context)
             pool.close()
             kb.close()
             gc.unfreeze()

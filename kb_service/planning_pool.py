@@ -37,14 +37,16 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Iterator
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
-from planhrc.ordering import Placement
-from planhrc.pipeline import PlanningConfig, PlanOutcome
+from planhrc.pipeline import PlanOutcome
+from planhrc.pipeline.replan import PlanningJob
 from planhrc.vocabulary import PlanningStatus
+
+__all__ = ["ATOMS_PER_FRAME", "PlanningJob", "PlanningPool", "pack_outcome", "state_size", "unpack_outcome"]
 
 log = logging.getLogger(__name__)
 
@@ -53,19 +55,6 @@ EFFECTS_PER_FRAME = 1_000  # actions' conditional effects per frame (absolute 20
 WORKER_NICE = 10  # below the service's requests when they compete for a core
 _PARENT_POLL_S = 0.2
 _STOP_WAIT_S = 1.0
-
-
-@dataclass(frozen=True)
-class PlanningJob:
-    """One pipeline run, as a value: `pipeline.plan(obj, init, goal, config, placement=..., deadline_at=...)`, VAL
-    included when `config.validate`."""
-
-    obj: ArticulatedObject
-    init: State
-    goal: State
-    config: PlanningConfig
-    placement: Placement | None
-    deadline_at: float  # time.monotonic()
 
 
 def state_size(obj: ArticulatedObject) -> int:

@@ -18,7 +18,11 @@ VAL together: a task too large for it ends with status `timeout` instead of minu
 | `order` | an order of a plan's steps that stays on the table |
 | `motion` | what a step means for the robot (`action_motion`), macro steps |
 | `pieces` | a plan cut into pieces VAL checks one by one |
-| `validation` | VAL on a plan: whole, in pieces, or its first pieces only |
+| `val_runs` | VAL runs on a plan: started now, judged later (`validate`: both at once) |
+| `validation` | the service's owner of validation runs: armed VAL processes, the early answer, verdict handles |
+| `later` | a plan's later pieces checked behind the service's answer (made and held by `validation`) |
+| `gate` | the dispatch gate's logic over a record of VAL's verdicts on a plan's pieces (pure) |
+| `replan` | a re-plan for the service in one call: the plan with a handle on VAL's verdict |
 | `solve` | one request of `planhrc solve` through the pipeline |
 
 This module only re-exports the public names.
@@ -31,13 +35,17 @@ from .order import Ordered, Refusal, order_steps, steps_of
 from .pieces import (MIN_PIECE_STEPS, ValPiece, early_answer_first_piece, early_pieces, piece_bounds, piece_of,
                      validation_pieces)
 from .stages import Found, expect, find_plan, plan, plan_moves, planner_chain, run_planners
-from .validation import ValCheck, finish_first, finish_val, start_pieces, start_val, validate, validate_first
+from .gate import GateAnswer, PieceRecord, PieceVerdict, Verdict, gate
+from .replan import PlannedTurn, PlanningJob, ReplanRequest, plan_for_service
+from .val_runs import ValCheck, validate
+from .validation import EarlyAnswer, Validator, VerdictHandle
 
 __all__ = [
-    "MIN_PIECE_STEPS", "Found", "MacroStep", "Ordered", "PlanOutcome", "PlanStep", "PlanningConfig", "Refusal",
-    "ValCheck", "ValPiece", "action_motion", "config_from_settings", "deadline_from", "early_answer_first_piece",
-    "early_pieces", "expect", "find_plan", "finish_first", "finish_val", "first_motion_steps", "merge_macro_steps",
-    "move_of", "order_steps", "piece_bounds", "piece_of", "plan", "plan_moves", "planner_chain", "problem_name",
-    "run_planners", "start_pieces", "start_val", "steps_of", "step_text", "time_left", "validate", "validate_first",
+    "MIN_PIECE_STEPS", "EarlyAnswer", "Found", "GateAnswer", "MacroStep", "Ordered", "PieceRecord", "PieceVerdict",
+    "PlanOutcome", "PlanStep", "PlannedTurn", "PlanningConfig", "PlanningJob", "Refusal", "ReplanRequest",
+    "ValCheck", "ValPiece", "Validator", "Verdict", "VerdictHandle", "action_motion", "config_from_settings",
+    "deadline_from", "early_answer_first_piece", "early_pieces", "expect", "find_plan", "first_motion_steps", "gate",
+    "merge_macro_steps", "move_of", "order_steps", "piece_bounds", "piece_of", "plan", "plan_for_service",
+    "plan_moves", "planner_chain", "problem_name", "run_planners", "steps_of", "step_text", "time_left", "validate",
     "validation_pieces",
 ]

@@ -20,7 +20,7 @@ from planhrc.vocabulary import PlanningStatus
 from .config import (PlanningConfig, PlanOutcome, config_from_settings, deadline_from, over_deadline, problem_name,
                      time_left)
 from .order import Refusal, order_steps, steps_of
-from .validation import validate
+from .val_runs import validate
 
 
 def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig | None = None, *,

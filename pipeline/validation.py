@@ -1,182 +1,239 @@
-"""VAL on a pipeline's plan: the whole plan (`validate`; in pieces at once for a long plan of a domain with
-conditional effects), its first pieces only (`validate_first`), or started now and read later (`start_val` then
-`finish_val`, `start_pieces` then `finish_first`)."""
+"""The service's owner of validation runs (`Validator`): every VAL process a re-plan or a dispatch needs is started,
+waited for and stopped here; other modules hold a `VerdictHandle` on a plan's verdict, never a thread or a lock.
+
+How a new plan is checked (`Validator.check`), by what VAL costs on its domain:
+
+* **one short run** (a domain without conditional effects: VAL's fixed cost dominates): one run on the whole plan,
+  started as soon as the plan's steps are known (`replan` starts it before the replay), on a VAL process armed
+  with the domain. The handle says `read_in_write`: the caller begins its write meanwhile and reads the verdict
+  inside it, briefly, so the write overlaps VAL on the other core;
+* **the early answer** (setting `val_early_answer`, a domain with conditional effects, a plan longer than its
+  first motion by a piece at least): VAL on the first motion only before the answer, in `val_pieces` pieces at
+  once; the rest in `later.LaterPieces`, checked behind the answer once the plan is stored (`follow`), each
+  verdict handed to the caller's recorder (the service writes it to the object's log);
+* **otherwise** the whole plan, in `val_pieces` pieces at once for a long plan of such a domain.
+
+The dispatch gate (`gate.gate`) reads the verdicts recorded; a verdict still to come is waited for here
+(`wait_piece`), one that will never come (the service restarted while VAL ran) is asked of VAL again (`recheck`).
+"""
 from __future__ import annotations
 
 import logging
-import time
-from dataclasses import replace
-from typing import Callable, Protocol, Sequence
+import threading
+from dataclasses import dataclass, replace
+from typing import Sequence
 
-from planhrc.model import ArticulatedObject
+from planhrc.model import ActionSpec, ArticulatedObject, State
 from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.fast_downward import has_conditional_effects
-from planhrc.planner.validate import ValidationResult, start_validation, validate_pieces, validate_plan
-from planhrc.translator.translate import PddlTask
+from planhrc.translator.domain import read_domain_model
+from planhrc.translator.translate import PddlTask, translate
 from planhrc.vocabulary import PlanningStatus
 
-from .config import PlanningConfig, PlanOutcome, deadline_from, time_left
-from .pieces import MIN_PIECE_STEPS, ValPiece, validation_pieces
+from . import val_runs
+from .config import PlanningConfig, PlanOutcome, problem_name, time_left
+from .gate import PieceVerdict, Verdict
+from .later import LaterPieces, Recorder
+from .motion import step_text
+from .pieces import early_answer_first_piece, early_pieces, piece_of
 
 log = logging.getLogger(__name__)
 
 
-def validate(outcome: PlanOutcome, obj: ArticulatedObject | None = None, config: PlanningConfig | None = None,
-             deadline_at: float | None = None) -> PlanOutcome:
-    """VAL on the plan of an outcome made with `defer_validation`: the outcome, now `validated`, or an invalid
-    outcome saying why VAL refused it, or a `timeout` outcome when VAL does not finish by `deadline_at`.
-    Outcomes without a plan to check come back unchanged.
+@dataclass(frozen=True)
+class EarlyAnswer:
+    """A plan adopted before VAL checked all of it: its pieces' step ranges (1-based, inclusive) and how many of
+    them, from the first, VAL accepted before the answer."""
 
-    With `obj` and `config.val_pieces` > 1, a long plan is checked in pieces at once (one VAL process each, see
-    `validation_pieces`); the answer is the one a single run on the whole plan gives."""
-    if not outcome.solved or not outcome.actions or outcome.validated or outcome.task is None:
-        return outcome
-    n_pieces = config.val_pieces if config is not None and obj is not None else 1
-    return _checked(outcome, config, deadline_at, lambda left: _run_val(outcome, obj, n_pieces, left),
-                    lambda: replace(outcome, validated=True, validated_steps=len(outcome.steps)), "the plan")
+    pieces: tuple[tuple[int, int], ...]
+    accepted: int
 
 
-def validate_first(outcome: PlanOutcome, pieces: Sequence[ValPiece], config: PlanningConfig | None = None,
-                   deadline_at: float | None = None, armed: ArmedValidators | None = None) -> PlanOutcome:
-    """VAL on the plan's first pieces only (`early_pieces`: the first motion, in one or more pieces checked at
-    once): the outcome with `validated_steps` = the last piece's last step (the rest of the plan is *not*
-    validated: the caller checks the later pieces before using their steps), or an invalid or `timeout` outcome
-    as in `validate`. `start_pieces` then `finish_first`, for a caller with work to do meanwhile."""
-    if not outcome.solved or not outcome.actions or outcome.validated or outcome.task is None:
-        return outcome
-    checks = start_pieces(outcome.task, pieces, armed)
-    return finish_first(outcome, pieces, checks, config, deadline_at)
+class VerdictHandle:
+    """VAL's verdict on one new plan, under way in VAL's own processes: `outcome(t)` waits up to t seconds (None:
+    until VAL answers or the deadline passes) and gives the checked outcome, or None while VAL still runs;
+    `cancel()` stops every run. A plan with nothing to check has its outcome at once (`settled`)."""
 
+    def __init__(self, plan: PlanOutcome, checks: Sequence[val_runs.ValCheck] = (), *, what: str = val_runs.THE_PLAN,
+                 accepted: PlanOutcome | None = None, config: PlanningConfig | None = None, deadline_at: float = 0.0,
+                 later: LaterPieces | None = None, read_in_write: bool = False) -> None:
+        self.plan = plan  # as planned, before VAL's verdict
+        self.read_in_write = read_in_write  # one short run: read the verdict inside the write, briefly
+        self._checks = tuple(checks)
+        self._what = what
+        self._accepted = accepted or plan
+        self._config = config
+        self._deadline_at = deadline_at
+        self._later = later
+        self._final: PlanOutcome | None = None if self._checks else plan
 
-def start_pieces(task: PddlTask, pieces: Sequence[ValPiece], armed: ArmedValidators | None = None
-                 ) -> tuple[ValCheck, ...]:
-    """One VAL run per piece, all started now (on armed processes when given), against the paper's exact domain."""
-    checks: list[ValCheck] = []
-    try:
-        for piece in pieces:
-            checks.append(armed.start(task.validation_domain, piece.problem, piece.steps) if armed is not None
-                          else start_validation(task.validation_domain, piece.problem, piece.steps))
-    except BaseException:
-        for check in checks:
+    @classmethod
+    def settled(cls, outcome: PlanOutcome) -> VerdictHandle:
+        return cls(outcome)
+
+    def outcome(self, timeout_s: float | None = None) -> PlanOutcome | None:
+        if self._final is not None:
+            return self._final
+        try:
+            judged = val_runs.judge(self.plan, self._checks, self._config, self._deadline_at, self._what,
+                                    self._accepted, timeout_s)
+        except Exception as exc:  # a failing VAL must not leave the perception without a decision
+            self.cancel()
+            judged = _error(self.plan, exc)
+        if judged is None:
+            return None
+        self._final = judged
+        if self._later is not None and not (judged.solved and judged.validated_steps and not judged.validated):
+            self._later.cancel()
+            self._later = None
+        return judged
+
+    def early_answer(self) -> EarlyAnswer | None:
+        """Once `outcome` accepted the plan's first motion with the rest to check behind the answer: its pieces;
+        None for a plan checked whole (or refused)."""
+        later, final = self._later, self._final
+        if later is None or final is None or not (final.solved and final.actions and not final.validated):
+            return None
+        first = later.accepted or ((1, final.validated_steps),)
+        return EarlyAnswer(first + tuple((p.first, p.last) for p in later.pieces), max(1, len(later.accepted)))
+
+    def cancel(self) -> None:
+        """Stop every VAL run of this plan (the plan is not adopted, or the request failed)."""
+        for check in self._checks:
             check.cancel()
-        raise
-    return tuple(checks)
+        if self._later is not None:
+            self._later.cancel()
 
 
-def finish_first(outcome: PlanOutcome, pieces: Sequence[ValPiece], checks: Sequence[ValCheck],
-                 config: PlanningConfig | None, deadline_at: float | None) -> PlanOutcome:
-    """The outcome once VAL has answered on every first piece (`start_pieces`): `validated_steps` up to the last
-    one when all accepted, else invalid naming the piece VAL refused (the others stopped), or `timeout` at the
-    deadline."""
-    deadline_at = deadline_at if deadline_at is not None else (
-        deadline_from(config) if config is not None else time.monotonic() + 60.0)
-    what = f"its first {pieces[-1].last} steps"
-    t = time.perf_counter()
-    try:
-        for i, check in enumerate(checks, start=1):
-            verdict = _wait_verdict(check, deadline_at)
-            if verdict is None:
-                return _val_timeout(outcome, config, what, "VAL did not answer in time", time.perf_counter() - t)
-            if not verdict.valid:
-                reason = verdict.reason if len(checks) == 1 else f"piece {i} of {len(checks)}: {verdict.reason}"
-                return _judged(outcome, ValidationResult(False, reason, verdict.seconds), time.perf_counter() - t,
-                               lambda: outcome, what)
-    finally:
-        for check in checks:
-            check.cancel()  # a run that answered is only cleaned up; one still running is stopped
-    return _judged(outcome, ValidationResult(True, "Plan valid", 0.0), time.perf_counter() - t,
-                   lambda: replace(outcome, validated_steps=pieces[-1].last), what)
+class Validator:
+    """VAL for the service: armed VAL processes (`planner.armed`), the checks of new plans (`check`), the later
+    pieces being checked behind an answer, one plan per object (`follow`, `stop`, `wait_piece`), and VAL asked
+    again on a stored plan's piece (`recheck`). `close()` stops them all (the service stops)."""
 
+    def __init__(self, config: PlanningConfig, *, early_answer: bool, merge_macro_steps: bool, armed: bool) -> None:
+        self.config = config
+        self.early_answer = early_answer and config.validate
+        self.merge_macro_steps = merge_macro_steps
+        self.armed = ArmedValidators() if armed and config.validate else None
+        self._guard = threading.Lock()
+        self._later: dict[str, tuple[str, LaterPieces]] = {}  # object id -> (plan id, its later pieces under VAL)
 
-def _wait_verdict(check: ValCheck, until: float) -> ValidationResult | None:
-    """VAL's answer, waited for until `until` (`time.monotonic()`), else None."""
-    verdict = check.verdict(max(0.0, until - time.monotonic()))
-    while verdict is None and time.monotonic() < until:  # a wait may end a little early
-        verdict = check.verdict(max(0.0, until - time.monotonic()))
-    return verdict
+    def close(self) -> None:
+        with self._guard:
+            runs = [later for _, later in self._later.values()]
+            self._later.clear()
+        for later in runs:
+            later.cancel()
+        if self.armed is not None:
+            self.armed.close()
 
+    # -- a new plan -------------------------------------------------------------------------------------------
+    def beside(self, task: PddlTask | None) -> bool:
+        """Whether a plan of this task is checked by one short VAL run (VAL on, no conditional effects), which
+        may start as soon as its steps are known."""
+        return self.config.validate and task is not None and not has_conditional_effects(task.validation_domain)
 
-def _checked(outcome: PlanOutcome, config: PlanningConfig | None, deadline_at: float | None,
-             run: Callable[[float], ValidationResult], accepted: Callable[[], PlanOutcome], what: str
-             ) -> PlanOutcome:
-    deadline_at = deadline_at if deadline_at is not None else (
-        deadline_from(config) if config is not None else time.monotonic() + 60.0)
-    t = time.perf_counter()
-    try:
+    def start_whole(self, task: PddlTask, steps: Sequence[str]) -> val_runs.ValCheck:
+        """One VAL run on a whole plan, started now (`beside`)."""
+        return val_runs.start_val(task, steps, self.armed)
+
+    def check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float,
+              started: val_runs.ValCheck | None = None) -> VerdictHandle:
+        """VAL on a new plan, started (or, with `started`, already running) in VAL's processes: the handle on its
+        verdict. Nothing to check (no plan, VAL off, validated where it was planned): a settled handle."""
+        if not (outcome.solved and outcome.actions) or not self.config.validate or outcome.validated:
+            if started is not None:
+                started.cancel()
+            return VerdictHandle.settled(outcome)
+        task = outcome.task
+        assert task is not None  # a solved plan with actions was translated
+        try:
+            if started is not None or self.beside(task):
+                started = started or self.start_whole(task, outcome.steps)
+                return VerdictHandle(outcome, (started,), accepted=val_runs.accepted_whole(outcome),
+                                     config=self.config, deadline_at=deadline_at, read_in_write=True)
+            first = (early_answer_first_piece(obj, outcome, self.merge_macro_steps) if self.early_answer
+                     else None)
+            if first is not None:
+                return self._check_first(obj, outcome, task, first, deadline_at)
+            # cold runs: a plan checked whole here is short (or the early answer is off), not worth keeping
+            # VAL processes armed with its domain beside the service
+            checks = val_runs.start_runs(task, val_runs.whole_plan(obj, outcome, self.config.val_pieces))
+            return VerdictHandle(outcome, checks, accepted=val_runs.accepted_whole(outcome), config=self.config,
+                                 deadline_at=deadline_at)
+        except Exception as exc:  # VAL could not start: the perception still gets a decision
+            if started is not None:
+                started.cancel()
+            return VerdictHandle.settled(_error(outcome, exc))
+
+    def _check_first(self, obj: ArticulatedObject, outcome: PlanOutcome, task: PddlTask, first: int,
+                     deadline_at: float) -> VerdictHandle:
+        """The early answer: the first motion (its first `first` steps) in `val_pieces` pieces checked at once
+        (VAL's cost grows with the steps of such a domain, so pieces at once answer sooner than one run), the
+        rest of the plan left to `LaterPieces`."""
+        pieces = early_pieces(obj, outcome, self.config.val_pieces, first, max(1, self.config.val_pieces))
+        before = tuple(p for p in pieces if p.last <= first)
+        later = LaterPieces(task.validation_domain, pieces[len(before):], self.config.deadline_s,
+                            accepted=tuple((p.first, p.last) for p in before))
+        try:
+            checks = val_runs.start_runs(task, [(p.problem, p.steps) for p in before], self.armed)
+        except BaseException:
+            later.cancel()
+            raise
+        return VerdictHandle(outcome, checks, what=f"its first {before[-1].last} steps",
+                             accepted=replace(outcome, validated_steps=before[-1].last), config=self.config,
+                             deadline_at=deadline_at, later=later)
+
+    # -- plans behind the answer --------------------------------------------------------------------------------
+    def follow(self, object_id: str, plan_id: str | None, handle: VerdictHandle | None, record: Recorder) -> None:
+        """The object's plan is now `plan_id` (None: it has none): stop checking the previous plan's later pieces;
+        when `handle`'s plan was adopted on its early answer, check its later pieces now, behind the answer, and
+        hand each verdict to `record`."""
+        later = handle._later if handle is not None and handle.early_answer() is not None else None
+        with self._guard:
+            previous = self._later.pop(object_id, None)
+            if later is not None and plan_id is not None:
+                self._later[object_id] = (plan_id, later)
+        if previous is not None and previous[1] is not later:
+            previous[1].cancel()
+        if later is not None and plan_id is not None:
+            later.attach(record)
+            later.start()  # only now: the first motion's VAL and the write had the cores to themselves
+
+    def stop(self, object_id: str) -> None:
+        """The object's plan is being replaced: its later pieces need no more checking."""
+        with self._guard:
+            previous = self._later.pop(object_id, None)
+        if previous is not None:
+            previous[1].cancel()
+
+    def wait_piece(self, object_id: str, plan_id: str, first_step: int, timeout_s: float) -> bool | None:
+        """Wait until the verdict on the piece of `plan_id` starting at `first_step` is recorded (True) or
+        `timeout_s` passes (False); None when no check of that plan is under way here (the verdict will not
+        come: `recheck`)."""
+        with self._guard:
+            running = self._later.get(object_id)
+        if running is None or running[0] != plan_id or running[1].cancelled:
+            return None
+        return running[1].wait(first_step, timeout_s)
+
+    def recheck(self, obj: ArticulatedObject, init: State, goal: State, actions: Sequence[ActionSpec],
+                expected_states: Sequence[State], number: int, first: int, last: int, deadline_at: float
+                ) -> PieceVerdict:
+        """VAL on piece `number` (a_first .. a_last) of a stored plan, built again from its problem's states, its
+        actions in plan order and its expected states. PlannerError when VAL does not answer by `deadline_at`."""
+        task = translate(obj, init, goal, read_domain_model(self.config.tbox_path, obj.formulation.value),
+                         problem_name(obj))
+        piece = piece_of(obj, task.problem, tuple(step_text(a) for a in actions), expected_states, first, last)
         left = time_left(deadline_at)
         if left <= 0:
             raise PlannerError("no time left for VAL")
-        check = run(left)
-    except PlannerError as exc:  # VAL's time limit: the request's deadline
-        return _val_timeout(outcome, config, what, str(exc), time.perf_counter() - t)
-    return _judged(outcome, check, time.perf_counter() - t, accepted, what)
+        result = val_runs.check_piece(task.validation_domain, piece, left, raising=True)
+        verdict = Verdict(result.valid, "Plan valid" if result.valid else result.reason)
+        return PieceVerdict(number, first, last, verdict, result.seconds)
 
 
-def _judged(outcome: PlanOutcome, check: ValidationResult, seconds: float, accepted: Callable[[], PlanOutcome],
-            what: str) -> PlanOutcome:
-    """The outcome VAL's answer makes of a plan: `accepted()` when VAL accepted it, else invalid with VAL's
-    reason (the time VAL took in the timings, as `validate`)."""
-    timings = {**outcome.timings, "validate": seconds}
-    if check.valid:
-        return replace(accepted(), timings=timings)
-    log.warning("plan of %s rejected by VAL: %s", outcome.planner, check.reason)
-    return PlanOutcome(PlanningStatus.INVALID, f"VAL rejected {what}: {check.reason}", outcome.planner,
-                       timings=timings, task=outcome.task, attempts=outcome.attempts)
-
-
-def _val_timeout(outcome: PlanOutcome, config: PlanningConfig | None, what: str, why: str, seconds: float
-                 ) -> PlanOutcome:
-    limit = f"{config.deadline_s:g} s" if config is not None else "its time limit"
-    return PlanOutcome(PlanningStatus.TIMEOUT, f"planning deadline of {limit} exceeded while VAL checked "
-                       f"{what} ({why})", outcome.planner, timings={**outcome.timings, "validate": seconds},
-                       task=outcome.task, attempts=outcome.attempts)
-
-
-class ValCheck(Protocol):
-    """A VAL run under way (`planner.validate.ValRun`): its verdict once there is one, and a way to stop it."""
-
-    def verdict(self, timeout_s: float | None = None) -> ValidationResult | None: ...
-
-    def cancel(self) -> None: ...
-
-
-def start_val(task: PddlTask, steps: Sequence[str], armed: ArmedValidators | None = None) -> ValCheck:
-    """VAL started on a plan's steps as one run on the whole plan against the paper's exact domain, e.g. as soon
-    as `find_plan` has them, before the expected states are replayed: it runs in its own process (on the other
-    core) beside `expect` and whatever the caller does next, and `finish_val` reads its verdict. With `armed`
-    (a service's), on a VAL process that has already read the domain. For domains whose plans VAL checks in one
-    short run (no conditional effects); the others go through `validate`."""
-    if armed is not None:
-        return armed.start(task.validation_domain, task.problem, steps)
-    return start_validation(task.validation_domain, task.problem, steps)
-
-
-def finish_val(outcome: PlanOutcome, check: ValCheck, config: PlanningConfig | None, deadline_at: float,
-               timeout_s: float | None = None) -> PlanOutcome | None:
-    """The outcome of `expect` once the VAL run `start_val` began on its plan has answered (as `validate` would
-    make it), waiting up to `timeout_s` (None: until VAL answers or the deadline passes); None while VAL still
-    runs within the deadline. At the deadline VAL is stopped and the outcome is a `timeout`. An outcome that is
-    not a plan to check stops VAL and comes back unchanged."""
-    if not outcome.solved or not outcome.actions:
-        check.cancel()
-        return outcome
-    t = time.perf_counter()
-    until = deadline_at if timeout_s is None else min(deadline_at, time.monotonic() + timeout_s)
-    verdict = _wait_verdict(check, until)
-    if verdict is None:
-        if time_left(deadline_at) > 0:
-            return None
-        check.cancel()
-        return _val_timeout(outcome, config, "the plan", "VAL did not answer in time", time.perf_counter() - t)
-    return _judged(outcome, verdict, verdict.seconds,
-                   lambda: replace(outcome, validated=True, validated_steps=len(outcome.steps)), "the plan")
-
-
-def _run_val(outcome: PlanOutcome, obj: ArticulatedObject | None, n_pieces: int, timeout_s: float
-             ) -> ValidationResult:
-    assert outcome.task is not None
-    if obj is None or n_pieces <= 1 or len(outcome.steps) < 2 * MIN_PIECE_STEPS or not has_conditional_effects(
-            outcome.task.validation_domain):
-        return validate_plan(outcome.task.validation_domain, outcome.task.problem, outcome.steps, timeout_s)
-    return validate_pieces(outcome.task.validation_domain, validation_pieces(obj, outcome, n_pieces), timeout_s)
+def _error(outcome: PlanOutcome, exc: Exception) -> PlanOutcome:
+    log.exception("VAL failed on a plan of %s", outcome.planner)
+    return PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", outcome.planner)
