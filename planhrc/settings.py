@@ -110,11 +110,6 @@ class Settings(BaseSettings):
         description="The service compacts its store this often (seconds; 0: never). `planhrc compact` runs it "
         "on a store by hand.",
     )
-    crash_in_perception_write: int = Field(
-        default=0, ge=0,
-        description="For crash tests only: the service kills itself (SIGKILL) inside the store write of its N-th "
-        "perception, after every row is written and before the commit; 0 (the default) never.",
-    )
 
 
 @lru_cache
