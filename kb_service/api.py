@@ -9,7 +9,7 @@ result into the route's response model (`schemas`).
 from __future__ import annotations
 
 import logging
-from typing import Annotated, Any, Iterable, Iterator, Literal
+from typing import Annotated, Any, Awaitable, Callable, Iterable, Iterator, Literal, Sequence
 
 from fastapi import APIRouter, Depends, FastAPI, Header, Query, Request
 from fastapi.exception_handlers import http_exception_handler
@@ -335,7 +335,7 @@ def install_error_handlers(app: FastAPI) -> None:
     """Map the typed errors of the libraries to HTTP status codes."""
     from planhrc.model import ModelError
 
-    def handler(status: int):
+    def handler(status: int) -> Callable[[Request, Exception], Awaitable[JSONResponse]]:
         async def handle(request: Request, exc: Exception) -> JSONResponse:
             headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
             return JSONResponse({"detail": str(exc)}, status_code=status, headers=headers)
@@ -373,7 +373,7 @@ async def _request_validation_error(request: Request, exc: Exception) -> JSONRes
     return JSONResponse({"detail": "; ".join(messages) or "invalid request"}, status_code=422)
 
 
-def _field_path(loc: tuple | list) -> str:
+def _field_path(loc: Sequence[int | str]) -> str:
     parts = list(loc)
     if parts and parts[0] in ("body", "query", "path", "header"):
         parts = parts[1:]

@@ -9,6 +9,12 @@ import logging
 import socket
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
+
+if TYPE_CHECKING:
+    from planhrc.settings import Settings
+
+_Parser = TypeVar("_Parser", bound=argparse.ArgumentParser)
 
 
 # Settings field -> the option that sets it, to name the right one in an error.
@@ -17,7 +23,7 @@ SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "token":
                  "planner": "--planner", "log_level": "--log-level"}
 
 
-def add_serve_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     from uvicorn.config import LOG_LEVELS
 
     from planhrc.cli_args import port, tbox_file
@@ -47,7 +53,7 @@ class SettingsProblem(Exception):
     """A setting the service cannot start with; the message names the option or variable."""
 
 
-def check_serve_settings(settings, given: set[str]) -> None:
+def check_serve_settings(settings: Settings, given: set[str]) -> None:
     """Refuse, before anything starts, settings the service would only trip over later (a planner name, the
     TBox, the store's folder, a busy port). Raises SettingsProblem naming the option or `PLANHRC_*` variable."""
     from uvicorn.config import LOG_LEVELS
@@ -121,7 +127,7 @@ def run_serve(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_compact_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_compact_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     from planhrc.cli_args import tbox_file
 
     p = subparsers.add_parser(

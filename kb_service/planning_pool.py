@@ -103,7 +103,8 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
 
 def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
     """The outcome `pack_outcome` sent, each state one set operation on the first."""
-    bare, n_actions, has_states, n_base, n_states = pickle.loads(next(frames))
+    header: tuple[PlanOutcome, int, bool, int, int] = pickle.loads(next(frames))
+    bare, n_actions, has_states, n_base, n_states = header
     actions: list[ActionSpec] = []
     for _ in range(n_actions):
         actions.extend(pickle.loads(next(frames)))
@@ -112,7 +113,8 @@ def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
         base_atoms.extend(pickle.loads(next(frames)))
     states: list[State] = [frozenset(base_atoms)] if has_states else []
     for _ in range(n_states):
-        for missing, added in pickle.loads(next(frames)):
+        changes: list[tuple[State, State]] = pickle.loads(next(frames))
+        for missing, added in changes:
             states.append((states[0] - missing) | added)
     return replace(bare, actions=tuple(actions), expected_states=tuple(states))
 
