@@ -87,8 +87,7 @@ SAME_OBJECT = {"object_id": "$request.path.object_id"}
 
 # -- dependencies -----------------------------------------------------------------------------------------
 # Both are `async def`: they do no I/O and return at once, and FastAPI runs a plain `def` dependency on its thread
-# pool, a trip there and back before the handler's own (a re-planning perception: 0.83 ms from the request's
-# arrival to its handler with two such dependencies).
+# pool, a trip there and back before the handler's own, on the path of every request.
 async def get_context(request: Request) -> usecases.Context:
     context: usecases.Context = request.app.state.context
     return context
@@ -389,7 +388,7 @@ def _field_path(loc: Sequence[int | str]) -> str:
 # -- conversions ----------------------------------------------------------------------------------------
 def _in_pieces(lines: Iterable[str], size: int = 64 * 1024) -> Iterator[bytes]:
     """Lines joined into pieces of about `size` bytes: the stream still starts at once and holds one piece, but
-    it no longer hops to the thread pool once per triple (the current ABox's 2,500 lines took 0.5-1 s)."""
+    it no longer hops to the thread pool once per triple, which made a whole ABox's export crawl."""
     piece: list[str] = []
     length = 0
     for line in lines:

@@ -41,9 +41,9 @@ def compact_on_schedule(kb: KnowledgeBase, settings: Settings, stop: threading.E
 
 def freeze_heap() -> None:
     """Leave what start-up built (modules, the TBox, the store) out of the garbage collector's full passes until
-    shutdown (`gc.freeze`): each full pass walks every object not frozen while it holds the interpreter, and with
-    start-up's objects in it a pass took 95-200 ms, which every request (/health too) waited for; without them,
-    under 30 ms. Shutdown unfreezes them, so an app built and closed in a longer process (a test) is collected."""
+    shutdown (`gc.freeze`): each full pass walks every object not frozen while it holds the interpreter, and
+    start-up's objects (most of the heap) made every pass long enough for every request (/health too) to wait on
+    it. Shutdown unfreezes them, so an app built and closed in a longer process (a test) is collected."""
     gc.freeze()
 
 

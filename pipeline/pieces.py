@@ -12,10 +12,10 @@ from .config import PlanOutcome
 from .motion import first_motion_steps
 
 
-# VAL's fixed cost (start, parse, ground the problem) is several ms: a piece shorter than this is not worth a
-# process of its own. Without conditional effects a step costs VAL next to nothing (a 57-step relative 20 x 12
-# plan: 4.0 ms in one run, 7.4 ms in two pieces), so only plans of domains with conditional effects are cut
-# (absolute 20 x 12: 249 ms in one run, 156 ms in two pieces, on the 2-core machine under load).
+# VAL's fixed cost (start, parse, ground the problem) is what a short piece costs: a piece shorter than this is
+# not worth a process of its own. Without conditional effects a step costs VAL next to nothing (a long relative
+# plan checks faster in one run than in two pieces), so only plans of domains with conditional effects, whose
+# steps each cost VAL much more, are cut (`planhrc bench --replan-only` shows VAL's share of a re-plan).
 MIN_PIECE_STEPS = 8
 
 

@@ -3,7 +3,7 @@
 The repository keeps its folders (`translator/`, `planner/`, ...) and maps them into one `planhrc` namespace;
 mypy reads modules by path, so the test lays out that namespace in a temporary folder of symbolic links taken from
 `pyproject.toml`'s own mapping and runs mypy on it with the configuration in `pyproject.toml` (strict on the
-model, the cooperation model, the translator and the planner).
+model, the cooperation model, the translator, the planner, the pipeline and the service but its store).
 """
 from __future__ import annotations
 
