@@ -11,7 +11,7 @@ from planhrc.translator import PddlTask, domain_text, read_domain_model, transla
 from ..store import NotFoundError, StoredEvent, StoredPlan, StoredProblem, StoredState
 from ..store.knowledge_base import MAX_EVENTS_PAGE
 from .context import Context
-from .values import EventRead, Health, LinkRead, ObjectRead, PlanRead, PlanStepRead, ProblemRead, StateRead
+from .values import EventRead, Health, LinkRead, ObjectRead, PlanRead, PlanStepRead, StateRead
 
 
 def read_object(context: Context, object_id: str) -> ObjectRead:
@@ -49,10 +49,9 @@ def read_state(context: Context, state_id: str) -> StateRead:
     return state_read(context.store.get_state(state_id))
 
 
-def read_problem(context: Context, problem_id: str) -> ProblemRead:
-    problem: StoredProblem = context.store.get_problem(problem_id)
-    return ProblemRead(problem.id, problem.object_id, problem.init_state_id, problem.goal_state_id,
-                       problem.created_at)
+def read_problem(context: Context, problem_id: str) -> StoredProblem:
+    """A problem as stored (its record is the read: ids and time only)."""
+    return context.store.get_problem(problem_id)
 
 
 def list_events(context: Context, object_id: str, after_seq: int = 0, limit: int | None = None) -> list[EventRead]:

@@ -98,15 +98,6 @@ class StateRead:
 
 
 @dataclass(frozen=True)
-class ProblemRead:
-    id: str
-    object_id: str
-    init_state_id: str
-    goal_state_id: str
-    created_at: float
-
-
-@dataclass(frozen=True)
 class PlanStepRead:
     id: str
     step: int
