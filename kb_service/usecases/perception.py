@@ -18,7 +18,7 @@ stores nothing.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from planhrc.cooperation import Decision, decide
 from planhrc.model import ArticulatedObject, ModelError, Perception, perceive as snap
@@ -58,6 +58,24 @@ class _ValStillRunning(Exception):
     """VAL did not answer within OVERLAP_WAIT_S of the write: roll it back and wait outside the store."""
 
 
+@dataclass(frozen=True)
+class _Seen:
+    """What a perception found before its write: the object as perceived, where its cooperation stands, and the
+    decision taken (None: no goal to decide towards)."""
+
+    obj: ArticulatedObject
+    perception: Perception
+    execution: Execution
+    goal: StoredState | None
+    plan: StoredPlan | None
+    memo: ObjectMemo
+    base: refine.Base  # where the checks place a placed object's base point (None: abstract)
+    measured: tuple[float, float] | None  # the base point the perception measured
+    key: str | None  # the request's idempotency key, and its fingerprint
+    fingerprint: str
+    decision: Decision | None = None
+
+
 def perceive(context: Context, request: PerceptionRequest) -> Turn:
     """Decide on one perception and store all it leads to in one write (see the module's note)."""
     store, links, key = context.store, request.link_orientations_deg, request.idempotency_key
@@ -76,28 +94,30 @@ def perceive(context: Context, request: PerceptionRequest) -> Turn:
         except ModelError as exc:
             raise ValidationError(str(exc)) from None
 
-        # decide
+        # where the object's cooperation stands
         memo = context.memory.of(store, obj.ident)
-        base = (measured or memo.where) if memo.base_point_xy is not None else None
         execution = store.get_execution(obj.ident)
         goal = store.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
         plan, view = context.views.get(store, execution.plan_id)
+        base = (measured or memo.where) if memo.base_point_xy is not None else None
+        seen = _Seen(obj, perception, execution, goal, plan, memo, base, measured, key, print_)
         if goal is None:
-            return _write(context, obj, perception, execution, None, plan, None, memo, base, measured, key,
-                          print_).turn
+            return _write(context, seen).turn
+
+        # decide
         deadline_at = deadline_from(context.planning)
         decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
         decision = refine.recheck_at(obj, base, plan, perception, decision)
         decision = refine.escalate(context, obj, plan, perception, decision, memo, base)
         decision = refine.gate_decision(context, obj, plan, decision, deadline_at)
+        seen = replace(seen, decision=decision)
         if decision.kind not in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
-            return _write(context, obj, perception, execution, goal, plan, decision, memo, base, measured, key,
-                          print_).turn
+            return _write(context, seen).turn
 
         # re-plan: the pipeline once, VAL running in its own processes meanwhile
         context.validator.stop(obj.ident)  # the plan being replaced needs no more checking
-        request_ = refine.replan_request(obj, perception, goal.atoms, plan, decision, memo, base, deadline_at)
-        planned = plan_for_service(request_, context.planning, context.validator, context.pool)
+        replan = refine.replan_request(obj, perception, goal.atoms, plan, decision, memo, base, deadline_at)
+        planned = plan_for_service(replan, context.planning, context.validator, context.pool)
         try:
             if planned.outcome.status is PlanningStatus.TIMEOUT:
                 raise DeadlineError(f"planning: {planned.outcome.message}")
@@ -105,14 +125,12 @@ def perceive(context: Context, request: PerceptionRequest) -> Turn:
             if not planned.verdict.read_in_write:
                 planned.verdict.outcome(None)  # VAL's verdict before the write: the store is not held meanwhile
             try:
-                written = _write(context, obj, perception, execution, goal, plan, decision, memo, base, measured,
-                                 key, print_, planned, checked)
+                written = _write(context, seen, planned, checked)
             except _ValStillRunning:
                 log.info("VAL was slower than %.0f ms on %s's plan: the write waited for it outside the store",
                          OVERLAP_WAIT_S * 1000, obj.ident)
                 planned.verdict.outcome(None)
-                written = _write(context, obj, perception, execution, goal, plan, decision, memo, base, measured,
-                                 key, print_, planned, checked)
+                written = _write(context, seen, planned, checked)
         except BaseException:
             planned.verdict.cancel()  # no VAL process outlives the request
             raise
@@ -122,22 +140,24 @@ def perceive(context: Context, request: PerceptionRequest) -> Turn:
         if adopted is not None:
             context.views.keep(*adopted)
         plan_id = adopted[0].id if adopted is not None else None
-        context.validator.follow(obj.ident, plan_id, planned.verdict, lambda piece: _record(context, obj, plan_id,
-                                                                                            piece))
+
+        def record(piece: PieceVerdict) -> None:
+            assert plan_id is not None  # only an adopted plan's pieces are checked behind the answer
+            record_verdict(store, obj.ident, plan_id, piece)
+
+        context.validator.follow(obj.ident, plan_id, planned.verdict, record)
         return written.turn
 
 
-def _write(context: Context, obj: ArticulatedObject, perception: Perception, execution: Execution,
-           goal: StoredState | None, plan: StoredPlan | None, decision: Decision | None, memo: ObjectMemo,
-           base: refine.Base, measured: tuple[float, float] | None, key: str | None, print_: str,
-           planned: PlannedTurn | None = None, checked: CheckedPlan | None = None) -> Written:
+def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, checked: CheckedPlan | None = None
+           ) -> Written:
     """The perception's one write. With a re-plan whose VAL verdict is read inside the write (`read_in_write`),
     it waits for the verdict before it uses the plan, so it commits a plan VAL accepted or none (a plan VAL
     refuses is stored as a problem without a plan), or raises _ValStillRunning (rolled back) after
     OVERLAP_WAIT_S."""
-    store = context.store
+    store, obj, goal, decision = context.store, seen.obj, seen.goal, seen.decision
     with store.transaction():
-        perceived = store.add_perception(perception)
+        perceived = store.add_perception(seen.perception)
         outcome: PlanOutcome | None = None
         if planned is not None:
             outcome = planned.verdict.outcome(OVERLAP_WAIT_S if planned.verdict.read_in_write else None)
@@ -149,15 +169,14 @@ def _write(context: Context, obj: ArticulatedObject, perception: Perception, exe
             written = Written(Turn(DecisionKind.NO_PLAN, None, perceived.id, None, None,
                                    "no goal is set: PUT /objects/{id}/goal first"))
         elif planned is None or outcome is None:
-            written = follow(context, obj, perceived, execution, plan, decision, memo, base)
+            written = follow(context, obj, perceived, seen.execution, seen.plan, decision, seen.memo, seen.base)
         else:
-            written = adopt(context, obj, perceived, goal, decision, outcome, checked,
-                            planned.verdict.early_answer())
+            written = adopt(context, obj, perceived, goal, decision, outcome, checked, planned.verdict.early_answer())
         turn = written.turn
         data = decision_data(written, goal.id if goal is not None else None,
-                             decision.remedy if decision is not None else None, measured)
+                             decision.remedy if decision is not None else None, seen.measured)
         store.add_event(obj.ident, turn.decision, turn.reason, data)
-        remember(store, obj.ident, key, print_, turn_record(turn))
+        remember(store, obj.ident, seen.key, seen.fingerprint, turn_record(turn))
     return written
 
 
@@ -167,11 +186,6 @@ def _check_plan(context: Context, obj: ArticulatedObject, outcome: PlanOutcome, 
     if not (outcome.solved and outcome.actions):
         return None
     return context.store.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at)
-
-
-def _record(context: Context, obj: ArticulatedObject, plan_id: str | None, piece: PieceVerdict) -> None:
-    assert plan_id is not None  # only an adopted plan's pieces are checked behind the answer
-    record_verdict(context.store, obj.ident, plan_id, piece)
 
 
 def _incomplete(context: Context, obj: ArticulatedObject, request: PerceptionRequest, print_: str,
