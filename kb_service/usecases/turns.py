@@ -80,8 +80,11 @@ def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal
     dispatch gate starts from, through a restart."""
     store = context.store
     problem = store.add_problem(obj.ident, perceived.id, goal.id)
-    written = Written(Turn(DecisionKind.NO_PLAN, None, perceived.id, None, None, ""), problem.id, outcome.status,
-                      outcome.timings, outcome.ordering)
+
+    def written(turn: Turn, behind: EarlyAnswer | None = None,
+                adopted: tuple[StoredPlan, PlanView] | None = None) -> Written:
+        return Written(turn, problem.id, outcome.status, outcome.timings, outcome.ordering, behind, adopted)
+
     if outcome.solved and outcome.actions:
         plan = store.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states, checked)
         store.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
@@ -92,20 +95,19 @@ def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal
         reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions{ordering}{checked_by}"
         action = next_action(context.settings.merge_macro_steps, obj, plan, plan.actions[0])
         turn = Turn(DecisionKind.REPLAN, plan.id, perceived.id, action, decision.matched_expected_step, reason)
-        return _with(written, turn, early=early, adopted=(plan, view))
+        return written(turn, early, (plan, view))
     if outcome.solved:  # the perceived state already satisfies the goal
         store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
-        return _with(written, Turn(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message))
+        return written(Turn(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message))
     if outcome.help:  # a plan exists but the robot cannot carry it out on this table: ask the human
         store.set_execution(obj.ident, Execution(None, None, IDLE, None))
         reason = f"{decision.reason}; {outcome.message}; the robot asks the human for help"
-        return _with(written, Turn(DecisionKind.HUMAN_HELP_REQUESTED, None, perceived.id, None,
-                                   decision.matched_expected_step, reason, help=outcome.help))
+        return written(Turn(DecisionKind.HUMAN_HELP_REQUESTED, None, perceived.id, None,
+                            decision.matched_expected_step, reason, help=outcome.help))
     store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.NO_PLAN, None))
     reason = (f"{decision.reason}; planning {outcome.status}: {outcome.message}; "
               "a human must bring the object to a workable configuration")
-    return _with(written, Turn(DecisionKind.NO_PLAN, None, perceived.id, None, decision.matched_expected_step,
-                               reason))
+    return written(Turn(DecisionKind.NO_PLAN, None, perceived.id, None, decision.matched_expected_step, reason))
 
 
 def decision_data(written: Written, goal_state_id: str | None, remedy: Remedy | None,
@@ -140,12 +142,6 @@ def decision_data(written: Written, goal_state_id: str | None, remedy: Remedy | 
 
 def help_data(items: tuple[HelpItem, ...]) -> list[dict[str, Any]]:
     return [{"link": h.link, "to_deg": h.to_deg, "sentence": h.sentence} for h in items]
-
-
-def _with(written: Written, turn: Turn, early: EarlyAnswer | None = None,
-          adopted: tuple[StoredPlan, PlanView] | None = None) -> Written:
-    return Written(turn, written.problem_id, written.planning_status, written.timings, written.ordering, early,
-                   adopted)
 
 
 def _failure_words(memo: ObjectMemo) -> str | None:
