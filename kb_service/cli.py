@@ -11,6 +11,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
+from planhrc.errors import PlanhrcError
+
 if TYPE_CHECKING:
     from planhrc.settings import Settings
 
@@ -49,8 +51,10 @@ def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser
     return p
 
 
-class SettingsProblem(Exception):
-    """A setting the service cannot start with; the message names the option or variable."""
+class SettingsProblem(PlanhrcError):
+    """A setting the service cannot start with; the message names the option or variable. (Under the project's
+    root rather than the store's `KBError`, whose import loads the whole store: `planhrc serve --help` stays
+    quick.)"""
 
 
 def check_serve_settings(settings: Settings, given: set[str]) -> None:

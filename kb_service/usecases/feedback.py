@@ -51,9 +51,8 @@ def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
             current = execution.dispatched_action_id or "none"
             raise ConflictError(
                 f"action_id: {action_id} is not the current dispatched action of {object_id} (current: {current})")
-        accepted: Accepted
         if execution.status == ExecutionStatus.DISPATCHED:
-            accepted = "current"
+            accepted = Accepted.CURRENT
             plan, _ = context.views.get(store, execution.plan_id)
             split_plans = context.memory.of(store, object_id).split_plans
             last = (last_step(merges(context.settings.merge_macro_steps, split_plans, plan.id), obj, plan, action)
@@ -64,7 +63,7 @@ def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
                 f": the next perception checks s^e_{next_step}" if outcome == ActionOutcome.SUCCEEDED
                 else ": the next perception decides whether to retry, resume or re-plan")
         else:
-            accepted = "late"
+            accepted = Accepted.LATE
             new = replace(execution, dispatched_action_id=None)
             text = f"a_{action.step} {outcome}, reported after a perception had already moved the execution"
         result = FeedbackResult(action_id, accepted, new)

@@ -18,6 +18,7 @@ from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Remed
 from ..store import StoredEvent, StoredPlan
 from .log import EventKind, piece_record_of, verdict_of
 from .store import Store
+from .values import Accepted
 
 DECISIONS = frozenset(DecisionKind)
 
@@ -102,7 +103,7 @@ def _read(memo: ObjectMemo, event: StoredEvent) -> ObjectMemo:
 def next_failure(failure: FailureHistory | None, data: Mapping[str, Any]) -> FailureHistory | None:
     """The failure record after one feedback event: cleared by a success, counted for the same motion, started
     anew for another; a failure without a reason is not a motion's failure."""
-    if data.get("outcome") == ActionOutcome.SUCCEEDED or data.get("accepted") == "late":
+    if data.get("outcome") == ActionOutcome.SUCCEEDED or data.get("accepted") == Accepted.LATE:
         return None if data.get("outcome") == ActionOutcome.SUCCEEDED else failure
     reason, joint, turned = data.get("reason"), data.get("joint_index"), data.get("turned_link_index")
     if reason is None or joint is None or turned is None:

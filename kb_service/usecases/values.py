@@ -3,14 +3,21 @@ JSON records of the results an idempotency key remembers (the same JSON as the r
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any, Literal, Mapping
+from enum import StrEnum
+from typing import Any, Mapping
 
 from planhrc.ordering import HelpItem
 from planhrc.vocabulary import DecisionKind, ExecutionStatus
 
 from ..store import Execution
 
-Accepted = Literal["current", "late"]
+
+
+class Accepted(StrEnum):
+    """How a feedback was taken."""
+
+    CURRENT = "current"  # it moved the execution on
+    LATE = "late"  # a perception had already moved the execution: it is only recorded
 
 
 @dataclass(frozen=True)
@@ -175,6 +182,6 @@ def feedback_record(result: FeedbackResult) -> dict[str, Any]:
 
 def feedback_of(record: Mapping[str, Any]) -> FeedbackResult:
     e = record["execution"]
-    return FeedbackResult(record["action_id"], record["accepted"],
+    return FeedbackResult(record["action_id"], Accepted(record["accepted"]),
                           Execution(e["plan_id"], e["next_step"], ExecutionStatus(e["status"]),
                                     e["dispatched_action_id"]))
