@@ -21,11 +21,11 @@ from starlette.routing import Match, Route
 import planhrc
 from planhrc.translator.errors import TranslationError
 
+from . import usecases
 from .auth import AuthError, check_bearer
 from .events import stream_events
 from .store import ConflictError, DeadlineError, NotFoundError, ValidationError
 from .store.knowledge_base import MAX_EVENTS_PAGE
-from . import usecases
 from .schemas import (
     DecisionPublic,
     ErrorPublic,
