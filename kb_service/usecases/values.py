@@ -2,7 +2,7 @@
 JSON records of the results an idempotency key remembers (the same JSON as the response bodies)."""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, Mapping
 
@@ -155,9 +155,9 @@ class Health:
 def turn_record(turn: Turn) -> dict[str, Any]:
     action = turn.next_action
     return {"decision": turn.decision, "plan_id": turn.plan_id, "perceived_state_id": turn.perceived_state_id,
-            "next_action": {**asdict(action), "params": list(action.params)} if action is not None else None,
+            "next_action": {**vars(action), "params": list(action.params)} if action is not None else None,
             "matched_expected_step": turn.matched_expected_step, "reason": turn.reason,
-            "help": [asdict(h) for h in turn.help] if turn.help is not None else None,
+            "help": [dict(vars(h)) for h in turn.help] if turn.help is not None else None,
             "unseen_links": list(turn.unseen_links) if turn.unseen_links is not None else None}
 
 
