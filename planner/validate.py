@@ -213,8 +213,8 @@ def spawn_val(files: Sequence[str], cwd: str) -> subprocess.Popen[bytes]:
 
 
 def remove_files(files: Sequence[str], tmp: str | None) -> None:
-    """Remove a run's files and, when given, their folder (a few known files: `shutil.rmtree`'s careful walk took
-    0.3 ms of a re-plan's critical path)."""
+    """Remove a run's files and, when given, their folder (a few known files: `shutil.rmtree`'s careful walk is a
+    visible part of a short re-plan's critical path)."""
     for path in files:
         try:
             os.unlink(path)
@@ -238,8 +238,8 @@ def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: flo
 
 def scratch_dir() -> str | None:
     """Where VAL's three small files go: the temporary directory a caller chose (`tempfile.tempdir`), else
-    memory (`/dev/shm`) when there is one, else the system's default. On the development machines creating and
-    removing a directory on the disk costs 1-4 ms, in memory 0.02 ms: a tenth of a relative re-plan."""
+    memory (`/dev/shm`) when there is one, else the system's default: creating and removing a directory on a disk
+    can cost a good part of a short re-plan, in memory next to nothing."""
     if tempfile.tempdir is None and os.path.isdir(SHM) and os.access(SHM, os.W_OK | os.X_OK):
         return SHM
     return None
@@ -309,9 +309,9 @@ def keep_off_this_cpu(pid: int) -> Callable[[], None] | None:
 
     Why: a child started while this thread goes on working begins on this thread's CPU, and on the 2-core
     machines measured the scheduler left it there, sharing one core with its parent while the other idled, for
-    most of VAL's run: a 3.3 ms (CPU) VAL run beside a re-plan's write ended 7.9 ms after its start, against 4.8 ms
-    kept off the parent's CPU (median of 54 relative 20 x 12 re-plans each, in-process). The caller lets it go
-    (`ValRun` does, as soon as it waits for VAL), so a run never waits for one busy CPU while another is free."""
+    most of VAL's run: a VAL run beside a re-plan's write ended markedly later than one kept off the parent's
+    CPU (relative 20 x 12 re-plans, in-process). The caller lets it go (`ValRun` does, as soon as it waits for
+    VAL), so a run never waits for one busy CPU while another is free."""
     try:
         allowed = os.sched_getaffinity(0)
         cpu = _current_cpu()
