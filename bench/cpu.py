@@ -71,7 +71,9 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
         settle.wait()
         probe_s = _probe_cost(settle, server.pid)
         idle_s = _idle_rate(server.pid)
-        before, t0, probes, latencies, decisions = process_cpu_s(server.pid), time.monotonic(), 0, [], {}
+        latencies: list[float] = []
+        decisions: dict[str, int] = {}
+        before, t0, probes = process_cpu_s(server.pid), time.monotonic(), 0
         for _ in range(runs):
             seconds, answer = _replan(client, ident, random_angles(rng, links, orientations))
             decisions[answer["decision"]] = decisions.get(answer["decision"], 0) + 1
