@@ -77,7 +77,8 @@ class Guard:
     def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
         self._session.lock.release()
         if isinstance(exc, psycopg.OperationalError):
-            raise UnavailableError(f"db: the connection to the database was lost ({str(exc).strip()[:200]}); "
+            reason = " ".join(str(exc).split())[:200]  # libpq's messages may run over several lines
+            raise UnavailableError(f"db: the connection to the database was lost ({reason}); "
                                    "nothing of this request was written") from None
 
 
