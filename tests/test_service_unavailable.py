@@ -6,10 +6,8 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-import psycopg
 import pytest
 from fastapi.testclient import TestClient
-from psycopg import sql
 
 from planhrc.kb_service.app import create_app
 from planhrc.settings import make_settings
@@ -28,6 +26,9 @@ def service(pg_cluster) -> Iterator[tuple[TestClient, str]]:
 
 def cut(admin_url: str, database: str, allow: bool) -> None:
     """End the service's connections to `database`; `allow` False: and take no new ones until allowed again."""
+    import psycopg
+    from psycopg import sql
+
     with psycopg.connect(admin_url, autocommit=True) as admin:
         admin.execute(sql.SQL("ALTER DATABASE {} ALLOW_CONNECTIONS {}").format(
             sql.Identifier(database), sql.Literal(allow)))

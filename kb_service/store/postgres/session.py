@@ -4,9 +4,9 @@ and which individuals are stored.
 The connection runs in autocommit mode, so a read outside a transaction holds no snapshot open; a write, or a
 `transaction()` block, is one `BEGIN ... COMMIT`, and nested blocks join the outermost one; each commit that wrote is
 counted in the database (`revision`). What reacts to a commit or a rollback (the record caches) registers as a
-`TransactionListener`. Every method here is called with `lock`
-held; the store takes it (`guard`), which also reconnects a connection the server dropped (between transactions
-only: a transaction cut off is rolled back, never replayed) and turns a lost connection into `UnavailableError`.
+`TransactionListener`. Every method here is called with `lock` held; the store takes it (`guard`), which also
+reconnects a connection the server dropped (between transactions only: a transaction cut off is rolled back, never
+replayed) and turns a lost connection into `UnavailableError`.
 """
 from __future__ import annotations
 

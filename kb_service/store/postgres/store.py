@@ -29,8 +29,8 @@ from planhrc.vocabulary import ExecutionStatus
 from ..checks import check_events_page, check_export, check_keep_perceived
 from ..errors import DamagedStoreError, KBError
 from ..events import EventLog
-from ..inferred import InferredFacts
 from ..facade import StoreFacade
+from ..inferred import InferredFacts
 from ..location import shown_location
 from ..names import TBOX_IRI, counter_name
 from ..owl import QuadStore, ntriple_lines
