@@ -25,8 +25,7 @@ from planhrc.translator.errors import TranslationError
 from . import usecases
 from .auth import AuthError, check_bearer
 from .events import stream_events
-from .store import ConflictError, DeadlineError, NotFoundError, UnavailableError, ValidationError
-from .store import MAX_EVENTS_PAGE
+from .store import MAX_EVENTS_PAGE, ConflictError, DeadlineError, NotFoundError, UnavailableError, ValidationError
 from .schemas import (
     DecisionPublic,
     ErrorPublic,
