@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .errors import PlannerError
+from .normalise import for_external
 from .plan_file import read_best_plan
 from .process import run_limited
 from .result import PlanResult, PlanStatus
@@ -49,6 +50,7 @@ class ExternalPlanner:
 
     def solve(self, domain: str, problem: str, timeout_s: float) -> PlanResult:
         start = time.perf_counter()
+        domain, problem = for_external(domain, problem)  # the text as VAL reads it (planner.normalise)
         with tempfile.TemporaryDirectory(prefix=f"planhrc-{self.name}-") as tmp:
             directory = Path(tmp)
             (directory / "domain.pddl").write_text(domain)

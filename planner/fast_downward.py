@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from .errors import PlannerError
+from .normalise import for_external
 from .plan_file import read_best_plan
 from .process import installed_file, run_limited
 from .result import PlanResult, PlanStatus
@@ -79,6 +80,7 @@ class FastDownwardPlanner:
 
     def solve(self, domain: str, problem: str, timeout_s: float) -> PlanResult:
         start = time.perf_counter()
+        domain, problem = for_external(domain, problem)  # its translator rejects `?j -joint`, reads duplicates
         args = self.search_args(domain)
         alias = args[:2] if args and args[0] == "--alias" else ()
         rest = args[2:] if alias else args
