@@ -54,13 +54,13 @@ def _recognised(lifted: LiftedTask, prob: Problem) -> CyclicTask:
 # bounded, shared by every InprocPlanner the registry builds, so the fallback chain re-plans without
 # re-parsing the domain or grounding again.
 @lru_cache(maxsize=16)
-def _parsed_domain(text: str) -> Domain:
+def parsed_domain(text: str) -> Domain:
     return parse_domain(text)
 
 
 @lru_cache(maxsize=16)
 def _analysed(text: str, goal_predicates: frozenset[str]) -> LiftedTask:
-    return analyse(_parsed_domain(text), goal_predicates)
+    return analyse(parsed_domain(text), goal_predicates)
 
 
 @lru_cache(maxsize=16)
