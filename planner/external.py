@@ -9,8 +9,10 @@ output contains one of `unsolvable_markers`.
 """
 from __future__ import annotations
 
+import importlib.util
 import logging
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -25,6 +27,11 @@ from .result import PlanResult, PlanStatus
 log = logging.getLogger(__name__)
 
 PROBE_TEMPLATE = ("{binary}", "-d", "{domain}", "-i", "{problem}", "-o", "{plan}")
+# LAPKT's BFWS (the `lapkt` wheel, the ``bench`` extra; its Tarski grounder needs `clingo`): what its lapkt_cmd.py
+# script does, run by this interpreter so that no script path is needed.
+BFWS_CODE = ("from lapkt.parseargs import process_arguments; from lapkt.load_planner import Planner; "
+             "Planner(process_arguments()).solve()")
+BFWS_TEMPLATE = ("{binary}", "-c", BFWS_CODE, "BFWS", "-d", "{domain}", "-p", "{problem}", "--plan_file", "{plan}")
 MADAGASCAR_TEMPLATE = ("{binary}", "{domain}", "{problem}", "-o", "{plan}")
 DEFAULT_UNSOLVABLE_MARKERS = ("unsolvable", "no plan exists", "problem has no solution", "goal not reachable")
 
@@ -77,3 +84,11 @@ def make_probe(binary: str | Path, name: str = "probe") -> ExternalPlanner:
 def make_madagascar(binary: str | Path, name: str = "madagascar") -> ExternalPlanner:
     """`binary` may be M, Mp or MpC; all take the same arguments."""
     return ExternalPlanner(name, binary, MADAGASCAR_TEMPLATE)
+
+
+def make_bfws(name: str = "bfws") -> ExternalPlanner:
+    """LAPKT's BFWS (by Probe's author) in this interpreter; PlannerError when `lapkt` or `clingo` is missing."""
+    for package in ("lapkt", "clingo"):
+        if importlib.util.find_spec(package) is None:
+            raise PlannerError(f"{name}: the {package} package is not installed (pip install planhrc[bench])")
+    return ExternalPlanner(name, sys.executable, BFWS_TEMPLATE)
