@@ -31,6 +31,8 @@ PROBE_TEMPLATE = ("{binary}", "-d", "{domain}", "-i", "{problem}", "-o", "{plan}
 # script does, run by this interpreter so that no script path is needed.
 BFWS_CODE = ("from lapkt.parseargs import process_arguments; from lapkt.load_planner import Planner; "
              "Planner(process_arguments()).solve()")
+# Its last, complete search (BFWS with novelty, landmarks and h_ff) ends so when the task has no plan.
+BFWS_UNSOLVABLE = ("plan found with cost: notfound",)
 BFWS_TEMPLATE = ("{binary}", "-c", BFWS_CODE, "BFWS", "-d", "{domain}", "-p", "{problem}", "--plan_file", "{plan}")
 MADAGASCAR_TEMPLATE = ("{binary}", "{domain}", "{problem}", "-o", "{plan}")
 DEFAULT_UNSOLVABLE_MARKERS = ("unsolvable", "no plan exists", "problem has no solution", "goal not reachable")
@@ -67,10 +69,11 @@ class ExternalPlanner:
         elapsed = time.perf_counter() - start
         if outcome.timed_out:
             return PlanResult(PlanStatus.TIMEOUT, (), elapsed, self.name, f"killed after {timeout_s} s")
-        if plan is not None:
-            return PlanResult(PlanStatus.SOLVED, plan, elapsed, self.name, f"exit code {outcome.returncode}")
         text = (outcome.stdout + "\n" + outcome.stderr).lower()
-        if any(m in text for m in self.unsolvable_markers):
+        says_unsolvable = any(m in text for m in self.unsolvable_markers)
+        if plan is not None and (plan or not says_unsolvable):  # BFWS writes an empty plan file when it finds none
+            return PlanResult(PlanStatus.SOLVED, plan, elapsed, self.name, f"exit code {outcome.returncode}")
+        if says_unsolvable:
             return PlanResult(PlanStatus.UNSOLVABLE, (), elapsed, self.name, "planner reports no plan")
         tail = " | ".join((outcome.stderr or outcome.stdout).strip().splitlines()[-5:])
         return PlanResult(PlanStatus.ERROR, (), elapsed, self.name,
@@ -91,4 +94,4 @@ def make_bfws(name: str = "bfws") -> ExternalPlanner:
     for package in ("lapkt", "clingo"):
         if importlib.util.find_spec(package) is None:
             raise PlannerError(f"{name}: the {package} package is not installed (pip install planhrc[bench])")
-    return ExternalPlanner(name, sys.executable, BFWS_TEMPLATE)
+    return ExternalPlanner(name, sys.executable, BFWS_TEMPLATE, BFWS_UNSOLVABLE)
