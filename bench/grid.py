@@ -21,6 +21,9 @@ states stored), Fast Downward's whole process (bounded by `--fd-timeout` and `--
 reported as such and not repeated) and a re-planning `POST /objects/{id}/perceptions` to a real
 `planhrc serve` process; medians and p90.
 
+`--bimanual` runs only the bimanual grid (`planhrc.bench.bimanual`): the chain beside packaged planners on random
+tasks with two hands, a centre, grasp and release.
+
 `--scale` measures how grounding, planning, VAL and the in-process loop grow with links (20..200) and
 orientations (12..72); a table and a plot go to `--out`.
 
@@ -45,6 +48,7 @@ from typing import Any, Iterable, Sequence
 from planhrc.cli_args import SubParsers, int_list, name_list, positive_float, positive_int, writable_dir
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
+from planhrc.bench.bimanual import add_bimanual_arguments, run_bimanual
 from planhrc.bench.errors import BenchError
 from planhrc.bench.plots import plot_times
 from planhrc.planner.errors import PlannerError
@@ -566,6 +570,7 @@ def add_bench_parser(subparsers: SubParsers) -> None:
     p.add_argument("--scale-runs", type=positive_int, default=5, help="re-plans per cell")
     p.add_argument("--val-timeout", type=positive_float, default=20.0, metavar="S",
                    help="VAL's limit per plan in --scale")
+    add_bimanual_arguments(p)
     p.add_argument("--out", type=writable_dir, default="bench-results", help="output folder")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_bench)
@@ -600,6 +605,8 @@ def run_bench(args: argparse.Namespace) -> int:
 def _run_bench(args: argparse.Namespace) -> int:
     out_dir = Path(args.out)
     formulations, planners = args.formulations, args.planners
+    if args.bimanual:
+        return run_bimanual(args)
     if args.scale:
         report = scale_report(formulations, args.scale_links, args.scale_orientations, args.scale_runs,
                               args.val_timeout)
