@@ -172,10 +172,10 @@ def markdown(report: dict[str, Any]) -> str:
                   f"{report['command_cell'][0]} links x {report['command_cell'][1]}:", "",
                   "| variant | runs | solved | shortest | median s | max s |", "|---|---|---|---|---|---|"]
         for variant in sorted({c["variant"] for c in report["command"]}):
-            sel = [c for c in report["command"] if c["variant"] == variant]
-            times = [c["seconds"] for c in sel]
-            lines.append(f"| {variant} | {len(sel)} | {sum(c['status'] == 'solved' for c in sel)} | "
-                         f"{sum(c['plan_length'] == c['optimal_length'] for c in sel)} | "
+            runs = [c for c in report["command"] if c["variant"] == variant]
+            times = [c["seconds"] for c in runs]
+            lines.append(f"| {variant} | {len(runs)} | {sum(c['status'] == 'solved' for c in runs)} | "
+                         f"{sum(c['plan_length'] == c['optimal_length'] for c in runs)} | "
                          f"{_num(statistics.median(times))} | {_num(max(times))} |")
     return "\n".join(lines)
 
