@@ -38,3 +38,16 @@ def test_a_slice_of_the_grid_with_the_whole_command(tmp_path):
 def test_bench_refuses_an_unknown_bimanual_planner(tmp_path, capsys):
     code = main(["bench", "--bimanual", "--bimanual-planners", "chain,nosuch", "--out", str(tmp_path)])
     assert code == 2 and "nosuch" in capsys.readouterr().err
+
+
+def test_field_styles_are_val_valid_in_process(tmp_path, capsys):
+    """Files in the paper's benchmark styles (relative, absolute with upstream facts, oriented with actions
+    declared twice and `?j -joint`): every one planned in-process and accepted by VAL."""
+    from planhrc.bench.field import main as field_main
+
+    assert field_main(["--links", "4,6", "--orientations", "4,6", "--instances", "1", "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "field.json").read_text())
+    assert [(s["style"], s["files"], s["val_valid_in_process"]) for s in report["summary"]] == [
+        ("relative", 4, 4), ("absolute", 4, 4), ("oriented", 4, 4)]
+    assert all(r["warnings"] == 2 for r in report["rows"] if r["style"] == "oriented")
+    assert "| oriented | 4 | 4 |" in capsys.readouterr().out
