@@ -36,8 +36,11 @@ FINAL_STATUSES = frozenset({PlanStatus.SOLVED, PlanStatus.UNSOLVABLE})
 
 
 def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeout_s: float, *,
-                       validate: bool = True) -> PlanResult:
+                       validate: bool = True, validation_domain: str | None = None) -> PlanResult:
     """Run `planners` in order on the PDDL texts within `timeout_s` seconds in total, VAL included.
+
+    VAL judges the plans against `validation_domain` when given (a caller whose planners read a stricter copy of
+    the domain it answers for, as the pipeline's paper-exact domain), else against `domain`.
 
     Raises PlannerError before running anything when the list is empty, a name is unknown or the time limit
     is not positive; every other outcome is a status of the returned result.
@@ -63,7 +66,7 @@ def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeo
         backend = get_planner(name)  # built when reached: a chain the first planner ends builds no other
         result = backend.solve(domain, problem, remaining)
         if validate and result.status is PlanStatus.SOLVED:
-            result = judged(result, domain, problem, timeout_s - (time.perf_counter() - start))
+            result = judged(result, validation_domain or domain, problem, timeout_s - (time.perf_counter() - start))
         attempts.append(PlannerAttempt(backend.name, result.status, result.message, result.seconds))
         last = result
         if result.status in FINAL_STATUSES:

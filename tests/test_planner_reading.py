@@ -152,3 +152,14 @@ def test_cli_labels_validation_and_warnings(capsys):
     assert "; unvalidated" in text and text.startswith("; warning: action increase_angle is declared again")
     assert cli_main(args) == 0
     assert "; VAL accepted the plan" in capsys.readouterr().out
+
+
+def test_val_judges_against_the_domain_the_caller_answers_for():
+    """The planners read the oriented domain; VAL judges against the one-action-per-name copy the caller gives,
+    where the plans of the first declarations are valid too; against a domain where they are not, they fail."""
+    copy = for_external(ORIENTED, ORIENTED_PROBLEM)[0]
+    result = plan_with_fallback(ORIENTED, ORIENTED_PROBLEM, ["inproc"], 60.0, validation_domain=copy)
+    assert result.solved and result.validated
+    later_only = copy.replace("(:action increase_angle", "(:action increase_angle_first", 1)
+    refused = plan_with_fallback(ORIENTED, ORIENTED_PROBLEM, ["inproc"], 60.0, validation_domain=later_only)
+    assert not refused.solved and refused.attempts[0].status is PlanStatus.INVALID
