@@ -141,7 +141,8 @@ def stations(graph: ControlGraph, chain: Sequence[int], same: tuple[bool, ...], 
                     table[i][step] = axis
             for i, steps in table.items():
                 seen.setdefault(i, set()).add(frozenset(steps))
-            offers.append(table)
+            # in a fixed order: the turns here came in the grounding's order, which follows hashing
+            offers.append({i: dict(sorted(table[i].items())) for i in sorted(table)})
         nested = all(a <= b or b <= a for sets in seen.values() for a in sets for b in sets)
         to_offer = {i: _distances_to(graph, [s for s, table in enumerate(offers) if i in table]) for i in seen}
         between = {j: {i: min(to_offer[i][s] for s, table in enumerate(offers) if j in table) for i in seen}
