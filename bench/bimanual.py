@@ -32,7 +32,7 @@ from typing import Any, Sequence
 
 from planhrc.bench.bimanual_tasks import (VARIANTS, BimanualInstance, domain_text, make_instances, optimal_length,
                                           problem_text)
-from planhrc.planner.chain import DEFAULT_CHAIN, plan_with_fallback
+from planhrc.planner.chain import DEFAULT_CHAIN, plan_with_fallback, val_crashed
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.inproc import forget
 from planhrc.planner.registry import PLANNERS as REGISTRY, get_planner
@@ -61,8 +61,9 @@ class BimanualRow:
     optimal_length: int
     claimed_optimal: bool | None
     decided_by: str
-    valid: bool | None
+    valid: bool | None  # None: not checked, or VAL ended without a verdict (val_reason says which)
     validate_seconds: float | None
+    val_reason: str
     message: str
 
 
@@ -73,8 +74,19 @@ def plan_once(planner: str, domain: str, problem: str, timeout_s: float) -> Plan
     return get_planner(planner).solve(domain, problem, timeout_s)
 
 
+def val_expansion(inst: BimanualInstance) -> int:
+    """How many instances of a turn's conditional effect VAL expands: a joint and four angles for the macros,
+    a joint and two for the single steps. VAL held about 3.7 GB for one macro plan of 4 links x 24 (3 x 24^4
+    instances); the kernel killed it at 23-24 GB on 7 and 8 links."""
+    return inst.joints * inst.orientations ** (4 if inst.variant == "macros" else 2)
+
+
+VAL_LIMIT = 1_500_000  # expansions VAL is given: about 5 GB on the macros, so a shared machine keeps its memory
+
+
 def run_grid(planners: Sequence[str], instances: Sequence[BimanualInstance], timeout_s: float,
-             validate: bool = True, val_timeout_s: float = 300.0, progress: bool = True) -> list[BimanualRow]:
+             validate: bool = True, val_timeout_s: float = 300.0, progress: bool = True,
+             val_limit: int = VAL_LIMIT) -> list[BimanualRow]:
     from tqdm import tqdm
 
     jobs = [(p, inst) for inst in instances for p in planners]
@@ -85,15 +97,21 @@ def run_grid(planners: Sequence[str], instances: Sequence[BimanualInstance], tim
         domain, problem = domain_text(inst.variant), problem_text(inst)
         result = plan_once(planner, domain, problem, timeout_s)
         valid = vsec = None
-        if validate and result.solved:
+        reason = ""
+        if validate and result.solved and val_expansion(inst) > val_limit:
+            reason = f"not run: VAL would expand {val_expansion(inst)} effect instances (limit {val_limit})"
+        elif validate and result.solved:
             try:
                 check = validate_plan(domain, problem, result.plan, timeout_s=val_timeout_s)
-                valid, vsec = check.valid, check.seconds
+                vsec, reason = check.seconds, check.reason
+                valid = None if val_crashed(check.reason) else check.valid
             except PlannerError as exc:  # VAL's own time limit: no verdict
-                log.warning("VAL gave no verdict on %s's plan of %s: %s", planner, inst.name, exc)
+                reason = str(exc)
+        if reason and valid is None:
+            log.warning("VAL gave no verdict on %s's plan of %s: %s", planner, inst.name, reason)
         rows.append(BimanualRow(inst.variant, planner, inst.name, inst.links, inst.orientations, result.status,
                                 result.seconds, len(result.plan) if result.solved else None, optimal_length(inst),
-                                result.optimal, result.planner, valid, vsec, result.message[:200]))
+                                result.optimal, result.planner, valid, vsec, reason[:200], result.message[:200]))
     return rows
 
 
@@ -128,6 +146,7 @@ def summarise(rows: Sequence[BimanualRow]) -> list[dict[str, Any]]:
             out.append({
                 "variant": variant, "planner": planner, "instances": len(sel), "solved": len(good),
                 "val_valid": sum(1 for r in good if r.valid), "invalid": sum(1 for r in sel if r.valid is False),
+                "no_verdict": sum(1 for r in good if r.valid is None),
                 "timeouts": sum(1 for r in sel if r.status is PlanStatus.TIMEOUT),
                 "median_s": statistics.median(times) if times else None,
                 "p95_s": percentile(times, 0.95) if times else None,
@@ -148,14 +167,17 @@ def markdown(report: dict[str, Any]) -> str:
     machine = report["machine"]
     lines = [f"machine: {machine['cpu']}, {machine['cores']} cores; per planner call {report['timeout_s']} s; "
              f"links {report['links']}, orientations {report['orientations']}, {report['per_cell']} random "
-             "instances per cell and variant", "",
-             "| variant | planner | solved, VAL-valid | timeouts | median s | p95 s | max s | shortest | "
-             "claimed optimal | mean length / optimum | VAL median s |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "instances per cell and variant; VAL where it expands at most "
+             f"{report.get('val_limit', 'any number of')} effect instances", "",
+             "| variant | planner | solved, VAL-valid | VAL: invalid, no verdict | timeouts | median s | p95 s | "
+             "max s | shortest | claimed optimal | mean length / optimum | VAL median s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in report["summary"]:
-        lines.append(f"| {s['variant']} | {s['planner']} | {s['val_valid']}/{s['instances']} | {s['timeouts']} | "
+        lines.append(f"| {s['variant']} | {s['planner']} | {s['val_valid']}/{s['instances']} | "
+                     f"{s['invalid']}, {s.get('no_verdict', 0)} | {s['timeouts']} | "
                      f"{_num(s['median_s'], 4)} | {_num(s['p95_s'], 4)} | {_num(s['max_s'], 4)} | {s['shortest']} | "
                      f"{s['claimed_optimal']} | {_num(s['mean_length_ratio'])} | {_num(s['val_median_s'])} |")
-    rows = [BimanualRow(**{**r, "status": PlanStatus(r["status"])}) for r in report["rows"]]
+    rows = [BimanualRow(**{"val_reason": "", **r, "status": PlanStatus(r["status"])}) for r in report["rows"]]
     planners = list(dict.fromkeys(r.planner for r in rows))
     lines += ["", "Per cell: solved (VAL-valid) / instances, median planning s", "",
               "| variant | links x K | " + " | ".join(planners) + " |", "|---|---|" + "---|" * len(planners)]
@@ -182,15 +204,15 @@ def markdown(report: dict[str, Any]) -> str:
 
 def bimanual_report(planners: Sequence[str], links: Sequence[int], orientations: Sequence[int], per_cell: int,
                     timeout_s: float, validate: bool, val_timeout_s: float, command_cell: tuple[int, int],
-                    progress: bool, variants: Sequence[str] = VARIANTS) -> dict[str, Any]:
+                    progress: bool, variants: Sequence[str] = VARIANTS, val_limit: int = VAL_LIMIT) -> dict[str, Any]:
     from planhrc.bench.grid import machine_info
 
     instances = [inst for v in variants for inst in make_instances(links, orientations, per_cell, v)]
-    rows = run_grid(planners, instances, timeout_s, validate, val_timeout_s, progress)
+    rows = run_grid(planners, instances, timeout_s, validate, val_timeout_s, progress, val_limit)
     command = measure_command([i for i in instances if (i.links, i.orientations) == command_cell], timeout_s)
     return {"machine": machine_info(), "timeout_s": timeout_s, "links": list(links),
             "orientations": list(orientations), "per_cell": per_cell, "planners": list(planners),
-            "command_cell": list(command_cell), "summary": summarise(rows),
+            "command_cell": list(command_cell), "val_limit": val_limit, "summary": summarise(rows),
             "rows": [{**asdict(r), "status": r.status.value} for r in rows], "command": command}
 
 
@@ -219,6 +241,8 @@ def add_bimanual_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bimanual-variants", type=name_list(list(VARIANTS)), default=",".join(VARIANTS))
     parser.add_argument("--bimanual-val-timeout", type=positive_float, default=300.0, metavar="S",
                         help="VAL's limit per plan (the macros' conditional effects make VAL slow at K = 24)")
+    parser.add_argument("--bimanual-val-limit", type=positive_int, default=VAL_LIMIT, metavar="N",
+                        help="run VAL only where it expands at most N conditional-effect instances (its memory)")
 
 
 def run_bimanual(args: argparse.Namespace) -> int:
@@ -231,7 +255,7 @@ def run_bimanual(args: argparse.Namespace) -> int:
         return 2
     report = bimanual_report(args.bimanual_planners, args.bimanual_links, args.bimanual_orientations,
                              args.bimanual_instances, args.timeout, not args.no_validate, args.bimanual_val_timeout,
-                             (4, 24), not args.no_progress, args.bimanual_variants)
+                             (4, 24), not args.no_progress, args.bimanual_variants, args.bimanual_val_limit)
     paths = write_report(report, Path(args.out))
     print(markdown(report))
     print("wrote " + ", ".join(str(p) for p in paths))

@@ -19,6 +19,7 @@ domain's reading notes (an action declared twice: `planner.pddl`) come back as `
 from __future__ import annotations
 
 import logging
+import signal
 import time
 from dataclasses import replace
 from typing import Sequence
@@ -99,9 +100,22 @@ def judged(result: PlanResult, domain: str, problem: str, remaining_s: float) ->
     seconds = result.seconds + check.seconds
     if check.valid:
         return replace(result, seconds=seconds, validated=True)
+    if val_crashed(check.reason):  # no verdict either way: not solved, and not said to be invalid
+        log.warning("VAL ended without a verdict on the plan of %s: %s", result.planner, check.reason)
+        return replace(result, status=PlanStatus.ERROR, plan=(), optimal=None, seconds=seconds,
+                       message=f"VAL ended without a verdict on its plan of {len(result.plan)} step(s) "
+                               f"({check.reason}: killed, e.g. when memory ran out)")
     log.warning("VAL rejected the plan of %s: %s", result.planner, check.reason)
     return replace(result, status=PlanStatus.INVALID, plan=(), optimal=None, seconds=seconds,
                    message=f"VAL rejected its plan of {len(result.plan)} step(s): {check.reason}")
+
+
+def val_crashed(reason: str) -> bool:
+    """Whether VAL's "reason" is only that SIGKILL ended it (`planner.validate` says "VAL exit code -9" when VAL
+    printed no reason): killed from outside, as by the kernel when memory runs out, so no verdict. (VAL's
+    expansion of a conditional effect over four angles needs gigabytes at K = 24.) Other signals count as a
+    refusal: this VAL build, for one, ends a "Bad plan description!" with a segmentation fault."""
+    return reason.strip() == f"VAL exit code -{signal.SIGKILL.value}"
 
 
 def reading_warnings(domain: str) -> tuple[str, ...]:

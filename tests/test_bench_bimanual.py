@@ -51,3 +51,12 @@ def test_field_styles_are_val_valid_in_process(tmp_path, capsys):
         ("relative", 4, 4), ("absolute", 4, 4), ("oriented", 4, 4)]
     assert all(r["warnings"] == 2 for r in report["rows"] if r["style"] == "oriented")
     assert "| oriented | 4 | 4 |" in capsys.readouterr().out
+
+
+def test_val_is_not_run_where_its_expansion_would_exceed_the_limit():
+    from planhrc.bench.bimanual import run_grid, val_expansion
+
+    inst = make_instances([4], [24], 1, "macros")[0]
+    assert val_expansion(inst) == 3 * 24 ** 4
+    (row,) = run_grid([CHAIN], [inst], 30.0, validate=True, progress=False, val_limit=val_expansion(inst) - 1)
+    assert row.status == "solved" and row.valid is None and row.val_reason.startswith("not run")

@@ -163,3 +163,11 @@ def test_val_judges_against_the_domain_the_caller_answers_for():
     later_only = copy.replace("(:action increase_angle", "(:action increase_angle_first", 1)
     refused = plan_with_fallback(ORIENTED, ORIENTED_PROBLEM, ["inproc"], 60.0, validation_domain=later_only)
     assert not refused.solved and refused.attempts[0].status is PlanStatus.INVALID
+
+
+def test_only_a_kill_is_no_verdict():
+    from planhrc.planner.chain import val_crashed
+
+    assert val_crashed("VAL exit code -9")
+    assert not val_crashed("VAL exit code -11")  # how this VAL build ends a bad plan description
+    assert not val_crashed("Goal not satisfied")
