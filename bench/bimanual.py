@@ -179,15 +179,18 @@ def markdown(report: dict[str, Any]) -> str:
                      f"{s['claimed_optimal']} | {_num(s['mean_length_ratio'])} | {_num(s['val_median_s'])} |")
     rows = [BimanualRow(**{"val_reason": "", **r, "status": PlanStatus(r["status"])}) for r in report["rows"]]
     planners = list(dict.fromkeys(r.planner for r in rows))
-    lines += ["", "Per cell: solved (VAL-valid) / instances, median planning s", "",
+    lines += ["", "Per cell: solved and not refused by VAL / instances (* some plans VAL did not check), median "
+              "planning s", "",
               "| variant | links x K | " + " | ".join(planners) + " |", "|---|---|" + "---|" * len(planners)]
     for variant in sorted({r.variant for r in rows}):
         for links, k in sorted({(r.links, r.orientations) for r in rows if r.variant == variant}):
             cells = []
             for planner in planners:
                 sel = [r for r in rows if (r.variant, r.planner, r.links, r.orientations) == (variant, planner, links, k)]
-                good = [r.seconds for r in sel if r.status is PlanStatus.SOLVED and r.valid is not False]
-                cells.append(f"{len(good)}/{len(sel)}, {_num(statistics.median(good), 3) if good else '-'}")
+                good = [r for r in sel if r.status is PlanStatus.SOLVED and r.valid is not False]
+                times = [r.seconds for r in good]
+                unchecked = "*" if any(r.valid is None for r in good) else ""
+                cells.append(f"{len(good)}/{len(sel)}{unchecked}, {_num(statistics.median(times), 3) if times else '-'}")
             lines.append(f"| {variant} | {links} x {k} | " + " | ".join(cells) + " |")
     if report.get("command"):
         lines += ["", f"Whole command, `planhrc plan DOMAIN PROBLEM --json --no-validate` as a process, "
