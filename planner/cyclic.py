@@ -32,6 +32,7 @@ from planhrc.model import Atom, natural_key
 
 from .deadline import check as check_deadline
 from .pddl import format_sexpr
+from .product import solve_with_control
 from .recognise import Axis, CyclicTask
 from .result import PlanResult, PlanStatus
 
@@ -259,8 +260,10 @@ class GroundTask:
         missing = [self.names[v] for v in self.order if v not in current]
         if missing:
             return PlanStatus.ERROR, (), f"init: variable(s) without a value: {', '.join(missing)}", None
+        control = self.task.control_predicates
+        control_goal = frozenset(a for a in goal if a[0] in control)
         wanted: dict[int, int] = {}
-        for atom in sorted(goal):
+        for atom in sorted(goal - control_goal):
             if atom[0] in statics:
                 if atom not in self.static_atoms:
                     return PlanStatus.UNSOLVABLE, (), f"goal: static fact {format_sexpr(atom)} is false", None
@@ -275,9 +278,13 @@ class GroundTask:
                 return PlanStatus.UNSOLVABLE, (), f"goal: {self.names[var]} must take two values", None
             wanted[var] = index[value]
         chain = [v for v in self.order if v in wanted]
+        same = tuple(self.component[a] == self.component[b] for a, b in zip(chain, chain[1:]))
+        if control:  # grippers, a working position...: a cyclic part times a small control (planner.product)
+            return solve_with_control(self.axes, self.k, self.cycle, TRANSFORMS, self._preference, self._control_memo,
+                                      chain, same, current, wanted, frozenset(a for a in init if a[0] in control),
+                                      control_goal, len(self.task.variables))
         if all(current[v] == wanted[v] for v in chain):
             return PlanStatus.SOLVED, (), "goal already holds", True
-        same = tuple(self.component[a] == self.component[b] for a, b in zip(chain, chain[1:]))
         attempts = []
         for view in self._views(tuple(chain), same):
             transform = view.transform
@@ -354,6 +361,10 @@ class GroundTask:
                 for i in cover for sign in (1, -1)
                 for axes in [[axis for s, axis in cover[i] if s == sign]] if axes}
         return _View(name, transform, images, cover, best)
+
+    @_Shared
+    def _control_memo(self) -> dict[object, object]:
+        return {}
 
     @_Shared
     def _view_memo(self) -> dict[tuple[tuple[int, ...], tuple[bool, ...]], tuple[_View, ...]]:
