@@ -268,3 +268,20 @@ def test_plans_written_out_when_read_give_the_inferences_of_plans_written_at_onc
         finally:
             world.close()
     assert inferred[0] and inferred[0] == inferred[1]
+
+
+@pytest.mark.reasoner
+def test_the_reasoning_service_infers_the_same_from_plans_written_out_when_read(place, tmp_path, monkeypatch):
+    """The knowledge service's DL check (`knowledge.reasoning.reason`, on the store's export) finds the same
+    inferences, consistent, in a store whose plans stayed journal rows as in one whose plans were written at once,
+    on each backend."""
+    from planhrc.kb_service.knowledge.reasoning import ReasoningRequest, reason
+
+    monkeypatch.setattr(time, "time", lambda: 1_700_000_000.0)
+    other = place.another(tmp_path / "eager")
+    with place.open() as lazy, other.open() as eager:
+        _history_of_plans(lazy, write_out=False)
+        _history_of_plans(eager, write_out=True)
+        results = [reason(kb, ReasoningRequest("pellet", "obj1"), 120.0) for kb in (lazy, eager)]
+    assert all(result.consistent for result in results)
+    assert results[0].inferred and set(results[0].inferred) == set(results[1].inferred)
