@@ -189,18 +189,28 @@ def anchor_planner() -> str | None:
     return next((name for name in ANCHORS if name in usable), None)
 
 
-def cpu_report(formulations: tuple[str, ...] | list[str], runs: int, anchor_runs: int = 5,
-               anchor_timeout_s: float = 10.0) -> dict[str, Any]:
-    """The CPU column of the re-planning table: per formulation, the service's whole CPU per re-plan and the
-    anchor's whole process in the same run, and their ratio."""
+def cpu_row(formulation: str, runs: int, anchor_runs: int = 5, anchor_timeout_s: float = 10.0) -> dict[str, Any]:
+    """The CPU column of the re-planning table for one formulation: the service's whole CPU per re-plan, the
+    anchor's whole process measured right after it in the same run, and their ratio."""
+    row: dict[str, Any] = {"service": measure_service_cpu(formulation, runs=runs)}
     anchor = anchor_planner()
-    out: dict[str, Any] = {"anchor": anchor, "formulations": {}}
-    for f in formulations:
-        row: dict[str, Any] = {"service": measure_service_cpu(f, runs=runs)}
-        if anchor is not None:
-            row["anchor"] = measure_process_cpu(anchor, f, runs=anchor_runs, timeout_s=anchor_timeout_s)
-            base = row["anchor"].get("cpu_median_ms")
-            if base and row["anchor"]["status"] == "solved":
-                row["ratio"] = round(row["service"]["per_replan_ms"] / base, 3)
-        out["formulations"][f] = row
-    return out
+    if anchor is not None:
+        row["anchor"] = measure_process_cpu(anchor, formulation, runs=anchor_runs, timeout_s=anchor_timeout_s)
+        base = row["anchor"].get("cpu_median_ms")
+        if base and row["anchor"]["status"] == "solved":
+            row["ratio"] = round(row["service"]["per_replan_ms"] / base, 3)
+    return row
+
+
+def cpu_text(row: dict[str, Any] | None) -> str:
+    """The table's cells: the service's CPU per re-plan (VAL's processes in it), and the anchor's whole process."""
+    if row is None:
+        return "- | - |"
+    service = row["service"]
+    text = f"{service['per_replan_ms']} (VAL {service['val_children_ms']}) | "
+    anchor = row.get("anchor")
+    if anchor is None:
+        return text + "- |"
+    if anchor["status"] != "solved":
+        return text + f"{anchor['planner']}: {anchor['note']} |"
+    return text + f"{anchor['planner']} {anchor['cpu_median_ms']}, ratio {row.get('ratio', '-')} |"
