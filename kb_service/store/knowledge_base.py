@@ -177,7 +177,7 @@ class SqliteStore(StoreFacade):
             abox = self._abox
             objects = self._records.object_ids()
             shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
-            roots = {oid: current_roots(abox.q.db, oid) for oid in objects}
+            roots = {oid: current_roots(abox.q.db, SQLITE, oid) for oid in objects}
             # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
             self._backlog.settle(name for names in roots.values() for name in names)
 
@@ -229,7 +229,7 @@ class SqliteStore(StoreFacade):
 
     def _current_names(self, object_ids: Sequence[str]) -> list[str]:
         with self._guard:
-            return [name for oid in object_ids for name in current_roots(self._abox.q.db, oid)]
+            return [name for oid in object_ids for name in current_roots(self._abox.q.db, SQLITE, oid)]
 
     def current_roots(self, object_id: str) -> tuple[str, ...]:
         with self._guard:
