@@ -4,7 +4,7 @@ chooses the status codes of its errors:
 
 QueryError (malformed query, update, SERVICE, unknown graph, answer over the size limit) -> 400 (the SPARQL
 Protocol's "malformed query"), BusyError (the reasoning queue is full) -> 429 with Retry-After; DeadlineError
-(a query past its time limit) -> 503, NotFoundError -> 404 and ValidationError -> 422 as everywhere.
+(a query past its time limit) and EngineError (the query process failed) -> 503, NotFoundError -> 404 and ValidationError -> 422 as everywhere.
 
 Reads follow the service's token policy for reads (the request guard counts `POST /sparql` as a read: a query
 changes nothing); `POST /reasoning` stores what the reasoner inferred, so it needs the write token.
@@ -22,7 +22,7 @@ from starlette.concurrency import run_in_threadpool
 from .api import ERRORS, require_writer
 from .knowledge.reasoning_jobs import BusyError
 from .knowledge.service import KnowledgeService
-from .knowledge.sparql import GRAPH_TYPES, RESULT_TYPES, QueryError, SparqlRequest
+from .knowledge.sparql import GRAPH_TYPES, RESULT_TYPES, EngineError, QueryError, SparqlRequest
 
 SPARQL_QUERY = "application/sparql-query"
 SPARQL_UPDATE = "application/sparql-update"
@@ -168,5 +168,9 @@ def install_knowledge_errors(app: FastAPI) -> None:
     async def busy(request: Request, exc: Exception) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status_code=429, headers={"Retry-After": str(RETRY_AFTER_S)})
 
+    async def unavailable(request: Request, exc: Exception) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "1"})
+
     app.add_exception_handler(QueryError, bad_query)
+    app.add_exception_handler(EngineError, unavailable)
     app.add_exception_handler(BusyError, busy)

@@ -19,7 +19,7 @@ from .explain import explain_subsumption
 from .graph import KnowledgeGraph, KnowledgeSource
 from .reasoning import ReasoningRequest, ReasoningResult, check_request, reason, scope_of
 from .reasoning_jobs import Job, ReasoningJobs
-from .sparql import SparqlAnswer, SparqlEngine, SparqlRequest
+from .sparql import ENGINES, SparqlAnswer, SparqlEndpoint, SparqlRequest
 
 log = logging.getLogger(__name__)
 
@@ -29,15 +29,18 @@ class KnowledgeService:
         self.store = store
         self.settings = settings
         self.graph = KnowledgeGraph(store, Path(settings.tbox_path))
-        self.engine = SparqlEngine(self.graph, settings.sparql_timeout_s, settings.sparql_max_results)
+        self.endpoint = SparqlEndpoint(self.graph, ENGINES[settings.sparql_engine](settings.sparql_timeout_s),
+                                       settings.sparql_timeout_s, settings.sparql_max_results)
         self.jobs = ReasoningJobs(self._reason, self._keep, settings.reasoning_queue)
 
     def close(self) -> None:
         self.jobs.close()
+        with self.graph.lock:  # after the query that runs, if one does
+            self.endpoint.close()
 
     # -- SPARQL ---------------------------------------------------------------------------------------------
     def sparql(self, request: SparqlRequest) -> SparqlAnswer:
-        return self.engine.run(request)
+        return self.endpoint.run(request)
 
     # -- subsumption ----------------------------------------------------------------------------------------
     def subsumption(self, state_id: str, by_state_id: str) -> dict[str, Any]:
