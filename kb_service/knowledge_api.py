@@ -19,6 +19,8 @@ from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.concurrency import run_in_threadpool
 
+from planhrc.vocabulary import ReasoningScope
+
 from .api import ERRORS, require_writer
 from .knowledge.reasoning_jobs import BusyError
 from .knowledge.service import KnowledgeService
@@ -49,6 +51,10 @@ class ReasoningCreate(BaseModel):
     reasoner: Literal["pellet", "hermit"] = Field(description="The DL reasoner to run.")
     object_id: str | None = Field(default=None, min_length=1, max_length=200,
                                   description="Only this object's current ABox (with the TBox); else every object's.")
+    scope: ReasoningScope = Field(default=ReasoningScope.STATES, description="`states`: each object with its goal "
+                                  "and latest perceived state (what consistency, the states' types and the rules "
+                                  "are about); `current`: the whole current ABox, the plan's actions and expected "
+                                  "states included (slower).")
 
 
 async def get_knowledge(request: Request) -> KnowledgeService:

@@ -20,7 +20,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from rdflib import BNode, Literal, URIRef
 
-from .graph import DEFAULT, GRAPHS, NAMED, Change, Triple
+from .entailment import Triple
+from .graph import DEFAULT, GRAPHS, NAMED, Change
 from .sparql import CheckedQuery, EngineError, QueryError, timed_out
 
 log = logging.getLogger(__name__)

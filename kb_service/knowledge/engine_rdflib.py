@@ -22,7 +22,8 @@ from rdflib.plugins.sparql.processor import SPARQLResult
 from rdflib.plugins.sparql.sparql import Query, QueryContext, SPARQLError
 from rdflib.plugins.stores.memory import Memory
 
-from .graph import DEFAULT, DEFAULT_NAMES, GRAPHS, NAMED, Change, Triple
+from .entailment import Triple
+from .graph import DEFAULT, DEFAULT_NAMES, GRAPHS, NAMED, Change
 from .sparql import CheckedQuery, QueryError, timed_out
 
 PREPARED_KEPT = 256  # parsed queries kept (a console or a client sends the same few again and again)

@@ -38,7 +38,7 @@ class Job:
 
     def public(self) -> dict[str, Any]:
         out: dict[str, Any] = {"id": self.id, "status": self.status, "reasoner": self.request.reasoner,
-                               "object_id": self.request.object_id}
+                               "object_id": self.request.object_id, "scope": str(self.request.scope)}
         if self.result is not None:
             out.update(self.result.public())
         if self.error is not None:

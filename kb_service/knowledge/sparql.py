@@ -20,7 +20,8 @@ from rdflib import Graph
 from planhrc.vocabulary import SparqlEngineName
 
 from ..store import DeadlineError, KBError
-from .graph import DEFAULT, DEFAULT_NAMES, GRAPHS, Change, KnowledgeGraph, Triple
+from .entailment import Triple
+from .graph import DEFAULT, DEFAULT_NAMES, GRAPHS, Change, KnowledgeGraph
 from .query_text import read_query_text
 
 # Media types of the answers: SELECT and ASK (SPARQL results), CONSTRUCT and DESCRIBE (RDF); the first is the
