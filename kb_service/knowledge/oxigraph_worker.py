@@ -92,7 +92,7 @@ class Replica:
                 return _bytes(ox.serialize(triples, format=GRAPH_FORMATS.get(fmt, ox.RdfFormat.TURTLE),
                                            prefixes=prefixes)), len(triples)
             names = [v.value for v in result.variables]
-            rows = [[solution[v] for v in result.variables] for solution in _first(result, max_results + 1)]
+            rows = [list(solution) for solution in _first(result, max_results + 1)]  # in the order of `names`
         except (OSError, ValueError, TypeError) as exc:
             raise QueryFailed(f"query: cannot be evaluated ({_one_line(exc)})") from None
         _check_size(len(rows), max_results)
