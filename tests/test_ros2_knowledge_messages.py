@@ -42,3 +42,16 @@ def test_answers():
     assert refused == {"request_id": "c", "ok": False, "status": 400, "detail": "POST /sparql: 400 query: empty"}
     assert json.loads(refusal_text("", Ros2Error("x")))["status"] is None
     assert request_id_of('{"request_id": "d"}') == "d" and request_id_of("nope") == "" and request_id_of("[]") == ""
+
+
+def test_the_documentation_names_every_knowledge_topic_and_the_service():
+    from pathlib import Path
+
+    from planhrc.ros2 import topics
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "ros2.md").read_text()
+    for spec in topics.KNOWLEDGE_TOPICS:
+        row = next((line for line in page.splitlines() if line.startswith(f"| `{spec.suffix}` |")), None)
+        assert row is not None, spec.suffix
+        assert f"`{spec.type_name}`" in row and spec.qos_text in row and f"| {spec.direction} |" in row
+    assert topics.REASON_NOW[0].endswith("/reason_now") and f"`{topics.REASON_NOW[1]}` (service)" in page
