@@ -33,7 +33,7 @@ GRAPH_FORMATS = {"turtle": ox.RdfFormat.TURTLE, "nt": ox.RdfFormat.N_TRIPLES, "x
 _PARENT_POLL_S = 0.5
 
 
-class QueryFailed(Exception):
+class _QueryFailed(Exception):
     """A query this process cannot answer; the message is the client's."""
 
 
@@ -82,7 +82,7 @@ class Replica:
         try:
             result = self.store.query(text, prefixes=prefixes, default_graph=graph, named_graphs=self.named)
         except SyntaxError as exc:
-            raise QueryFailed(f"query: not SPARQL 1.1 ({_one_line(exc)})") from None
+            raise _QueryFailed(f"query: not SPARQL 1.1 ({_one_line(exc)})") from None
         try:
             if isinstance(result, ox.QueryBoolean):
                 return _bytes(result.serialize(format=RESULT_FORMATS.get(fmt, ox.QueryResultsFormat.JSON))), 1
@@ -94,7 +94,7 @@ class Replica:
             names = [v.value for v in result.variables]
             rows = [list(solution) for solution in _first(result, max_results + 1)]  # in the order of `names`
         except (OSError, ValueError, TypeError) as exc:
-            raise QueryFailed(f"query: cannot be evaluated ({_one_line(exc)})") from None
+            raise _QueryFailed(f"query: cannot be evaluated ({_one_line(exc)})") from None
         _check_size(len(rows), max_results)
         return _solutions(names, rows, fmt), len(rows)
 
@@ -108,7 +108,7 @@ def _first(items: Any, n: int) -> Any:
 
 def _check_size(rows: int, max_results: int) -> None:
     if rows > max_results:
-        raise QueryFailed(f"query: the answer has more than {max_results} results (the service's "
+        raise _QueryFailed(f"query: the answer has more than {max_results} results (the service's "
                           "sparql_max_results); ask for fewer, e.g. with LIMIT and OFFSET")
 
 
@@ -167,7 +167,7 @@ def serve(conn: Connection) -> None:
                 answer = ("ok", None)
             else:
                 answer = ("ok", replica.query(*args))
-        except QueryFailed as exc:
+        except _QueryFailed as exc:
             answer = ("error", str(exc))
         except Exception as exc:  # the parent gets an answer whatever happens
             answer = ("error", f"query: cannot be evaluated ({_one_line(exc)})")
