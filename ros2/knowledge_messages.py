@@ -11,6 +11,7 @@ from typing import Any, Mapping, Sequence
 
 from planhrc.client import ProtocolError, SparqlAnswer
 
+from .convert import _json_object
 from .errors import Ros2Error
 
 MAX_REQUEST_ID = 200
@@ -34,12 +35,7 @@ FIELDS: dict[str, dict[str, tuple[type, bool]]] = {
 
 def read_request(topic: str, data: str) -> KnowledgeRequest:
     """A request's JSON; Ros2Error naming the field when it is not one."""
-    try:
-        body = json.loads(data)
-    except ValueError as exc:
-        raise Ros2Error(f"{topic}: not JSON ({exc})") from None
-    if not isinstance(body, dict):
-        raise Ros2Error(f"{topic}: expected a JSON object, got {type(body).__name__}")
+    body = _json_object(topic, data)
     request_id = body.get("request_id", "")
     if not isinstance(request_id, str) or len(request_id) > MAX_REQUEST_ID:
         raise Ros2Error(f"{topic}.request_id: a string of at most {MAX_REQUEST_ID} characters")

@@ -5,9 +5,6 @@ std_srvs/srv/Trigger service `reason_now` run real reasoning jobs, a request sen
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +15,7 @@ from planhrc.bench.knowledge import CURRENT_STATE_QUERY
 from planhrc.client import KBClient
 
 from .servers import TOKEN
-from .test_ros2_bridge import ROS2_PYTHON, bridge, ros_env, service  # noqa: F401 (fixtures)
+from .test_ros2_bridge import ROS2_PYTHON, bridge, ros_env, run_peer, service  # noqa: F401 (fixtures)
 
 PEER = Path(__file__).with_name("ros2_knowledge_peer.py")
 
@@ -28,17 +25,7 @@ pytestmark = [pytest.mark.ros2, pytest.mark.integration,
 
 
 def ask(steps: list[dict[str, Any]], env: dict[str, str], timeout_s: float = 180) -> list[dict]:
-    proc = subprocess.Popen([str(ROS2_PYTHON), str(PEER), json.dumps(steps)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        out, err = proc.communicate(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        out, err = proc.communicate()
-        pytest.fail(f"the peer did not finish in {timeout_s} s:\n{out[-3000:]}\n{err[-3000:]}")
-    lines = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
-    assert proc.returncode == 0 and lines and lines[-1] == {"done": True}, f"{out[-4000:]}\n{err[-3000:]}"
-    return lines[:-1]
+    return run_peer(PEER, [json.dumps(steps)], env, timeout_s)
 
 
 @pytest.fixture

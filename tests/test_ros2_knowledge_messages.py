@@ -19,8 +19,8 @@ def test_a_request_is_read_with_its_fields():
 
 
 @pytest.mark.parametrize("topic,data,words", [
-    ("sparql", "not json", "sparql: not JSON"),
-    ("sparql", "[1]", "sparql: expected a JSON object, got list"),
+    ("sparql", "not json", "sparql.data: not JSON"),
+    ("sparql", "[1]", "sparql.data: expected a JSON object, got list"),
     ("sparql", '{"request_id": 5, "query": "ASK {}"}', "sparql.request_id: a string"),
     ("sparql", '{"query": ""}', "sparql.query: expected a non-empty string"),
     ("sparql", '{"query": "ASK {}", "default_graph_uri": "g"}', "sparql.default_graph_uri: expected a list"),

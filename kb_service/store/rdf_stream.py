@@ -19,7 +19,6 @@ RDF_NS = "http://www.w3.org/1999/02/22-rdf-syntax-ns#"
 RDF_TYPE = RDF_NS + "type"
 STANDARD = {"rdf": RDF_NS, "rdfs": "http://www.w3.org/2000/01/rdf-schema#",
             "xsd": "http://www.w3.org/2001/XMLSchema#"}
-CHUNK_CHARS = 1 << 16  # what the writers gather before they hand a piece on
 
 _IRI = r"<([^>]*)>"
 _BNODE = r"_:([^\s]+)"
@@ -84,19 +83,6 @@ def _grouped(lines: Iterable[str]) -> Iterator[tuple[Term, list[tuple[str, Term]
         yield subject, run
 
 
-def _pieces(parts: Iterable[str]) -> Iterator[str]:
-    buffer: list[str] = []
-    size = 0
-    for part in parts:
-        buffer.append(part)
-        size += len(part)
-        if size >= CHUNK_CHARS:
-            yield "".join(buffer)
-            buffer, size = [], 0
-    if buffer:
-        yield "".join(buffer)
-
-
 # -- RDF/XML ----------------------------------------------------------------------------------------------------
 def _xml(text: str, attribute: bool = False) -> str:
     bad = _NOT_XML.search(text)
@@ -145,7 +131,7 @@ def _node_ids() -> Iterator[str]:
 
 
 def write_rdfxml(lines: Iterable[str], prefixes: Mapping[str, str]) -> Iterator[str]:
-    """The triples of `lines` as an RDF/XML document, in pieces."""
+    """The triples of `lines` as an RDF/XML document, in pieces (a response gathers them into larger ones)."""
     declared = {**STANDARD, **prefixes}
     names = _Names(declared)
     node_ids: dict[str, str] = {}  # the store's blank node labels as XML names (rdf:nodeID must be one)
@@ -179,7 +165,7 @@ def write_rdfxml(lines: Iterable[str], prefixes: Mapping[str, str]) -> Iterator[
             yield "  </rdf:Description>\n"
         yield "</rdf:RDF>\n"
 
-    return _pieces(parts())
+    return parts()
 
 
 # -- Turtle -----------------------------------------------------------------------------------------------------
@@ -221,7 +207,7 @@ def write_turtle(lines: Iterable[str], prefixes: Mapping[str, str]) -> Iterator[
             rows = [f"{'a' if p == RDF_TYPE else iri(p)} {term(o)}" for p, o in run]
             yield f"{term(subject)} " + " ;\n    ".join(rows) + " .\n"
 
-    return _pieces(parts())
+    return parts()
 
 
 WRITERS = {"xml": write_rdfxml, "turtle": write_turtle}
