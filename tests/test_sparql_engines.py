@@ -159,6 +159,9 @@ def test_both_engines_refuse_alike(store, name, query, words):
      "WHERE { ?s ?p ?o }", "SELECT", ("http://planhrc.org/graph/abox", "http://planhrc.org/graph/tbox"), False),
     ("BASE <http://e/> PREFIX : <http://e/> ASK { ?s ?p ?o }", "ASK", (), False),
     ("construct where { ?s ?p ?o } ", "CONSTRUCT", (), False),
+    ("PREFIX a.b: <http://e/> # SELECT\nPREFIX : <http://f/>\nCONSTRUCT { ?s a a.b:C } WHERE { ?s ?p ?o }", "CONSTRUCT",
+     (), False),
+    ("PREFIX x: <http://e/> x:y", None, (), False),
     ("SELECT * WHERE { FILTER(?a<1) SERVICE ?x { ?s ?p ?o } }", "SELECT", (), True),
     ("delete where { ?s ?p ?o }", "DELETE", (), False),
 ])

@@ -25,6 +25,8 @@ _OPAQUE = re.compile(
       | (?P<short2>"(?:[^"\\\n\r]|\\.)*")
       | (?P<iri><[^<>"{}|^`\\\x00-\x20]*>)""", re.VERBOSE | re.DOTALL)
 _WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
+# BASE <iri> and PREFIX name: <iri> declarations (IRIs already replaced by their markers)
+_PROLOGUE = re.compile(r"\s*(?:(?:BASE\s*\x00\d+\x00|PREFIX\s*[^\s:]*:\s*\x00\d+\x00)\s*)*", re.IGNORECASE)
 _PREFIX = re.compile(r"PREFIX\s+([A-Za-z][\w.-]*)?:\s*\x00(\d+)\x00", re.IGNORECASE)
 _FROM = re.compile(r"FROM\s+(NAMED\s+)?(?:\x00(\d+)\x00|([A-Za-z][\w.-]*)?:([\w.-]*))", re.IGNORECASE)
 # A keyword is a word that no '?', '$', ':' or name character touches (`?service` and `ex:service` are names;
@@ -73,14 +75,6 @@ def read_query_text(text: str, prefixes: dict[str, str]) -> QueryText:
 
 def _form(bare: str) -> str | None:
     """The first keyword after the prologue (BASE and PREFIX declarations)."""
-    for m in _WORD.finditer(bare):
-        word = m.group(0).upper()
-        if word in ("BASE", "PREFIX"):
-            continue
-        if word in FORMS or word in UPDATES:
-            return word
-        # a prefix name of a PREFIX line ("PREFIX ex: <...>") is a word too: skip what a declaration holds
-        if bare[m.end():m.end() + 1] == ":":
-            continue
-        return None
-    return None
+    word = _WORD.match(bare, _PROLOGUE.match(bare).end())  # type: ignore[union-attr]  (it matches the empty text)
+    name = word.group(0).upper() if word else None
+    return name if name in FORMS or name in UPDATES else None
