@@ -75,6 +75,7 @@ def read_query_text(text: str, prefixes: dict[str, str]) -> QueryText:
 
 def _form(bare: str) -> str | None:
     """The first keyword after the prologue (BASE and PREFIX declarations)."""
-    word = _WORD.match(bare, _PROLOGUE.match(bare).end())  # type: ignore[union-attr]  (it matches the empty text)
+    prologue = _PROLOGUE.match(bare)  # it matches the empty text too
+    word = _WORD.match(bare, prologue.end() if prologue else 0)
     name = word.group(0).upper() if word else None
     return name if name in FORMS or name in UPDATES else None
