@@ -14,7 +14,7 @@ gone.
 """
 from __future__ import annotations
 
-import json
+import io
 import os
 import signal
 import sys
@@ -25,7 +25,6 @@ from typing import Any
 
 import pyoxigraph as ox
 
-XSD_STRING = "http://www.w3.org/2001/XMLSchema#string"
 RESULT_FORMATS = {"json": ox.QueryResultsFormat.JSON, "xml": ox.QueryResultsFormat.XML,
                   "csv": ox.QueryResultsFormat.CSV, "tsv": ox.QueryResultsFormat.TSV}
 GRAPH_FORMATS = {"turtle": ox.RdfFormat.TURTLE, "nt": ox.RdfFormat.N_TRIPLES, "xml": ox.RdfFormat.RDF_XML,
@@ -91,12 +90,43 @@ class Replica:
                 _check_size(len(triples), max_results)
                 return _bytes(ox.serialize(triples, format=GRAPH_FORMATS.get(fmt, ox.RdfFormat.TURTLE),
                                            prefixes=prefixes)), len(triples)
-            names = [v.value for v in result.variables]
-            rows = [list(solution) for solution in _first(result, max_results + 1)]  # in the order of `names`
+            # the solutions as TSV (one line each, written by Oxigraph as it evaluates: the lines are counted, and
+            # the writing stops past the limit), then in the client's format, all without a Python object a term
+            rows = _Rows(max_results)
+            result.serialize(rows, format=ox.QueryResultsFormat.TSV)
+        except _TooMany:
+            raise _QueryFailed(_too_many(max_results)) from None
         except (OSError, ValueError, TypeError) as exc:
             raise _QueryFailed(f"query: cannot be evaluated ({_one_line(exc)})") from None
-        _check_size(len(rows), max_results)
-        return _solutions(names, rows, fmt), len(rows)
+        tsv = rows.getvalue()
+        if fmt == "tsv":
+            return tsv, rows.count
+        parsed = ox.parse_query_results(tsv, format=ox.QueryResultsFormat.TSV)
+        return _bytes(parsed.serialize(format=RESULT_FORMATS.get(fmt, ox.QueryResultsFormat.JSON))), rows.count
+
+
+class _TooMany(Exception):
+    """More solutions than the answer may hold."""
+
+
+class _Rows(io.BytesIO):
+    """What Oxigraph writes as TSV, with its solutions counted (a line each, after the line of the variables);
+    past `limit` it stops the writing."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__()
+        self.limit = limit
+        self.lines = 0
+
+    @property
+    def count(self) -> int:
+        return max(0, self.lines - 1)
+
+    def write(self, data: Any) -> int:
+        self.lines += bytes(data).count(b"\n")
+        if self.count > self.limit:
+            raise _TooMany()
+        return super().write(data)
 
 
 def _first(items: Any, n: int) -> Any:
@@ -106,41 +136,19 @@ def _first(items: Any, n: int) -> Any:
         yield item
 
 
+def _too_many(max_results: int) -> str:
+    return (f"query: the answer has more than {max_results} results (the service's sparql_max_results); ask for "
+            "fewer, e.g. with LIMIT and OFFSET")
+
+
 def _check_size(rows: int, max_results: int) -> None:
     if rows > max_results:
-        raise _QueryFailed(f"query: the answer has more than {max_results} results (the service's "
-                          "sparql_max_results); ask for fewer, e.g. with LIMIT and OFFSET")
+        raise _QueryFailed(_too_many(max_results))
 
 
 def _one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return text if len(text) <= 300 else text[:297] + "..."
-
-
-def _term(term: Any) -> dict[str, str]:
-    if isinstance(term, ox.NamedNode):
-        return {"type": "uri", "value": term.value}
-    if isinstance(term, ox.BlankNode):
-        return {"type": "bnode", "value": term.value}
-    if isinstance(term, ox.Literal):
-        out = {"type": "literal", "value": term.value}
-        if term.language:
-            out["xml:lang"] = term.language
-        elif term.datatype.value != XSD_STRING:
-            out["datatype"] = term.datatype.value
-        return out
-    raise TypeError(f"a solution binds {term!r}, which SPARQL results cannot carry")
-
-
-def _solutions(names: list[str], rows: list[list[Any]], fmt: str) -> bytes:
-    """SELECT's solutions as SPARQL JSON, converted by Oxigraph to the other formats."""
-    bindings = [{name: _term(t) for name, t in zip(names, row) if t is not None} for row in rows]
-    doc = json.dumps({"head": {"vars": names}, "results": {"bindings": bindings}},
-                     ensure_ascii=False, separators=(",", ":")).encode("utf-8")
-    if fmt == "json":
-        return doc
-    parsed = ox.parse_query_results(doc, format=ox.QueryResultsFormat.JSON)
-    return _bytes(parsed.serialize(format=RESULT_FORMATS[fmt]))
 
 
 def _bytes(out: bytes | None) -> bytes:
