@@ -12,7 +12,7 @@ from itertools import islice
 from typing import Any, Iterator, Mapping, Sequence
 
 from pyparsing import ParseException
-from rdflib import RDF, BNode, Dataset, URIRef, Variable
+from rdflib import RDF, BNode, Dataset, Variable
 from rdflib.graph import Graph, ReadOnlyGraphAggregate
 from rdflib.plugins.sparql.algebra import translateQuery
 from rdflib.plugins.sparql.evaluate import evalPart

@@ -62,7 +62,6 @@ class CheckedQuery:
     """A query the endpoint answers, as an engine gets it."""
 
     text: str
-    graph_form: bool  # CONSTRUCT or DESCRIBE: the answer is RDF
     defaults: tuple[str, ...]  # the default graph: DEFAULT, or names of NAMED to unite
     fmt: str  # a value of RESULT_TYPES or GRAPH_TYPES
     prefixes: Mapping[str, str]  # known without a PREFIX line
@@ -170,7 +169,7 @@ class SparqlEndpoint:
             defaults = (DEFAULT,)
         graph_form = read.form in ("CONSTRUCT", "DESCRIBE")
         media, fmt = _media(request.accept, GRAPH_TYPES if graph_form else RESULT_TYPES)
-        return CheckedQuery(text, graph_form, tuple(sorted(set(defaults))), fmt, self.prefixes), media
+        return CheckedQuery(text, tuple(sorted(set(defaults))), fmt, self.prefixes), media
 
 
 def _names(iris: Sequence[str], field: str) -> tuple[str, ...]:
