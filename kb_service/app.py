@@ -5,7 +5,7 @@ import gc
 import logging
 import threading
 from contextlib import asynccontextmanager
-from typing import AsyncIterator
+from typing import AsyncIterator, Callable
 
 from fastapi import FastAPI
 
@@ -19,14 +19,15 @@ from .knowledge.service import KnowledgeService
 from .knowledge_api import install_knowledge_errors
 from .knowledge_api import router as knowledge_router
 from .locks import ObjectLocks
-from .orchestrator import Orchestrator
 from .planning_pool import PlanningPool
+from .store import KBError, KnowledgeStore
 from .store.location import shown_location
+from .usecases import close_context, open_context
 
 log = logging.getLogger(__name__)
 
 
-def open_knowledge_base(settings: Settings):
+def open_knowledge_base(settings: Settings) -> KnowledgeStore:
     """Open the store named by the settings (a SQLite file, ':memory:' or None for a throwaway in-memory store, or
     a PostgreSQL URL)."""
     from planhrc.kb_service.store import open_store
@@ -35,10 +36,8 @@ def open_knowledge_base(settings: Settings):
     return open_store(settings.db_path, settings.tbox_path, password)
 
 
-def compact_on_schedule(kb, settings: Settings, stop: threading.Event) -> None:
+def compact_on_schedule(kb: KnowledgeStore, settings: Settings, stop: threading.Event) -> None:
     """Compact the store every `compact_every_s` seconds until `stop` is set (the retention policy)."""
-    from planhrc.kb_service.store import KBError
-
     while not stop.wait(settings.compact_every_s):
         try:
             done = kb.compact(settings.keep_perceived)
@@ -49,22 +48,24 @@ def compact_on_schedule(kb, settings: Settings, stop: threading.Event) -> None:
 
 def freeze_heap() -> None:
     """Leave what start-up built (modules, the TBox, the store) out of the garbage collector's full passes until
-    shutdown (`gc.freeze`): each full pass walks every object not frozen while it holds the interpreter, and with
-    start-up's objects in it a pass took 95-200 ms, which every request (/health too) waited for; without them,
-    under 30 ms. Shutdown unfreezes them, so an app built and closed in a longer process (a test) is collected."""
+    shutdown (`gc.freeze`): each full pass walks every object not frozen while it holds the interpreter, and
+    start-up's objects (most of the heap) made every pass long enough for every request (/health too) to wait on
+    it. Shutdown unfreezes them, so an app built and closed in a longer process (a test) is collected."""
     gc.freeze()
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
-    """The planHRC knowledge-base service: a KnowledgeBase is opened at start-up and closed at shutdown."""
+def create_app(settings: Settings | None = None,
+               open_store: Callable[[Settings], KnowledgeStore] = open_knowledge_base) -> FastAPI:
+    """The planHRC knowledge-base service: a KnowledgeBase is opened at start-up (`open_store`, by default the
+    one the settings name) and closed at shutdown."""
     settings = settings or get_settings()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        kb = open_knowledge_base(settings)
+        kb = open_store(settings)
         app.state.kb = kb
         pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
-        orchestrator = app.state.orchestrator = Orchestrator(kb, settings, ObjectLocks(), pool)
+        context = app.state.context = open_context(kb, settings, ObjectLocks(), pool)
         knowledge = app.state.knowledge = KnowledgeService(kb, settings)
         log.info("knowledge base open: %s", shown_location(settings.db_path) if settings.db_path else "in memory")
         freeze_heap()
@@ -81,7 +82,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             if compactor is not None:
                 compactor.join(timeout=60)
             knowledge.close()
-            orchestrator.close()
+            close_context(context)
             pool.close()
             kb.close()
             gc.unfreeze()

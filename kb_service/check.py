@@ -6,7 +6,6 @@ import argparse
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from planhrc.cli_args import int_in, positive_float, positive_int, tbox_file
 from planhrc.paths import default_tbox_path
@@ -57,7 +56,7 @@ def check_ontology(tbox_path: Path | str, db_path: str | None, reasoner: str, ti
     return CheckReport(reasoner, str(tbox_path), db_path, report)
 
 
-def add_ontology_parser(subparsers: Any) -> argparse.ArgumentParser:
+def add_ontology_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     parser = subparsers.add_parser("ontology", help="check the ontology with a DL reasoner; benchmark subsumption")
     sub = parser.add_subparsers(dest="ontology_command", required=True, metavar="SUBCOMMAND")
     check = sub.add_parser("check", help="consistency, classes and inferred facts of the TBox (and a stored ABox)")

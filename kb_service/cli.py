@@ -13,10 +13,16 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 from .network import SettingsProblem, check_exposure, resolve_secrets
 from .store.backends import backend_of
 from .store.errors import KBError
+
+if TYPE_CHECKING:
+    from planhrc.settings import Settings
+
+_Parser = TypeVar("_Parser", bound=argparse.ArgumentParser)
 
 __all__ = ["SERVE_OPTIONS", "SettingsProblem", "add_compact_parser", "add_serve_parser", "check_serve_settings",
            "main", "run_compact", "run_serve"]
@@ -31,7 +37,7 @@ SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "db_pass
                  "planner": "--planner", "log_level": "--log-level"}
 
 
-def add_serve_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     from uvicorn.config import LOG_LEVELS
 
     from planhrc.cli_args import port, tbox_file
@@ -73,7 +79,7 @@ def add_serve_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     return p
 
 
-def check_serve_settings(settings, given: set[str], warnings: list[str] | None = None):
+def check_serve_settings(settings: Settings, given: set[str], warnings: list[str] | None = None) -> Settings:
     """Refuse, before anything starts, settings the service would only trip over later (a planner name, the
     TBox, the store's folder or server, a busy port, a service open to the network without a token, TLS files that
     do not load). Raises SettingsProblem naming the option or `PLANHRC_*` variable; returns the settings with the
@@ -127,12 +133,12 @@ def check_serve_settings(settings, given: set[str], warnings: list[str] | None =
     return settings
 
 
-def check_store_server(settings, option: str) -> None:
+def check_store_server(settings: Settings, option: str) -> None:
     """A store on a database server: its backend exists and the server answers (one connection, closed)."""
     from .store import BACKENDS
 
     backend = backend_of(settings.db_path)
-    if backend not in BACKENDS:
+    if settings.db_path is None or backend not in BACKENDS:
         raise SettingsProblem(f"{option}: no store backend for {backend}:// (this version has: "
                               f"{', '.join(sorted(BACKENDS))})")
     try:
@@ -209,7 +215,7 @@ def _leave_request_threads(code: int, how: str) -> None:
         os._exit(code)
 
 
-def add_compact_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_compact_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     from planhrc.cli_args import tbox_file
 
     p = subparsers.add_parser(

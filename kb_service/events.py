@@ -8,16 +8,17 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import asdict
 from typing import AsyncIterator, Awaitable, Callable, Sequence
 
 import anyio
 
-from .public import event_public
 from .store import StoredEvent
+from .usecases.reads import event_read
 
 
 def format_sse(event: StoredEvent) -> str:
-    payload = json.dumps(event_public(event), separators=(",", ":"))
+    payload = json.dumps(asdict(event_read(event)), separators=(",", ":"))
     return f"id: {event.seq}\nevent: {event.kind}\ndata: {payload}\n\n"
 
 

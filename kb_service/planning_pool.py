@@ -8,7 +8,7 @@ planning configuration, the deadline) and gets back the `PlanOutcome`, checked b
 worker's, so they end with it). The store's checks of the plan stay with the caller: they need the store.
 
 * **Which tasks.** Only tasks whose states hold at least `min_atoms` atoms go to a worker (`takes`): a small
-  task's pipeline costs less than the trip (the relative 20 x 12 re-plan is tens of milliseconds).
+  task's pipeline (a relative 20 x 12 re-plan, say) costs less than the trip.
 * **The deadline.** A worker runs the pipeline with the job's deadline (`time.monotonic()` is the same clock in
   every process of the machine) and answers by it; one that has not answered `grace_s` after it is stopped
   (SIGTERM, then SIGKILL) and replaced, and the job ends `timeout`. A worker that dies ends its job `error` and is
@@ -18,11 +18,10 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   service builds each state as one set operation on the first. The outcome travels in several frames (header,
   actions, states in chunks) so that no single unpickling holds the service's interpreter for long.
 * **Priority.** A worker runs at nice 10: on a machine whose cores are all busy, the service's requests come
-  first and the large task gets what is left (`planhrc service-bench --parts contention`, 2 cores, load 4-5:
-  the slowest /health 35-42 ms and the other object's slowest perception 80-92 ms, against 26-85 ms and
-  103-168 ms at the service's priority).
+  first and the large task gets what is left (`planhrc service-bench --parts contention` compares the slowest
+  /health and the other object's slowest perception with the workers at the service's priority).
 * **Life.** The service makes the pool in its lifespan and closes it at shutdown; a worker starts when a job
-  first needs it (about 1.5 s: importing the pipeline), up to `workers`, and stays. A worker ignores SIGINT
+  first needs it (it imports the pipeline first, which takes a while), up to `workers`, and stays. A worker ignores SIGINT
   (the service stops it), stops on SIGTERM with the VAL or planner processes it started, and watches its parent:
   when the parent is gone (SIGKILL included) it stops the same way.
 """
@@ -37,35 +36,24 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Iterator
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
-from planhrc.ordering import Placement
-from planhrc.pipeline import PlanningConfig, PlanOutcome
+from planhrc.pipeline import PlanOutcome
+from planhrc.pipeline.replan import PlanningJob
 from planhrc.vocabulary import PlanningStatus
+
+__all__ = ["ATOMS_PER_FRAME", "PlanningJob", "PlanningPool", "pack_outcome", "state_size", "unpack_outcome"]
 
 log = logging.getLogger(__name__)
 
-ATOMS_PER_FRAME = 5_000  # a few milliseconds of unpickling in the service per frame
+ATOMS_PER_FRAME = 5_000  # one frame's unpickling holds the service's interpreter only briefly
 EFFECTS_PER_FRAME = 1_000  # actions' conditional effects per frame (absolute 200 links: about 200 an action)
 WORKER_NICE = 10  # below the service's requests when they compete for a core
 _PARENT_POLL_S = 0.2
 _STOP_WAIT_S = 1.0
-
-
-@dataclass(frozen=True)
-class PlanningJob:
-    """One pipeline run, as a value: `pipeline.plan(obj, init, goal, config, placement=..., deadline_at=...)`, VAL
-    included when `config.validate`."""
-
-    obj: ArticulatedObject
-    init: State
-    goal: State
-    config: PlanningConfig
-    placement: Placement | None
-    deadline_at: float  # time.monotonic()
 
 
 def state_size(obj: ArticulatedObject) -> int:
@@ -114,7 +102,8 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
 
 def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
     """The outcome `pack_outcome` sent, each state one set operation on the first."""
-    bare, n_actions, has_states, n_base, n_states = pickle.loads(next(frames))
+    header: tuple[PlanOutcome, int, bool, int, int] = pickle.loads(next(frames))
+    bare, n_actions, has_states, n_base, n_states = header
     actions: list[ActionSpec] = []
     for _ in range(n_actions):
         actions.extend(pickle.loads(next(frames)))
@@ -123,7 +112,8 @@ def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
         base_atoms.extend(pickle.loads(next(frames)))
     states: list[State] = [frozenset(base_atoms)] if has_states else []
     for _ in range(n_states):
-        for missing, added in pickle.loads(next(frames)):
+        changes: list[tuple[State, State]] = pickle.loads(next(frames))
+        for missing, added in changes:
             states.append((states[0] - missing) | added)
     return replace(bare, actions=tuple(actions), expected_states=tuple(states))
 

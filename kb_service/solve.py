@@ -44,7 +44,7 @@ def solve_and_store(request: SolveRequest, kb: KnowledgeBase, config: PlanningCo
     return report(solution, ids, timings)
 
 
-def add_solve_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_solve_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = subparsers.add_parser("solve", help="solve one problem end to end through the ontology",
                               description=__doc__)
     p.add_argument("--formulation", choices=["relative", "absolute"], required=True)

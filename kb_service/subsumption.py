@@ -37,7 +37,7 @@ from .store.owl import pellet_command
 log = logging.getLogger(__name__)
 
 
-def subsumes_fast(s1: State | frozenset, s2: State | frozenset) -> bool:
+def subsumes_fast(s1: State, s2: State) -> bool:
     """D(s1) ⊑ D(s2): every atom of s2 is an atom of s1."""
     return is_subsumed(s1, s2)
 
@@ -67,7 +67,7 @@ _TYPE_CLASS = {"link": "Link", "joint": "Joint", "orientation": "Orientation"}
 METHODS = ("unsat", "classify")
 
 
-def _individual_types(pairs: Sequence[tuple[frozenset, frozenset]]) -> dict[str, str]:
+def _individual_types(pairs: Sequence[tuple[State, State]]) -> dict[str, str]:
     types: dict[str, str] = {}
     for s1, s2 in pairs:
         for atom in s1 | s2:
@@ -91,22 +91,22 @@ class _Describer:
     absorption), so atoms stay anonymous.
     """
 
-    def __init__(self, world: World, tbox, abox, individuals: dict[str, Thing]):
+    def __init__(self, world: World, tbox: Any, abox: Any, individuals: dict[str, Thing]) -> None:
         self.tbox, self.abox, self.individuals = tbox, abox, individuals
-        self.block_classes: dict[frozenset, Any] = {}
+        self.block_classes: dict[State, Any] = {}
 
-    def _named(self, prefix: str, n: int, expr):
+    def _named(self, prefix: str, n: int, expr: Any) -> Any:
         cls: Any = type(f"{prefix}_{n}", (Thing,), {"namespace": self.abox})
         cls.equivalent_to.append(expr)
         return cls
 
-    def atom_class(self, atom: Atom):
+    def atom_class(self, atom: Atom) -> Any:
         """PredicateClass ⊓ ∃arg1.{x} ⊓ … as a fresh construct (an RDF blank node must not be shared)."""
         pred = getattr(self.tbox, PREDICATES[atom[0]][0])
         parts = [getattr(self.tbox, prop).some(OneOf([self.individuals[name]])) for prop, name in _owl_args(atom)]
         return And([pred] + parts)
 
-    def describe(self, atoms: frozenset[Atom]):
+    def describe(self, atoms: frozenset[Atom]) -> Any:
         madeof = self.tbox.madeof
         static = frozenset(a for a in atoms if a[0] != HAS_ORIENTATION)
         conjuncts = []

@@ -14,7 +14,7 @@ Indices follow CONVENTIONS.md: ``s^e_1`` is the state the plan starts from and `
 ``s^e_{j+1}``, so the action executable from ``s^e_i`` is ``a_i``. (The paper's text says "resumes from
 ``a_{i+1}``", which with its own definition of ``s^e_1 = s^c`` is one step late.)
 
-The function only decides; storing states, planning and dispatching belong to the service's orchestrator.
+The function only decides; storing states, planning and dispatching belong to the service's use cases.
 
 `escalate` then applies what the paper asks of a repeated failure: after a failed or partial action whose reason
 says the motion itself is the problem (unreachable, stall, slip, collision, left_table), the same motion is not retried

@@ -167,11 +167,6 @@ class Settings(BaseSettings):
         description="POST /reasoning waits this long for its job: a job done by then is answered with its result "
         "(200), a longer one with 202 and the job's location.",
     )
-    crash_in_perception_write: int = Field(
-        default=0, ge=0,
-        description="For crash tests only: the service kills itself (SIGKILL) inside the store write of its N-th "
-        "perception, after every row is written and before the commit; 0 (the default) never.",
-    )
 
 
 @lru_cache

@@ -1,7 +1,7 @@
 """VAL processes started ahead of need: each has read its domain and waits for a problem (`ArmedValidators`).
 
 A cold VAL run spends most of a short check before it reads the problem: starting the process, loading its
-libraries and parsing the domain (relative 20 x 12: 1.3 ms of CPU of 2.8 ms, `perf stat` over 50 runs). A
+libraries and parsing the domain (about half of a relative 20 x 12 check's CPU time, by `perf stat`). A
 service re-plans the same few domains all day, so it keeps one VAL process per domain already past that point:
 `Validate DOMAIN PROBLEM PLAN` started with the domain a file, the problem a named pipe (FIFO) and the plan a
 path that does not exist yet. VAL reads its arguments in order, so it parses the domain, opens the FIFO and
@@ -36,8 +36,8 @@ READY_WAIT_S = 2.0  # how long the arming thread watches a new process reach its
 
 class _Armed:
     """One VAL process that has parsed `domain` and waits for its problem on a FIFO; its files are `<prefix>-`
-    domain.pddl, problem.pddl and plan.txt in the folder `folder`, which outlives it (removing a folder took
-    0.4 ms of the kernel's time in the service, against 0.04 ms for the files)."""
+    domain.pddl, problem.pddl and plan.txt in the folder `folder`, which outlives it (removing a folder costs the
+    kernel far more than removing its files, on the request's path)."""
 
     def __init__(self, domain: str, folder: str, prefix: str) -> None:
         self.files = [os.path.join(folder, f"{prefix}-{name}") for name in VAL_FILES]

@@ -19,6 +19,7 @@ import os
 import select
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -197,6 +198,10 @@ def start_validation(domain: str, problem: str, plan: Sequence[str], *, nice: in
 
 
 VAL_FILES = ("domain.pddl", "problem.pddl", "plan.txt")
+# VAL grounds every instance of a quantified effect: on a domain whose effects quantify over several angles (the
+# bimanual macros) one check can ask for tens of GB. A VAL process gets at most this much address space; past it
+# VAL fails (no verdict, which the callers report as such) instead of the host's memory running out.
+VAL_ADDRESS_SPACE_BYTES = 8 * 2**30
 
 
 def plan_text(plan: Sequence[str]) -> str:
@@ -208,13 +213,28 @@ def spawn_val(files: Sequence[str], cwd: str) -> subprocess.Popen[bytes]:
     """VAL on (domain, problem, plan) files, in a session of its own (its process group is killed at a time limit),
     stderr in the same pipe as stdout (one descriptor to wait on, VAL's messages in their order)."""
     binary = validate_binary()
-    return subprocess.Popen([str(binary), *files], cwd=cwd, env=val_env(binary), stdin=subprocess.DEVNULL,
+    proc = subprocess.Popen([str(binary), *files], cwd=cwd, env=val_env(binary), stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    cap_address_space(proc.pid, VAL_ADDRESS_SPACE_BYTES)
+    return proc
+
+
+def cap_address_space(pid: int, limit_bytes: int) -> None:
+    """Limit a started child's address space (Linux `prlimit`; set from here rather than in the child before exec,
+    which is unsafe in a process with threads). Elsewhere, or when the child has already gone, nothing."""
+    if sys.platform != "linux":
+        return
+    import resource
+
+    try:
+        resource.prlimit(pid, resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+    except (ProcessLookupError, PermissionError, ValueError, OSError):
+        pass
 
 
 def remove_files(files: Sequence[str], tmp: str | None) -> None:
-    """Remove a run's files and, when given, their folder (a few known files: `shutil.rmtree`'s careful walk took
-    0.3 ms of a re-plan's critical path)."""
+    """Remove a run's files and, when given, their folder (a few known files: `shutil.rmtree`'s careful walk is a
+    visible part of a short re-plan's critical path)."""
     for path in files:
         try:
             os.unlink(path)
@@ -238,8 +258,8 @@ def validate_plan(domain: str, problem: str, plan: Sequence[str], timeout_s: flo
 
 def scratch_dir() -> str | None:
     """Where VAL's three small files go: the temporary directory a caller chose (`tempfile.tempdir`), else
-    memory (`/dev/shm`) when there is one, else the system's default. On the development machines creating and
-    removing a directory on the disk costs 1-4 ms, in memory 0.02 ms: a tenth of a relative re-plan."""
+    memory (`/dev/shm`) when there is one, else the system's default: creating and removing a directory on a disk
+    can cost a good part of a short re-plan, in memory next to nothing."""
     if tempfile.tempdir is None and os.path.isdir(SHM) and os.access(SHM, os.W_OK | os.X_OK):
         return SHM
     return None
@@ -309,9 +329,9 @@ def keep_off_this_cpu(pid: int) -> Callable[[], None] | None:
 
     Why: a child started while this thread goes on working begins on this thread's CPU, and on the 2-core
     machines measured the scheduler left it there, sharing one core with its parent while the other idled, for
-    most of VAL's run: a 3.3 ms (CPU) VAL run beside a re-plan's write ended 7.9 ms after its start, against 4.8 ms
-    kept off the parent's CPU (median of 54 relative 20 x 12 re-plans each, in-process). The caller lets it go
-    (`ValRun` does, as soon as it waits for VAL), so a run never waits for one busy CPU while another is free."""
+    most of VAL's run: a VAL run beside a re-plan's write ended markedly later than one kept off the parent's
+    CPU (relative 20 x 12 re-plans, in-process). The caller lets it go (`ValRun` does, as soon as it waits for
+    VAL), so a run never waits for one busy CPU while another is free."""
     try:
         allowed = os.sched_getaffinity(0)
         cpu = _current_cpu()

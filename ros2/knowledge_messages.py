@@ -45,7 +45,7 @@ def read_request(topic: str, data: str) -> KnowledgeRequest:
         raise Ros2Error(f"{topic}.{unknown[0]}: unknown field (the fields are {', '.join(sorted(spec))})")
     fields: dict[str, Any] = {}
     for name, (kind, required) in spec.items():
-        value = body.get(name)
+        value: Any = body.get(name)  # checked against the field's kind just below
         if value is None:
             if required:
                 raise Ros2Error(f"{topic}.{name}: required")

@@ -165,7 +165,7 @@ def test_a_perception_whose_planning_worker_dies_answers_and_the_next_one_plans(
         rng = random.Random(11)
         client.put(f"/objects/{big}/goal", json={"link_orientations_deg": _angles(rng, 200)}).raise_for_status()
         client.put(f"/objects/{mid}/goal", json={"link_orientations_deg": [90] * 20}).raise_for_status()
-        pool = app.state.orchestrator.pool
+        pool = app.state.context.pool
         answer: dict = {}
         worker = threading.Thread(target=lambda: answer.update(r=client.post(
             f"/objects/{big}/perceptions", json={"link_orientations_deg": _angles(rng, 200)})))

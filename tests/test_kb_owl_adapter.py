@@ -112,7 +112,7 @@ def test_a_replanning_perception_writes_little_to_the_log_however_long_the_histo
     10 MB per perception over 3,000); with 4 KiB pages it is about 0.5 MB."""
     import random
 
-    from planhrc.kb_service.orchestrator import Orchestrator
+    from planhrc.kb_service import usecases
     from planhrc.kb_service.store import KnowledgeBase
     from planhrc.paths import default_tbox_path
     from planhrc.settings import make_settings
@@ -120,13 +120,14 @@ def test_a_replanning_perception_writes_little_to_the_log_however_long_the_histo
     tbox = default_tbox_path()
     rng = random.Random(3)
     with KnowledgeBase(str(tmp_path / "kb.sqlite3"), tbox) as kb:
-        cell = Orchestrator(kb, make_settings(tbox_path=str(tbox), planner="inproc"))
-        ident = cell.create_object("bar", 8, 12, "relative").ident
-        cell.set_goal(ident, [rng.randrange(12) * 30 for _ in range(8)])
+        context = usecases.open_context(kb, make_settings(tbox_path=str(tbox), planner="inproc"))
+        ident = usecases.create_object(context, usecases.NewObject("bar", 8, 12, "relative")).id
+        usecases.set_goal(context, usecases.GoalRequest(ident, tuple(rng.randrange(12) * 30 for _ in range(8))))
 
         def perceive(n: int) -> None:
             for _ in range(n):  # random configurations: nearly every one is off the plan and re-plans
-                cell.handle_perception(ident, [rng.randrange(12) * 30 for _ in range(8)])
+                links = tuple(rng.randrange(12) * 30 for _ in range(8))
+                usecases.perceive(context, usecases.PerceptionRequest(ident, links))
 
         perceive(20)
         kb.settle()  # the plans' triples too (the store's writer thread writes them behind each answer)
@@ -140,6 +141,7 @@ def test_a_replanning_perception_writes_little_to_the_log_however_long_the_histo
         kb.settle()
         frames = db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()[0][1]
         per_perception = frames * quads.page_size() / 10
+        usecases.close_context(context)
     assert per_perception < 800_000, per_perception
 
 

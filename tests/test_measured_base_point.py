@@ -106,13 +106,13 @@ def test_a_bad_measured_base_point_is_refused_in_one_line_and_changes_nothing(cl
 
 
 def test_the_library_entry_refuses_a_bad_base_point_naming_it():
-    from planhrc.kb_service.orchestrator import _measured_base
     from planhrc.kb_service.store import ValidationError
+    from planhrc.kb_service.usecases.inputs import measured_base
 
-    assert _measured_base([0.6, 0.39]) == (0.6, 0.39) and _measured_base(None) is None
+    assert measured_base([0.6, 0.39]) == (0.6, 0.39) and measured_base(None) is None
     for bad in ([0.6], [float("nan"), 0.0], ["x", 0.0], 0.6):
         with pytest.raises(ValidationError, match="^base_point_xy: "):
-            _measured_base(bad)  # type: ignore[arg-type]
+            measured_base(bad)  # type: ignore[arg-type]
 
 
 def test_the_openapi_documents_the_measured_base_point(client):

@@ -12,6 +12,7 @@ from planhrc.paths import default_tbox_path
 from planhrc.pipeline import config_from_settings, plan
 from planhrc.planner.result import PlanResult, PlanStatus
 from planhrc.settings import make_settings
+from planhrc.translator import read_domain_model, translate
 from planhrc.vocabulary import PlanningStatus
 from tests.scenarios import SCENARIOS
 
@@ -69,13 +70,13 @@ def test_the_value_is_stored_in_one_write_and_reads_back_equal(config, tmp_path)
 def test_a_plan_val_rejects_is_refused(config, monkeypatch):
     obj, init, goal = _setup("relative", 3, 4, (0, 0, 0), (0, 90, 0))
     wrong = ("(rotateanticlockwise obj2_l2 obj2_l1 obj2_j1 deg_0 deg_270)",)  # names another object: VAL refuses
-    monkeypatch.setattr(pipeline, "run_planners",
+    monkeypatch.setattr(pipeline.stages, "run_planners",
                         lambda task, cfg, timeout_s=None: PlanResult(PlanStatus.SOLVED, wrong, 0.0, "stub"))
     outcome = plan(obj, init, goal, config)
     assert outcome.status == "invalid" and "replay" in outcome.message  # the replay refuses it before VAL
     assert outcome.actions == () and outcome.expected_states == ()
     solved = pipeline.PlanOutcome(PlanningStatus.SOLVED, "", "stub", None, (None,), (init, goal),  # type: ignore
-                                  task=pipeline.translate(obj, init, goal, pipeline.read_domain_model(
+                                  task=translate(obj, init, goal, read_domain_model(
                                       config.tbox_path, "relative"), "t"), steps=wrong)
     checked = pipeline.validate(solved, obj, config)
     assert checked.status == "invalid" and "VAL" in checked.message
@@ -126,3 +127,24 @@ def test_a_task_the_in_process_planner_refuses_goes_to_the_fallback_planner(conf
     assert outcome.solved and outcome.planner == "fd-lama"
     assert len(outcome.actions) == 2
     assert plan(obj, init, goal, replace(config, fallback_planner=None)).status == "error"
+
+
+def test_a_plan_val_refuses_passes_the_task_to_the_next_planner(config, monkeypatch):
+    """Isolates the pipeline's reaction to VAL's refusal: VAL (the real one) is handed a tampered copy of the
+    in-process planner's plan; the next planner of the chain (Fast Downward, real) plans the task and VAL accepts it,
+    and the answer's attempts say why the first plan was not taken."""
+    real_validate = pipeline.stages.validate
+
+    def tampered(outcome, obj, cfg, deadline_at=None):
+        if outcome.planner == "inproc":
+            outcome = replace(outcome, steps=outcome.steps[1:])  # VAL sees a plan without its first step
+        return real_validate(outcome, obj, cfg, deadline_at)
+
+    monkeypatch.setattr(pipeline.stages, "validate", tampered)
+    obj, init, goal = _setup("relative", 4, 4, (0, 0, 0, 0), (0, 90, 90, 0))
+    outcome = plan(obj, init, goal, config)
+    assert outcome.solved and outcome.validated and outcome.planner == "fd-lama"
+    refused = [a for a in outcome.attempts if a.status is PlanStatus.INVALID]
+    assert [a.planner for a in refused] == ["inproc"] and "VAL" in refused[0].message
+    alone = plan(obj, init, goal, replace(config, fallback_planner=None))  # no planner left: the refusal stands
+    assert alone.status == "invalid" and not alone.actions

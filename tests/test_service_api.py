@@ -338,7 +338,7 @@ def test_unsolvable_or_failed_planning_answers_no_plan(client, monkeypatch):
     from planhrc import pipeline
     from planhrc.vocabulary import PlanningStatus
 
-    monkeypatch.setattr(pipeline, "find_plan",
+    monkeypatch.setattr(pipeline.stages, "find_plan",
                         lambda *a, **k: pipeline.PlanOutcome(PlanningStatus.UNSOLVABLE, "no plan exists", "stub"))
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
@@ -580,8 +580,8 @@ def test_openapi_examples_use_ids_the_store_really_produces(client):
 
 def test_a_plan_val_refuses_is_never_stored_or_dispatched(client, monkeypatch):
     """VAL runs while the store writes the new plan; when it refuses, the write is rolled back and the perception
-    is stored alone, answered no_plan. (VAL is made to refuse: the unit under test is the orchestrator.)"""
-    from planhrc import pipeline
+    is stored alone, answered no_plan. (VAL is made to refuse: the unit under test is the perception's use case.)"""
+    from planhrc.pipeline import val_runs
     from planhrc.planner.validate import ValidationResult
 
     class Refusing:  # a VAL run (pipeline.ValCheck) that refuses
@@ -591,7 +591,7 @@ def test_a_plan_val_refuses_is_never_stored_or_dispatched(client, monkeypatch):
         def cancel(self):
             pass
 
-    monkeypatch.setattr(pipeline, "start_val", lambda *a, **k: Refusing())
+    monkeypatch.setattr(val_runs, "start_val", lambda *a, **k: Refusing())
     oid = new_object(client)
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]})
     answer = perceive(client, oid, [0, 0, 0, 0])

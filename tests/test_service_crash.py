@@ -1,13 +1,40 @@
-"""One perception, one transaction: `planhrc serve` killed (SIGKILL) inside a perception's store write keeps
-all of every earlier perception and nothing of the killed one, and goes on after a restart."""
+"""One perception, one transaction: the service killed (SIGKILL) inside a perception's store write keeps all of
+every earlier perception and nothing of the killed one, and `planhrc serve` goes on after a restart on the same
+file. The kill comes from the test's own launcher (`crash_launcher`: the service's app around a store that dies
+before committing its N-th perception), not from the service."""
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
 
 import httpx
 import pytest
 
-from tests.servers import TOKEN, served, settled_health, store_location, token_client
+from planhrc.service_process import RunningService, die_with_parent, stop_process_group
+from tests.servers import (TOKEN, free_port, serve_env, served, settled_health, store_location, token_client,
+                           wait_until_serving)
+
+
+@contextmanager
+def crashing_service(db: str, folder: Path, crash_at: int) -> Iterator[RunningService]:
+    """The service on `db` (`tests.crash_launcher`), dying inside the write of its `crash_at`-th perception."""
+    port = free_port()
+    log_path = folder / f"crash-{port}.log"
+    with open(log_path, "wb") as log_file:
+        proc = subprocess.Popen([sys.executable, "-m", "tests.crash_launcher", "--port", str(port), "--db", str(db),
+                                 "--crash-at", str(crash_at)], cwd=folder, env=serve_env({"PLANHRC_TOKEN": TOKEN}),
+                                stdout=log_file, stderr=subprocess.STDOUT, start_new_session=True,
+                                preexec_fn=die_with_parent)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        wait_until_serving(proc, url, log_path=log_path)
+        yield RunningService(url, proc.pid, log_path)
+    finally:
+        stop_process_group(proc)
 
 
 def _perceive(client: httpx.Client, oid: str, links: list[float], key: str) -> httpx.Response:
@@ -26,9 +53,7 @@ def _dead(pid: int) -> bool:
 @pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
 def test_serve_killed_inside_a_perception_write_keeps_all_or_nothing(tmp_path, backend, request):
     db = store_location(backend, tmp_path, request)
-    with served(db, env={"PLANHRC_TOKEN": TOKEN, "PLANHRC_CRASH_IN_PERCEPTION_WRITE": "3"},
-                folder=tmp_path) as server, \
-            token_client(server) as client:
+    with crashing_service(db, tmp_path, crash_at=3) as server, token_client(server) as client:
         oid = client.post("/objects", json={"name": "rod", "links": 3, "orientations": 4,
                                             "formulation": "relative"}).json()["id"]
         assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]}).status_code == 200

@@ -11,8 +11,8 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")  # starlette's notice about httpx2
     from fastapi.testclient import TestClient
 
-from planhrc import pipeline
-from planhrc.kb_service import orchestrator
+from planhrc.kb_service.usecases import perception
+from planhrc.pipeline import val_runs
 from planhrc.kb_service.app import create_app
 from planhrc.kb_service.store import KnowledgeBase
 from planhrc.planner.validate import ValidationResult
@@ -101,7 +101,7 @@ def test_a_slow_val_on_one_object_does_not_hold_the_store(db, monkeypatch):
         for oid in (slow, fast):
             client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
         client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 90, 0]})
-        real = pipeline.start_val
+        real = val_runs.start_val
         started = threading.Event()
 
         def start_val(task, steps, armed=None):
@@ -111,7 +111,7 @@ def test_a_slow_val_on_one_object_does_not_hold_the_store(db, monkeypatch):
                 return _Slower(check, 3.0)
             return check
 
-        monkeypatch.setattr(pipeline, "start_val", start_val)
+        monkeypatch.setattr(val_runs, "start_val", start_val)
         slow_answer, timings, done_before = timed_beside(
             lambda: client.post(f"/objects/{slow}/perceptions", json={"link_orientations_deg": [0, 0, 0]}),
             started, (
@@ -153,12 +153,12 @@ class _Slower:
 
 def _timed_val(monkeypatch, seconds: float, verdict: ValidationResult | None = None) -> list[float]:
     """VAL made `seconds` slower (and, with `verdict`, answering that); the times its runs end."""
-    real, ended = pipeline.start_val, []
+    real, ended = val_runs.start_val, []
 
     def start_val(task, steps, armed=None):
         return _Slower(real(task, steps, armed), seconds, verdict, ended)
 
-    monkeypatch.setattr(pipeline, "start_val", start_val)
+    monkeypatch.setattr(val_runs, "start_val", start_val)
     return ended
 
 
@@ -179,7 +179,7 @@ def test_a_relative_replan_writes_while_val_checks_and_stores_only_what_val_acce
     with TestClient(create_app(make_settings(db_path=db, token=None))) as client:
         oid = _object(client, 3)
         client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
-        monkeypatch.setattr(orchestrator, "OVERLAP_WAIT_S", 10.0)  # this test is about the overlap, not its bound
+        monkeypatch.setattr(perception, "OVERLAP_WAIT_S", 10.0)  # this test is about the overlap, not its bound
         ended, starts = _timed_val(monkeypatch, 0.05), _write_starts(monkeypatch)
         answer = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0]}).json()
         assert answer["decision"] == "replan" and answer["next_action"] is not None
@@ -187,7 +187,7 @@ def test_a_relative_replan_writes_while_val_checks_and_stores_only_what_val_acce
         assert client.get(f"/objects/{oid}/plan").json()["id"] == answer["plan_id"]
 
         monkeypatch.undo()
-        monkeypatch.setattr(orchestrator, "OVERLAP_WAIT_S", 10.0)
+        monkeypatch.setattr(perception, "OVERLAP_WAIT_S", 10.0)
         ended = _timed_val(monkeypatch, 0.05, ValidationResult(False, "step 1: precondition not satisfied", 0.0))
         starts = _write_starts(monkeypatch)
         refused = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 270, 180]}).json()

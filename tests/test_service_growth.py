@@ -152,10 +152,10 @@ def test_a_slow_plan_on_one_object_stalls_neither_another_object_nor_reads(clien
     import threading
     import time
 
-    from planhrc import pipeline
+    from planhrc.pipeline import stages
 
     slow, fast = new_object(client), new_object(client)
-    real_plan = pipeline.find_plan
+    real_plan = stages.find_plan
     started = threading.Event()
 
     def plan(obj, *args, **kwargs):
@@ -167,7 +167,7 @@ def test_a_slow_plan_on_one_object_stalls_neither_another_object_nor_reads(clien
     for oid in (slow, fast):
         client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
     client.post(f"/objects/{fast}/perceptions", json={"link_orientations_deg": [0, 90, 0]})  # the planner's imports
-    monkeypatch.setattr(pipeline, "find_plan", plan)
+    monkeypatch.setattr(stages, "find_plan", plan)
     slow_answer, timings, done_before = timed_beside(
         lambda: client.post(f"/objects/{slow}/perceptions", json={"link_orientations_deg": [0, 0, 0]}),
         started, (

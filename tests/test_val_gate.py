@@ -1,7 +1,7 @@
 """The early answer: a re-plan on a domain with conditional effects is answered once VAL has accepted the plan's
 first piece, and no later step is dispatched before VAL has accepted the piece it lies in (through a restart).
 
-The service runs in process on a real store file, with the real planner and real VAL. Two tests hold the later
+The service's use cases run in process on a real store file, with the real planner and real VAL. Two tests hold the later
 pieces' VAL back (a wrapper that waits before calling the real VAL) to see what happens while a verdict is pending;
 one hands VAL a plan with a tampered later step (the stored plan is the planner's: only VAL's copy differs).
 """
@@ -10,18 +10,20 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Iterator
 
 import pytest
 
 from planhrc import pipeline
-from planhrc.kb_service import val_gate
-from planhrc.kb_service.orchestrator import Orchestrator
+from planhrc.kb_service import usecases
 from planhrc.kb_service.planning_pool import PlanningPool
 from planhrc.kb_service.store import KnowledgeBase
-from planhrc.kb_service.val_gate import PieceRecord, Verdict
+from planhrc.kb_service.usecases import (Context, FeedbackRequest, GoalRequest, NewObject, PerceptionRequest,
+                                        give_feedback, perceive, take_next_action)
+from planhrc.kb_service.usecases.log import piece_record_of
+from planhrc.pipeline import PieceRecord, Verdict, gate, later, stages
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 from planhrc.settings import make_settings
@@ -33,20 +35,28 @@ GOAL = [180, 0, 180, 0, 180, 0, 180, 0, 180, 0]
 
 
 @contextlib.contextmanager
-def service(db: Path, pool: PlanningPool | None = None, **overrides) -> Iterator[tuple[KnowledgeBase, Orchestrator]]:
+def service(db: Path, pool: PlanningPool | None = None, **overrides) -> Iterator[tuple[KnowledgeBase, Context]]:
     tbox = default_tbox_path()
     with KnowledgeBase(str(db), tbox) as kb:
-        cell = Orchestrator(kb, make_settings(tbox_path=str(tbox), **overrides), pool=pool)
+        context = usecases.open_context(kb, make_settings(tbox_path=str(tbox), **overrides), pool=pool)
         try:
-            yield kb, cell
+            yield kb, context
         finally:
-            cell.close()
+            usecases.close_context(context)
 
 
-def new_object(cell: Orchestrator, formulation: str = "absolute") -> str:
-    ident = cell.create_object("bar", LINKS, K, formulation).ident
-    cell.set_goal(ident, GOAL)
+def new_object(cell: Context, formulation: str = "absolute") -> str:
+    ident = usecases.create_object(cell, NewObject("bar", LINKS, K, formulation)).id
+    usecases.set_goal(cell, GoalRequest(ident, tuple(GOAL)))
     return ident
+
+
+def perceived(cell: Context, oid: str, links: list) -> usecases.Turn:
+    return perceive(cell, PerceptionRequest(oid, tuple(links)))
+
+
+def succeeded(cell: Context, oid: str, action: usecases.NextAction) -> None:
+    give_feedback(cell, FeedbackRequest(oid, action.id, "succeeded"))
 
 
 def kinds(kb: KnowledgeBase, oid: str, kind: str) -> list:
@@ -61,13 +71,13 @@ def adoption(kb: KnowledgeBase, oid: str, plan_id: str):
 def held_back(monkeypatch):
     """VAL on the later pieces waits until the test sets the event (then runs the real VAL)."""
     release = threading.Event()
-    real = val_gate.check_piece
+    real = later.check_piece
 
     def slow(*args, **kwargs):
         release.wait(60)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(val_gate, "check_piece", slow)
+    monkeypatch.setattr(later, "check_piece", slow)
     yield release
     release.set()
 
@@ -75,55 +85,56 @@ def held_back(monkeypatch):
 def test_the_answer_comes_once_the_first_piece_is_accepted_and_a_later_step_waits_for_its_verdict(tmp_path, held_back):
     with service(tmp_path / "kb.sqlite3") as (kb, cell):
         oid = new_object(cell)
-        answer = cell.handle_perception(oid, START)
-        assert answer["decision"] == "replan" and answer["next_action"]["step"] == 1
-        event = adoption(kb, oid, answer["plan_id"])
+        answer = perceived(cell, oid, START)
+        assert answer.decision == "replan" and answer.next_action.step == 1
+        event = adoption(kb, oid, answer.plan_id)
         pieces = event.data["val_pieces"]
         accepted = event.data["val_accepted"]
         first = pieces[:len(accepted)]  # the first motion, in pieces checked at once before the answer
         assert accepted == list(range(1, len(accepted) + 1)) and len(pieces) > len(accepted)
-        assert first[0][0] == 1 and first[-1][1] == answer["next_action"]["last_step"]
+        assert first[0][0] == 1 and first[-1][1] == answer.next_action.last_step
         assert all(b + 1 == c for (_, b), (c, _) in zip(pieces, pieces[1:]))  # consecutive, nothing left out
-        assert pieces[-1][1] == len(cell.describe_plan(answer["plan_id"])["steps"])
-        assert "are checked before they are dispatched" in answer["reason"]
+        assert pieces[-1][1] == len(usecases.read_plan(cell, answer.plan_id).steps)
+        assert "are checked before they are dispatched" in answer.reason
         assert kinds(kb, oid, "val_verdict") == []  # answered while VAL still holds the later pieces
 
-        action = cell.take_next_action(oid)  # the first motion lies in the accepted piece
-        assert action is not None and action["step"] == 1
-        cell.handle_feedback(oid, action["id"], "succeeded")
-        links = move(START, action)
+        action = take_next_action(cell, oid)  # the first motion lies in the accepted piece
+        assert action is not None and action.step == 1
+        succeeded(cell, oid, action)
+        links = move(START, asdict(action))
         result: dict = {}
-        perceiving = threading.Thread(target=lambda: result.update(cell.handle_perception(oid, links)))
+        perceiving = threading.Thread(target=lambda: result.update(turn=perceived(cell, oid, links)))
         perceiving.start()
         perceiving.join(1.5)
         assert perceiving.is_alive(), "a step of a piece VAL has not decided on must wait for the verdict"
         held_back.set()
         perceiving.join(60)
-        assert result["decision"] == "continue" and result["next_action"]["step"] == pieces[len(accepted)][0]
+        turn = result["turn"]
+        assert turn.decision == "continue" and turn.next_action.step == pieces[len(accepted)][0]
         verdicts = kinds(kb, oid, "val_verdict")
         decided = next(e for e in reversed(kb.list_events(oid)) if e.kind == "continue")
         assert any(v.data["piece"] == len(accepted) + 1 and v.data["verdict"] == "accepted" and v.seq < decided.seq
                    for v in verdicts)
 
 
-def _tamper_once(cell: Orchestrator, monkeypatch) -> list:
+def _tamper_once(cell: Context, monkeypatch) -> list:
     """VAL's copy of the first plan gets one later step turned the other way (the store keeps the planner's)."""
-    real = cell._run_pipeline
+    real = stages.expect
     tampered: list = []
 
-    def run(obj, init, goal, placement=None, deadline_at=None):
-        outcome, started = real(obj, init, goal, placement, deadline_at)
-        assert started is None  # absolute: VAL checks the plan in pieces, after the pipeline
+    def expect(obj, init, goal, found, deadline_at):
+        outcome = real(obj, init, goal, found, deadline_at)
+        assert not cell.validator.beside(outcome.task)  # absolute: VAL checks the plan in pieces, after the pipeline
         if tampered or not outcome.solved:
-            return outcome, started
+            return outcome
         k = len(outcome.steps) - 3  # in the last piece
         words = outcome.steps[k].strip("()").split()
         name = "rotateclockwise" if "anticlockwise" in words[0] else "rotateanticlockwise"
         flipped = "(" + " ".join([name] + words[1:-2] + [words[-1], words[-2]]) + ")"
         tampered.append(k + 1)
-        return replace(outcome, steps=outcome.steps[:k] + (flipped,) + outcome.steps[k + 1:]), started
+        return replace(outcome, steps=outcome.steps[:k] + (flipped,) + outcome.steps[k + 1:])
 
-    monkeypatch.setattr(cell, "_run_pipeline", run)
+    monkeypatch.setattr(stages, "expect", expect)
     return tampered
 
 
@@ -131,10 +142,10 @@ def test_a_later_piece_val_refuses_is_never_dispatched_and_leads_to_a_replan(tmp
     with service(tmp_path / "kb.sqlite3") as (kb, cell):
         oid = new_object(cell)
         tampered = _tamper_once(cell, monkeypatch)
-        answer = cell.handle_perception(oid, START)
-        plan_id = answer["plan_id"]
-        assert answer["decision"] == "replan" and tampered
-        record = PieceRecord.from_event(plan_id, adoption(kb, oid, plan_id).data)
+        answer = perceived(cell, oid, START)
+        plan_id = answer.plan_id
+        assert answer.decision == "replan" and tampered
+        record = piece_record_of(plan_id, adoption(kb, oid, plan_id).data)
         refused = record.covering(tampered[0], tampered[0])[0]
         first_refused = record.bounds(refused)[0]
         deadline = time.monotonic() + 60
@@ -144,22 +155,22 @@ def test_a_later_piece_val_refuses_is_never_dispatched_and_leads_to_a_replan(tmp
 
         links, withheld = list(START), None
         while True:  # the robot carries out the plan motion after motion, as far as VAL accepted it
-            action = cell.take_next_action(oid)
+            action = take_next_action(cell, oid)
             if action is None:
                 withheld = kinds(kb, oid, "dispatch_withheld")
                 break
-            assert action["last_step"] < first_refused  # no motion reaching into the refused piece goes out
-            cell.handle_feedback(oid, action["id"], "succeeded")
-            links = move(links, action)
+            assert action.last_step < first_refused  # no motion reaching into the refused piece goes out
+            succeeded(cell, oid, action)
+            links = move(links, asdict(action))
         assert withheld and f"VAL refused piece {refused}" in withheld[-1].reason
-        assert cell.kb.get_execution(oid).status == "idle"
+        assert kb.get_execution(oid).status == "idle"
 
-        again = cell.handle_perception(oid, links)
-        assert again["decision"] == "replan" and again["plan_id"] != plan_id
-        assert f"VAL refused piece {refused} of plan {plan_id}" in again["reason"]
+        again = perceived(cell, oid, links)
+        assert again.decision == "replan" and again.plan_id != plan_id
+        assert f"VAL refused piece {refused} of plan {plan_id}" in again.reason
         dispatched = [e.data["step"] for e in kinds(kb, oid, "dispatched") if e.data["plan_id"] == plan_id]
         assert dispatched and max(dispatched) < first_refused
-        assert cell.take_next_action(oid)["plan_id"] == again["plan_id"]
+        assert take_next_action(cell, oid).plan_id == again.plan_id
 
 
 def test_after_a_restart_a_step_whose_verdict_was_not_recorded_is_checked_by_val_before_it_goes_out(
@@ -167,42 +178,42 @@ def test_after_a_restart_a_step_whose_verdict_was_not_recorded_is_checked_by_val
     db = tmp_path / "kb.sqlite3"
     with service(db) as (kb, cell):
         oid = new_object(cell)
-        answer = cell.handle_perception(oid, START)
-        plan_id = answer["plan_id"]
+        answer = perceived(cell, oid, START)
+        plan_id = answer.plan_id
         accepted = len(adoption(kb, oid, plan_id).data["val_accepted"])
-        action = cell.take_next_action(oid)
-        cell.handle_feedback(oid, action["id"], "succeeded")
+        action = take_next_action(cell, oid)
+        succeeded(cell, oid, action)
         assert kinds(kb, oid, "val_verdict") == []
     held_back.set()  # the stopped service's VAL runs were cancelled: nothing more is recorded
-    links = move(START, action)
+    links = move(START, asdict(action))
 
     with service(db) as (kb, cell):  # a restart on the same file
         time.sleep(0.2)
         assert kinds(kb, oid, "val_verdict") == []
-        decided = cell.handle_perception(oid, links)
-        assert decided["decision"] == "continue" and decided["plan_id"] == plan_id
-        step = decided["next_action"]["step"]
+        decided = perceived(cell, oid, links)
+        assert decided.decision == "continue" and decided.plan_id == plan_id
+        step = decided.next_action.step
         verdicts = kinds(kb, oid, "val_verdict")
         assert [(v.data["piece"], v.data["verdict"]) for v in verdicts] == [(accepted + 1, "accepted")]
         assert verdicts[0].data["first_step"] <= step <= verdicts[0].data["last_step"]
         continued = [e for e in kb.list_events(oid) if e.kind == "continue"][-1]
         assert verdicts[0].seq < continued.seq
-        taken = cell.take_next_action(oid)
-        assert taken["step"] == step
+        taken = take_next_action(cell, oid)
+        assert taken.step == step
         assert len(kinds(kb, oid, "val_verdict")) == 1  # recorded once, not asked again
 
 
 def test_relative_plans_and_the_setting_off_are_validated_whole_before_the_answer(tmp_path):
     with service(tmp_path / "rel.sqlite3") as (kb, cell):
         oid = new_object(cell, "relative")
-        answer = cell.handle_perception(oid, START)
-        assert answer["decision"] == "replan"
-        assert "val_pieces" not in adoption(kb, oid, answer["plan_id"]).data
+        answer = perceived(cell, oid, START)
+        assert answer.decision == "replan"
+        assert "val_pieces" not in adoption(kb, oid, answer.plan_id).data
     with service(tmp_path / "off.sqlite3", val_early_answer=False) as (kb, cell):
         oid = new_object(cell)
-        answer = cell.handle_perception(oid, START)
-        assert answer["decision"] == "replan"
-        assert "val_pieces" not in adoption(kb, oid, answer["plan_id"]).data
+        answer = perceived(cell, oid, START)
+        assert answer.decision == "replan"
+        assert "val_pieces" not in adoption(kb, oid, answer.plan_id).data
         time.sleep(0.3)
         assert kinds(kb, oid, "val_verdict") == []
 
@@ -212,9 +223,9 @@ def test_the_early_answer_on_the_planning_pool_path(tmp_path):
     service, the first piece before the answer and the rest behind it."""
     with PlanningPool(1, min_atoms=1) as pool, service(tmp_path / "kb.sqlite3", pool=pool) as (kb, cell):
         oid = new_object(cell)
-        answer = cell.handle_perception(oid, START)
-        assert answer["decision"] == "replan" and pool.pids()
-        event = adoption(kb, oid, answer["plan_id"]).data
+        answer = perceived(cell, oid, START)
+        assert answer.decision == "replan" and pool.pids()
+        event = adoption(kb, oid, answer.plan_id).data
         pieces, accepted = event["val_pieces"], event["val_accepted"]
         assert len(accepted) == 2  # the first motion of this plan has several steps: two pieces at once
         deadline = time.monotonic() + 60
@@ -259,3 +270,14 @@ def test_a_piece_record_names_the_pieces_a_motion_lies_in():
     assert record.covering(3, 5) == [1, 2]
     assert record.covering(20, 21) == [2, 3]
     assert record.bounds(3) == (21, 40)
+
+
+def test_the_gate_passes_a_motion_only_when_every_piece_it_lies_in_is_accepted():
+    record = PieceRecord("p", ((1, 3), (4, 20), (21, 40)), {1: Verdict(True, ""), 3: Verdict(False, "step 22 fails")})
+    assert gate(record, "p", 1, 3).passes
+    waiting = gate(record, "p", 3, 5)
+    assert waiting.missing == 2 and waiting.refusal is None and not waiting.passes
+    refused = gate(record.with_verdict(2, Verdict(True, "")), "p", 20, 21)
+    assert refused.refusal == "VAL refused piece 3 of plan p (a_21..a_40): step 22 fails" and not refused.passes
+    assert gate(record, "another plan", 21, 40).passes and gate(None, "p", 21, 40).passes  # validated whole
+    assert record.verdicts.keys() == {1, 3}  # with_verdict made a new record

@@ -1,0 +1,79 @@
+"""A worker's feedback on the dispatched action: with `succeeded` the execution moves past the motion's last step
+and the next perception checks the expected state there; otherwise the next perception decides whether to retry,
+resume or re-plan. Feedback on an action a perception already moved past is recorded as *late* and moves nothing."""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from planhrc.pipeline import action_motion
+from planhrc.vocabulary import ActionOutcome, ExecutionStatus
+
+from ..store import ConflictError, Execution
+from .actions import last_step, merges
+from .context import Context
+from .idempotency import fingerprint, recall, remember
+from .inputs import action_outcome, failure_reason, finite_or_none
+from .log import EventKind
+from .values import Accepted, FeedbackResult, feedback_of, feedback_record
+
+
+@dataclass(frozen=True)
+class FeedbackRequest:
+    """A worker's report on action `action_id`: its outcome, why it failed (`reason`, a FailureReason) and the
+    turned link's measured orientation (`measured_deg`) when it did not succeed."""
+
+    object_id: str
+    action_id: str
+    outcome: str
+    message: str = ""
+    idempotency_key: str | None = None
+    reason: str | None = None
+    measured_deg: float | None = None
+
+
+def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
+    """Record the feedback and move the execution (see the module's note)."""
+    outcome = action_outcome(request.outcome)
+    failure = failure_reason(outcome, request.reason)
+    measured_deg = finite_or_none(request.measured_deg, "measured_deg")
+    store, object_id, action_id, message = context.store, request.object_id, request.action_id, request.message
+    with context.locks.hold(object_id):
+        obj = store.get_object(object_id)
+        print_ = fingerprint({"feedback": [action_id, outcome, message]}
+                             if failure is None and measured_deg is None else
+                             {"feedback": [action_id, outcome, message, failure, measured_deg]})
+        recalled = recall(store, object_id, request.idempotency_key, print_)
+        if recalled is not None:
+            return feedback_of(recalled)
+        action = store.get_action(action_id)
+        execution = store.get_execution(object_id)
+        if execution.dispatched_action_id != action_id:
+            current = execution.dispatched_action_id or "none"
+            raise ConflictError(
+                f"action_id: {action_id} is not the current dispatched action of {object_id} (current: {current})")
+        if execution.status == ExecutionStatus.DISPATCHED:
+            accepted = Accepted.CURRENT
+            plan, _ = context.views.get(store, execution.plan_id)
+            split_plans = context.memory.of(store, object_id).split_plans
+            last = (last_step(merges(context.settings.merge_macro_steps, split_plans, plan.id), obj, plan, action)
+                    if plan else action.step)
+            next_step = last + 1 if outcome == ActionOutcome.SUCCEEDED else action.step
+            new = Execution(execution.plan_id, next_step, ExecutionStatus.READY, None)
+            text = f"a_{action.step} {outcome}" + (
+                f": the next perception checks s^e_{next_step}" if outcome == ActionOutcome.SUCCEEDED
+                else ": the next perception decides whether to retry, resume or re-plan")
+        else:
+            accepted = Accepted.LATE
+            new = replace(execution, dispatched_action_id=None)
+            text = f"a_{action.step} {outcome}, reported after a perception had already moved the execution"
+        result = FeedbackResult(action_id, accepted, new)
+        why = f" [{failure}]" if failure is not None else ""
+        motion = action_motion(obj, action)
+        with store.transaction():
+            store.set_execution(object_id, new)
+            store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""),
+                            {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
+                             "reason": failure, "measured_deg": measured_deg, "message": message,
+                             "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"]})
+            remember(store, object_id, request.idempotency_key, print_, feedback_record(result))
+        return result

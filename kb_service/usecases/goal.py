@@ -1,0 +1,111 @@
+"""Set a goal: stored at once, with a Problem from the latest perceived state when one exists. Planning happens
+at the next perception (the paper: setting a goal triggers a perception), so a goal set before any perception
+waits for the first one. The old plan was made for another goal: the execution goes idle."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from planhrc.geometry import ObjectGeometry, configuration_feasible
+from planhrc.model import ArticulatedObject, Formulation, State, snap_angle
+from planhrc.vocabulary import ExecutionStatus
+
+from ..store import Execution, ValidationError
+from .context import Context
+from .inputs import allowed, check_count, check_finite
+from .log import EventKind
+from .memory import ObjectMemo
+from .values import GoalSet
+
+
+@dataclass(frozen=True)
+class GoalRequest:
+    """A goal: every link's orientation, or one angle per joint (None: that joint is free)."""
+
+    object_id: str
+    link_orientations_deg: tuple[float, ...] | None = None
+    joint_angles_deg: tuple[float | None, ...] | None = None
+    allow_infeasible: bool = False
+
+
+def set_goal(context: Context, request: GoalRequest) -> GoalSet:
+    """Store a goal. For a placed object a complete goal configuration is checked first: one off the table,
+    inside the robot or folded onto itself is refused naming the links (unless `allow_infeasible`); links
+    beyond the robot's reach are accepted with a warning (the robot will ask the human for them)."""
+    store, object_id = context.store, request.object_id
+    with context.locks.hold(object_id):
+        obj = store.get_object(object_id)
+        atoms = goal_atoms(obj, request.link_orientations_deg, request.joint_angles_deg)
+        memo = context.memory.of(store, object_id)
+        warnings = _warnings(context, obj, memo, atoms, request)
+        with store.transaction():
+            goal = store.add_state(object_id, "goal", atoms)
+            problem = None
+            if memo.perceived_state_id is not None:
+                problem = store.add_problem(object_id, memo.perceived_state_id, goal.id)
+            store.set_execution(object_id, Execution(None, None, ExecutionStatus.IDLE, None))
+            context.validator.stop(object_id)
+            store.add_event(object_id, EventKind.GOAL_SET,
+                            "goal set; the next perception plans towards it"
+                            + (f" ({'; '.join(warnings)})" if warnings else ""),
+                            {"goal_state_id": goal.id, "problem_id": problem.id if problem else None,
+                             "warnings": warnings})
+        return GoalSet(goal.id, problem.id if problem else None, tuple(warnings))
+
+
+def goal_atoms(obj: ArticulatedObject, link_orientations_deg: tuple[float, ...] | None,
+               joint_angles_deg: tuple[float | None, ...] | None) -> State:
+    if (link_orientations_deg is None) == (joint_angles_deg is None):
+        raise ValidationError("link_orientations_deg, joint_angles_deg: give exactly one of them")
+    if link_orientations_deg is not None:
+        field = "link_orientations_deg"
+        check_count(obj, link_orientations_deg, field)
+        check_finite(link_orientations_deg, field)
+        if any(v is None for v in link_orientations_deg):
+            raise ValidationError(f"{field}: every link needs an orientation")
+        values = obj.joint_values_from_links([v for v in allowed(obj, link_orientations_deg, field) if v is not None])
+        return obj.configuration_atoms(values)
+    assert joint_angles_deg is not None
+    return obj.partial_configuration_atoms(joint_angles_deg, field="joint_angles_deg")
+
+
+def _warnings(context: Context, obj: ArticulatedObject, memo: ObjectMemo, atoms: State,
+              request: GoalRequest) -> list[str]:
+    """The geometric check of a goal (placed objects, complete goals): raises ValidationError for an infeasible
+    one unless allowed; the warnings to answer with."""
+    base = memo.where
+    if base is None:
+        return []
+    links = _goal_links(context, obj, memo, atoms, request.link_orientations_deg)
+    if links is None:
+        return []
+    result = configuration_feasible(ObjectGeometry.of(obj, base), links)
+    blocking = [r for r in result.reasons if r.code != "out_of_reach"]
+    warnings = [f"goal: {r.message}" for r in result.reasons if r.code == "out_of_reach"]
+    if blocking and not request.allow_infeasible:
+        raise ValidationError("goal: " + "; ".join(r.message for r in blocking)
+                              + " (send allow_infeasible: true to set it anyway)")
+    if blocking:
+        warnings = [f"goal accepted although infeasible: {r.message}" for r in blocking] + warnings
+    return warnings
+
+
+def _goal_links(context: Context, obj: ArticulatedObject, memo: ObjectMemo, atoms: State,
+                link_orientations_deg: tuple[float, ...] | None) -> tuple[int, ...] | None:
+    """Every link's absolute orientation in a complete goal. Absolute formulation: as given. Relative: the goal
+    holds only the angles between links and the robot turns downstream links, so l1 stays where it was last
+    perceived (where it is given, before the first perception); None when the goal leaves a joint free or l1
+    is not known."""
+    values = obj.joint_values_of(atoms)
+    if len(values) != obj.n_joints:
+        return None
+    if obj.formulation is Formulation.ABSOLUTE:
+        return tuple(values[k] for k in obj.joint_indices)
+    store = context.store
+    perceived = store.get_state(memo.perceived_state_id) if memo.perceived_state_id is not None else None
+    if perceived is not None and perceived.link_orientations_deg:
+        first = snap_angle(perceived.link_orientations_deg[0], obj.orientations)
+    elif link_orientations_deg is not None:
+        first = int(float(link_orientations_deg[0])) % 360
+    else:
+        return None
+    return obj.link_orientations_of(atoms, first)

@@ -1,0 +1,152 @@
+"""Per-object memory the use cases share, each piece owned by one small class and passed explicitly:
+
+* `Memory`: what each object's event log says (its goal, latest perceived state, last feedback, failures, VAL's
+  verdicts...), read incrementally since the log is append-only, so a restarted service continues where it stopped;
+* `PlanViews`: the cooperation model's view of each object's current plan (its expected states and preconditions),
+  one plan per object.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, replace
+from typing import Any, Mapping
+
+from planhrc.cooperation import FailureHistory, PlanView
+from planhrc.pipeline import PieceRecord
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Remedy
+
+from ..store import StoredEvent, StoredPlan
+from .log import EventKind, piece_record_of, verdict_of
+from ..store import KnowledgeStore
+from .values import Accepted
+
+DECISIONS = frozenset(DecisionKind)
+
+
+@dataclass(frozen=True)
+class ObjectMemo:
+    """What the event log says about an object, up to event `seq`."""
+
+    seq: int = 0
+    goal_state_id: str | None = None
+    perceived_state_id: str | None = None
+    last_outcome: ActionOutcome | None = None  # a feedback informs only the next decision
+    base_point_xy: tuple[float, float] | None = None  # set: the object is placed in the cell (geometric checks)
+    measured_base_xy: tuple[float, float] | None = None  # where the latest perception measured the base point
+    failure: FailureHistory | None = None  # the motion failing since the last success, and the remedies tried
+    split_plans: frozenset[str] = frozenset()  # plans whose macro steps are dispatched step by step
+    last_decision: str | None = None  # the kind of the last decision logged
+    val: PieceRecord | None = None  # the latest plan adopted with only its first motion validated, and its verdicts
+
+    @property
+    def where(self) -> tuple[float, float] | None:
+        """The base point the geometric checks use: the latest measured one, else the one the object was created
+        with; None for an abstract object (no geometric checks)."""
+        if self.base_point_xy is None:
+            return None
+        return self.measured_base_xy or self.base_point_xy
+
+
+class Memory:
+    """One `ObjectMemo` per object, brought up to date with its event log by `of` (the caller holds the object's
+    lock, so one object's memo is read and replaced by one request at a time)."""
+
+    def __init__(self) -> None:
+        self._guard = threading.Lock()
+        self._memos: dict[str, ObjectMemo] = {}
+
+    def of(self, store: KnowledgeStore, object_id: str) -> ObjectMemo:
+        with self._guard:
+            memo = self._memos.get(object_id) or ObjectMemo()
+        events = store.list_events(object_id, after_seq=memo.seq)
+        if not events:
+            return memo
+        for event in events:
+            memo = _read(replace(memo, seq=max(memo.seq, event.seq)), event)
+        with self._guard:
+            self._memos[object_id] = memo
+        return memo
+
+
+def _read(memo: ObjectMemo, event: StoredEvent) -> ObjectMemo:
+    """The memo after one more event."""
+    data = event.data
+    if event.kind == EventKind.OBJECT_CREATED:
+        return replace(memo, base_point_xy=base_of(data))
+    if event.kind == EventKind.GOAL_SET:
+        return replace(memo, goal_state_id=data.get("goal_state_id"), failure=None)
+    if event.kind == DecisionKind.INCOMPLETE_PERCEPTION:
+        return memo  # it stored no state and decided nothing: the last feedback still informs the next decision
+    if event.kind == EventKind.FEEDBACK:
+        outcome = data.get("outcome")
+        return replace(memo, last_outcome=ActionOutcome(outcome) if outcome else None,
+                       failure=next_failure(memo.failure, data))
+    if event.kind == EventKind.VAL_VERDICT:
+        if memo.val is not None and memo.val.plan_id == data.get("plan_id"):
+            return replace(memo, val=memo.val.with_verdict(int(data["piece"]), verdict_of(data)))
+        return memo
+    if event.kind in DECISIONS:
+        remedy, plan_id = data.get("remedy"), data.get("plan_id")
+        failure = memo.failure
+        if remedy and failure is not None:
+            failure = replace(failure, tried=failure.tried + (Remedy(remedy),))
+        return replace(
+            memo,
+            val=piece_record_of(data["plan_id"], data) if data.get("val_pieces") else memo.val,
+            perceived_state_id=data.get("perceived_state_id") or memo.perceived_state_id,
+            measured_base_xy=base_of(data) or memo.measured_base_xy,
+            last_outcome=None, last_decision=event.kind, failure=failure,
+            split_plans=memo.split_plans | {plan_id} if remedy == Remedy.SPLIT and plan_id else memo.split_plans)
+    return memo
+
+
+def next_failure(failure: FailureHistory | None, data: Mapping[str, Any]) -> FailureHistory | None:
+    """The failure record after one feedback event: cleared by a success, counted for the same motion, started
+    anew for another; a failure without a reason is not a motion's failure."""
+    if data.get("outcome") == ActionOutcome.SUCCEEDED or data.get("accepted") == Accepted.LATE:
+        return None if data.get("outcome") == ActionOutcome.SUCCEEDED else failure
+    reason, joint, turned = data.get("reason"), data.get("joint_index"), data.get("turned_link_index")
+    if reason is None or joint is None or turned is None:
+        return None
+    if failure is not None and (failure.joint, failure.turned) == (joint, turned):
+        return replace(failure, reason=FailureReason(reason), failures=failure.failures + 1)
+    return FailureHistory(int(joint), int(turned), FailureReason(reason))
+
+
+def base_of(data: Mapping[str, Any]) -> tuple[float, float] | None:
+    """The base point an event keeps (None when it has none)."""
+    base = data.get("base_point_xy")
+    return (float(base[0]), float(base[1])) if base else None
+
+
+class PlanViews:
+    """The cooperation model's view of each object's plan, one plan per object (not every plan it ever had)."""
+
+    def __init__(self) -> None:
+        self._guard = threading.Lock()
+        self._views: dict[str, tuple[StoredPlan, PlanView]] = {}  # plan id -> view
+        self._view_of: dict[str, str] = {}  # object id -> the plan id cached in _views
+
+    def get(self, store: KnowledgeStore, plan_id: str | None) -> tuple[StoredPlan | None, PlanView | None]:
+        if plan_id is None:
+            return None, None
+        with self._guard:
+            cached = self._views.get(plan_id)
+        if cached is not None:
+            return cached
+        plan = store.get_plan(plan_id)
+        view = PlanView(
+            expected_states=tuple(store.get_state(sid).atoms for sid in plan.expected_state_ids),
+            preconditions=tuple(a.spec.pre for a in sorted(plan.actions, key=lambda a: a.step)),
+        )
+        self.keep(plan, view)
+        return plan, view
+
+    def keep(self, plan: StoredPlan, view: PlanView) -> None:
+        """Cache the view of an object's plan in place of the object's previous one."""
+        with self._guard:
+            previous = self._view_of.get(plan.object_id)
+            if previous is not None and previous != plan.id:
+                self._views.pop(previous, None)
+            self._views[plan.id] = (plan, view)
+            self._view_of[plan.object_id] = plan.id

@@ -1,0 +1,151 @@
+"""What a decision writes, inside the perception's one write: `follow` moves the execution within the current plan
+(goal reached, continue, resume) or asks the human for the next motion; `adopt` stores a re-plan's problem and, when
+VAL accepted it, its plan with its expected states. Each returns what it wrote (`Written`): the perception's
+`Turn` and what the decision's event keeps besides. `decision_data` is that event's data."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from planhrc.cooperation import Decision, PlanView
+from planhrc.geometry import ObjectGeometry
+from planhrc.model import ArticulatedObject, snap_angle
+from planhrc.ordering import HelpItem, Placement, help_for
+from planhrc.pipeline import EarlyAnswer, PlanOutcome, move_of
+from planhrc.vocabulary import DecisionKind, ExecutionStatus, PlanningStatus, Remedy
+
+from ..store import Execution, StoredPlan, StoredState
+from ..store import CheckedPlan
+from .actions import last_step, merges, next_action
+from .context import Context
+from .decide import Base, whole_turn_deg
+from .memory import ObjectMemo
+from .values import Turn
+
+IDLE, READY, DISPATCHED = ExecutionStatus.IDLE, ExecutionStatus.READY, ExecutionStatus.DISPATCHED
+
+
+@dataclass(frozen=True)
+class Written:
+    """A decision's writes: the answer, and for a re-plan its problem, planning status and timings, what the
+    ordering on the table did, the pieces VAL checks behind the answer (early answer) and the plan adopted."""
+
+    turn: Turn
+    problem_id: str | None = None
+    planning_status: PlanningStatus | None = None
+    timings: Mapping[str, float] | None = None
+    ordering: str = ""
+    early: EarlyAnswer | None = None
+    adopted: tuple[StoredPlan, PlanView] | None = None
+
+
+def follow(context: Context, obj: ArticulatedObject, perceived: StoredState, execution: Execution,
+           plan: StoredPlan | None, decision: Decision, memo: ObjectMemo, base: Base) -> Written:
+    """Goal reached, continue or resume: the execution moves within the current plan; or the human is asked to do
+    the next motion, and the execution waits for the next perception."""
+    store = context.store
+    if decision.kind == DecisionKind.GOAL_REACHED:
+        store.set_execution(obj.ident, Execution(execution.plan_id, None, ExecutionStatus.GOAL_REACHED,
+                                                 execution.dispatched_action_id))
+        return Written(Turn(DecisionKind.GOAL_REACHED, execution.plan_id, perceived.id, None,
+                            decision.matched_expected_step, decision.reason))
+    assert plan is not None and decision.next_step is not None
+    # a split remedy dispatches this plan's steps one by one from now on (its event says so too, for the memo)
+    merge = decision.remedy != Remedy.SPLIT and merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
+    action = plan.actions[decision.next_step - 1]
+    if decision.kind == DecisionKind.HUMAN_HELP_REQUESTED:
+        last = last_step(merge, obj, plan, action)
+        moves = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
+                 if action.step <= a.step <= last]
+        seen = tuple(float(snap_angle(v, obj.orientations)) for v in perceived.link_orientations_deg or ())
+        if len(seen) != obj.n_links:  # not a perceived state with its observation: the plan's own view
+            seen = tuple(float(v) for v in obj.link_orientations_of(perceived.atoms))
+        placed = Placement(ObjectGeometry.of(obj, base), seen, whole_turn_deg=whole_turn_deg(obj))
+        help_items = help_for(placed, moves, None, why=_failure_words(memo))
+        store.set_execution(obj.ident, Execution(plan.id, decision.next_step, IDLE, None))
+        return Written(Turn(DecisionKind.HUMAN_HELP_REQUESTED, plan.id, perceived.id, None,
+                            decision.matched_expected_step, decision.reason, help=tuple(help_items)))
+    still_dispatched = execution.status == DISPATCHED and execution.dispatched_action_id == action.id
+    store.set_execution(obj.ident, Execution(plan.id, decision.next_step, DISPATCHED if still_dispatched else READY,
+                                             execution.dispatched_action_id))
+    return Written(Turn(DecisionKind(decision.kind), plan.id, perceived.id, next_action(merge, obj, plan, action),
+                        decision.matched_expected_step, decision.reason))
+
+
+def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
+          outcome: PlanOutcome, checked: CheckedPlan | None, early: EarlyAnswer | None) -> Written:
+    """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL: the whole plan, or
+    with the early answer its first motion), its plan with expected states; move the execution. With the early
+    answer the decision's event names the plan's pieces and those accepted (`decision_data`): the record the
+    dispatch gate starts from, through a restart."""
+    store = context.store
+    problem = store.add_problem(obj.ident, perceived.id, goal.id)
+
+    def written(turn: Turn, behind: EarlyAnswer | None = None,
+                adopted: tuple[StoredPlan, PlanView] | None = None) -> Written:
+        return Written(turn, problem.id, outcome.status, outcome.timings, outcome.ordering, behind, adopted)
+
+    if outcome.solved and outcome.actions:
+        plan = store.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states, checked)
+        store.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
+        view = PlanView(expected_states=outcome.expected_states, preconditions=tuple(a.pre for a in outcome.actions))
+        ordering = f" ({outcome.ordering})" if outcome.ordering else ""
+        checked_by = (f"; VAL accepted a_1..a_{outcome.validated_steps}, a_{outcome.validated_steps + 1}.."
+                      f"a_{len(plan.actions)} are checked before they are dispatched" if early is not None else "")
+        reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions{ordering}{checked_by}"
+        action = next_action(context.settings.merge_macro_steps, obj, plan, plan.actions[0])
+        turn = Turn(DecisionKind.REPLAN, plan.id, perceived.id, action, decision.matched_expected_step, reason)
+        return written(turn, early, (plan, view))
+    if outcome.solved:  # the perceived state already satisfies the goal
+        store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
+        return written(Turn(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message))
+    if outcome.help:  # a plan exists but the robot cannot carry it out on this table: ask the human
+        store.set_execution(obj.ident, Execution(None, None, IDLE, None))
+        reason = f"{decision.reason}; {outcome.message}; the robot asks the human for help"
+        return written(Turn(DecisionKind.HUMAN_HELP_REQUESTED, None, perceived.id, None,
+                            decision.matched_expected_step, reason, help=outcome.help))
+    store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.NO_PLAN, None))
+    reason = (f"{decision.reason}; planning {outcome.status}: {outcome.message}; "
+              "a human must bring the object to a workable configuration")
+    return written(Turn(DecisionKind.NO_PLAN, None, perceived.id, None, decision.matched_expected_step, reason))
+
+
+def decision_data(written: Written, goal_state_id: str | None, remedy: Remedy | None,
+                  measured: tuple[float, float] | None) -> dict[str, Any]:
+    """The data of a decision's event: the answer's ids, and what a restarted service reads back (the measured
+    base point, the goal, the remedy, a re-plan's pieces under VAL...)."""
+    turn = written.turn
+    action = turn.next_action
+    data: dict[str, Any] = {
+        "perceived_state_id": turn.perceived_state_id, "plan_id": turn.plan_id,
+        "next_step": action.step if action else None, "next_action_id": action.id if action else None,
+        "matched_expected_step": turn.matched_expected_step,
+    }
+    if measured is not None:  # kept with the perception's event: a restarted service checks there too
+        data["base_point_xy"] = list(measured)
+    if goal_state_id is not None:
+        data["goal_state_id"] = goal_state_id
+    if remedy is not None:
+        data["remedy"] = remedy
+    if written.early is not None:
+        data["val_pieces"] = [[a, b] for a, b in written.early.pieces]
+        data["val_accepted"] = list(range(1, written.early.accepted + 1))
+    if written.planning_status is not None:
+        data.update({"planning_status": written.planning_status, "problem_id": written.problem_id,
+                     "timings": {k: round(v, 6) for k, v in (written.timings or {}).items()}})
+    if written.ordering:
+        data["ordering"] = written.ordering
+    if turn.help is not None:
+        data["help"] = help_data(turn.help)
+    return data
+
+
+def help_data(items: tuple[HelpItem, ...]) -> list[dict[str, Any]]:
+    return [{"link": h.link, "to_deg": h.to_deg, "sentence": h.sentence} for h in items]
+
+
+def _failure_words(memo: ObjectMemo) -> str | None:
+    failure = memo.failure
+    if failure is None:
+        return None
+    return f"the robot failed {failure.failures} time{'s' if failure.failures > 1 else ''}: {failure.reason}"

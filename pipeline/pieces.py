@@ -1,0 +1,132 @@
+"""A plan cut into pieces for VAL: each piece from an expected state to exactly the next cut's expected state, so
+that VAL's verdicts on the pieces say what one run on the whole plan says (`validation_pieces`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+from planhrc.model import HAS_ORIENTATION, ArticulatedObject, State, format_atom
+from planhrc.planner.fast_downward import has_conditional_effects
+
+from .config import PlanOutcome
+from .motion import first_motion_steps
+
+
+# VAL's fixed cost (start, parse, ground the problem) is what a short piece costs: a piece shorter than this is
+# not worth a process of its own. Without conditional effects a step costs VAL next to nothing (a long relative
+# plan checks faster in one run than in two pieces), so only plans of domains with conditional effects, whose
+# steps each cost VAL much more, are cut (`planhrc bench --replan-only` shows VAL's share of a re-plan).
+MIN_PIECE_STEPS = 8
+
+
+def validation_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int, first_steps: int | None = None
+                      ) -> list[tuple[str, tuple[str, ...]]]:
+    """Cut a solved outcome's plan into at most `n_pieces` consecutive pieces of nearly equal length, each a
+    (problem, steps) pair for VAL: piece i starts from the expected state s^e_(c_i) and its goal is the *exact*
+    next cut state s^e_(c_(i+1)) (every hasorientation atom of it, and the negation of every other one); the
+    last piece's goal is the task's own goal (the first piece starts from the task's initial state). With
+    `first_steps`, the first piece is the plan's first `first_steps` steps and the rest is cut as above
+    (`piece_bounds`).
+
+    Why the pieces say what one run says: hasorientation is the only predicate any action changes, and every
+    piece's problem has the task's objects and static facts. Induction over the pieces: VAL's state before
+    piece i is s^e_(c_i) (for i = 1 the task's init); VAL accepts piece i only if each of its steps is
+    applicable in turn and the state it ends in satisfies the exact goal, i.e. *is* s^e_(c_(i+1)); so one run
+    on the whole plan applies the same steps to the same states and ends where the last piece ends, in a state
+    satisfying the goal. When the pieces are accepted, the whole plan is. (A piece can only be refused
+    wrongly if an expected state is wrong, which makes the plan unusable anyway.) The same induction makes an
+    accepted *first* piece mean: from the perceived state, its steps apply one after the other and end exactly
+    in the expected state after them, whatever the later pieces' verdicts."""
+    return [(p.problem, p.steps) for p in early_pieces(obj, outcome, n_pieces, first_steps)]
+
+
+@dataclass(frozen=True)
+class ValPiece:
+    """One piece of a plan for VAL: steps a_first .. a_last (1-based, inclusive) and the problem they solve."""
+
+    first: int
+    last: int
+    problem: str
+    steps: tuple[str, ...]
+
+
+def piece_bounds(n_steps: int, n_pieces: int, first_steps: int | None = None, first_parts: int = 1
+                 ) -> list[tuple[int, int]]:
+    """The pieces of a plan of `n_steps` steps as 0-based half-open (start, end) step ranges: `n_pieces` of
+    nearly equal length, none shorter than MIN_PIECE_STEPS unless the plan is; with `first_steps`, the first
+    `first_steps` steps as `first_parts` pieces of nearly equal length (at least one step each: they are checked
+    at once before an answer, where VAL's cost per step matters more than its fixed cost), then the rest cut the
+    same way."""
+    if first_steps is not None and 0 < first_steps < n_steps:
+        rest = piece_bounds(n_steps - first_steps, n_pieces)
+        parts = max(1, min(first_parts, first_steps))
+        cuts = [round(i * first_steps / parts) for i in range(parts + 1)]
+        return ([(cuts[i], cuts[i + 1]) for i in range(parts)]
+                + [(first_steps + a, first_steps + b) for a, b in rest])
+    n = min(n_pieces, max(1, n_steps // MIN_PIECE_STEPS))
+    cuts = [round(i * n_steps / n) for i in range(n + 1)]
+    return [(cuts[i], cuts[i + 1]) for i in range(n)]
+
+
+def early_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int, first_steps: int | None = None,
+                 first_parts: int = 1) -> tuple[ValPiece, ...]:
+    """The pieces of `validation_pieces` (the first `first_steps` in `first_parts` pieces), with their step
+    ranges."""
+    assert outcome.task is not None
+    bounds = piece_bounds(len(outcome.steps), n_pieces, first_steps, first_parts)
+    return tuple(piece_of(obj, outcome.task.problem, outcome.steps, outcome.expected_states, a + 1, b)
+                 for a, b in bounds)
+
+
+def piece_of(obj: ArticulatedObject, task_problem: str, steps: Sequence[str], states: Sequence[State],
+             first: int, last: int) -> ValPiece:
+    """The piece of a plan (`steps`, expected states `states`, task problem text) holding steps a_first .. a_last:
+    from s^e_first (the task's own init for the first piece) to exactly s^e_(last+1), or to the task's goal for
+    the last piece."""
+    a, b = first - 1, last
+    if b == len(steps):
+        problem = task_problem if a == 0 else _problem_text(obj, states[a], None, task_problem)
+    else:
+        problem = _problem_text(obj, states[a], states[b], task_problem)
+    return ValPiece(first, last, problem, tuple(steps[a:b]))
+
+
+def early_answer_first_piece(obj: ArticulatedObject, outcome: PlanOutcome, merge: bool) -> int | None:
+    """The length of the first piece to validate before answering, or None when the whole plan is checked
+    before the answer: plans of domains without conditional effects (VAL checks them whole in a few ms) and
+    plans whose rest after the first motion is shorter than MIN_PIECE_STEPS."""
+    if outcome.task is None or not outcome.steps or not has_conditional_effects(outcome.task.validation_domain):
+        return None
+    first = first_motion_steps(obj, outcome.actions, merge)
+    if len(outcome.steps) - first < MIN_PIECE_STEPS:
+        return None
+    return first
+
+
+def _problem_text(obj: ArticulatedObject, start: State, exact_goal: State | None, task_problem: str) -> str:
+    """A VAL problem with the task's objects and static facts, starting from `start`, whose goal is
+    `exact_goal` exactly (each of its hasorientation atoms, and the negation of every other one) or, when it
+    is None, the task's own goal. Written from the task's text (only the hasorientation lines of its init and
+    its goal change): the static facts are not sorted and written again for every piece."""
+    head, rest = task_problem.split(_INIT, 1)
+    init, goal = rest.split(_GOAL, 1)
+    static = "".join(line for line in init.splitlines(keepends=True)
+                     if not line.startswith(_FLUENT) and line != _CLOSE)
+    fluents = "".join(f"    {format_atom(a)}\n" for a in sorted(_fluents(start)))
+    if exact_goal is None:
+        goal_text = _GOAL + goal
+    else:
+        wanted = _fluents(exact_goal)
+        goal_text = (_GOAL + "".join(f"    {format_atom(a)}\n" for a in sorted(wanted))
+                     + "".join(f"    (not {format_atom((HAS_ORIENTATION, o, j))})\n" for j in obj.joints
+                               for o in obj.orientation_names if (HAS_ORIENTATION, o, j) not in wanted)
+                     + "  ))\n)\n")
+    return head + _INIT + static + fluents + _CLOSE + goal_text
+
+
+# The parts of a problem written by `translator.problem.write_problem` that `_problem_text` cuts at.
+_INIT, _GOAL, _CLOSE, _FLUENT = "  (:init\n", "  (:goal (and\n", "  )\n", f"    ({HAS_ORIENTATION} "
+
+
+def _fluents(state: State) -> State:
+    return frozenset(a for a in state if a[0] == HAS_ORIENTATION)

@@ -1,0 +1,117 @@
+"""A re-plan for the service, in one call: `plan_for_service` makes the new plan (a plan composed of motions the
+caller asks for, else the planner's: in a worker of the service's planning pool for a large task, else here) and
+hands back the plan with a handle on VAL's verdict (`PlannedTurn`), VAL already running in its own processes.
+
+For a plan VAL checks in one short run, VAL starts on the plan's steps as soon as `find_plan` has them, before the
+expected states are replayed, so that VAL runs on the other core beside the replay and whatever the caller does
+next (the store's checks of the plan, the start of its write).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, replace
+from typing import Callable, Protocol, TypeVar
+
+from planhrc.model import ArticulatedObject, State
+from planhrc.ordering import Move, Placement
+from planhrc.vocabulary import PlanningStatus
+
+from . import stages
+from .config import PlanningConfig, PlanOutcome
+from .val_runs import ValCheck
+from .validation import Validator, VerdictHandle
+
+log = logging.getLogger(__name__)
+
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True)
+class PlanningJob:
+    """One pipeline run, as a value: `plan(obj, init, goal, config, placement=..., deadline_at=...)`, VAL included
+    when `config.validate` (what a planning pool's worker runs)."""
+
+    obj: ArticulatedObject
+    init: State
+    goal: State
+    config: PlanningConfig
+    placement: Placement | None
+    deadline_at: float  # time.monotonic()
+
+
+class PlanningPool(Protocol):
+    """Where large tasks are planned (the service's worker processes, `kb_service.planning_pool`)."""
+
+    def takes(self, obj: ArticulatedObject) -> bool: ...
+
+    def plan(self, job: PlanningJob) -> PlanOutcome: ...
+
+
+@dataclass(frozen=True)
+class ReplanRequest:
+    """A re-plan from `init` to `goal` by `deadline_at` (`time.monotonic()`), for an object placed in the cell at
+    `placement` (None: abstract). With `moves`, the plan composed of those motions is tried first (a failing
+    joint turned the other way round)."""
+
+    obj: ArticulatedObject
+    init: State
+    goal: State
+    deadline_at: float
+    placement: Placement | None = None
+    moves: tuple[Move, ...] | None = None
+
+
+@dataclass(frozen=True)
+class PlannedTurn:
+    """The new plan as planned, and the handle on VAL's verdict on it (`verdict.outcome(...)`: the plan checked)."""
+
+    outcome: PlanOutcome
+    verdict: VerdictHandle
+
+
+def plan_for_service(request: ReplanRequest, config: PlanningConfig, validator: Validator,
+                     pool: PlanningPool | None = None) -> PlannedTurn:
+    """The new plan and VAL on it (see the module's note). A failing stage ends in an `error` outcome, never an
+    exception: the perception still gets a decision."""
+    outcome, started = _planned(request, config, validator, pool)
+    return PlannedTurn(outcome, validator.check(request.obj, outcome, request.deadline_at, started))
+
+
+def _planned(request: ReplanRequest, config: PlanningConfig, validator: Validator, pool: PlanningPool | None
+             ) -> tuple[PlanOutcome, ValCheck | None]:
+    obj, init, goal, deadline_at = request.obj, request.init, request.goal, request.deadline_at
+    if request.moves is not None:
+        try:
+            return stages.plan_moves(obj, init, goal, request.moves, config, placement=request.placement,
+                                     defer_validation=True), None
+        except Exception as exc:  # the composed plan does not hold: let the planner try
+            log.warning("the other way round failed for %s: %s", obj.ident, exc)
+    if pool is not None and pool.takes(obj):
+        # with the early answer VAL runs here, after the worker's outcome: the first motion before the answer
+        job_config = replace(config, validate=False) if validator.early_answer else config
+        job = PlanningJob(obj, init, goal, job_config, request.placement, deadline_at)
+        return _guarded(obj, config, lambda: pool.plan(job)), None
+    found = _guarded(obj, config, lambda: stages.find_plan(obj, init, goal, config, placement=request.placement,
+                                                           deadline_at=deadline_at))
+    if isinstance(found, PlanOutcome):
+        return found, None
+    started = None
+    if validator.beside(found.task):
+        begun = _guarded(obj, config, lambda: validator.start_whole(found.task, found.steps))
+        if isinstance(begun, PlanOutcome):
+            return begun, None
+        started = begun
+    try:
+        return _guarded(obj, config, lambda: stages.expect(obj, init, goal, found, deadline_at)), started
+    except BaseException:
+        if started is not None:
+            started.cancel()
+        raise
+
+
+def _guarded(obj: ArticulatedObject, config: PlanningConfig, stage: Callable[[], _T]) -> _T | PlanOutcome:
+    try:
+        return stage()
+    except Exception as exc:  # a crashing stage must not leave the perception without a decision
+        log.exception("planning failed for %s", obj.ident)
+        return PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", config.planner)
