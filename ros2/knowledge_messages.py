@@ -45,17 +45,21 @@ def read_request(topic: str, data: str) -> KnowledgeRequest:
         raise Ros2Error(f"{topic}.{unknown[0]}: unknown field (the fields are {', '.join(sorted(spec))})")
     fields: dict[str, Any] = {}
     for name, (kind, required) in spec.items():
-        value: Any = body.get(name)  # checked against the field's kind just below
+        value = body.get(name)
         if value is None:
             if required:
                 raise Ros2Error(f"{topic}.{name}: required")
             continue
-        if not isinstance(value, kind) or (kind is str and not value):
-            raise Ros2Error(f"{topic}.{name}: expected a{'' if kind is str else ' list of'} non-empty string"
-                            f"{'' if kind is str else 's'}")
-        if kind is list and not all(isinstance(v, str) for v in value):
-            raise Ros2Error(f"{topic}.{name}: expected a list of strings")
-        fields[name] = tuple(value) if kind is list else value
+        if kind is list:
+            if not isinstance(value, list):
+                raise Ros2Error(f"{topic}.{name}: expected a list of non-empty strings")
+            if not all(isinstance(v, str) for v in value):
+                raise Ros2Error(f"{topic}.{name}: expected a list of strings")
+            fields[name] = tuple(value)
+        elif not isinstance(value, str) or not value:
+            raise Ros2Error(f"{topic}.{name}: expected a non-empty string")
+        else:
+            fields[name] = value
     return KnowledgeRequest(topic, request_id, fields)
 
 
