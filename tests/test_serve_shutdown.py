@@ -16,6 +16,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from planhrc.kb_service.app import create_app
+from planhrc.kb_service.store import open_store
+from planhrc.paths import default_tbox_path
 from planhrc.settings import make_settings
 from tests.servers import free_port, serve_command, serve_env, wait_until_serving
 
@@ -97,3 +99,10 @@ def test_objects_are_listed_at_a_cost_per_object(big_store):
         assert listed.status_code == 200 and len(listed.json()) == OBJECTS
         one = client.get(f"/objects/{listed.json()[-1]['id']}").json()
         assert listed.json()[-1] == one
+    with open_store(str(big_store), default_tbox_path()) as store:
+        objects = store.list_objects()
+        assert len(objects) == OBJECTS
+        # what cost most of a first listing: each object's plan-check lookups, built only when a check asks
+        info = store._records.info(objects[0].ident)
+        assert not {"types", "static", "static_fragment", "orientation_atom_name"} & set(vars(info))
+        assert info.static_fragment and "static_fragment" in vars(info)
