@@ -272,16 +272,28 @@ def test_plans_written_out_when_read_give_the_inferences_of_plans_written_at_onc
 
 @pytest.mark.reasoner
 def test_the_reasoning_service_infers_the_same_from_plans_written_out_when_read(place, tmp_path, monkeypatch):
-    """The knowledge service's DL check (`knowledge.reasoning.reason`, on the store's export) finds the same
-    inferences, consistent, in a store whose plans stayed journal rows as in one whose plans were written at once,
-    on each backend."""
-    from planhrc.kb_service.knowledge.reasoning import ReasoningRequest, reason
+    """The knowledge service's DL check (`knowledge.reasoning.reason`, on the store's export) of the whole current
+    ABox, the plan with its actions and expected states too, finds the same inferences, consistent, in a store whose
+    plans stayed journal rows as in one whose plans were written at once, on each backend."""
+    from rdflib import Graph
 
+    from planhrc.kb_service.knowledge.reasoning import ReasoningRequest, reason
+    from planhrc.kb_service.knowledge.entailment import Vocabulary
+    from planhrc.vocabulary import ReasoningScope
+
+    tbox = Graph()
+    tbox.parse(str(TBOX), format="xml")
+    vocabulary = Vocabulary.of(tbox)
     monkeypatch.setattr(time, "time", lambda: 1_700_000_000.0)
     other = place.another(tmp_path / "eager")
+    request = ReasoningRequest("pellet", "obj1", ReasoningScope.CURRENT)
     with place.open() as lazy, other.open() as eager:
         _history_of_plans(lazy, write_out=False)
         _history_of_plans(eager, write_out=True)
-        results = [reason(kb, ReasoningRequest("pellet", "obj1"), 120.0) for kb in (lazy, eager)]
+        plan = lazy.latest_plan("obj1")
+        assert plan is not None and lazy.plans_to_write() == 2  # the plans are rows until the reasoner reads them
+        results = [reason(kb, request, 120.0, vocabulary, tmp_path) for kb in (lazy, eager)]
     assert all(result.consistent for result in results)
     assert results[0].inferred and set(results[0].inferred) == set(results[1].inferred)
+    # the current plan's expected states were among what the reasoner read
+    assert any(f"#{state}>" in line for state in plan.expected_state_ids for line in results[0].inferred)
