@@ -154,13 +154,13 @@ def check_store_server(settings: Settings, option: str) -> None:
 
 
 def run_serve(args: argparse.Namespace) -> int:
-    import uvicorn
     from pydantic import ValidationError
 
     from planhrc.cli_args import settings_error_line
     from planhrc.settings import make_settings
 
     from .app import create_app
+    from .server import serve
 
     overrides = {key: value for key, value in {
         "host": args.host, "port": args.port, "db_path": args.db, "db_password_file": args.db_password_file,
@@ -184,10 +184,10 @@ def run_serve(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.DEBUG if level == "trace" else level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=level,
-                    ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
-                    # an open event stream (a console page) must not keep a stopping service alive
-                    timeout_graceful_shutdown=2)
+        serve(create_app(settings), host=settings.host, port=settings.port, log_level=level,
+              ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
+              # an open event stream (a console page) must not keep a stopping service alive
+              timeout_graceful_shutdown=2)
     except KeyboardInterrupt:
         _leave_request_threads(128 + signal.SIGINT, "interrupted")
         raise

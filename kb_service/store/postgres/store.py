@@ -6,8 +6,8 @@ and the RDF export (`history`), and what a reasoner inferred beside them (`infer
 
 Every public method takes the store's lock and refuses a closed store. Each write checks its input completely
 before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan is
-stored as a journal row and its triples are written behind the answer (`journal`), as in the SQLite store; every
-process reads it from its row until then.
+stored as a journal row and its triples are written when a reader of the triples needs them (`journal`), as in the
+SQLite store; every process reads it from its row until then.
 
 The TBox is read by each process from its file (an in-memory owlready2 world, for the TBox's lines of the export);
 its digest is kept in the database, and a process whose TBox differs from the one the store was written with says
@@ -78,14 +78,13 @@ class PostgresStore(StoreFacade):
             self._prepare(hashlib.sha256(self.tbox_path.read_bytes()).hexdigest())
             self._records = PgRecords(session)
             self._journal = PgJournal(session, self._records)
-            session.listen(self._records, self._journal)
+            session.listen(self._records)
             self._writes = Writes(session, self._records, self._journal)
             self._inferred = PgInferred(session)
-            self._journal.recover()  # before anything is served
+            self._journal.check()  # before anything is served
         except BaseException:
             session.close()
             raise
-        self._journal.start()
         log.info("store: PostgreSQL at %s", shown_location(db))
 
     def _prepare(self, tbox_digest: str) -> None:
@@ -116,13 +115,8 @@ class PostgresStore(StoreFacade):
 
     # -- life cycle -------------------------------------------------------------------------------------------
     def close(self) -> None:
-        self._journal.stop()  # before the lock: the writer thread may be waiting for it
-        with self._session.lock:
+        with self._session.lock:  # the journalled plans stay rows: they are the plans, in the database
             if not self._session.closed:
-                try:
-                    self._journal.settle()
-                except Exception:  # the rows stay in the journal; the next open writes them out
-                    log.exception("store: writing out journalled plans at close failed")
                 self._session.close()
 
     def __enter__(self) -> Self:
@@ -231,21 +225,24 @@ class PostgresStore(StoreFacade):
             self._journal.settle()
 
     def plans_to_write(self) -> int:
-        self._session.check_open()
-        return len(self._journal)
+        with self._guard:
+            return len(self._journal)
 
     # -- retention --------------------------------------------------------------------------------------------
     def compact(self, keep_perceived: int) -> Compaction:
         keep = check_keep_perceived(keep_perceived)
         with self._guard:
-            self._journal.settle()  # a plan still in the journal is history like any other
             s = self._session
             objects = self._records.object_ids()
             shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+            roots = {oid: current_roots(s.conn, POSTGRESQL, oid) for oid in objects}
+            # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
+            self._journal.settle([name for names in roots.values() for name in names])
 
             def fill() -> Compaction:
                 individuals = triples = 0
                 for oid in objects:
+                    individuals += self._journal.drop(oid, roots[oid])
                     i, t = compact_object(s.conn, oid, shared[oid], keep)
                     individuals, triples = individuals + i, triples + t
                 s.pending_triples -= triples
@@ -265,7 +262,10 @@ class PostgresStore(StoreFacade):
                 ids = self._records.object_ids() if object_ids is None else list(object_ids)
                 for oid in ids:
                     self._records.info(oid)
-            self._journal.settle()  # the export reads triples: every journalled plan's are written first
+            # the export reads triples: the journalled plans it shows are written out first (each object's
+            # current plan, or with the history every one)
+            self._journal.settle(None if ids is None else
+                                 [name for oid in ids for name in current_roots(self._session.conn, POSTGRESQL, oid)])
             reader = self._session.reader()
         return self._read_lines(reader, ids)
 
