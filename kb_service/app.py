@@ -14,13 +14,14 @@ from planhrc.settings import Settings, get_settings
 
 from .api import install_error_handlers, router
 from .console import install_console
+from .events import EventBell
 from .guard import GuardPolicy, RequestGuard
 from .knowledge.service import KnowledgeService
 from .knowledge_api import install_knowledge_errors
 from .knowledge_api import router as knowledge_router
 from .locks import ObjectLocks
 from .planning_pool import PlanningPool
-from .store import KBError, KnowledgeStore
+from .store import EventFeeding, KBError, KnowledgeStore
 from .store.location import shown_location
 from .usecases import close_context, open_context
 
@@ -67,6 +68,8 @@ def create_app(settings: Settings | None = None,
         pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
         context = app.state.context = open_context(kb, settings, ObjectLocks(), pool)
         knowledge = app.state.knowledge = KnowledgeService(kb, settings)
+        # a store other processes write too: event streams wait on its feed of committed events
+        bell = app.state.bell = EventBell(kb.event_feed) if isinstance(kb, EventFeeding) else None
         log.info("knowledge base open: %s", shown_location(settings.db_path) if settings.db_path else "in memory")
         freeze_heap()
         stop = threading.Event()
@@ -81,6 +84,8 @@ def create_app(settings: Settings | None = None,
             stop.set()
             if compactor is not None:
                 compactor.join(timeout=60)
+            if bell is not None:
+                bell.close()
             knowledge.close()
             close_context(context)
             pool.close()
