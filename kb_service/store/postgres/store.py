@@ -58,6 +58,9 @@ _APPEND_EVENT = (
     "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
 )
 
+_LOCK_OBJECT = "SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))"  # an object's lock (`replicas`)
+COMPACT_LOCK = 0x706C616E68726302  # "planhrc\x02": held by the one process compacting the store
+
 
 class PostgresStore(StoreFacade):
     """TBox (from its file) + ABox and the service's tables in one PostgreSQL database; thread safe."""
@@ -141,8 +144,7 @@ class PostgresStore(StoreFacade):
         with self._guard:
             if not self._session.depth:
                 raise KBError("internal: lock_object outside a transaction() (it would be released at once)")
-            self._session.execute("SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))",
-                                  (LOCK_NAMESPACE + object_id,))
+            self._session.execute(_LOCK_OBJECT, (LOCK_NAMESPACE + object_id,))
 
     def event_feed(self) -> EventFeed:
         """A feed of the events every process commits (`replicas.EventFeed`); the caller closes it."""
@@ -244,8 +246,15 @@ class PostgresStore(StoreFacade):
             shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
 
             def fill() -> Compaction:
+                # one process compacts at a time (every replica compacts on its schedule), and each object's
+                # writes wait for it as for any other write of the object (its lock, until the commit)
+                row = s.execute("SELECT pg_try_advisory_xact_lock(%s)", (COMPACT_LOCK,)).fetchone()
+                if not (row and row[0]):
+                    log.info("store: another process is compacting the store; this one leaves it to it")
+                    return Compaction(0, 0, 0)
                 individuals = triples = 0
                 for oid in objects:
+                    s.execute(_LOCK_OBJECT, (LOCK_NAMESPACE + oid,))
                     i, t = compact_object(s.conn, oid, shared[oid], keep)
                     individuals, triples = individuals + i, triples + t
                 s.pending_triples -= triples
