@@ -180,3 +180,59 @@ def test_a_stream_reads_the_log_when_the_feed_names_its_object_and_only_then(db)
             bell.close()
         assert len(got) == 1 and "event: goal_set" in got[0][1]
         assert len(reads) == 2  # the start, and the news
+
+
+def test_a_replica_dispatches_another_replicas_plan_only_as_far_as_val_accepted_it(db, tmp_path):
+    """An absolute plan adopted on A on VAL's early answer (its later pieces checked behind the answer, on A) is
+    carried out through B: B's gate reads the verdicts A records and checks again the pieces it finds no verdict
+    for, so every step leaves only once VAL accepted the piece it lies in."""
+    from tests.test_val_gate import GOAL, K, LINKS, START
+
+    with replicas(db, tmp_path) as [(_, a), (_, b)]:
+        oid = a.post("/objects", json={"name": "bar", "links": LINKS, "orientations": K,
+                                       "formulation": "absolute"}).json()["id"]
+        assert a.put(f"/objects/{oid}/goal", json={"link_orientations_deg": GOAL}).status_code == 200
+        assert perceive(a, oid, START).json()["decision"] == "replan"
+        taken = 0
+        while (action := b.post(f"/objects/{oid}/actions/next").json()) is not None:
+            taken += 1
+            done = a.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded"})
+            assert done.status_code == 200, done.text
+            assert taken < 100
+        accepted: set[int] = set()
+        pieces: list[list[int]] = []
+        dispatched = before_answer = 0
+        for event in events(b, oid):
+            data = event["data"]
+            if event["kind"] == "replan":
+                pieces, accepted = data["val_pieces"], set(data["val_accepted"])
+                before_answer = len(accepted)
+            elif event["kind"] == "val_verdict" and data["verdict"] == "accepted":
+                accepted.add(data["piece"])
+            elif event["kind"] == "dispatched":
+                dispatched += 1
+                number = next(i for i, (lo, hi) in enumerate(pieces, start=1) if lo <= data["step"] <= hi)
+                assert number in accepted, (data, accepted)
+        assert dispatched == taken and 0 < before_answer < len(pieces)
+        assert accepted == set(range(1, len(pieces) + 1))  # every piece checked, the later ones behind the answer
+
+
+def test_one_replica_compacts_at_a_time(db):
+    """Every replica compacts on its schedule: while one compacts (holding the compaction's lock), another's
+    compaction leaves the store to it."""
+    import psycopg
+
+    from planhrc.kb_service.store import open_store
+    from planhrc.kb_service.store.postgres.store import COMPACT_LOCK
+    from planhrc.model import make_object
+    from planhrc.paths import default_tbox_path
+
+    with open_store(db, default_tbox_path()) as kb:
+        obj = make_object(kb.new_object_id(), "relative", 3, 4)
+        kb.create_object(obj)
+        for joints in ([0, 0], [0, 90], [90, 90]):
+            kb.add_state(obj.ident, "perceived", obj.state(joints))
+        with psycopg.connect(db, autocommit=True) as other, other.transaction():
+            other.execute("SELECT pg_advisory_xact_lock(%s)", (COMPACT_LOCK,))
+            assert kb.compact(1).individuals == 0  # left to the other one
+        assert kb.compact(1).individuals > 0
