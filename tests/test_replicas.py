@@ -236,3 +236,38 @@ def test_one_replica_compacts_at_a_time(db):
             other.execute("SELECT pg_advisory_xact_lock(%s)", (COMPACT_LOCK,))
             assert kb.compact(1).individuals == 0  # left to the other one
         assert kb.compact(1).individuals > 0
+
+
+def test_replicas_writing_one_object_at_once_store_each_individual_once(db, tmp_path):
+    """Perceptions of one object from four clients on two replicas at once, each with new orientations, and each
+    replica writing its plans out behind its answers: every individual the object's states and plans share (an
+    orientation atom) is created once, whichever process creates it first, so no triple is stored twice."""
+    import random
+
+    import psycopg
+
+    with replicas(db, tmp_path) as [(_, a), (_, b)]:
+        oid = a.post("/objects", json={"name": "long", "links": 12, "orientations": 12,
+                                       "formulation": "relative"}).json()["id"]
+        assert a.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0.0] * 12}).status_code == 200
+        end = time.monotonic() + 6
+
+        def post(n: int) -> list[int]:
+            rng, statuses = random.Random(n), []
+            while time.monotonic() < end:
+                links = [float(rng.randrange(12) * 30) for _ in range(12)]
+                statuses.append(perceive((a, b)[n % 2], oid, links).status_code)
+            return statuses
+
+        with ThreadPoolExecutor(4) as pool:
+            statuses = [s for f in [pool.submit(post, n) for n in range(4)] for s in f.result(timeout=120)]
+        assert statuses and set(statuses) == {200}
+        for client in (a, b):  # every plan's triples written out
+            deadline = time.monotonic() + 30
+            while client.get("/health").json()["plans_to_write"]:
+                assert time.monotonic() < deadline
+                time.sleep(0.1)
+    with psycopg.connect(db, autocommit=True) as conn:
+        twice = conn.execute("SELECT s, p, coalesce(o, lit), count(*) FROM planhrc_triple GROUP BY s, p, o, lit, dt "
+                             "HAVING count(*) > 1 LIMIT 5").fetchall()
+    assert twice == []

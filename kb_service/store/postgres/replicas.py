@@ -17,9 +17,10 @@ from .session import Connection, connect
 
 EVENT_CHANNEL = "planhrc_event"
 LOCK_NAMESPACE = "planhrc-object:"  # hashed with the object id into the advisory lock's key
+LOCK_OBJECT = "SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))"  # with LOCK_NAMESPACE + the object's id
 
 
-__all__ = ["EVENT_CHANNEL", "LOCK_NAMESPACE", "EventFeed", "ObjectLocking"]  # the protocol: `interface`
+__all__ = ["EVENT_CHANNEL", "LOCK_NAMESPACE", "LOCK_OBJECT", "EventFeed", "ObjectLocking"]  # the protocol: `interface`
 
 
 class EventFeed:

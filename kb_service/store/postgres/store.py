@@ -42,7 +42,7 @@ from .history import abox_lines, compact_object
 from .inferred import PgInferred
 from .journal import PgJournal
 from .records import PgRecords
-from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
+from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, LOCK_OBJECT, EventFeed
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
 
@@ -58,7 +58,6 @@ _APPEND_EVENT = (
     "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
 )
 
-_LOCK_OBJECT = "SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))"  # an object's lock (`replicas`)
 COMPACT_LOCK = 0x706C616E68726302  # "planhrc\x02": held by the one process compacting the store
 
 
@@ -144,7 +143,7 @@ class PostgresStore(StoreFacade):
         with self._guard:
             if not self._session.depth:
                 raise KBError("internal: lock_object outside a transaction() (it would be released at once)")
-            self._session.execute(_LOCK_OBJECT, (LOCK_NAMESPACE + object_id,))
+            self._session.execute(LOCK_OBJECT, (LOCK_NAMESPACE + object_id,))
 
     def event_feed(self) -> EventFeed:
         """A feed of the events every process commits (`replicas.EventFeed`); the caller closes it."""
@@ -254,7 +253,7 @@ class PostgresStore(StoreFacade):
                     return Compaction(0, 0, 0)
                 individuals = triples = 0
                 for oid in objects:
-                    s.execute(_LOCK_OBJECT, (LOCK_NAMESPACE + oid,))
+                    s.execute(LOCK_OBJECT, (LOCK_NAMESPACE + oid,))
                     i, t = compact_object(s.conn, oid, shared[oid], keep)
                     individuals, triples = individuals + i, triples + t
                 s.pending_triples -= triples
