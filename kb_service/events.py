@@ -127,7 +127,7 @@ class EventBell:
                 if feed is None:
                     try:
                         feed = self._open_feed()
-                    except UnavailableError as exc:
+                    except Exception as exc:  # the database unreachable now (UnavailableError), or refusing
                         log.warning("event feed: %s; trying again", exc)
                         self._stop.wait(REOPEN_S)
                         continue
@@ -135,10 +135,16 @@ class EventBell:
                     self._ring(None)  # what was committed while there was no feed
                 try:
                     news = feed.wait(FEED_WAIT_S)
-                except UnavailableError as exc:
-                    log.warning("%s; opening it again", exc)
+                except Exception as exc:  # lost (UnavailableError) or anything else: the streams must not go deaf
+                    if isinstance(exc, UnavailableError):
+                        log.warning("%s; opening it again", exc)
+                    else:
+                        log.exception("event feed failed; opening it again")
                     self.listening.clear()
-                    feed.close()
+                    try:
+                        feed.close()
+                    except Exception:  # a connection already gone
+                        pass
                     feed = None
                     continue
                 if news:
