@@ -268,7 +268,13 @@ def serve_jobs(db: str, password: str | None, tbox_path: str, lease_s: float, st
 def _run_job(plan: Any, link: _Link, db: str, password: str | None, worker: str,
              got: tuple[int, str, bytes, float, int], tbox_path: str, lease_s: float) -> None:
     job_id, object_id, blob, left, attempts = got
-    job: PlanningJob = pickle.loads(blob)
+    try:
+        job: PlanningJob = pickle.loads(blob)
+    except Exception as exc:  # a service of another planhrc version: it gets an error, not silence
+        log.error("planning job %d (%s) does not read as a job of this version: %s", job_id, object_id, exc)
+        failed = PlanOutcome(PlanningStatus.ERROR, f"the planning worker could not read the job ({exc})", "none")
+        link.execute(FINISH, (pickle.dumps(list(pack_outcome(failed))), job_id, worker))
+        return
     job = replace(job, config=replace(job.config, tbox_path=Path(tbox_path)), deadline_at=time.monotonic() + left)
     log.info("planning job %d (%s, attempt %d, %.2f s left)", job_id, object_id, attempts, left)
     lease = _Lease(db, password, job_id, worker, lease_s)

@@ -7,9 +7,11 @@ stored; a worker killed (SIGKILL) mid-job has its job leased again by another, a
 from __future__ import annotations
 
 import os
+import pickle
 import signal
 import subprocess
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -79,6 +81,32 @@ def test_the_queue_hands_each_job_to_one_worker_never_starts_a_late_one_and_keep
         assert {r[0] for r in rows(db)} == {late, second}
 
 
+def test_a_job_the_worker_cannot_read_is_answered_with_an_error(db):
+    """A job a worker cannot unpickle (a service of another version) gets an `error` outcome, so its service answers
+    instead of waiting for the deadline; the worker goes on."""
+    from planhrc.kb_service.planning_pool import unpack_outcome
+    from planhrc.kb_service.planning_queue import ensure_tables, serve_jobs
+    from planhrc.kb_service.store.postgres.jobs import COLLECT, SUBMIT
+    from planhrc.paths import default_tbox_path
+
+    with psycopg.connect(db, autocommit=True) as conn:
+        ensure_tables(conn)
+        job = conn.execute(SUBMIT, ("obj1", b"not a pickle", 30)).fetchone()[0]
+        stop = threading.Event()
+        thread = threading.Thread(target=serve_jobs, args=(db, None, str(default_tbox_path()), 1.0, stop, "test"))
+        thread.start()
+        try:
+            deadline = time.monotonic() + 60
+            while (row := conn.execute(COLLECT, (job,)).fetchone()) is None:
+                assert time.monotonic() < deadline and thread.is_alive()
+                time.sleep(0.05)
+        finally:
+            stop.set()
+            thread.join(10)
+        outcome = unpack_outcome(iter(pickle.loads(row[0])))
+        assert outcome.status == "error" and "could not read the job" in outcome.message
+
+
 # -- real processes ---------------------------------------------------------------------------------------------
 QUEUED = {"PLANHRC_PLANNING_POOL_MIN_ATOMS": "1"}  # every task through the queue
 
@@ -141,8 +169,6 @@ def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_get
                                        "formulation": "absolute"}).json()["id"]
         goal = [float((30 * k * 7) % 360) for k in range(links)]
         assert c.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal}).status_code == 200
-        import threading
-
         answer: dict[str, Any] = {}
         request = threading.Thread(target=lambda: answer.update(r=perceive(c, oid, [0.0] * links, "long")))
         request.start()
