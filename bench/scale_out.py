@@ -2,10 +2,13 @@
 perception of one `planhrc serve` on SQLite against 1, 2 and 4 replicas on one PostgreSQL database, in one run
 (not a test).
 
-For each configuration (a backend, a number of replicas, a number of objects) the part starts the services on a
-fresh store, creates the objects (`links` x `orientations`, each with a goal and a first perception), then runs
-`clients` closed-loop clients for `seconds`: each posts a perception of a random configuration of one of its objects
-(nearly always a re-plan), to the replicas in turn, and posts the next once answered. It reports the perceptions
+For each configuration (a backend, a number of replicas, a number of objects, a routing) the part starts the
+services on a fresh store, creates the objects (`links` x `orientations`, each with a goal and a first perception),
+then runs `clients` closed-loop clients for `seconds`: each posts a perception of a random configuration of one of
+its objects (nearly always a re-plan), and posts the next once answered. Two routings of several replicas: `turns`
+sends each request to the next replica (a round-robin load balancer: an object's requests land on every replica,
+each reading what the others wrote), `object` sends each object's requests to one replica (a balancer that hashes
+the object's id: each replica's caches of its objects stay warm). It reports the perceptions
 answered per second, their p50/p95 latency, the answers that were not 200, and the CPU per perception: the services'
 processes (with the VAL and planner processes they ran) and, on PostgreSQL, the server's processes serving the
 database's connections (read from /proc: a server on this machine). The PostgreSQL database is emptied before each
@@ -76,10 +79,14 @@ def empty_database(db: str) -> None:
             conn.execute(sql.SQL("DROP TABLE IF EXISTS {} CASCADE").format(sql.Identifier(table)))
 
 
+ROUTINGS = ("turns", "object")
+
+
 def _load(clients: list[httpx.Client], objects: list[str], n_clients: int, seconds: float, links: int,
-          orientations: int, seed: int) -> tuple[list[float], int]:
-    """`n_clients` closed-loop clients for `seconds`, client i on objects i, i + n, ... and on the replicas in
-    turn; the latencies of the 200 answers and the count of the others."""
+          orientations: int, seed: int, routing: str) -> tuple[list[float], int]:
+    """`n_clients` closed-loop clients for `seconds`, client i on objects i, i + n, ..., each request to the next
+    replica (`turns`) or to its object's (`object`); the latencies of the 200 answers and the count of the
+    others."""
     latencies: list[float] = []
     others = [0]
     guard = threading.Lock()
@@ -90,8 +97,8 @@ def _load(clients: list[httpx.Client], objects: list[str], n_clients: int, secon
         mine = objects[i::n_clients] or objects[i % len(objects):][:1]
         k = 0
         while time.monotonic() < end:
-            client = clients[(i + k) % len(clients)]
             oid = mine[k % len(mine)]
+            client = clients[(i + k if routing == "turns" else objects.index(oid)) % len(clients)]
             k += 1
             t = time.perf_counter()
             try:
@@ -115,7 +122,7 @@ def _load(clients: list[httpx.Client], objects: list[str], n_clients: int, secon
 
 
 def _configuration(db: str, backend: str, replicas: int, n_objects: int, n_clients: int, seconds: float,
-                   links: int, orientations: int, seed: int) -> dict[str, Any]:
+                   links: int, orientations: int, seed: int, routing: str = "turns") -> dict[str, Any]:
     with ExitStack() as stack:
         folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="planhrc-scale-")))
         location = str(folder / "kb.sqlite3") if backend == "sqlite" else db
@@ -138,12 +145,13 @@ def _configuration(db: str, backend: str, replicas: int, n_objects: int, n_clien
         server_cpu = _database_backends(db) if backend == "postgresql" else _no_server
         services_before = [process_cpu_s(s.pid) for s in servers]
         db_before = server_cpu()
-        latencies, others = _load(clients, objects, n_clients, seconds, links, orientations, seed)
+        latencies, others = _load(clients, objects, n_clients, seconds, links, orientations, seed, routing)
         services = sum(process_cpu_s(s.pid) for s in servers) - sum(services_before)
         db_after = server_cpu()
         database = sum(cpu - db_before.get(pid, 0.0) for pid, cpu in db_after.items())
     n = len(latencies)
-    return {"backend": backend, "replicas": replicas, "objects": n_objects, "clients": n_clients,
+    return {"backend": backend, "replicas": replicas, "routing": routing if replicas > 1 else "-",
+            "objects": n_objects, "clients": n_clients,
             "perceptions": n, "per_s": round(n / seconds, 2), "p50_ms": round(percentile(latencies, 0.5) * 1000, 1),
             "p95_ms": round(percentile(latencies, 0.95) * 1000, 1), "not_200": others,
             "service_cpu_ms": round(services / max(n, 1) * 1000, 2),
@@ -165,13 +173,15 @@ def bench_scale_out(db: str | None, replica_counts: list[int], object_counts: li
         raise BenchError(f"--db: a PostgreSQL store needs psycopg 3: pip install 'planhrc[postgresql]' ({exc})") \
             from None
     rows = []
-    plan = [("sqlite", 1)] + [("postgresql", r) for r in replica_counts]
+    plan = [("sqlite", 1, "turns")] + [("postgresql", r, routing) for r in replica_counts
+                                       for routing in (ROUTINGS if r > 1 else ROUTINGS[:1])]
     for n_objects in object_counts:
-        for backend, replicas in plan:
-            row = _configuration(db, backend, replicas, n_objects, clients, seconds, links, orientations, seed)
+        for backend, replicas, routing in plan:
+            row = _configuration(db, backend, replicas, n_objects, clients, seconds, links, orientations, seed,
+                                 routing)
             rows.append(row)
-            log(f"scale-out {backend} x{replicas}, {n_objects} objects: {row['per_s']}/s, p95 {row['p95_ms']} ms, "
-                f"CPU {row['cpu_ms']} ms per perception")
+            log(f"scale-out {backend} x{replicas} ({row['routing']}), {n_objects} objects: {row['per_s']}/s, "
+                f"p95 {row['p95_ms']} ms, CPU {row['cpu_ms']} ms per perception")
     empty_database(db)
     return {"object": f"{links} x {orientations}, relative", "clients": clients, "seconds": seconds, "rows": rows,
             "ratios": ratios(rows)}
@@ -187,6 +197,7 @@ def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         single = next((r for r in group if r["backend"] == "postgresql" and r["replicas"] == 1), None)
         for r in group:
             out.append({"objects": n_objects, "backend": r["backend"], "replicas": r["replicas"],
+                        "routing": r["routing"],
                         "throughput_vs_1_replica": round(r["per_s"] / single["per_s"], 2)
                         if single and single["per_s"] else None,
                         "cpu_vs_sqlite": round(r["cpu_ms"] / sqlite["cpu_ms"], 2) if sqlite["cpu_ms"] else None})
@@ -195,15 +206,17 @@ def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def scale_out_markdown(part: dict[str, Any]) -> list[str]:
     lines = [f"Scale-out: objects of {part['object']}, {part['clients']} closed-loop clients for {part['seconds']:g} s "
-             "per configuration, perceptions of random configurations (re-plans), to the replicas in turn. *CPU* is "
+             "per configuration, perceptions of random configurations (re-plans); routing `turns`: each request to "
+             "the next replica, `object`: each object's requests to one replica. *CPU* is "
              "per perception answered: the services' processes (with their VAL and planner processes) plus, on "
              "PostgreSQL, the server's processes serving the database.", "",
-             "| objects | store | replicas | perceptions/s | p50 | p95 | not 200 | CPU (service + database) "
-             "| throughput vs 1 replica | CPU vs SQLite |", "|---|---|---|---|---|---|---|---|---|---|"]
-    ratio = {(r["objects"], r["backend"], r["replicas"]): r for r in part["ratios"]}
+             "| objects | store | replicas | routing | perceptions/s | p50 | p95 | not 200 | CPU (service + "
+             "database) | throughput vs 1 replica | CPU vs SQLite |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    ratio = {(r["objects"], r["backend"], r["replicas"], r["routing"]): r for r in part["ratios"]}
     for r in part["rows"]:
-        q = ratio[(r["objects"], r["backend"], r["replicas"])]
-        lines.append(f"| {r['objects']} | {r['backend']} | {r['replicas']} | {r['per_s']} | {r['p50_ms']} ms "
+        q = ratio[(r["objects"], r["backend"], r["replicas"], r["routing"])]
+        lines.append(f"| {r['objects']} | {r['backend']} | {r['replicas']} | {r['routing']} | {r['per_s']} "
+                     f"| {r['p50_ms']} ms "
                      f"| {r['p95_ms']} ms | {r['not_200']} | {r['cpu_ms']} ms ({r['service_cpu_ms']} + "
                      f"{r['database_cpu_ms']}) | {q['throughput_vs_1_replica']} | {q['cpu_vs_sqlite']} |")
     return lines + [""]

@@ -80,15 +80,15 @@ def test_service_bench_scale_out_compares_sqlite_and_replicas_in_one_run(tmp_pat
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     part = json.loads(out.stdout)["scale_out"]
-    assert [(r["backend"], r["replicas"], r["objects"]) for r in part["rows"]] == [
-        ("sqlite", 1, 3), ("postgresql", 1, 3), ("postgresql", 2, 3)]
+    assert [(r["backend"], r["replicas"], r["routing"], r["objects"]) for r in part["rows"]] == [
+        ("sqlite", 1, "-", 3), ("postgresql", 1, "-", 3), ("postgresql", 2, "turns", 3), ("postgresql", 2, "object", 3)]
     for row in part["rows"]:
         assert row["perceptions"] > 0 and row["per_s"] > 0 and row["not_200"] == 0
         assert 0 < row["p50_ms"] <= row["p95_ms"]
         assert row["cpu_ms"] > 0
     assert all(r["database_cpu_ms"] > 0 for r in part["rows"] if r["backend"] == "postgresql")
-    assert [r["throughput_vs_1_replica"] is not None for r in part["ratios"]] == [True] * 3
-    assert "| 3 | postgresql | 2 |" in (tmp_path / "service-bench.md").read_text()
+    assert [r["throughput_vs_1_replica"] is not None for r in part["ratios"]] == [True] * 4
+    assert "| 3 | postgresql | 2 | object |" in (tmp_path / "service-bench.md").read_text()
     refused = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "scale-out"],
                              capture_output=True, text=True, timeout=120)
     assert refused.returncode == 1 and refused.stderr.strip().splitlines() == [
