@@ -191,3 +191,36 @@ def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_get
         plans = [e for e in events(c, oid) if e["kind"] == "replan"]
         assert len(plans) == (1 if reply.status_code == 200 else 0)
         assert rows(db) == []
+
+
+@pytest.mark.integration
+def test_a_worker_stopped_with_sigterm_hands_its_job_back_and_says_so_in_one_line(db, tmp_path):
+    """SIGTERM mid-job: the worker stops the pipeline, returns the job to the queue at once (for another worker to
+    take, without waiting for the lease), and ends with 143 and one line."""
+    import random
+
+    from planhrc.kb_service.planning_queue import ensure_tables
+    from planhrc.kb_service.store.postgres.jobs import SUBMIT
+    from planhrc.model import make_object
+    from planhrc.pipeline import PlanningJob, config_from_settings
+    from planhrc.settings import make_settings
+
+    obj = make_object("obj1", "absolute", 40, 12)
+    rng = random.Random(3)
+    init, goal = (obj.state([rng.choice(obj.orientation_degrees) for _ in obj.joint_indices]) for _ in range(2))
+    job = PlanningJob(obj, init, goal, config_from_settings(make_settings(planning_deadline_s=60)), None, 0.0)
+    with psycopg.connect(db, autocommit=True) as conn:
+        ensure_tables(conn)
+        conn.execute(SUBMIT, ("obj1", pickle.dumps(job), 60))
+    log_path = tmp_path / "worker-w.log"
+    with worker(db, tmp_path, lease_s=30) as proc:
+        deadline = time.monotonic() + 60
+        while not [r for r in rows(db) if r[1] == "running"]:
+            assert time.monotonic() < deadline and proc.poll() is None, log_path.read_text()
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(30) == 143
+    (row,) = rows(db)
+    assert row[1:] == ("queued", None, 1), row  # back in the queue, not waiting for the 30 s lease
+    lines = [line for line in log_path.read_text().splitlines() if "Traceback" in line or line.startswith("planhrc")]
+    assert lines == ["planhrc planning-worker: terminated"], log_path.read_text()
