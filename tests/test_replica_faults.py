@@ -50,7 +50,7 @@ def test_a_replica_killed_inside_a_perception_loses_nothing_acknowledged(pg_clus
             answer = perceive(a if i % 2 == 0 else b, oid, links, key)
             assert answer.status_code == 200, answer.text
             acknowledged[key] = (links, answer.json())
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 30
         while not _dead(crashing.pid) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert _dead(crashing.pid)
