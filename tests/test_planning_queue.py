@@ -161,7 +161,7 @@ def test_without_a_worker_the_deadline_holds_and_nothing_is_stored(db, tmp_path)
 @pytest.mark.integration
 @pytest.mark.slow
 def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_gets_one_plan(db, tmp_path):
-    env = {**QUEUED, "PLANHRC_PLANNING_DEADLINE_S": "60"}
+    env = {**QUEUED, "PLANHRC_PLANNING_DEADLINE_S": "45"}  # a 503 at the deadline comes within the client's 60 s
     links = 40  # an absolute task a worker needs a few seconds for
     with worker(db, tmp_path, name="a") as first, worker(db, tmp_path, name="b") as second, \
             replicas(db, tmp_path, count=1, args=("--planning-queue",), env=env) as [(_, c)]:
@@ -170,7 +170,13 @@ def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_get
         goal = [float((30 * k * 7) % 360) for k in range(links)]
         assert c.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal}).status_code == 200
         answer: dict[str, Any] = {}
-        request = threading.Thread(target=lambda: answer.update(r=perceive(c, oid, [0.0] * links, "long")))
+
+        def send() -> None:
+            t = time.monotonic()
+            answer["r"] = perceive(c, oid, [0.0] * links, "long")
+            answer["took"] = time.monotonic() - t
+
+        request = threading.Thread(target=send)
         request.start()
         deadline = time.monotonic() + 60
         holder = None
@@ -184,6 +190,7 @@ def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_get
         request.join(120)
         reply = answer["r"]
         assert reply.status_code in (200, 503), reply.text
+        assert answer["took"] < 45 + 14  # by the planning deadline (a loaded machine's slack on top)
         if reply.status_code == 200:
             assert reply.json()["decision"] == "replan"
         survivor = (tmp_path / f"worker-{'b' if victim is first else 'a'}.log").read_text()
