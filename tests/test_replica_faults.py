@@ -16,19 +16,11 @@ import pytest
 from planhrc.vocabulary import DecisionKind
 from tests.replica_tools import advisory_locks, events, new_rod, perceive, replicas
 from tests.servers import store_location, token_client
-from tests.test_service_crash import crashing_service
+from tests.test_service_crash import _dead, crashing_service
 
 pytestmark = pytest.mark.integration
 
 DECISIONS = {str(kind) for kind in DecisionKind}
-
-
-def _dead(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split(")")[-1].split()[0] in ("Z", "X")
-    except FileNotFoundError:
-        return True
 
 
 def test_a_replica_killed_inside_a_perception_loses_nothing_acknowledged(pg_cluster, tmp_path, request):
@@ -77,17 +69,10 @@ def test_a_replica_killed_inside_a_perception_loses_nothing_acknowledged(pg_clus
 @pytest.fixture
 def own_cluster() -> Iterator[Any]:
     """A cluster of this test's own, to restart without disturbing the session's."""
-    from tests.conftest import _unavailable
-    from tests.pg_cluster import Cluster, ClusterUnavailable
+    from tests.conftest import throwaway_cluster
 
-    try:
-        cluster = Cluster()
-    except ClusterUnavailable as exc:
-        _unavailable(str(exc))
-    try:
+    with throwaway_cluster() as cluster:
         yield cluster
-    finally:
-        cluster.close()
 
 
 @pytest.mark.slow
