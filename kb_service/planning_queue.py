@@ -268,32 +268,36 @@ def serve_jobs(db: str, password: str | None, tbox_path: str, lease_s: float, st
 def _run_job(plan: Any, link: _Link, db: str, password: str | None, worker: str,
              got: tuple[int, str, bytes, float, int], tbox_path: str, lease_s: float) -> None:
     job_id, object_id, blob, left, attempts = got
+    lease: _Lease | None = None
     try:
-        job: PlanningJob = pickle.loads(blob)
-    except Exception as exc:  # a service of another planhrc version: it gets an error, not silence
-        log.error("planning job %d (%s) does not read as a job of this version: %s", job_id, object_id, exc)
-        failed = PlanOutcome(PlanningStatus.ERROR, f"the planning worker could not read the job ({exc})", "none")
-        link.execute(FINISH, (pickle.dumps(list(pack_outcome(failed))), job_id, worker))
-        return
-    job = replace(job, config=replace(job.config, tbox_path=Path(tbox_path)), deadline_at=time.monotonic() + left)
-    log.info("planning job %d (%s, attempt %d, %.2f s left)", job_id, object_id, attempts, left)
-    lease = _Lease(db, password, job_id, worker, lease_s)
-    lease.start()
-    try:
+        try:
+            job: PlanningJob = pickle.loads(blob)
+        except Exception as exc:  # a service of another planhrc version: it gets an error, not silence
+            log.error("planning job %d (%s) does not read as a job of this version: %s", job_id, object_id, exc)
+            failed = PlanOutcome(PlanningStatus.ERROR, f"the planning worker could not read the job ({exc})",
+                                 "none")
+            link.execute(FINISH, (pickle.dumps(list(pack_outcome(failed))), job_id, worker))
+            return
+        job = replace(job, config=replace(job.config, tbox_path=Path(tbox_path)),
+                      deadline_at=time.monotonic() + left)
+        log.info("planning job %d (%s, attempt %d, %.2f s left)", job_id, object_id, attempts, left)
+        lease = _Lease(db, password, job_id, worker, lease_s)
+        lease.start()
         try:
             outcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
                            deadline_at=job.deadline_at)
         except Exception as exc:  # the service gets an outcome whatever happens
             log.exception("planning failed for %s", object_id)
             outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)
-    except BaseException:  # stopped (SIGTERM, Ctrl-C): another worker may take the job at once
         lease.stop()
+    except BaseException:  # stopped (SIGTERM, Ctrl-C) while it held the job: another worker may take it at once
+        if lease is not None:
+            lease.stop()
         try:
             link.execute(HAND_BACK, (job_id, worker))
         except UnavailableError:
             pass  # its lease expires instead
         raise
-    lease.stop()
     frames = pickle.dumps(list(pack_outcome(outcome)), pickle.HIGHEST_PROTOCOL)
     if not link.execute(FINISH, (frames, job_id, worker)):
         log.warning("planning job %d was withdrawn or taken over meanwhile: its outcome is dropped", job_id)

@@ -222,9 +222,10 @@ def test_a_worker_stopped_with_sigterm_hands_its_job_back_and_says_so_in_one_lin
     log_path = tmp_path / "worker-w.log"
     with worker(db, tmp_path, lease_s=30) as proc:
         deadline = time.monotonic() + 60
-        while not [r for r in rows(db) if r[1] == "running"]:
+        while "planning job 1 (obj1, attempt 1" not in log_path.read_text():  # it holds the job
             assert time.monotonic() < deadline and proc.poll() is None, log_path.read_text()
             time.sleep(0.02)
+        assert [r[1] for r in rows(db)] == ["running"]
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(30) == 143
     (row,) = rows(db)
