@@ -175,7 +175,7 @@ def test_a_stream_reads_the_log_when_the_feed_names_its_object_and_only_then(db)
             return False
 
         bell = EventBell(mine.event_feed)
-        assert bell.listening.wait(10)
+        assert bell.listening.wait(30)
         got: list[tuple[float, str]] = []
 
         async def main() -> None:
@@ -186,7 +186,10 @@ def test_a_stream_reads_the_log_when_the_feed_names_its_object_and_only_then(db)
                         got.append((time.monotonic(), frame))
 
             async def write() -> None:
-                await anyio.sleep(1.5)
+                with anyio.fail_after(30):
+                    while not reads:  # the stream has read the log once, and waits
+                        await anyio.sleep(0.05)
+                await anyio.sleep(0.5)
                 await anyio.to_thread.run_sync(lambda: other.add_event("obj2", "goal_set", "elsewhere", {}))
                 await anyio.sleep(1.0)
                 assert len(reads) == 1, reads  # idle, and news of another object: no read
