@@ -105,7 +105,10 @@ def test_postgresql_restarted_under_load(own_cluster, tmp_path):
         clients = [threading.Thread(target=load, args=(n, oid)) for n, oid in enumerate(oids)]
         for thread in clients:
             thread.start()
-        time.sleep(2)
+        deadline = time.monotonic() + 60
+        while len({r[0] for r in answered if r[3] == 200}) < len(oids):  # every client under way
+            assert time.monotonic() < deadline and not failures, failures
+            time.sleep(0.1)
         own_cluster.restart(down_s=1.0)
         time.sleep(3)
         stop.set()
