@@ -22,8 +22,8 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 from .backends import BACKENDS, open_store
 from .errors import (ConflictError, DamagedStoreError, DeadlineError, KBError, NotFoundError, ReasonerError,
                      UnavailableError, ValidationError)
-from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, Export, Inferences, KnowledgeStore, PlanChecks, PlanJournal,
-                        Reads, Retention, Writes)
+from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, EventFeed, EventFeeding, Export, Inferences, KnowledgeStore,
+                        ObjectLocking, PlanChecks, PlanJournal, Reads, Retention, Writes)
 from .knowledge_base import KnowledgeBase, SqliteStore
 from .names import ABOX_IRI, PREDICATES, TBOX_IRI, atom_fragment
 from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffect, Execution, StoredAction,
@@ -31,8 +31,9 @@ from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffe
 
 __all__ = [
     "ABOX_IRI", "BACKENDS", "MAX_EVENTS_PAGE", "MAX_SEQ", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec",
-    "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "Execution",
-    "Export", "Inferences", "KBError", "KnowledgeBase", "KnowledgeStore", "NotFoundError", "PlanChecks", "PlanJournal", "Reads",
-    "ReasonerError", "Retention", "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem",
-    "StoredState", "UnavailableError", "ValidationError", "Writes", "atom_fragment", "open_store",
+    "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "EventFeed",
+    "EventFeeding", "Execution", "Export", "Inferences", "KBError", "KnowledgeBase", "KnowledgeStore",
+    "NotFoundError", "ObjectLocking", "PlanChecks", "PlanJournal", "Reads", "ReasonerError", "Retention",
+    "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem", "StoredState", "UnavailableError",
+    "ValidationError", "Writes", "atom_fragment", "open_store",
 ]

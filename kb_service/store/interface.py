@@ -11,6 +11,7 @@
 | `Retention` | compaction of each object's history |
 | `Inferences` | what a DL reasoner inferred, kept apart from the asserted facts |
 | `KnowledgeStore` | all of them, and closing: what a backend must offer |
+| `ObjectLocking`, `EventFeeding` | what a store shared by several service processes adds (PostgreSQL): an object's lock across processes, a feed of the events every process commits |
 
 Records are the frozen dataclasses of `records`; ids are the readable IRI fragments of `names`, whatever the
 backend. Nothing here names a backend's internals (worlds, storids, connections): a backend that keeps the facts
@@ -200,3 +201,29 @@ class KnowledgeStore(Writes, Reads, PlanChecks, PlanJournal, Export, Retention, 
     def __enter__(self) -> Self: ...
 
     def __exit__(self, *exc: object) -> None: ...
+
+
+# -- what a store several service processes share adds (`postgres.replicas`) ---------------------------------
+@runtime_checkable
+class ObjectLocking(Protocol):
+    def lock_object(self, object_id: str) -> None:
+        """Hold the object's lock, across every process on the store, until the open transaction ends (inside
+        `transaction()` only): the object's writes are one at a time, as the service's in-process locks make them
+        within one process."""
+        ...
+
+
+class EventFeed(Protocol):
+    def wait(self, timeout_s: float) -> list[tuple[str, int]]:
+        """(object id, seq) of every event committed (by any process) since the last call, waiting up to
+        `timeout_s` for one; `UnavailableError` when the feed lost its connection."""
+        ...
+
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class EventFeeding(Protocol):
+    def event_feed(self) -> EventFeed:
+        """A feed of the events every process commits; the caller closes it (one per process is enough)."""
+        ...

@@ -16,6 +16,7 @@ from ..journal import JournalEntry, decode, encode
 from ..records import StoredPlan
 from ..triples import plan_triples
 from .records import PgRecords
+from .replicas import LOCK_NAMESPACE, LOCK_OBJECT
 from .session import Session
 
 log = logging.getLogger(__name__)
@@ -83,6 +84,9 @@ class PgJournal:
             if row is None:
                 return None
             entry = decode(bytes(row[0]))
+            # a write of the object like any other: its shared individuals (orientation atoms) are created once,
+            # whichever process writes them, since each write sees what the one before it committed
+            s.execute(LOCK_OBJECT, (LOCK_NAMESPACE + entry.object_id,))
             batch = s.batch()
             plan_triples(s, batch, self._records.info(entry.object_id), entry)
             s.flush(batch)

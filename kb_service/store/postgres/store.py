@@ -42,7 +42,7 @@ from .history import abox_lines, compact_object
 from .inferred import PgInferred
 from .journal import PgJournal
 from .records import PgRecords
-from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
+from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, LOCK_OBJECT, EventFeed
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
 
@@ -57,6 +57,8 @@ _APPEND_EVENT = (
     "e AS (INSERT INTO planhrc_event SELECT %s, value, %s, %s, %s::json, %s FROM c RETURNING seq) "
     "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
 )
+
+COMPACT_LOCK = 0x706C616E68726302  # "planhrc\x02": held by the one process compacting the store
 
 
 class PostgresStore(StoreFacade):
@@ -135,8 +137,7 @@ class PostgresStore(StoreFacade):
         with self._guard:
             if not self._session.depth:
                 raise KBError("internal: lock_object outside a transaction() (it would be released at once)")
-            self._session.execute("SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))",
-                                  (LOCK_NAMESPACE + object_id,))
+            self._session.execute(LOCK_OBJECT, (LOCK_NAMESPACE + object_id,))
 
     def event_feed(self) -> EventFeed:
         """A feed of the events every process commits (`replicas.EventFeed`); the caller closes it."""
@@ -240,9 +241,18 @@ class PostgresStore(StoreFacade):
             self._journal.settle([name for names in roots.values() for name in names])
 
             def fill() -> Compaction:
+                # one process compacts at a time (every replica compacts on its schedule), and each object's
+                # writes wait for it as for any other write of the object (its lock, until the commit)
+                row = s.execute("SELECT pg_try_advisory_xact_lock(%s)", (COMPACT_LOCK,)).fetchone()
+                if not (row and row[0]):
+                    log.info("store: another process is compacting the store; this one leaves it to it")
+                    return Compaction(0, 0, 0)
                 individuals = triples = 0
                 for oid in objects:
-                    individuals += self._journal.drop(oid, roots[oid])
+                    s.execute(LOCK_OBJECT, (LOCK_NAMESPACE + oid,))
+                    # a plan another replica adopted since the roots were read is current too: its row stays
+                    kept = {*roots[oid], *current_roots(s.conn, POSTGRESQL, oid)}
+                    individuals += self._journal.drop(oid, kept)
                     i, t = compact_object(s.conn, oid, shared[oid], keep)
                     individuals, triples = individuals + i, triples + t
                 s.pending_triples -= triples
