@@ -198,6 +198,11 @@ def test_a_query_past_its_limit_stops_the_query_process_and_nothing_else():
             for _ in range(50):  # the stopped process is reaped at once; give the kernel a moment all the same
                 os.kill(first, 0)
                 time.sleep(0.1)
+        # a query that is not SPARQL is refused before the stopped process is started again (which takes seconds
+        # on a loaded machine: the graphs are loaded anew)
+        refused = client.get("/sparql", params={"query": "SELECT ?s WHERE { ?s ?p }"})
+        assert refused.status_code == 400 and "not SPARQL 1.1" in refused.json()["detail"], refused.text
+        assert engine.pid() is None
         assert client.get("/sparql", params={"query": "ASK { ?s a owl:Class }"}).json()["boolean"] is True
         assert engine.pid() not in (None, first)
         last = engine.pid()

@@ -87,6 +87,9 @@ class RdflibEngine:
     def close(self) -> None:
         pass
 
+    def parse(self, query: CheckedQuery) -> None:
+        self._prepare(query)  # kept for the run that follows
+
     def run(self, query: CheckedQuery, deadline: float, max_results: int) -> tuple[bytes, int]:
         prepared = self._prepare(query)
         self.memory.deadline = deadline

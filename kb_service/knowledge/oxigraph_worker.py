@@ -81,7 +81,7 @@ class Replica:
         try:
             result = self.store.query(text, prefixes=prefixes, default_graph=graph, named_graphs=self.named)
         except SyntaxError as exc:
-            raise _QueryFailed(f"query: not SPARQL 1.1 ({_one_line(exc)})") from None
+            raise _QueryFailed(f"query: not SPARQL 1.1 ({one_line(exc)})") from None
         try:
             if isinstance(result, ox.QueryBoolean):
                 return _bytes(result.serialize(format=RESULT_FORMATS.get(fmt, ox.QueryResultsFormat.JSON))), 1
@@ -97,7 +97,7 @@ class Replica:
         except _TooMany:
             raise _QueryFailed(_too_many(max_results)) from None
         except (OSError, ValueError, TypeError) as exc:
-            raise _QueryFailed(f"query: cannot be evaluated ({_one_line(exc)})") from None
+            raise _QueryFailed(f"query: cannot be evaluated ({one_line(exc)})") from None
         tsv = rows.getvalue()
         if fmt == "tsv":
             return tsv, rows.count
@@ -146,7 +146,7 @@ def _check_size(rows: int, max_results: int) -> None:
         raise _QueryFailed(_too_many(max_results))
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return text if len(text) <= 300 else text[:297] + "..."
 
@@ -178,7 +178,7 @@ def serve(conn: Connection) -> None:
         except _QueryFailed as exc:
             answer = ("error", str(exc))
         except Exception as exc:  # the parent gets an answer whatever happens
-            answer = ("error", f"query: cannot be evaluated ({_one_line(exc)})")
+            answer = ("error", f"query: cannot be evaluated ({one_line(exc)})")
         try:
             conn.send(answer)
         except OSError:

@@ -83,6 +83,10 @@ class QueryEngine(Protocol):
 
     def load(self, contents: Mapping[str, frozenset[Triple]]) -> None: ...
 
+    def parse(self, query: CheckedQuery) -> None:
+        """QueryError for a query the engine cannot read, without the graphs: a syntax error is answered at once,
+        also while the graphs are being (re)loaded."""
+
     def apply(self, changes: Sequence[Change]) -> None: ...
 
     def run(self, query: CheckedQuery, deadline: float, max_results: int) -> tuple[bytes, int]:
@@ -137,6 +141,7 @@ class SparqlEndpoint:
     def run(self, request: SparqlRequest) -> SparqlAnswer:
         started = time.monotonic()
         query, media = self.check(request)
+        self.engine.parse(query)
         graph = self.graph
         if not graph.lock.acquire(timeout=self.timeout_s):
             raise DeadlineError(f"query: the endpoint stayed busy for {self.timeout_s:g} s; try again")

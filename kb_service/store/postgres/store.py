@@ -27,7 +27,7 @@ from planhrc.model import ArticulatedObject
 from planhrc.vocabulary import ExecutionStatus
 
 from ..checks import check_events_page, check_export, check_keep_perceived
-from ..errors import DamagedStoreError, KBError
+from ..errors import DamagedStoreError, KBError, UnavailableError
 from ..events import EventLog
 from ..facade import StoreFacade
 from ..inferred import InferredFacts
@@ -76,6 +76,7 @@ class PostgresStore(StoreFacade):
         self._tbox_lines = _tbox_lines(self.tbox_path)
         session = self._session = Session(db, password)
         self._guard = session.guard
+        self._plans_to_write = 0  # the last count read, what /health shows while the database is away
         try:
             self._prepare(hashlib.sha256(self.tbox_path.read_bytes()).hexdigest())
             self._records = PgRecords(session)
@@ -226,8 +227,12 @@ class PostgresStore(StoreFacade):
             self._journal.settle()
 
     def plans_to_write(self) -> int:
-        with self._guard:
-            return len(self._journal)
+        try:
+            with self._guard:
+                self._plans_to_write = len(self._journal)
+        except UnavailableError:
+            pass  # /health answers from memory while the database takes no connections, as its other counts do
+        return self._plans_to_write
 
     # -- retention --------------------------------------------------------------------------------------------
     def compact(self, keep_perceived: int) -> Compaction:
