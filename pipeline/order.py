@@ -4,8 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-from planhrc.model import HAS_ORIENTATION, ArticulatedObject, DomainModelSpec, State, orientation_name
-from planhrc.ordering import HelpItem, Move, Placement, feasible_alternative
+from planhrc.model import HAS_ORIENTATION, ArticulatedObject, DomainModelSpec, Formulation, State, orientation_name
+from planhrc.ordering import HelpItem, Move, Placement, feasible_alternative, first_obstacle, help_for
 from planhrc.transition import StateIndex, apply, ground_action
 
 from .motion import move_of
@@ -31,8 +31,15 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
                 placement: Placement) -> Ordered | Refusal:
     """The planner's steps in an order whose every configuration is feasible (`ordering.feasible_alternative`:
     the same steps, else a longer plan turning one joint the other way round), grounded again in that order (in
-    the absolute formulation an action's from/to orientations depend on the turns before it)."""
+    the absolute formulation an action's from/to orientations depend on the turns before it). A bimanual plan is
+    not reordered (its turns happen between a grasp and a release at their joint): its own order is checked."""
     moves = [move_of(obj, step) for step in steps]
+    if obj.formulation is Formulation.BIMANUAL:
+        step, problem = first_obstacle(placement, moves)
+        if problem is None:
+            return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table")
+        return Refusal(f"the plan's action {step} would not stay on the table or within reach: {problem.sentence()}",
+                       help_for(placement, moves, problem))
     answer, added = feasible_alternative(placement, moves, obj.orientations)
     if answer.moves is None:
         return Refusal(answer.sentence(), answer.help)
