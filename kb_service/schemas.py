@@ -118,7 +118,9 @@ class ObjectCreate(BaseModel):
         json_schema_extra={"enum": list(ORIENTATION_COUNTS)},
     )
     formulation: Formulation = Field(
-        description="Planning formulation: joints carry relative angles, or absolute link orientations.",
+        description="Planning formulation: joints carry relative angles (relative), absolute link orientations "
+        "(absolute), or each link's orientation from link 1 with two grippers turning one joint at a time at the "
+        "centre, grasping and releasing the links it joins (bimanual).",
         examples=["relative"],
     )
     base_point_xy: list[TableCoordinate] | None = Field(
@@ -172,7 +174,7 @@ class ObjectPublic(BaseModel):
 
     id: str = Field(description="Identifier of the object (also the prefix of its individuals).", examples=["obj1"])
     name: str = Field(description="Human-readable name.", examples=["rod"])
-    formulation: Formulation = Field(description="relative or absolute.", examples=["relative"])
+    formulation: Formulation = Field(description="relative, absolute or bimanual.", examples=["relative"])
     orientations: int = Field(description="K, the number of allowed orientations.", examples=[4])
     step_deg: int = Field(description="360 / K: the angle of one planned rotation.", examples=[90])
     links: list[LinkPublic] = Field(description="Links l1..lN in chain order.", examples=[[{"name": "obj1_l1", "length_m": 0.155}]])
@@ -211,9 +213,9 @@ class GoalUpdate(BaseModel):
     )
     joint_angles_deg: list[FiniteFloat | None] | None = Field(
         default=None, min_length=MIN_LINKS - 1, max_length=MAX_LINKS,
-        description="One value per joint: the N-1 relative angles (relative formulation) or the N link "
-        "orientations (absolute formulation); null leaves that joint free (a partial goal), but at least one "
-        "joint has a value.",
+        description="One value per joint: the N-1 relative angles (relative formulation), the N link "
+        "orientations (absolute formulation) or the orientations of links 2..N from link 1 (bimanual); null leaves "
+        "that joint free (a partial goal), but at least one joint has a value.",
         examples=[[90, 0, 90], [90, None, 90]],
         json_schema_extra={"contains": {"type": "number"}},  # at least one joint has a value
     )
@@ -297,7 +299,8 @@ class NextActionPublic(BaseModel):
 
     id: str = Field(description="Identifier of the action (for feedback).", examples=["obj1_plan_1_a2"])
     name: str = Field(description="PDDL action name.", examples=["rotateclockwise"])
-    params: list[str] = Field(description="PDDL arguments: turned link, held link, joint, from, to.",
+    params: list[str] = Field(description="PDDL arguments: turned link, held link, joint, from, to (bimanual: "
+                              "turned link, kept link, joint, then the action's own, the grippers last).",
                               examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"]])
     step: int = Field(description="1-based position of the action in its plan.", examples=[2])
     last_step: int = Field(description="Last plan step this motion covers: consecutive steps of one joint in one "
@@ -307,7 +310,8 @@ class NextActionPublic(BaseModel):
     joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])
     turned_link_index: int = Field(description="Index of the link that turns (with every link beyond it).", examples=[2])
     held_link_index: int = Field(description="Index of the link held still (0 = the table).", examples=[1])
-    delta_deg: int = Field(description="Signed rotation of the turned link, + clockwise seen from above.", examples=[90])
+    delta_deg: int = Field(description="Signed rotation of the turned link, + clockwise seen from above; 0 for a "
+                           "bimanual step that turns nothing (grasp, release, centring).", examples=[90])
     macro_steps: int = Field(description="Number of planned steps this motion stands for.", examples=[1])
 
 
@@ -482,7 +486,7 @@ class PlanStepPublic(BaseModel):
     eff_neg: list[str] = Field(description="Ground negative effects.", examples=[["(hasorientation deg_0 obj1_j1)"]])
     eff_pos: list[str] = Field(description="Ground positive effects.", examples=[["(hasorientation deg_90 obj1_j1)"]])
     cond_eff: list[dict[str, list[str]]] = Field(
-        description="Ground conditional effects (absolute formulation): when, eff_neg, eff_pos.",
+        description="Ground conditional effects (absolute and bimanual formulations): when, eff_neg, eff_pos.",
         examples=[[{"when": ["(hasorientation deg_0 obj1_j2)"], "eff_neg": ["(hasorientation deg_0 obj1_j2)"],
                     "eff_pos": ["(hasorientation deg_90 obj1_j2)"]}]])
     joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])

@@ -9,10 +9,10 @@ model compares whole states with the plan's expected ones.
 """
 from __future__ import annotations
 
-from typing import Iterable
+from typing import Iterable, Sequence
 
-from planhrc.model import (CONTROL_PREDICATES, FREE, HOLDING, IN_CENTRE, ArticulatedObject, Atom, Formulation,
-                           ModelError, State, format_atom)
+from planhrc.model import (CONTROL_PREDICATES, FREE, HOLDING, IN_CENTRE, ActionSpec, ArticulatedObject, Atom,
+                           Formulation, ModelError, State, format_atom)
 
 
 def control_of(state: Iterable[Atom]) -> frozenset[Atom]:
@@ -34,6 +34,17 @@ def after_failure(control: Iterable[Atom]) -> frozenset[Atom]:
     kept = {a for a in control if a[0] == IN_CENTRE}
     grippers = {a[1] for a in control if a[0] in (FREE, HOLDING)}
     return frozenset(kept | {(FREE, g) for g in grippers})
+
+
+def control_after(control: Iterable[Atom], done: Sequence[ActionSpec], succeeded: bool) -> frozenset[Atom]:
+    """The control facts after the worker's feedback on the actions `done` (one motion, in order): their control
+    effects when it succeeded, else `after_failure`."""
+    now = frozenset(control)
+    if not succeeded:
+        return after_failure(now)
+    for action in done:
+        now = (now - control_of(action.eff_neg)) | control_of(action.eff_pos)
+    return now
 
 
 def check_control(obj: ArticulatedObject, control: Iterable[Atom], field: str = "control") -> frozenset[Atom]:

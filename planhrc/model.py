@@ -210,7 +210,7 @@ class ArticulatedObject:
         """Bimanual: which gripper keeps the upstream link, and the 45-degree steps where K allows them."""
         if self.formulation is not Formulation.BIMANUAL:
             return frozenset()
-        atoms = {(KEEPER, KEEPING_GRIPPER)}
+        atoms: set[Atom] = {(KEEPER, KEEPING_GRIPPER)}
         if self.has_macros:
             names, m = self.orientation_names, MACRO_DEG // self.step
             atoms |= {(ORIENTATION_ORD45, names[i], names[(i + m) % len(names)]) for i in range(len(names))}

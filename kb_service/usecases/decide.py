@@ -104,14 +104,17 @@ def placement(obj: ArticulatedObject, link_deg: Sequence[float], base: Base) -> 
 
 
 def whole_turn_deg(obj: ArticulatedObject) -> int:
-    """The step by which a human may turn the whole object without changing its state (`Placement`): relative
-    objects only, whose states do not say where l1 points."""
-    return obj.step if obj.formulation is Formulation.RELATIVE else 0
+    """The step by which a human may turn the whole object without changing its state (`Placement`): relative and
+    bimanual objects, whose states do not say where l1 points."""
+    return 0 if obj.formulation is Formulation.ABSOLUTE else obj.step
 
 
 def other_way(obj: ArticulatedObject, moves: Sequence[Move], failure: FailureHistory) -> list[Move] | None:
     """`moves` with the failing joint's steps replaced by the other way round (360° - delta), or None when that
-    joint has nothing left to turn in them."""
+    joint has nothing left to turn in them, or the plan's turns lie between grasps and releases (bimanual: the
+    planner makes the new plan)."""
+    if obj.grippers:
+        return None
     group = [m for m in moves if (m.joint, m.turned) == (failure.joint, failure.turned)]
     total = sum(m.delta_deg for m in group)
     if not group or total % 360 == 0:

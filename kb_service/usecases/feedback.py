@@ -1,14 +1,17 @@
 """A worker's feedback on the dispatched action: with `succeeded` the execution moves past the motion's last step
 and the next perception checks the expected state there; otherwise the next perception decides whether to retry,
-resume or re-plan. Feedback on an action a perception already moved past is recorded as *late* and moves nothing."""
+resume or re-plan. Feedback on an action a perception already moved past is recorded as *late* and moves nothing.
+For a bimanual object the feedback event also keeps the robot's control facts after it (`planhrc.control`): what
+the next perceived states hold beside the perceived orientations."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from planhrc.control import control_after
 from planhrc.pipeline import action_motion
 from planhrc.vocabulary import ActionOutcome, ExecutionStatus
 
-from ..store import ConflictError, Execution
+from ..store import ConflictError, Execution, StoredAction
 from .actions import last_step, merges
 from .context import Context
 from .idempotency import fingerprint, recall, remember
@@ -51,12 +54,15 @@ def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
             current = execution.dispatched_action_id or "none"
             raise ConflictError(
                 f"action_id: {action_id} is not the current dispatched action of {object_id} (current: {current})")
+        memo = context.memory.of(store, object_id)
+        done: tuple[StoredAction, ...] = (action,)  # the motion's actions: feedback on a merged one covers each step
         if execution.status == ExecutionStatus.DISPATCHED:
             accepted = Accepted.CURRENT
             plan, _ = context.views.get(store, execution.plan_id)
-            split_plans = context.memory.of(store, object_id).split_plans
+            split_plans = memo.split_plans
             last = (last_step(merges(context.settings.merge_macro_steps, split_plans, plan.id), obj, plan, action)
                     if plan else action.step)
+            done = tuple(a for a in plan.actions if action.step <= a.step <= last) if plan else done
             next_step = last + 1 if outcome == ActionOutcome.SUCCEEDED else action.step
             new = Execution(execution.plan_id, next_step, ExecutionStatus.READY, None)
             text = f"a_{action.step} {outcome}" + (
@@ -69,11 +75,15 @@ def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
         result = FeedbackResult(action_id, accepted, new)
         why = f" [{failure}]" if failure is not None else ""
         motion = action_motion(obj, action)
+        data = {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
+                "reason": failure, "measured_deg": measured_deg, "message": message,
+                "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"]}
+        if obj.grippers:  # bimanual: what the robot's grippers hold and where the centre is now (`planhrc.control`)
+            control = control_after(memo.control or obj.initial_control(), [a.spec for a in done],
+                                    outcome == ActionOutcome.SUCCEEDED)
+            data["control"] = [list(atom) for atom in sorted(control)]
         with store.transaction():
             store.set_execution(object_id, new)
-            store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""),
-                            {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
-                             "reason": failure, "measured_deg": measured_deg, "message": message,
-                             "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"]})
+            store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""), data)
             remember(store, object_id, request.idempotency_key, print_, feedback_record(result))
         return result

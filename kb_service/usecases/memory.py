@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
 from planhrc.cooperation import FailureHistory, PlanView
+from planhrc.model import Atom
 from planhrc.pipeline import PieceRecord
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Remedy
 
@@ -37,6 +38,7 @@ class ObjectMemo:
     split_plans: frozenset[str] = frozenset()  # plans whose macro steps are dispatched step by step
     last_decision: str | None = None  # the kind of the last decision logged
     val: PieceRecord | None = None  # the latest plan adopted with only its first motion validated, and its verdicts
+    control: frozenset[Atom] | None = None  # bimanual: the robot's control facts after the last feedback (None: none)
 
     @property
     def where(self) -> tuple[float, float] | None:
@@ -79,8 +81,10 @@ def _read(memo: ObjectMemo, event: StoredEvent) -> ObjectMemo:
         return memo  # it stored no state and decided nothing: the last feedback still informs the next decision
     if event.kind == EventKind.FEEDBACK:
         outcome = data.get("outcome")
+        control = data.get("control")
         return replace(memo, last_outcome=ActionOutcome(outcome) if outcome else None,
-                       failure=next_failure(memo.failure, data))
+                       failure=next_failure(memo.failure, data),
+                       control=frozenset(tuple(a) for a in control) if control is not None else memo.control)
     if event.kind == EventKind.VAL_VERDICT:
         if memo.val is not None and memo.val.plan_id == data.get("plan_id"):
             return replace(memo, val=memo.val.with_verdict(int(data["piece"]), verdict_of(data)))

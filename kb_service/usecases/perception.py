@@ -89,13 +89,13 @@ def perceive(context: Context, request: PerceptionRequest) -> Turn:
             return turn_of(recalled)
         if any(v is None for v in links):
             return _incomplete(context, obj, request, print_, measured)
-        try:
-            perception = snap(obj, links)  # validated and snapped once, here
-        except ModelError as exc:
-            raise ValidationError(str(exc)) from None
 
         # where the object's cooperation stands
         memo = context.memory.of(store, obj.ident)
+        try:  # validated and snapped once, here; a bimanual state takes the robot's control facts (`planhrc.control`)
+            perception = snap(obj, links, control=memo.control)
+        except ModelError as exc:
+            raise ValidationError(str(exc)) from None
         execution = store.get_execution(obj.ident)
         goal = store.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
         plan, view = context.views.get(store, execution.plan_id)
