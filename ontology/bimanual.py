@@ -18,6 +18,7 @@ link turns about which joint whatever its kind.
 """
 from __future__ import annotations
 
+import types
 from typing import Any, Mapping, Sequence
 
 from owlready2 import AllDisjoint, Thing
@@ -27,82 +28,91 @@ from planhrc.ontology.patterns import Patterns
 REQUIREMENTS = ":strips :typing :equality :negative-preconditions :conditional-effects"
 
 
+def subclass(base: Any, name: str, **annotations: list[str]) -> Any:
+    """A TBox class `name` under `base` with its annotations (`comment`, `pddlName`, ...), made in the ontology of
+    the enclosing `with`: the bases come from the TBox's own namespace, which no static type checker can follow."""
+    made = types.new_class(name, (base,))
+    for key, value in annotations.items():
+        setattr(made, key, value)
+    return made
+
+
 def declare_bimanual(ns: Mapping[str, Any]) -> dict[str, Any]:
     """The TBox classes the bimanual formulation needs beyond the paper's; call inside the ontology's `with`."""
     Type, Predicate, Action = ns["Type"], ns["Predicate"], ns["Action"]
     arg1, arg2 = ns["arg1"], ns["arg2"]
     Link, Joint, Orientation = ns["Link"], ns["Joint"], ns["Orientation"]
 
-    class Gripper(Type):
-        comment = ["A gripper of the robot (Baxter's left and right)."]
-        pddlName = ["gripper"]
+    Gripper = subclass(Type, "Gripper",
+        comment=["A gripper of the robot (Baxter's left and right)."],
+        pddlName=["gripper"])
 
     AllDisjoint([Link, Joint, Orientation, Gripper])
 
-    class Free(Predicate):
-        comment = ["Free(g): gripper g holds nothing."]
-        pddlName = ["free"]
-        pddlParameters = ["?g - gripper"]
-        pddlArgumentOrder = ["arg1"]
+    Free = subclass(Predicate, "Free",
+        comment=["Free(g): gripper g holds nothing."],
+        pddlName=["free"],
+        pddlParameters=["?g - gripper"],
+        pddlArgumentOrder=["arg1"])
 
     Free.is_a += [arg1.some(Gripper), arg1.exactly(1)]
 
-    class Holding(Predicate):
-        comment = ["Holding(g, l): gripper g holds link l."]
-        pddlName = ["holding"]
-        pddlParameters = ["?g - gripper ?l - link"]
-        pddlArgumentOrder = ["arg1 arg2"]
+    Holding = subclass(Predicate, "Holding",
+        comment=["Holding(g, l): gripper g holds link l."],
+        pddlName=["holding"],
+        pddlParameters=["?g - gripper ?l - link"],
+        pddlArgumentOrder=["arg1 arg2"])
 
     Holding.is_a += [arg1.some(Gripper), arg1.exactly(1), arg2.some(Link), arg2.exactly(1)]
 
-    class InCentre(Predicate):
-        comment = ["InCentre(j): joint j is at the working position, where both hands work."]
-        pddlName = ["incentre"]
-        pddlParameters = ["?j - joint"]
-        pddlArgumentOrder = ["arg1"]
+    InCentre = subclass(Predicate, "InCentre",
+        comment=["InCentre(j): joint j is at the working position, where both hands work."],
+        pddlName=["incentre"],
+        pddlParameters=["?j - joint"],
+        pddlArgumentOrder=["arg1"])
 
     InCentre.is_a += [arg1.some(Joint), arg1.exactly(1)]
 
-    class Keeper(Predicate):
-        comment = ["Keeper(g): gripper g keeps the upstream link still while the other gripper turns the downstream"
-                   " one (a static fact of a bimanual object)."]
-        pddlName = ["keeper"]
-        pddlParameters = ["?g - gripper"]
-        pddlArgumentOrder = ["arg1"]
+    Keeper = subclass(Predicate, "Keeper",
+        comment=["Keeper(g): gripper g keeps the upstream link still while the other gripper turns the downstream"
+                " one (a static fact of a bimanual object)."],
+        pddlName=["keeper"],
+        pddlParameters=["?g - gripper"],
+        pddlArgumentOrder=["arg1"])
 
     Keeper.is_a += [arg1.some(Gripper), arg1.exactly(1)]
 
-    class OrientationOrd45(Predicate):
-        comment = ["OrientationOrd45(o1, o2): o2 lies 45 degrees clockwise of o1 (asserted where 45 degrees is"
-                   " several steps of the orientation set)."]
-        pddlName = ["orientationord45"]
-        pddlParameters = ["?o1 - orientation ?o2 - orientation"]
-        pddlArgumentOrder = ["arg1 arg2"]
+    OrientationOrd45 = subclass(Predicate, "OrientationOrd45",
+        comment=["OrientationOrd45(o1, o2): o2 lies 45 degrees clockwise of o1 (asserted where 45 degrees is"
+                " several steps of the orientation set)."],
+        pddlName=["orientationord45"],
+        pddlParameters=["?o1 - orientation ?o2 - orientation"],
+        pddlArgumentOrder=["arg1 arg2"])
 
     OrientationOrd45.is_a += [arg1.some(Orientation), arg1.exactly(1), arg2.some(Orientation), arg2.exactly(1)]
 
     AllDisjoint([ns["Connected"], ns["HasOrientation"], ns["OrientationOrd"], ns["Affected"], ns["LinkOrientation"],
                  Free, Holding, InCentre, Keeper, OrientationOrd45])
 
-    class MoveToCentre(Action):
-        comment = ["Brings both open hands to another joint: that joint is at the centre from then on."]
-        pddlName = ["movetocentre"]
+    MoveToCentre = subclass(Action, "MoveToCentre",
+        comment=["Brings both open hands to another joint: that joint is at the centre from then on."],
+        pddlName=["movetocentre"])
 
-    class GraspLinks(Action):
-        comment = ["Closes both hands on the two links the centred joint joins: the keeper on the upstream link."]
-        pddlName = ["grasplinks"]
+    GraspLinks = subclass(Action, "GraspLinks",
+        comment=["Closes both hands on the two links the centred joint joins: the keeper on the upstream link."],
+        pddlName=["grasplinks"])
 
-    class ReleaseLinks(Action):
-        comment = ["Opens both hands."]
-        pddlName = ["releaselinks"]
+    ReleaseLinks = subclass(Action, "ReleaseLinks",
+        comment=["Opens both hands."],
+        pddlName=["releaselinks"])
 
-    class RotateClockwise45(Action):
-        comment = ["Turns the held downstream link 45 degrees clockwise (seen from above) at once."]
-        pddlName = ["rotateclockwise45"]
+    RotateClockwise45 = subclass(Action, "RotateClockwise45",
+        comment=["Turns the held downstream link 45 degrees clockwise (seen from above) at once."],
+        pddlName=["rotateclockwise45"])
 
-    class RotateAntiClockwise45(Action):
-        comment = ["Turns the held downstream link 45 degrees anticlockwise at once."]
-        pddlName = ["rotateanticlockwise45"]
+    RotateAntiClockwise45 = subclass(Action, "RotateAntiClockwise45",
+        comment=["Turns the held downstream link 45 degrees anticlockwise at once."],
+        pddlName=["rotateanticlockwise45"])
 
     AllDisjoint([ns["RotateClockwise"], ns["RotateAntiClockwise"], MoveToCentre, GraspLinks, ReleaseLinks,
                  RotateClockwise45, RotateAntiClockwise45])
