@@ -34,7 +34,8 @@ def client():
         yield c
 
 
-def act(client, oid: str, links: list[float], outcome: str = "succeeded", moved: bool = True) -> tuple[list[float], dict]:
+def act(client, oid: str, links: list[float], outcome: str = "succeeded",
+        moved: bool = True) -> tuple[list[float], dict]:
     """The worker takes the next action, turns the links if `moved`, and reports `outcome`."""
     action = client.post(f"/objects/{oid}/actions/next").json()
     assert action is not None
