@@ -21,7 +21,7 @@ with warnings.catch_warnings():
 from planhrc.kb_service.app import create_app
 from planhrc.planner.validate import validate_plan
 from planhrc.settings import make_settings
-from tests.servers import serving
+from tests.servers import serving, store_location
 from tests.test_service_api import move, new_object, noisy, perceive
 
 GOAL = [0, 90, 90, 180]  # link orientations: j1..j3 carry 90, 90, 180 from l1
@@ -142,11 +142,12 @@ def test_a_human_moving_the_object_while_the_robot_holds_nothing(client):
 
 
 @pytest.mark.integration
-def test_bimanual_episode_over_http_with_a_restart_in_the_middle(tmp_path):
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_bimanual_episode_over_http_with_a_restart_in_the_middle(tmp_path, backend, request):
     """Create, goal, perceive, take actions, feedback over HTTP; the service restarts while the robot holds the
     links, and the next perception still matches the expected state with the grasp (the control facts are kept
     with the feedback events it reads back)."""
-    db = tmp_path / "kb.sqlite3"
+    db = store_location(backend, tmp_path, request)
     env = {"PLANHRC_MERGE_MACRO_STEPS": "false"}
     links = [0.0, 0.0, 0.0, 0.0]
     with serving(db, env=env, folder=tmp_path) as base, httpx.Client(base_url=base, timeout=60) as c:
