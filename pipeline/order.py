@@ -1,14 +1,24 @@
-"""An order of a plan's steps that keeps every configuration of an object placed in the cell on the table."""
+"""An order of a plan's steps that keeps every configuration of an object placed in the cell on the table: the
+planner's steps in another order or one joint the other way round (`planhrc.ordering`), else a longer plan through
+intermediate configurations (`planhrc.detour.find_detour`); when none fits where the object lies, the place nearer
+the table's middle where one does, for the robot to slide the object to first (`planhrc.detour.find_room`)."""
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Sequence
 
-from planhrc.model import HAS_ORIENTATION, ArticulatedObject, DomainModelSpec, State, orientation_name
-from planhrc.ordering import HelpItem, Move, Placement, feasible_alternative
+from planhrc.detour import Room, find_detour, find_room
+from planhrc.model import HAS_ORIENTATION, ArticulatedObject, DomainModelSpec, Formulation, State, orientation_name
+from planhrc.ordering import CLOCKWISE, HelpItem, Move, Placement, feasible_alternative
 from planhrc.transition import StateIndex, apply, ground_action
 
 from .motion import move_of
+
+# How long the searches for a detour and for room may take together, and what they leave of the planning deadline
+# for grounding, replaying and validating the plan they find.
+SEARCH_S = 4.0
+VAL_RESERVE_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -25,17 +35,30 @@ class Refusal:
 
     message: str
     help: tuple[HelpItem, ...]
+    room: Room | None = None  # where the plan would fit: the robot may slide the object there first
 
 
 def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, steps: Sequence[str],
-                placement: Placement) -> Ordered | Refusal:
+                placement: Placement, deadline_at: float | None = None) -> Ordered | Refusal:
     """The planner's steps in an order whose every configuration is feasible (`ordering.feasible_alternative`:
-    the same steps, else a longer plan turning one joint the other way round), grounded again in that order (in
-    the absolute formulation an action's from/to orientations depend on the turns before it)."""
+    the same steps, else a longer plan turning one joint the other way round; else `detour.find_detour`: single
+    steps through intermediate configurations), grounded again in that order (in the absolute formulation an
+    action's from/to orientations depend on the turns before it). When nothing fits where the object lies, the
+    refusal names the place where it would (`detour.find_room`)."""
     moves = [move_of(obj, step) for step in steps]
     answer, added = feasible_alternative(placement, moves, obj.orientations)
     if answer.moves is None:
-        return Refusal(answer.sentence(), answer.help)
+        alphabet = alphabet_of(obj)
+        until = search_deadline(deadline_at)
+        detour = find_detour(placement, moves, alphabet, obj.orientations, deadline_at=until)
+        if detour.moves is not None:
+            longer = len(detour.moves) - len(moves)
+            why = (f"{longer} steps longer than the planner's {len(moves)}: no order of its steps, nor a joint "
+                   f"turned the other way round, stays on the table ({answer.problem.sentence() if answer.problem else 'no order found'}), "
+                   "so the plan goes through intermediate configurations")
+            return Ordered(steps_of(obj, model, init, detour.moves), why)
+        room = find_room(placement, moves, alphabet, obj.orientations, deadline_at=until)
+        return Refusal(answer.sentence(), answer.help, room)
     room = f" ({answer.clearance_m * 100:.1f} cm from its edges at rest)"
     if list(answer.moves) == moves:
         return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table{room}")
@@ -59,3 +82,18 @@ def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves:
         index.moved(state)
         steps.append(step)
     return tuple(steps)
+
+
+def search_deadline(deadline_at: float | None) -> float:
+    """When the searches for a longer plan or for room stop: `SEARCH_S` from now, and `VAL_RESERVE_S` before the
+    planning deadline (the plan found is still grounded, replayed and checked by VAL within it)."""
+    until = time.monotonic() + SEARCH_S
+    return until if deadline_at is None else min(until, deadline_at - VAL_RESERVE_S)
+
+
+def alphabet_of(obj: ArticulatedObject) -> tuple[Move, ...]:
+    """One clockwise step of every joint the robot turns in a detour: the downstream link, the one before held
+    (absolute: link K about joint K, link 1 against the table; relative: link K+1 about joint K)."""
+    if obj.formulation is Formulation.ABSOLUTE:
+        return tuple(Move(CLOCKWISE, k, k - 1, k, obj.step) for k in range(1, obj.n_links + 1))
+    return tuple(Move(CLOCKWISE, k + 1, k, k, obj.step) for k in range(1, obj.n_links))
