@@ -14,7 +14,8 @@ measured, not the snapped orientations of the state) and the tolerances are `pla
   the goal as drawn).
 
 A problem the pose already has (a link the human left past the edge) is not held against the turn as long as the
-turn does not make it worse (`Baseline`): only problems a turn adds or worsens count.
+turn does not make it worse (`Baseline`): only problems a turn adds or worsens count. Reach is the exception: a
+grasped link out of reach cannot be grasped, however it came to lie there.
 """
 from __future__ import annotations
 
@@ -58,14 +59,15 @@ def judge_turn(geometry: ObjectGeometry, angles: Sequence[float], turned: int, h
         short = reach_shortfall(centres[k - 1], cell.robot)
         reason = Infeasibility(Infeasible.OUT_OF_REACH, k, f"link {k} unreachable: {short:.2f} m beyond reach",
                                float(short), "the arms' reach")
-        if short > 1e-9 and not baseline.excused(reason):
+        if short > 1e-9:  # a link out of reach is not grasped, however it came to lie there
             return Feasibility(False, (reason,))
     n = max(1, int(math.ceil(abs(delta_deg) / SWEEP_INCREMENT_DEG)))
     for i in (n, *range(1, n)):  # where it comes to rest first: most refused turns are refused there
         placed, values = rotated(geometry, angles, turned, held, delta_deg * i / n)
         tolerance = rest if i == n else STRICT
         result = configuration_feasible(placed, values, cell, reach_links=grasped, tolerance=tolerance)
-        new = tuple(r for r in result.reasons if not baseline.excused(r, tolerance))
+        new = tuple(r for r in result.reasons
+                    if r.code is Infeasible.OUT_OF_REACH or not baseline.excused(r, tolerance))
         if new:
             return Feasibility(False, new)
     return Feasibility(True)

@@ -80,6 +80,7 @@ class Placement:
     whole_turn_deg: int = 0
     # motions the robot refused from a state before: never proposed again from that state
     refused: frozenset["RefusedMotion"] = frozenset()
+    grid_deg: int = 1  # the orientation step: what a help request's orientations are rounded to (`link_deg` is measured)
 
 
 @dataclass(frozen=True)
@@ -284,14 +285,16 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
     turn = _whole_turn(placement, end, final)
     if turn:  # the plan's end does not lie on the table where the object points now: turn it as a whole first
         turned_start = rotated(placement.geometry, placement.link_deg, 1, 0, turn)[1]
-        to = int(round(turned_start[0])) % 360
+        to = int(round(turned_start[0] / placement.grid_deg)) * placement.grid_deg % 360
         problem_there = configuration_feasible(end, final, placement.cell, reach_links=()).reasons[0].message
         first = HelpItem(1, to, f"turn link 1 to {to}° and the whole object with it, about its base point (pointing "
                                 f"as it does now, the plan's end would not lie on the table: {problem_there})")
         rest = help_for(replace(placement, link_deg=turned_start, whole_turn_deg=0), moves, problem, why)
         return (first,) + tuple(item for item in rest if item.link != 1)
     start = tuple(float(a) % 360.0 for a in placement.link_deg)
-    changed = [k for k in range(1, len(final) + 1) if round(final[k - 1]) % 360 != round(start[k - 1]) % 360]
+    grid = placement.grid_deg
+    changed = [k for k in range(1, len(final) + 1)
+               if round(final[k - 1] / grid) * grid % 360 != round(start[k - 1] / grid) * grid % 360]
     named = [k for k in (problem.links if problem is not None else ()) if k in changed]
     links = named or [m.turned for m in dict.fromkeys(moves) if m.turned in changed] or changed
     if changed and not _safe_for_a_human(placement, final, links):
@@ -299,7 +302,7 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
     why = f" ({why})" if why else f" ({problem.sentence()})" if problem is not None else ""
     items = []
     for k in dict.fromkeys(links):
-        to = int(round(final[k - 1])) % 360
+        to = int(round(final[k - 1] / placement.grid_deg)) * placement.grid_deg % 360
         items.append(HelpItem(k, to, f"turn link {k} to {to}°{why}"))
     return tuple(items)
 

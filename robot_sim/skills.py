@@ -376,7 +376,7 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
 Interrupt = Callable[[int, int], bool]
 
 
-class _Hands:
+class Hands:
     """The grasps an execution holds: arm -> (constraint id, link, grasp point in the link's frame)."""
 
     def __init__(self, scene: Scene, robot: Robot) -> None:
@@ -431,7 +431,7 @@ class _Hands:
             self.release(arm)
 
 
-def _drive(scene: Scene, robot: Robot, arm: str, target: Sequence[float], max_steps: int = 60,
+def drive_arm(scene: Scene, robot: Robot, arm: str, target: Sequence[float], max_steps: int = 60,
            tolerance_rad: float = 0.004) -> bool:
     """Drive `arm`'s joint motors to `target`, stepping the physics until the arm is there (True) or
     `max_steps` have passed (False: the arm stalls)."""
@@ -504,7 +504,7 @@ def execute(
         message = command.message if isinstance(command, Unreachable) else "no command"
         return ActionResult(ActionOutcome.FAILED, FailureReason.UNREACHABLE, message, 0.0, 0.0)
     robot = robot or Robot(scene)
-    hands = _Hands(scene, robot)
+    hands = Hands(scene, robot)
     total = command.rotation_steps
     done = 0
     before = _relative_deg(scene, command.turned_link, command.held_link)
@@ -515,7 +515,7 @@ def execute(
             if isinstance(primitive, MoveArm):
                 if problem is not None and primitive.joint_positions != tuple(HOME_POSE[primitive.arm]):
                     continue
-                if not _drive(scene, robot, primitive.arm, primitive.joint_positions) and problem is None:
+                if not drive_arm(scene, robot, primitive.arm, primitive.joint_positions) and problem is None:
                     problem = (FailureReason.STALL, f"the {primitive.arm} arm did not reach its pose")
             elif isinstance(primitive, Grasp):
                 if problem is not None:
@@ -551,7 +551,7 @@ def execute(
         hands.release_all()
     if problem is not None:  # the rest of the command was skipped: the arms go home with open hands
         for arm in arms_used:
-            _drive(scene, robot, arm, HOME_POSE[arm])
+            drive_arm(scene, robot, arm, HOME_POSE[arm])
     scene.step(6)
     return _judge(scene, robot, command, before, problem)
 

@@ -28,7 +28,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pybullet
@@ -46,7 +46,8 @@ from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
 from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.robot_sim.skills import ActionResult, Interrupt, Robot, RotationAction, perform_action
-from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, Infeasible, StopReason
+from planhrc.robot_sim.slide import SlideResult, slide
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, Infeasible, Skill, StopReason
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +70,7 @@ class StepRecord:
     human_during: tuple[str, ...] = ()
     human_assist: str | None = None
     help_requested: tuple[str, ...] = ()  # human_help_requested: the service's sentences, in order
+    skill: str | None = None  # robot_skill: the skill asked for and what it did
     measured_deg: float | None = None  # after a failed or partial action: the turned link, as perceived again
     looks: int = 1
     perception_s: float = 0.0
@@ -91,6 +93,7 @@ class WorkerSummary:
     stop_message: str = ""
     human_scheduled: int = 0
     human_performed: int = 0
+    final_help: tuple[str, ...] = ()  # ended short of the goal: the help request the worker's stop became
 
     @property
     def decisions(self) -> tuple[DecisionKind, ...]:
@@ -107,6 +110,10 @@ class WorkerSummary:
     @property
     def help_requests(self) -> int:
         return sum(1 for s in self.steps if s.decision is DecisionKind.HUMAN_HELP_REQUESTED)
+
+    @property
+    def skills(self) -> int:
+        return sum(1 for s in self.steps if s.decision is DecisionKind.ROBOT_SKILL)
 
     @property
     def seen_links(self) -> int:
@@ -139,6 +146,7 @@ class _Run:
     applied: set[int] = field(default_factory=set)  # indices of scenario events already performed
     performed: int = 0  # scenario events the human actually carried out
     stop_message: str = ""
+    final_help: tuple[str, ...] = ()  # the help request the last give-up became
 
 
 def _joint_index(name: str) -> int:
@@ -255,6 +263,7 @@ def run_worker(
             stop_message=run.stop_message,
             human_scheduled=len(scenario.events),
             human_performed=run.performed,
+            final_help=run.final_help,
         )
         _save(out, summary, run, spec, goal_link_orientations_deg)
         return summary
@@ -334,7 +343,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             run.records.append(StepRecord(**base))
             if unseen_in_a_row >= max_unseen:
                 run.stop_message = f"links {list(seen.missing_links)} not seen in {max_unseen} perceptions"
-                _give_up(kb, object_id, GiveUpReason.UNSEEN_LINKS, run.stop_message)
+                _give_up(kb, object_id, GiveUpReason.UNSEEN_LINKS, run.stop_message, run)
                 return StopReason.UNSEEN_LINKS
             scene.step(30)  # a quarter of a second: whatever covers a marker may move away
             step += 1
@@ -348,15 +357,22 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             if scenario.assists_after_failures is None:
                 run.records.append(StepRecord(**base, help_requested=requests))
                 run.stop_message = f"the robot asked for help and no human helps: {decision.reason}"
-                _give_up(kb, object_id, GiveUpReason.NO_HUMAN_HELP, run.stop_message)
+                _give_up(kb, object_id, GiveUpReason.NO_HUMAN_HELP, run.stop_message, run)
                 return StopReason.NO_HUMAN_HELP
             helped = help_turns(human, [(int(item["link"]), float(item["to_deg"])) for item in decision.help or ()])
             run.records.append(StepRecord(**base, help_requested=requests, human_assist="; ".join(helped or ()) or None))
             helpless = 0 if helped else helpless + 1
             if helpless >= max_unseen:
                 run.stop_message = f"the human could not do what was asked ({'; '.join(requests)})"
-                _give_up(kb, object_id, GiveUpReason.HUMAN_COULD_NOT_HELP, run.stop_message)
+                _give_up(kb, object_id, GiveUpReason.HUMAN_COULD_NOT_HELP, run.stop_message, run)
                 return StopReason.GAVE_UP
+            step += 1
+            continue
+
+        if decision.decision is DecisionKind.ROBOT_SKILL:
+            t3 = time.perf_counter()
+            done = perform_skill(scene, robot, decision.skill or {})
+            run.records.append(StepRecord(**base, skill=done, action_s=time.perf_counter() - t3))
             step += 1
             continue
 
@@ -374,13 +390,25 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             step = step + 1 if late else max(step + 1, min(e.at_step for e in pending))
             continue
         if decision.decision is DecisionKind.NO_PLAN:
-            run.records.append(StepRecord(**base))
+            # never a silent stop: the service turns the give-up into a help request, which a human may do
             run.stop_message = decision.reason
+            asked = _give_up(kb, object_id, GiveUpReason.NO_PLAN, decision.reason, run)
+            if scenario.assists_after_failures is not None and asked and helpless + 1 < max_unseen:
+                helped = help_turns(human, [(int(item["link"]), float(item["to_deg"])) for item in asked])
+                run.records.append(StepRecord(**base, help_requested=run.final_help,
+                                              human_assist="; ".join(helped or ()) or None))
+                run.final_help, run.stop_message = (), ""
+                helpless = 0 if helped else helpless + 1
+                step += 1
+                continue
+            run.records.append(StepRecord(**base, help_requested=run.final_help))
             return StopReason.NO_PLAN
 
         data = kb.next_action(object_id)
         if data is None:
             run.records.append(StepRecord(**base))
+            run.stop_message = "the service dispatched no action"
+            _give_up(kb, object_id, GiveUpReason.NO_ACTION, run.stop_message, run)
             return StopReason.NO_ACTION
         action = RotationAction.from_api(data)
         context.busy_links = (action.turned_link, action.held_link)
@@ -460,7 +488,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             if action.action_id is not None:
                 _feedback(kb, object_id, action.action_id, ActionOutcome.FAILED, f"worker gives up: {sentence}",
                           failed[signature][2])
-            _give_up(kb, object_id, GiveUpReason.REPEATED_FAILURE, run.stop_message)
+            _give_up(kb, object_id, GiveUpReason.REPEATED_FAILURE, run.stop_message, run)
             run.records.append(StepRecord(**base, action=dict(data), outcome=ActionOutcome.FAILED,
                                           outcome_message=run.stop_message, human_during=tuple(human_during),
                                           action_s=t4 - t3))
@@ -486,7 +514,30 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
                                       human_during=tuple(human_during), human_assist=assist, action_s=t4 - t3))
         log.info("step %d: %s -> %s (%s)", step, action, result.outcome.value, result.message)
         step += 1
+    run.stop_message = f"the goal was not reached in {max_steps} steps"
+    _give_up(kb, object_id, GiveUpReason.MAX_STEPS, run.stop_message, run)
     return StopReason.MAX_STEPS
+
+
+def perform_skill(scene: Scene, robot: Robot, skill: dict[str, Any]) -> str:
+    """Do the robot skill the service asked for (`SKILLS`), and say what it did; the next perception shows where
+    the object lies now."""
+    name = str(skill.get("name"))
+    if name not in SKILLS:
+        log.warning("skill %r: not a skill of this worker", name)
+        return f"{name}: not a skill of this worker"
+    result = SKILLS[name](scene, robot, skill)
+    log.info("skill %s: %s (%s)", name, result.outcome.value, result.message)
+    return f"{name} {result.outcome.value}: {result.message}"
+
+
+def _slide(scene: Scene, robot: Robot, skill: dict[str, Any]) -> SlideResult:
+    to = skill.get("base_point_xy") or ()
+    return slide(scene, robot, (float(to[0]), float(to[1])), [int(k) for k in skill.get("links") or ()])
+
+
+# the skills the service may ask for besides rotations (`planhrc.vocabulary.Skill`), one module each
+SKILLS: dict[str, Callable[[Scene, Robot, dict[str, Any]], SlideResult]] = {Skill.SLIDE: _slide}
 
 
 def way_round(scene: Scene, action: RotationAction) -> RotationAction:
@@ -545,10 +596,14 @@ def _feedback(kb: ServiceLink, object_id: str, action_id: str, outcome: ActionOu
     kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
 
 
-def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str) -> None:
-    """Tell the service the worker stops (it records the reason and dispatches nothing until a perception)."""
+def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str, run: _Run) -> list[dict[str, Any]]:
+    """Tell the service the worker stops (it records the reason and dispatches nothing until a perception); the
+    service answers with the help request the stop became, kept in the run's record (`final_help`)."""
     log.warning("giving up on %s: %s", object_id, message)
-    kb.give_up(object_id, reason, message[:500])
+    answer = kb.give_up(object_id, reason, message[:500])
+    asked = list(answer.get("help") or [])
+    run.final_help = tuple(str(item.get("sentence")) for item in asked)
+    return asked
 
 
 # -- records ---------------------------------------------------------------------------------------------

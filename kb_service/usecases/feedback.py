@@ -4,9 +4,10 @@ resume or re-plan. Feedback on an action a perception already moved past is reco
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any, Mapping
 
 from planhrc.pipeline import action_motion
-from planhrc.vocabulary import ActionOutcome, ExecutionStatus
+from planhrc.vocabulary import ActionOutcome, ExecutionStatus, FailureReason
 
 from ..store import ConflictError, Execution
 from .actions import last_step, merges
@@ -29,6 +30,7 @@ class FeedbackRequest:
     idempotency_key: str | None = None
     reason: str | None = None
     measured_deg: float | None = None
+    refusal: Mapping[str, Any] | None = None  # a turn refused before it moved: the geometric fact (schemas)
 
 
 def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
@@ -41,7 +43,9 @@ def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
         obj = store.get_object(object_id)
         print_ = fingerprint({"feedback": [action_id, outcome, message]}
                              if failure is None and measured_deg is None else
-                             {"feedback": [action_id, outcome, message, failure, measured_deg]})
+                             {"feedback": [action_id, outcome, message, failure, measured_deg]}
+                             if request.refusal is None else
+                             {"feedback": [action_id, outcome, message, failure, measured_deg, dict(request.refusal)]})
         recalled = recall(store, object_id, request.idempotency_key, print_)
         if recalled is not None:
             return feedback_of(recalled)
@@ -69,11 +73,37 @@ def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
         result = FeedbackResult(action_id, accepted, new)
         why = f" [{failure}]" if failure is not None else ""
         motion = action_motion(obj, action)
+        refused = (refusal_data(context, object_id, request.refusal, motion)
+                   if outcome == ActionOutcome.FAILED and failure in REFUSALS else None)
         with store.transaction():
             store.set_execution(object_id, new)
             store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""),
                             {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
                              "reason": failure, "measured_deg": measured_deg, "message": message,
-                             "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"]})
+                             "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"],
+                             **({"refusal": refused} if refused is not None else {})})
             remember(store, object_id, request.idempotency_key, print_, feedback_record(result))
         return result
+
+
+# A failed turn for one of these reasons did not start (the worker's judge or its arms refused it): the same turn
+# from the same state is not proposed again (`memory.ObjectMemo.refused`).
+REFUSALS = frozenset({FailureReason.LEFT_TABLE, FailureReason.COLLISION, FailureReason.UNREACHABLE})
+
+
+def refusal_data(context: Context, object_id: str, fact: Mapping[str, Any] | None, motion: Mapping[str, int]
+                 ) -> dict[str, Any] | None:
+    """What the feedback event keeps of a refused turn: the turn (link turned and held, direction), the pose it was
+    refused from (the worker's, else the latest perception's and measured base point) and the fact; None when there
+    is no pose to remember it by."""
+    fact = dict(fact or {})
+    memo = context.memory.of(context.store, object_id)
+    pose = fact.get("from_deg")
+    if pose is None and memo.perceived_state_id is not None:
+        pose = context.store.get_state(memo.perceived_state_id).link_orientations_deg
+    base = fact.get("base_point_xy") or memo.where
+    if not pose or base is None:
+        return None
+    return {**fact, "from_deg": [float(v) for v in pose], "base_point_xy": [float(v) for v in base],
+            "turned": motion["turned_link_index"], "held": motion["held_link_index"],
+            "direction": 1 if motion["delta_deg"] > 0 else -1}

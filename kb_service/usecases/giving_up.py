@@ -1,14 +1,24 @@
 """A worker gives up on an object: recorded, and the execution left idle with nothing dispatched (the plan stays;
-the next perception decides anew)."""
+the next perception decides anew). A give-up is never silent: it becomes a help request, recorded as the decision
+`human_help_requested` beside the give-up (the console shows it), naming what the human should do (each link the
+object still has to change, to its orientation at the goal, upstream first) and why no robot motion exists (the
+worker's reason)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from planhrc.vocabulary import ExecutionStatus
+from planhrc.geometry import ObjectGeometry
+from planhrc.model import ArticulatedObject, Formulation, ModelError, snap_angle
+from planhrc.ordering import HelpItem, Placement, help_for
+from planhrc.pipeline import move_of
+from planhrc.vocabulary import DecisionKind, ExecutionStatus
 
-from ..store import Execution
+from ..store import Execution, KnowledgeStore
 from .context import Context
+from .decide import whole_turn_deg
 from .log import EventKind
+from .memory import ObjectMemo
+from .turns import help_data
 from .values import GaveUp
 
 
@@ -22,12 +32,63 @@ class GiveUpRequest:
 def give_up(context: Context, request: GiveUpRequest) -> GaveUp:
     store, object_id = context.store, request.object_id
     with context.locks.hold(object_id):
-        store.get_object(object_id)
+        obj = store.get_object(object_id)
         execution = store.get_execution(object_id)
+        memo = context.memory.of(store, object_id)
+        why = f"the robot stopped ({request.reason}: {request.message})"
+        items = help_after(store, obj, execution, memo, why)
+        reason = (f"{why}; the robot asks the human for help: {'; '.join(h.sentence for h in items)}" if items else
+                  f"{why}; no goal is left to ask the human for")
         with store.transaction():
             store.set_execution(object_id, Execution(execution.plan_id, None, ExecutionStatus.IDLE, None))
             event = store.add_event(object_id, EventKind.WORKER_GAVE_UP,
                                     f"the worker gave up ({request.reason}): {request.message}",
                                     {"reason": request.reason, "message": request.message,
                                      "plan_id": execution.plan_id, "dropped_action_id": execution.dispatched_action_id})
-        return GaveUp(event.seq)
+            if items:
+                store.add_event(object_id, DecisionKind.HUMAN_HELP_REQUESTED, reason,
+                                {"perceived_state_id": memo.perceived_state_id, "plan_id": execution.plan_id,
+                                 "next_step": None, "next_action_id": None, "matched_expected_step": None,
+                                 "help": help_data(items), "gave_up": request.reason})
+        return GaveUp(event.seq, DecisionKind.HUMAN_HELP_REQUESTED if items else None, reason, items)
+
+
+def help_after(store: KnowledgeStore, obj: ArticulatedObject, execution: Execution, memo: ObjectMemo,
+               why: str) -> tuple[HelpItem, ...]:
+    """What to ask the human when the robot stops short of the goal: the rest of the plan from the latest perceived
+    state (`ordering.help_for`), else each link the goal still changes; nothing without a goal or a perception."""
+    if memo.goal_state_id is None or memo.perceived_state_id is None:
+        return ()
+    perceived = store.get_state(memo.perceived_state_id)
+    goal = store.get_state(memo.goal_state_id)
+    raw = perceived.link_orientations_deg or ()
+    if len(raw) != obj.n_links:
+        return ()
+    seen = tuple(float(snap_angle(v, obj.orientations)) for v in raw)
+    base = memo.where
+    if execution.plan_id is not None and execution.next_step is not None and base is not None:
+        plan = store.get_plan(execution.plan_id)
+        moves = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
+                 if a.step >= execution.next_step]
+        placed = Placement(ObjectGeometry.of(obj, base), seen, whole_turn_deg=whole_turn_deg(obj))
+        items = help_for(placed, moves, None, why=why)
+        if items:
+            return items
+    return goal_help(obj, seen, goal.atoms, why)
+
+
+def goal_help(obj: ArticulatedObject, seen: tuple[float, ...], goal: frozenset, why: str) -> tuple[HelpItem, ...]:
+    """Each link whose orientation the goal still changes, to its orientation there, upstream first (a human turns
+    a link about its joint with the one before, carrying the links beyond)."""
+    values = obj.joint_values_of(goal)
+    now = list(obj.joint_values_from_links([int(v) % 360 for v in seen]))
+    wanted = [values.get(k, v) for k, v in zip(obj.joint_indices, now)]
+    try:
+        if obj.formulation is Formulation.ABSOLUTE:
+            end = tuple(wanted)
+        else:
+            end = obj.link_orientations_of(obj.configuration_atoms(wanted), int(seen[0]))
+    except ModelError:
+        return ()
+    return tuple(HelpItem(k, int(end[k - 1]) % 360, f"turn link {k} to {int(end[k - 1]) % 360}° ({why})")
+                 for k in range(1, obj.n_links + 1) if int(end[k - 1]) % 360 != int(seen[k - 1]) % 360)
