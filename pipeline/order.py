@@ -15,9 +15,12 @@ from planhrc.transition import StateIndex, apply, ground_action
 
 from .motion import move_of
 
-# How long the searches for a detour and for room may take together, and what they leave of the planning deadline
-# for grounding, replaying and validating the plan they find.
-SEARCH_S = 4.0
+# How long the search for a detour may take, in time and step checks, then the search for room (a detour where the
+# object cannot be turned at all would take every check it may: room is tried within its own time), and what they
+# leave of the planning deadline for grounding, replaying and validating the plan they find.
+DETOUR_S = 2.5
+DETOUR_CHECKS = 2000
+ROOM_S = 2.5
 VAL_RESERVE_S = 2.0
 
 
@@ -49,23 +52,25 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
     answer, added = feasible_alternative(placement, moves, obj.orientations)
     if answer.moves is None:
         alphabet = alphabet_of(obj)
-        until = search_deadline(deadline_at)
-        detour = find_detour(placement, moves, alphabet, obj.orientations, deadline_at=until)
+        detour = find_detour(placement, moves, alphabet, obj.orientations, budget=DETOUR_CHECKS,
+                             deadline_at=search_deadline(deadline_at, DETOUR_S))
         if detour.moves is not None:
             longer = len(detour.moves) - len(moves)
+            obstacle = answer.problem.sentence() if answer.problem is not None else "no order found"
             why = (f"{longer} steps longer than the planner's {len(moves)}: no order of its steps, nor a joint "
-                   f"turned the other way round, stays on the table ({answer.problem.sentence() if answer.problem else 'no order found'}), "
-                   "so the plan goes through intermediate configurations")
+                   f"turned the other way round, stays on the table ({obstacle}), so the plan goes through "
+                   "intermediate configurations")
             return Ordered(steps_of(obj, model, init, detour.moves), why)
-        room = find_room(placement, moves, alphabet, obj.orientations, deadline_at=until)
+        room = find_room(placement, moves, alphabet, obj.orientations,
+                         deadline_at=search_deadline(deadline_at, ROOM_S))
         return Refusal(answer.sentence(), answer.help, room)
-    room = f" ({answer.clearance_m * 100:.1f} cm from its edges at rest)"
+    clearance = f" ({answer.clearance_m * 100:.1f} cm from its edges at rest)"
     if list(answer.moves) == moves:
-        return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table{room}")
+        return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table{clearance}")
     what = (f"{added} steps longer: one joint turns the other way round" if added
             else f"reordered {len(moves)} actions")
     return Ordered(steps_of(obj, model, init, answer.moves),
-                   f"{what} so that every configuration stays on the table{room}")
+                   f"{what} so that every configuration stays on the table{clearance}")
 
 
 def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves: Sequence[Move]) -> tuple[str, ...]:
@@ -84,10 +89,10 @@ def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves:
     return tuple(steps)
 
 
-def search_deadline(deadline_at: float | None) -> float:
-    """When the searches for a longer plan or for room stop: `SEARCH_S` from now, and `VAL_RESERVE_S` before the
+def search_deadline(deadline_at: float | None, seconds: float) -> float:
+    """When a search for a longer plan or for room stops: `seconds` from now, and `VAL_RESERVE_S` before the
     planning deadline (the plan found is still grounded, replayed and checked by VAL within it)."""
-    until = time.monotonic() + SEARCH_S
+    until = time.monotonic() + seconds
     return until if deadline_at is None else min(until, deadline_at - VAL_RESERVE_S)
 
 

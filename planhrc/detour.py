@@ -159,7 +159,7 @@ def find_room(placement: Placement, moves: Sequence[Move], alphabet: Sequence[Mo
     middle = (points.min(axis=0) + points.max(axis=0)) / 2.0
     centre = np.asarray(placement.cell.table.center_xy)
     base = np.asarray(geometry.base_point_xy)
-    shifts = []
+    shifts: list[np.ndarray] = []
     for fraction in (1.0, 0.5):
         for mask in ((1.0, 1.0), (1.0, 0.0), (0.0, 1.0)):
             shift = (centre - middle) * fraction * np.asarray(mask)

@@ -291,14 +291,20 @@ def _edge(point: np.ndarray, bounds: tuple[float, float, float, float]) -> str:
 
 def _reach_shortfalls(points: np.ndarray, robot: RobotBody) -> np.ndarray:
     """`reach_shortfall` of many table points at once."""
-    best = np.full(len(points), np.inf)
-    for shoulder, side in ((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0)):
+    return np.asarray(arm_shortfalls(points, robot).min(axis=1))
+
+
+def arm_shortfalls(points: np.ndarray, robot: RobotBody) -> np.ndarray:
+    """How far each table point lies beyond each arm's reach: an (n, 2) array, the left arm's then the right's
+    (0 where the arm reaches it)."""
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    out = np.empty((len(points), 2))
+    for column, (shoulder, side) in enumerate(((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0))):
         beyond = np.maximum(0.0, np.linalg.norm(points - np.asarray(shoulder), axis=1) - robot.reach_m)
         awkward = (points[:, 0] < robot.near_x_m) & (side * points[:, 1] < robot.own_side_y_m)
         across = np.minimum(robot.near_x_m - points[:, 0], robot.own_side_y_m - side * points[:, 1])
-        beyond = np.where(awkward, np.maximum(beyond, across), beyond)
-        best = np.minimum(best, beyond)
-    return best
+        out[:, column] = np.where(awkward, np.maximum(beyond, across), beyond)
+    return out
 
 
 def _segments_enter_box(a: np.ndarray, b: np.ndarray, box: tuple[float, float, float, float],

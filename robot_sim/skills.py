@@ -89,7 +89,7 @@ class ActionResult:
     message: str
     commanded_deg: float
     reached_deg: float
-
+    refusal: Mapping[str, Any] | None = None  # a turn not started: the geometric fact, for the service
     @property
     def value(self) -> str:
         return self.outcome.value
@@ -267,17 +267,20 @@ def _unwrap_yaw(yaw: float, previous: float | None) -> float:
     return min(candidates, key=lambda a: abs(a - previous))
 
 
-def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command | Unreachable:
-    """Plan a rotation action as a command, or say which link cannot be reached (nothing moves)."""
-    joint_between(action.turned_link, action.held_link, scene.n_links)  # refuses links that are not neighbours
-    turned_xy = scene.link_center(action.turned_link)
+def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_far: float = 0.0
+                 ) -> Command | Unreachable:
+    """Plan a rotation action as a command, or say which link cannot be reached (nothing moves). With
+    `turned_so_far`, the command for the rest of a turn whose first `turned_so_far` degrees another command
+    does first (the turned link is planned where that leaves it)."""
+    joint_k, _ = joint_between(action.turned_link, action.held_link, scene.n_links)  # refuses non-neighbours
+    turned_xy = rotate_point(scene.link_center(action.turned_link), scene.joint_points()[joint_k - 1], turned_so_far)
     held_xy = scene.link_center(action.held_link) if action.held_link >= 1 else None
     saved = {arm: arm_joints(scene, arm) for arm in ARMS}
     worst: Unreachable | None = None
     try:
         for holder, turner in robot.arm_assignments(held_xy, turned_xy):
             for flip in (0.0, math.pi):
-                planned = _plan_rotation(scene, robot, action, holder, turner, flip)
+                planned = _plan_rotation(scene, robot, action, holder, turner, flip, turned_so_far)
                 if isinstance(planned, Command):
                     return planned
                 if worst is None or planned.miss_m < worst.miss_m:
@@ -293,13 +296,14 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command 
 
 
 def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: str | None, turner: str,
-                   flip: float = 0.0) -> Command | Unreachable:
+                   flip: float = 0.0, turned_so_far: float = 0.0) -> Command | Unreachable:
     """The command with `holder` holding and `turner` turning, the turning gripper grasping at the link's yaw
     plus `flip` (0 or pi: the wrist's range decides which way round the turn can be followed). Each gripper
     takes the first grasp point it reaches along its link (the centre, then a quarter of the link to either
     side); the holding gripper may meet its link up to `robot.hold_twist_deg` off square, either way round."""
     joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
-    theta = scene.link_orientations_deg()
+    theta = list(scene.link_orientations_deg())
+    theta[action.turned_link - 1] += turned_so_far
     pivot = scene.joint_points()[joint_k - 1]
     z_grasp = scene.link_center_z + robot.grasp_height_m
     z_above = z_grasp + robot.approach_height_m
@@ -314,6 +318,8 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
                  ) -> tuple[np.ndarray, float] | Unreachable:
         """Above the link, then down onto it: the grasp point and yaw used, or the smallest miss."""
         centre, along = scene.link_center(link), direction(theta[link - 1])
+        if link == action.turned_link:
+            centre = rotate_point(centre, pivot, turned_so_far)
         best: Unreachable | None = None
         for offset in (0.0, -quarter, quarter):
             xy = centre + offset * along

@@ -28,7 +28,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pybullet
@@ -45,9 +45,9 @@ from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_fram
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
 from planhrc.robot_sim.service_link import ServiceLink
-from planhrc.robot_sim.skills import ActionResult, Interrupt, Robot, RotationAction, perform_action
-from planhrc.robot_sim.slide import SlideResult, slide
-from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, Infeasible, Skill, StopReason
+from planhrc.robot_sim.acting import measured_pose, perform_parts, perform_skill, way_round
+from planhrc.robot_sim.skills import Robot, RotationAction
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, StopReason
 
 log = logging.getLogger(__name__)
 
@@ -432,17 +432,21 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
         t3 = time.perf_counter()
         assist = None
         previous = failed.get(signature)
+        # the one judge's pose: the one posted with the perception, from which the service judged this motion
+        pose = measured_pose(scene, values, seen.base_point_xy)
+        final = bool(data.get("ends_plan", True))  # an older service does not say: judged as drawn at rest
         if previous is None:
-            parts: tuple[RotationAction, ...] | None = (way_round(scene, action),)
+            parts: tuple[RotationAction, ...] | None = (way_round(pose, scene.spec.cell(), action, final),)
         elif action.macro_steps > 1 and not previous[1]:
-            parts = way_round(scene, action).split()  # the macro motion failed: try its single steps
+            # the macro motion failed: try its single steps
+            parts = way_round(pose, scene.spec.cell(), action, final).split()
         else:
             parts = None  # tried every way the robot knows: not again
         if parts is not None:  # a human acting meanwhile takes the robot's whole rotation into account
             context.robot_turn = RobotTurn(action.turned_link, action.held_link, sum(p.delta_deg for p in parts),
                                            base_xy, tuple(theta))
-        result = None if parts is None else _perform_parts(scene, robot, parts, interrupt,
-                                                             fault.stop_fraction if fault else None)
+        result = None if parts is None else perform_parts(scene, robot, pose, parts, final, interrupt,
+                                                            fault.stop_fraction if fault else None)
         t4 = time.perf_counter()
         while during_events:  # the robot stopped before half-way: the human acts anyway
             index, event = during_events.pop(0)
@@ -502,7 +506,8 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             again = perceiver.look()
             measured = again.link_orientations_deg[action.turned_link - 1]
         if action.action_id is not None:
-            _feedback(kb, object_id, action.action_id, result.outcome, message, result.reason, measured)
+            _feedback(kb, object_id, action.action_id, result.outcome, message, result.reason, measured,
+                      result.refusal)
         if result.outcome is ActionOutcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
@@ -519,81 +524,18 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
     return StopReason.MAX_STEPS
 
 
-def perform_skill(scene: Scene, robot: Robot, skill: dict[str, Any]) -> str:
-    """Do the robot skill the service asked for (`SKILLS`), and say what it did; the next perception shows where
-    the object lies now."""
-    name = str(skill.get("name"))
-    if name not in SKILLS:
-        log.warning("skill %r: not a skill of this worker", name)
-        return f"{name}: not a skill of this worker"
-    result = SKILLS[name](scene, robot, skill)
-    log.info("skill %s: %s (%s)", name, result.outcome.value, result.message)
-    return f"{name} {result.outcome.value}: {result.message}"
-
-
-def _slide(scene: Scene, robot: Robot, skill: dict[str, Any]) -> SlideResult:
-    to = skill.get("base_point_xy") or ()
-    return slide(scene, robot, (float(to[0]), float(to[1])), [int(k) for k in skill.get("links") or ()])
-
-
-# the skills the service may ask for besides rotations (`planhrc.vocabulary.Skill`), one module each
-SKILLS: dict[str, Callable[[Scene, Robot, dict[str, Any]], SlideResult]] = {Skill.SLIDE: _slide}
-
-
-def way_round(scene: Scene, action: RotationAction) -> RotationAction:
-    """The action, or the same turn the other way round when only that way keeps the object on the table, clear
-    of the robot and of itself all along (`scene.turn_hazard`): both end in the same orientation."""
-    delta = safe_way(scene, action.turned_link, action.held_link, action.delta_deg)
-    if delta is None or delta == action.delta_deg:
-        return action
-    step = abs(action.delta_deg) / max(1, action.macro_steps)
-    log.info("turning l%d the other way round (%+g deg instead of %+g): that way stays on the table",
-             action.turned_link, delta, action.delta_deg)
-    return replace(action, delta_deg=delta, macro_steps=max(1, round(abs(delta) / step)))
-
-
-def refuse_unsafe(scene: Scene, action: RotationAction) -> ActionResult | None:
-    """A FAILED result, nothing moved, when the turn would put the object in harm's way either way round (a
-    link past the table's edge, inside the robot, folded onto another); None when it is safe to try."""
-    hazard = turn_hazard(scene, action.turned_link, action.held_link, action.delta_deg)
-    if hazard is None:
-        return None
-    reason = FailureReason.LEFT_TABLE if hazard.code is Infeasible.OFF_TABLE else FailureReason.COLLISION
-    log.warning("not turning l%d by %+g deg: %s", action.turned_link, action.delta_deg, hazard.message)
-    return ActionResult(ActionOutcome.FAILED, reason, f"not started: turning link {action.turned_link} by "
-                        f"{action.delta_deg:+g} deg either way round would end with {hazard.message}",
-                        action.delta_deg, 0.0)
-
-
-def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt: Interrupt,
-                   stop_fraction: float | None) -> ActionResult:
-    """Perform the single steps of an action one after the other; stop at the first that does not succeed or
-    would not be safe. The result covers them all: the turn reached is their sum."""
-    reached = 0.0
-    result = None
-    for part in parts:
-        result = refuse_unsafe(scene, part) or perform_action(scene, robot, part, interrupt=interrupt,
-                                                              stop_fraction=stop_fraction)
-        reached += result.reached_deg
-        if result.outcome is not ActionOutcome.SUCCEEDED:
-            break
-    assert result is not None
-    if len(parts) == 1:
-        return result
-    total = sum(p.delta_deg for p in parts)
-    outcome = result.outcome
-    if outcome is ActionOutcome.FAILED and abs(reached) > 1.0:
-        outcome = ActionOutcome.PARTIAL
-    return ActionResult(outcome, result.reason, f"in single steps: {result.message}", total, reached)
-
-
 def _feedback(kb: ServiceLink, object_id: str, action_id: str, outcome: ActionOutcome, message: str,
-              reason: FailureReason | None = None, measured_deg: float | None = None) -> None:
+              reason: FailureReason | None = None, measured_deg: float | None = None,
+              refusal: Mapping[str, Any] | None = None) -> None:
     """Post an action's outcome with its sentence and, for a failed or partial one, its reason and the turned
-    link's measured orientation."""
+    link's measured orientation; for a turn not started, the geometric fact (`refusal`)."""
     if outcome is ActionOutcome.SUCCEEDED:
-        reason, measured_deg = None, None
-    kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
+        reason, measured_deg, refusal = None, None, None
+    if refusal is not None:
+        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg,
+                         refusal=dict(refusal))
+    else:
+        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
 
 
 def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str, run: _Run) -> list[dict[str, Any]]:

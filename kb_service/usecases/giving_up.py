@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from planhrc.geometry import ObjectGeometry
-from planhrc.model import ArticulatedObject, Formulation, ModelError, snap_angle
+from planhrc.model import ArticulatedObject, Formulation, ModelError, State, snap_angle
 from planhrc.ordering import HelpItem, Placement, help_for
 from planhrc.pipeline import move_of
 from planhrc.vocabulary import DecisionKind, ExecutionStatus
@@ -77,7 +77,7 @@ def help_after(store: KnowledgeStore, obj: ArticulatedObject, execution: Executi
     return goal_help(obj, seen, goal.atoms, why)
 
 
-def goal_help(obj: ArticulatedObject, seen: tuple[float, ...], goal: frozenset, why: str) -> tuple[HelpItem, ...]:
+def goal_help(obj: ArticulatedObject, seen: tuple[float, ...], goal: State, why: str) -> tuple[HelpItem, ...]:
     """Each link whose orientation the goal still changes, to its orientation there, upstream first (a human turns
     a link about its joint with the one before, carrying the links beyond)."""
     values = obj.joint_values_of(goal)
