@@ -66,12 +66,12 @@ def judge_turn(geometry: ObjectGeometry, angles: Sequence[float], turned: int, h
         placed, values = rotated(geometry, angles, turned, held, delta_deg * i / n)
         tolerance = rest if i == n else STRICT
         result = configuration_feasible(placed, values, cell, reach_links=grasped, tolerance=tolerance)
-        if i == n and result.ok and (unreachable := two_arms(placed, values, turned, held, cell)) is not None:
-            return Feasibility(False, (unreachable,))
         new = tuple(r for r in result.reasons
                     if r.code is Infeasible.OUT_OF_REACH or not baseline.excused(r, tolerance))
         if new:
             return Feasibility(False, new)
+        if i == n and (unreachable := two_arms(placed, values, turned, held, cell)) is not None:
+            return Feasibility(False, (unreachable,))
     return Feasibility(True)
 
 

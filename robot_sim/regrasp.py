@@ -19,7 +19,7 @@ from planhrc.robot_sim.skills import (ActionResult, Command, Interrupt, Robot, R
 
 log = logging.getLogger(__name__)
 
-SPLIT_STEP_DEG = 5.0  # where a turn may be split: every 5° of it
+SPLIT_STEP_DEG = 10.0  # where a turn may be split: every 10° of it
 
 
 def regrasp_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command | None:

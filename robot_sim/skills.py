@@ -288,7 +288,7 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_f
                 for arm, q in saved.items():
                     set_arm_joints(scene, arm, q)
         assert worst is not None
-        log.warning("cannot plan %s: %s", action.name or f"turning l{action.turned_link}", worst.message)
+        log.info("cannot plan %s: %s", action.name or f"turning l{action.turned_link}", worst.message)
         return worst
     finally:
         for arm, q in saved.items():
