@@ -1,0 +1,99 @@
+"""The robot's new skills in the physical cell (PyBullet, stepped; outcomes judged from the world): sliding the whole
+object towards the table's middle with both arms, a turn re-grasped when one arm cannot follow it to its end; and a
+worker that stops short of the goal always ends with a help request the service recorded."""
+from __future__ import annotations
+
+import pybullet
+import pytest
+from pybullet_utils.bullet_client import BulletClient
+
+from planhrc.client import KBClient
+from planhrc.robot_sim.regrasp import perform_with_regrasp, regrasp_skill
+from planhrc.robot_sim.scene import SceneSpec, build_scene
+from planhrc.robot_sim.skills import Robot, RotationAction, Unreachable, rotate_skill
+from planhrc.robot_sim.slide import slide, slide_skill
+from planhrc.robot_sim.worker import run_worker
+from planhrc.vocabulary import ActionOutcome
+from tests.servers import serving
+
+pytestmark = pytest.mark.sim
+
+# Folded near the robot's left (the service found no plan there, `test_one_judge`): slid 11 cm the plan fits
+START = (90.52, 134.86, 89.96, 314.51, 314.58)
+BASE = (0.538, 0.128)
+TARGET = (0.645, 0.155)
+
+
+@pytest.fixture
+def cell():
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    scenes = []
+
+    def make(spec: SceneSpec):
+        scene = build_scene(client, spec)
+        scenes.append(scene)
+        return scene, Robot(scene)
+
+    yield make
+    for scene in scenes:
+        scene.close()
+    client.disconnect()
+
+
+def _bent(before, after) -> float:
+    return max(abs((a - b + 180.0) % 360.0 - 180.0) for a, b in zip(before, after))
+
+
+def test_both_arms_slide_the_object_towards_the_middle_keeping_its_shape(cell):
+    scene, robot = cell(SceneSpec(initial_orientations_deg=START, base_point_xy=BASE))
+    before = scene.link_orientations_deg()
+    result = slide(scene, robot, TARGET, (1, 5))
+    assert result.outcome is ActionOutcome.SUCCEEDED, result.message
+    x, y = scene.base_point()
+    assert abs(x - TARGET[0]) < 0.03 and abs(y - TARGET[1]) < 0.03  # measured where it was asked to go
+    assert _bent(before, scene.link_orientations_deg()) < 6.0  # the links between were dragged along, not bent
+    assert not scene.off_table_links()
+
+
+def test_a_slide_no_arm_can_follow_is_not_planned_and_nothing_moves(cell):
+    scene, robot = cell(SceneSpec(initial_orientations_deg=START, base_point_xy=BASE))
+    before = scene.configuration()
+    assert slide_skill(scene, robot, (0.95, 0.6), (1, 5)) is None  # the far corner: beyond both arms
+    assert slide_skill(scene, robot, TARGET, (1, 1)) is None  # one link for two arms
+    assert scene.configuration() == before
+
+
+# An arm's wrist cannot follow this turn of link 4 (held by link 3) to its end in one grasp; found by trying random
+# configurations of the cell with `rotate_skill` and `regrasp_skill`
+REGRASP_START = (0.0, 45.0, 90.0, 180.0, 270.0)
+REGRASP_BASE = (0.565, -0.006)
+
+
+def test_a_turn_one_arm_cannot_follow_is_done_in_two_grasps(cell):
+    scene, robot = cell(SceneSpec(initial_orientations_deg=REGRASP_START, base_point_xy=REGRASP_BASE))
+    action = RotationAction(turned_link=5, held_link=4, delta_deg=90)
+    whole = rotate_skill(scene, robot, action)
+    command = regrasp_skill(scene, robot, action)
+    if not isinstance(whole, Unreachable) or command is None:
+        pytest.skip("this physics build plans the turn in one grasp (or not at all): no re-grasp to test here")
+    assert sum(1 for p in command.primitives if type(p).__name__ == "Grasp") >= 3  # held, turned, turned again
+    before = scene.link_orientations_deg()
+    result = perform_with_regrasp(scene, robot, action)
+    assert result.outcome is ActionOutcome.SUCCEEDED, result.message
+    assert abs(((scene.link_orientations_deg()[4] - before[4]) - 90.0 + 180.0) % 360.0 - 180.0) < 4.0
+
+
+def test_a_worker_that_stops_short_of_the_goal_ends_with_a_help_request_the_service_recorded(tmp_path):
+    spec = SceneSpec(n_links=3, initial_orientations_deg=(90.0, 90.0, 90.0), base_point_xy=(0.7, 0.2325))
+    with serving(tmp_path / "kb.sqlite3") as url, KBClient(url) as kb:
+        oid = kb.create_object("rod", 3, 4, "relative", base_point_xy=spec.base_xy)["id"]
+        # the paper's 3-4 example needs two actions: one step is not enough, and no human helps
+        summary = run_worker(url, oid, spec, "none", tmp_path / "worker", max_steps=1, perception="fallback",
+                             goal_link_orientations_deg=(90.0, 180.0, 270.0), record_frames=False)
+        events = kb.read_events(oid)
+    assert not summary.reached_goal and summary.stop_reason == "max_steps"
+    assert summary.final_help and all(s.startswith("turn link ") for s in summary.final_help)
+    gave_up, asked = events[-2:]
+    assert gave_up["kind"] == "worker_gave_up" and gave_up["data"]["reason"] == "max_steps"
+    assert asked["kind"] == "human_help_requested" and "max_steps" in asked["reason"]
+    assert [h["sentence"] for h in asked["data"]["help"]] == list(summary.final_help)
