@@ -1,7 +1,7 @@
-"""The re-grasp skill: a turn whose arc one arm cannot follow to its end is done in two grasps. The turning arm
-takes the link as far as it can, both let go, and the rest of the turn is planned from there with every pairing of
-the arms: the other arm takes the turned link over (a hand-over), or the same arm grasps it again at another point
-(the link's centre or a quarter of it towards either end, the nearer the joint the shorter its arc).
+"""The re-grasp skill: a turn whose arc the turning arm cannot follow to its end from the link's centre is grasped
+nearer the joint (a shorter arc), else done in two grasps: the turning arm takes the link as far as it can, both let
+go, and the rest of the turn is planned from there with every pairing of the arms: the other arm takes the turned
+link over (a hand-over), or the same arm grasps it again (at its centre, else nearer the joint).
 
 `regrasp_skill` plans without moving anything and returns the two grasps as one `Command` (STYLE: a command or
 None); `perform_with_regrasp` plans the turn as one grasp first (`skills.rotate_skill`) and re-grasps only when the
@@ -23,16 +23,22 @@ SPLIT_STEP_DEG = 10.0  # where a turn may be split: every 10° of it
 
 
 def regrasp_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command | None:
-    """The turn as two grasps (see the module's note), splitting it as late as the first grasp can follow; None
-    when no split works."""
+    """The turn grasped nearer the joint, else as two grasps (see the module's note), splitting it as late as the
+    first grasp can follow; None when nothing works."""
+    nearer = rotate_skill(scene, robot, action, near_joint=True)
+    if isinstance(nearer, Command):
+        log.info("re-grasp: turning l%d holding it nearer the joint", action.turned_link)
+        return nearer
     n = max(1, math.ceil(abs(action.delta_deg) / SPLIT_STEP_DEG))
     for k in range(n - 1, 0, -1):
         first_deg = action.delta_deg * k / n
         first = rotate_skill(scene, robot, replace(action, delta_deg=first_deg, macro_steps=1))
         if isinstance(first, Unreachable):
             continue
-        rest = rotate_skill(scene, robot, replace(action, delta_deg=action.delta_deg - first_deg, macro_steps=1),
-                            turned_so_far=first_deg)
+        rest_action = replace(action, delta_deg=action.delta_deg - first_deg, macro_steps=1)
+        rest = rotate_skill(scene, robot, rest_action, turned_so_far=first_deg)
+        if isinstance(rest, Unreachable):
+            rest = rotate_skill(scene, robot, rest_action, turned_so_far=first_deg, near_joint=True)
         if isinstance(rest, Unreachable):
             continue
         log.info("re-grasp: turning l%d %+g deg, then %+g deg in a second grasp", action.turned_link, first_deg,

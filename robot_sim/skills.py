@@ -267,11 +267,12 @@ def _unwrap_yaw(yaw: float, previous: float | None) -> float:
     return min(candidates, key=lambda a: abs(a - previous))
 
 
-def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_far: float = 0.0
-                 ) -> Command | Unreachable:
+def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_far: float = 0.0,
+                 near_joint: bool = False) -> Command | Unreachable:
     """Plan a rotation action as a command, or say which link cannot be reached (nothing moves). With
     `turned_so_far`, the command for the rest of a turn whose first `turned_so_far` degrees another command
-    does first (the turned link is planned where that leaves it)."""
+    does first (the turned link is planned where that leaves it); with `near_joint`, the turning gripper takes
+    the link between its centre and the joint (a shorter arc) rather than at its centre first."""
     joint_k, _ = joint_between(action.turned_link, action.held_link, scene.n_links)  # refuses non-neighbours
     turned_xy = rotate_point(scene.link_center(action.turned_link), scene.joint_points()[joint_k - 1], turned_so_far)
     held_xy = scene.link_center(action.held_link) if action.held_link >= 1 else None
@@ -280,7 +281,7 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_f
     try:
         for holder, turner in robot.arm_assignments(held_xy, turned_xy):
             for flip in (0.0, math.pi):
-                planned = _plan_rotation(scene, robot, action, holder, turner, flip, turned_so_far)
+                planned = _plan_rotation(scene, robot, action, holder, turner, flip, turned_so_far, near_joint)
                 if isinstance(planned, Command):
                     return planned
                 if worst is None or planned.miss_m < worst.miss_m:
@@ -296,7 +297,7 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_f
 
 
 def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: str | None, turner: str,
-                   flip: float = 0.0, turned_so_far: float = 0.0) -> Command | Unreachable:
+                   flip: float = 0.0, turned_so_far: float = 0.0, near_joint: bool = False) -> Command | Unreachable:
     """The command with `holder` holding and `turner` turning, the turning gripper grasping at the link's yaw
     plus `flip` (0 or pi: the wrist's range decides which way round the turn can be followed). Each gripper
     takes the first grasp point it reaches along its link (the centre, then a quarter of the link to either
@@ -318,10 +319,14 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
                  ) -> tuple[np.ndarray, float] | Unreachable:
         """Above the link, then down onto it: the grasp point and yaw used, or the smallest miss."""
         centre, along = scene.link_center(link), direction(theta[link - 1])
+        offsets = (0.0, -quarter, quarter)
         if link == action.turned_link:
             centre = rotate_point(centre, pivot, turned_so_far)
+            if near_joint:  # the quarter towards the joint, then half-way between it and the centre
+                toward = -1.0 if side == "downstream" else 1.0
+                offsets = (toward * quarter, toward * quarter / 2)
         best: Unreachable | None = None
-        for offset in (0.0, -quarter, quarter):
+        for offset in offsets:
             xy = centre + offset * along
             for yaw in yaws:
                 above, miss = robot.solve_ik(arm, [xy[0], xy[1], z_above], yaw, max_twist_deg=twist)
