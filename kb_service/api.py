@@ -1,7 +1,8 @@
 """HTTP routes of the knowledge-base service. The only module that chooses HTTP status codes:
 
 NotFoundError -> 404, ValidationError / ModelError / TranslationError / bad request body -> 422 (the message
-names the field), ConflictError -> 409, AuthError -> 401, DeadlineError (planning past its deadline) -> 503.
+names the field), ConflictError -> 409, AuthError -> 401, DeadlineError (planning past its deadline) -> 503,
+UnavailableError (the store lost its database connection, a PostgreSQL store only; nothing written) -> 503.
 Handlers are plain `def`s: FastAPI runs them in its thread pool, and the use cases' per-object locks serialize
 what touches one object. A handler turns its body into a use case's request (`usecases`) and the use case's frozen
 result into the route's response model (`schemas`).
@@ -24,8 +25,7 @@ from planhrc.translator.errors import TranslationError
 from . import usecases
 from .auth import AuthError, check_bearer
 from .events import stream_events
-from .store import ConflictError, DeadlineError, NotFoundError, ValidationError
-from .store.knowledge_base import MAX_EVENTS_PAGE
+from .store import MAX_EVENTS_PAGE, ConflictError, DeadlineError, NotFoundError, UnavailableError, ValidationError
 from .schemas import (
     DecisionPublic,
     ErrorPublic,
@@ -59,7 +59,8 @@ ERRORS: dict[int | str, dict[str, Any]] = {
     413: {"model": ErrorPublic, "description": "The request body is over the service's size limit."},
     422: {"model": ErrorPublic, "description": "Bad input; the message names the field."},
     503: {"model": ErrorPublic, "description": "Planning (with VAL) did not finish within the service's planning "
-          "deadline; nothing was stored (the message says why; retry later or use a smaller object)."},
+          "deadline, or the store's database cannot be reached now (a PostgreSQL store); nothing was stored (the "
+          "message says which; retry later, or use a smaller object)."},
 }
 ERROR_JSON = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorPublic"}}}
 TEXT_ERRORS: dict[int | str, dict[str, Any]] = {  # routes answering text/plain still send their errors as JSON
@@ -69,7 +70,7 @@ RDF_TYPES = {"application/rdf+xml": "xml", "text/turtle": "turtle", "application
 NEXT_ACTION_MOVED = ("GET /objects/{object_id}/next-action was removed (a GET must not change state): take the next "
                      "action with POST /objects/{object_id}/actions/next")
 
-router = APIRouter(responses={401: ERRORS[401], 404: ERRORS[404], 422: ERRORS[422]})
+router = APIRouter(responses={401: ERRORS[401], 404: ERRORS[404], 422: ERRORS[422], 503: ERRORS[503]})
 
 
 def links(status: int, targets: dict[str, tuple[str, str, dict[str, str]]]) -> dict[int | str, dict[str, Any]]:
@@ -355,6 +356,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ConflictError, handler(409))
     app.add_exception_handler(AuthError, handler(401))
     app.add_exception_handler(DeadlineError, handler(503))
+    app.add_exception_handler(UnavailableError, handler(503))
     app.add_exception_handler(RequestValidationError, _request_validation_error)
     app.add_exception_handler(StarletteHTTPException, _http_error)
 

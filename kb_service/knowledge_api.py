@@ -4,7 +4,8 @@ chooses the status codes of its errors:
 
 QueryError (malformed query, update, SERVICE, unknown graph, answer over the size limit) -> 400 (the SPARQL
 Protocol's "malformed query"), BusyError (the reasoning queue is full) -> 429 with Retry-After; DeadlineError
-(a query past its time limit) -> 503, NotFoundError -> 404 and ValidationError -> 422 as everywhere.
+(a query past its time limit) -> 503, and as everywhere (`api`'s mapping) NotFoundError -> 404, ValidationError ->
+422 and UnavailableError (the store lost its database connection; nothing written) -> 503.
 
 Reads follow the service's token policy for reads (the request guard counts `POST /sparql` as a read: a query
 changes nothing); `POST /reasoning` stores what the reasoner inferred, so it needs the write token.
@@ -37,11 +38,14 @@ GET_QUERY_CHARS = 1000
 QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
     400: {"model": ERRORS[422]["model"], "description": "Not a query this endpoint answers: malformed, an update, "
           "SERVICE, a graph it does not have, or an answer over the result-size limit (the message says which)."},
-    503: {"model": ERRORS[422]["model"], "description": "The query did not finish within the service's time limit."},
+    503: {"model": ERRORS[422]["model"], "description": "The query did not finish within the service's time limit, "
+          "or the store's database cannot be reached now (a PostgreSQL store)."},
 }
+UNAVAILABLE = {"model": ERRORS[422]["model"], "description": "The store's database cannot be reached now (a "
+               "PostgreSQL store); nothing was written: send the request again later."}
 SPARQL_CONTENT: dict[str, dict[str, Any]] = {media: {} for media in (*RESULT_TYPES, *GRAPH_TYPES)}
 
-router = APIRouter(responses={401: ERRORS[401], 422: ERRORS[422]})
+router = APIRouter(responses={401: ERRORS[401], 422: ERRORS[422], 503: UNAVAILABLE})
 
 
 class ReasoningCreate(BaseModel):

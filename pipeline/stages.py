@@ -10,7 +10,7 @@ from typing import Mapping, Sequence
 from planhrc.model import ArticulatedObject, DomainModelSpec, State, is_subsumed
 from planhrc.ordering import Move, Placement, order_moves
 from planhrc.planner.chain import plan_with_fallback
-from planhrc.planner.result import PlanResult
+from planhrc.planner.result import PlannerAttempt, PlanResult, PlanStatus
 from planhrc.settings import get_settings
 from planhrc.errors import DeadlineExceeded
 from planhrc.transition import TransitionError, replay
@@ -47,7 +47,23 @@ def plan(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfi
         if outcome.solved:
             outcome = replace(outcome, timings={**outcome.timings,
                                                 "pipeline": time.perf_counter() - found.started})
+        elif outcome.status is PlanningStatus.INVALID:
+            return _next_planner(obj, init, goal, config, outcome, placement, deadline_at)
     return outcome
+
+
+def _next_planner(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig, refused: PlanOutcome,
+                  placement: Placement | None, deadline_at: float) -> PlanOutcome:
+    """A plan VAL refused is not an answer: the planners after the one that made it try the task, within what is
+    left of the deadline; the answer's attempts say why the earlier one failed. With none left, the refusal."""
+    chain = planner_chain(config)
+    rest = chain[chain.index(refused.planner) + 1:] if refused.planner in chain else ()
+    if not rest or time.monotonic() >= deadline_at:
+        return refused
+    later = replace(config, planner=rest[0], fallback_planner=rest[1] if len(rest) > 1 else None)
+    retried = plan(obj, init, goal, later, placement=placement, deadline_at=deadline_at)
+    why = PlannerAttempt(refused.planner, PlanStatus.INVALID, refused.message, refused.timings.get("planning", 0.0))
+    return replace(retried, attempts=(*refused.attempts, why, *retried.attempts))
 
 
 @dataclass(frozen=True)
@@ -173,8 +189,10 @@ def plan_moves(obj: ArticulatedObject, init: State, goal: State, moves: Sequence
 def run_planners(task: PddlTask, config: PlanningConfig, timeout_s: float | None = None) -> PlanResult:
     """The configured planner, then the fallback planner when the first cannot answer (the planner package's
     one fallback chain), within `timeout_s` (default: the configured planner time limit)."""
+    # The chain's own VAL is off: the pipeline validates the plan as it will be executed (ordered on the table,
+    # against the paper's exact domain), and a plan that VAL refuses passes the task on (`_next_planner`).
     return plan_with_fallback(task.domain, task.problem, planner_chain(config),
-                              config.timeout_s if timeout_s is None else timeout_s)
+                              config.timeout_s if timeout_s is None else timeout_s, validate=False)
 
 
 def planner_chain(config: PlanningConfig) -> tuple[str, ...]:

@@ -1,28 +1,47 @@
-"""One fallback policy for every caller: try planners in order, each with the time that is left.
+"""One fallback policy for every caller: try planners in order, each with the time that is left, and let only a
+plan VAL accepts end the chain.
 
     plan_with_fallback(domain, problem, ("inproc", "fd-lama"), timeout_s=10.0)
 
-A planner's answer ends the chain when it is a plan or a proof that there is none (status solved or
-unsolvable); an error (the task is outside what the planner takes, a crash) or a timeout passes the task to
-the next planner. The returned `PlanResult` is the deciding planner's, with `seconds` covering the whole
-chain and `attempts` saying, in order, what each planner answered and why. `optimal` is the deciding
-planner's own claim (only the in-process planner's proofs and the optimal Fast Downward search set it).
+A planner's answer ends the chain when it is a plan VAL accepts against the domain and problem *as given* (not a
+normalised copy: VAL is the judge of the text the user gave) or a proof that there is none (status unsolvable).
+A plan VAL refuses is an attempt with status invalid and VAL's reason, and the task goes on to the next planner,
+as after an error (the task is outside what the planner takes, a crash) or a timeout. VAL's time comes out of the
+chain's: a plan VAL cannot check in the time left is an attempt that timed out.
+
+`validate=False` skips VAL, for speed: the answer then says so (`PlanResult.validated` is False). The returned
+`PlanResult` is the deciding planner's, with `seconds` covering the whole chain (VAL included) and `attempts`
+saying, in order, what each planner answered and why. `optimal` is the deciding planner's own claim (only the
+in-process planner's proofs and the optimal Fast Downward search set it); it is a claim about the domain as VAL
+reads it, which is also what the planners that get a normalised copy read (`planner.normalise`). The
+domain's reading notes (an action declared twice: `planner.pddl`) come back as `warnings`.
 """
 from __future__ import annotations
 
+import logging
+import signal
 import time
+from dataclasses import replace
 from typing import Sequence
 
 from .errors import PlannerError
+from .inproc import parsed_domain
 from .registry import PLANNERS, get_planner
 from .result import PlannerAttempt, PlanResult, PlanStatus
+from .validate import validate_plan
+
+log = logging.getLogger(__name__)
 
 DEFAULT_CHAIN = ("inproc", "fd-lama")
 FINAL_STATUSES = frozenset({PlanStatus.SOLVED, PlanStatus.UNSOLVABLE})
 
 
-def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeout_s: float) -> PlanResult:
-    """Run `planners` in order on the PDDL texts within `timeout_s` seconds in total.
+def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeout_s: float, *,
+                       validate: bool = True, validation_domain: str | None = None) -> PlanResult:
+    """Run `planners` in order on the PDDL texts within `timeout_s` seconds in total, VAL included.
+
+    VAL judges the plans against `validation_domain` when given (a caller whose planners read a stricter copy of
+    the domain it answers for, as the pipeline's paper-exact domain), else against `domain`.
 
     Raises PlannerError before running anything when the list is empty, a name is unknown or the time limit
     is not positive; every other outcome is a status of the returned result.
@@ -47,16 +66,62 @@ def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeo
             continue
         backend = get_planner(name)  # built when reached: a chain the first planner ends builds no other
         result = backend.solve(domain, problem, remaining)
+        if validate and result.status is PlanStatus.SOLVED:
+            result = judged(result, validation_domain or domain, problem, timeout_s - (time.perf_counter() - start))
         attempts.append(PlannerAttempt(backend.name, result.status, result.message, result.seconds))
         last = result
         if result.status in FINAL_STATUSES:
             break
     elapsed = time.perf_counter() - start
+    warnings = reading_warnings(domain)
     if last is None:  # pragma: no cover - the first planner always has time
-        return PlanResult(PlanStatus.TIMEOUT, (), elapsed, names[0], "no planner had time", None, tuple(attempts))
+        return PlanResult(PlanStatus.TIMEOUT, (), elapsed, names[0], "no planner had time", None, tuple(attempts),
+                          warnings=warnings)
     if last.status in FINAL_STATUSES:
-        return PlanResult(last.status, last.plan, elapsed, last.planner, last.message, last.optimal, tuple(attempts))
+        return replace(last, seconds=elapsed, attempts=tuple(attempts), warnings=warnings)
     status = PlanStatus.TIMEOUT if any(a.status is PlanStatus.TIMEOUT for a in attempts) else PlanStatus.ERROR
     summary = "; ".join(f"{a.planner}: {a.status.value}" + (f" ({a.message})" if a.message else "") for a in attempts)
     return PlanResult(status, (), elapsed, last.planner, f"no planner produced a plan: {summary}", None,
-                      tuple(attempts))
+                      tuple(attempts), warnings=warnings)
+
+
+def judged(result: PlanResult, domain: str, problem: str, remaining_s: float) -> PlanResult:
+    """A solved result checked by VAL against the texts as given: validated, invalid with VAL's reason, or a
+    timeout when VAL cannot answer in the time left (the VAL time is added to the planner's)."""
+    start = time.perf_counter()
+    if remaining_s <= 0:
+        return replace(result, status=PlanStatus.TIMEOUT, plan=(), optimal=None,
+                       message=f"{result.message + '; ' if result.message else ''}no time left for VAL")
+    try:
+        check = validate_plan(domain, problem, result.plan, timeout_s=remaining_s)
+    except PlannerError as exc:  # VAL did not answer in the time left
+        return replace(result, status=PlanStatus.TIMEOUT, plan=(), optimal=None,
+                       seconds=result.seconds + time.perf_counter() - start, message=str(exc))
+    seconds = result.seconds + check.seconds
+    if check.valid:
+        return replace(result, seconds=seconds, validated=True)
+    if val_crashed(check.reason):  # no verdict either way: not solved, and not said to be invalid
+        log.warning("VAL ended without a verdict on the plan of %s: %s", result.planner, check.reason)
+        return replace(result, status=PlanStatus.ERROR, plan=(), optimal=None, seconds=seconds,
+                       message=f"VAL ended without a verdict on its plan of {len(result.plan)} step(s) "
+                               f"({check.reason}: killed, e.g. when memory ran out)")
+    log.warning("VAL rejected the plan of %s: %s", result.planner, check.reason)
+    return replace(result, status=PlanStatus.INVALID, plan=(), optimal=None, seconds=seconds,
+                   message=f"VAL rejected its plan of {len(result.plan)} step(s): {check.reason}")
+
+
+def val_crashed(reason: str) -> bool:
+    """Whether VAL's "reason" is only that SIGKILL ended it (`planner.validate` says "VAL exit code -9" when VAL
+    printed no reason): killed from outside, as by the kernel when memory runs out, so no verdict. (VAL's
+    expansion of a conditional effect over four angles needs gigabytes at K = 24.) Other signals count as a
+    refusal: this VAL build, for one, ends a "Bad plan description!" with a segmentation fault."""
+    return reason.strip() == f"VAL exit code -{signal.SIGKILL.value}"
+
+
+def reading_warnings(domain: str) -> tuple[str, ...]:
+    """What a planner reading `domain` as VAL does reads differently from its text (empty when it does not
+    parse: the planners said what is wrong with it). The parse is the in-process planner's, memoised."""
+    try:
+        return parsed_domain(domain).warnings
+    except PlannerError:
+        return ()

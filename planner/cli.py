@@ -1,7 +1,9 @@
-"""`planhrc plan DOMAIN PROBLEM [--planner NAME] [--no-fallback] --timeout S --json`.
+"""`planhrc plan DOMAIN PROBLEM [--planner NAME] [--no-fallback] [--no-validate] --timeout S --json`.
 
 The files go through the one fallback chain (`planner.chain`): `--planner` picks the first planner, the
-default chain (in-process, then Fast Downward LAMA) follows unless `--no-fallback` is given.
+default chain (in-process, then Fast Downward LAMA) follows unless `--no-fallback` is given. Every plan printed
+as solved was accepted by VAL against the files as given, unless `--no-validate` is given: then the answer says
+it is unvalidated (`"validated": false` in JSON, a comment line in text).
 """
 from __future__ import annotations
 
@@ -26,6 +28,8 @@ def add_plan_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     parser.add_argument("--planner", default=DEFAULT_CHAIN[0], choices=list(PLANNERS),
                         help=f"first planner to try (default chain: {', '.join(DEFAULT_CHAIN)})")
     parser.add_argument("--no-fallback", action="store_true", help="run only --planner, no fallback")
+    parser.add_argument("--no-validate", action="store_true",
+                        help="do not check the plan with VAL (faster; the answer is labelled unvalidated)")
     parser.add_argument("--timeout", type=positive_float, default=60.0, help="time limit in seconds")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.set_defaults(func=run_plan)
@@ -36,21 +40,27 @@ def run_plan(args: argparse.Namespace) -> int:
     """Exit status 0 when solved, 1 otherwise (including bad input, reported on stderr)."""
     try:
         domain, problem = read_pddl(args.domain, "domain"), read_pddl(args.problem, "problem")
-        result = plan_with_fallback(domain, problem, plan_chain(args.planner, args.no_fallback), args.timeout)
+        result = plan_with_fallback(domain, problem, plan_chain(args.planner, args.no_fallback), args.timeout,
+                                    validate=not args.no_validate)
     except PlannerError as exc:
         if args.json:
             print(json.dumps({"status": "error", "plan": [], "seconds": 0.0, "planner": args.planner,
-                              "message": str(exc)}))
+                              "message": str(exc), "optimal": None, "validated": False, "attempts": [],
+                              "warnings": []}))
         print(f"planhrc plan: {exc}", file=sys.stderr)
         return 1
     if args.json:
         print(json.dumps(result_json(result)))
     else:
+        for warning in result.warnings:
+            print(f"; warning: {warning}")
         for attempt in result.attempts[:-1]:
             print(f"; {attempt.planner} declined: {attempt.status.value}"
                   + (f" ({attempt.message})" if attempt.message else ""))
         print(f"; {result.planner}: {result.status.value} in {result.seconds:.3f} s"
               + (f" ({result.message})" if result.message else ""))
+        if result.solved:
+            print("; VAL accepted the plan" if result.validated else "; unvalidated: VAL did not check this plan")
         for step in result.plan:
             print(step)
     return 0 if result.status is PlanStatus.SOLVED else 1
@@ -66,6 +76,7 @@ def plan_chain(first: str, no_fallback: bool = False) -> tuple[str, ...]:
 def result_json(result: PlanResult) -> dict[str, Any]:
     return {"status": result.status.value, "plan": list(result.plan), "seconds": round(result.seconds, 6),
             "planner": result.planner, "message": result.message, "optimal": result.optimal,
+            "validated": result.validated, "warnings": list(result.warnings),
             "attempts": [{"planner": a.planner, "status": a.status.value, "message": a.message,
                           "seconds": round(a.seconds, 6)} for a in result.attempts]}
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from math import gcd
 from types import MappingProxyType
 from typing import Any, Callable, Generic, Iterable, Mapping, TypeVar, cast
 
@@ -32,32 +31,15 @@ from planhrc.model import Atom, natural_key
 
 from .deadline import check as check_deadline
 from .pddl import format_sexpr
+from .product import solve_with_control
 from .recognise import Axis, CyclicTask
+from .zk import (BASIS_LIMIT, TRANSFORMS, Transform, breadth_first, cover_of, path_to, solve_mod,
+                 unit_of)
 from .result import PlanResult, PlanStatus
 
 log = logging.getLogger(__name__)
 
 NAME = "inproc"
-
-# A transform maps a vector over the goal variables (chain order) to new coordinates; `same[i]` tells whether
-# goal variable i and i+1 lie on the same chain (differences never cross two objects).
-Transform = Callable[[tuple[int, ...], tuple[bool, ...]], tuple[int, ...]]
-
-
-def _identity(v: tuple[int, ...], same: tuple[bool, ...]) -> tuple[int, ...]:
-    return v
-
-
-def _downstream(v: tuple[int, ...], same: tuple[bool, ...]) -> tuple[int, ...]:
-    return tuple(v[i] - (v[i - 1] if i and same[i - 1] else 0) for i in range(len(v)))
-
-
-def _upstream(v: tuple[int, ...], same: tuple[bool, ...]) -> tuple[int, ...]:
-    n = len(v)
-    return tuple(v[i] - (v[i + 1] if i + 1 < n and same[i] else 0) for i in range(n))
-
-
-TRANSFORMS: dict[str, Transform] = {"identity": _identity, "downstream": _downstream, "upstream": _upstream}
 
 Outcome = tuple[PlanStatus, tuple[str, ...], str, "bool | None"]
 
@@ -259,8 +241,10 @@ class GroundTask:
         missing = [self.names[v] for v in self.order if v not in current]
         if missing:
             return PlanStatus.ERROR, (), f"init: variable(s) without a value: {', '.join(missing)}", None
+        control = self.task.control_predicates
+        control_goal = frozenset(a for a in goal if a[0] in control)
         wanted: dict[int, int] = {}
-        for atom in sorted(goal):
+        for atom in sorted(goal - control_goal):
             if atom[0] in statics:
                 if atom not in self.static_atoms:
                     return PlanStatus.UNSOLVABLE, (), f"goal: static fact {format_sexpr(atom)} is false", None
@@ -275,9 +259,13 @@ class GroundTask:
                 return PlanStatus.UNSOLVABLE, (), f"goal: {self.names[var]} must take two values", None
             wanted[var] = index[value]
         chain = [v for v in self.order if v in wanted]
+        same = tuple(self.component[a] == self.component[b] for a, b in zip(chain, chain[1:]))
+        if control:  # grippers, a working position...: a cyclic part times a small control (planner.product)
+            return solve_with_control(self.axes, self.k, self.cycle, TRANSFORMS, self._preference, self._control_memo,
+                                      chain, same, current, wanted, frozenset(a for a in init if a[0] in control),
+                                      control_goal, len(self.task.variables))
         if all(current[v] == wanted[v] for v in chain):
             return PlanStatus.SOLVED, (), "goal already holds", True
-        same = tuple(self.component[a] == self.component[b] for a, b in zip(chain, chain[1:]))
         attempts = []
         for view in self._views(tuple(chain), same):
             transform = view.transform
@@ -313,7 +301,7 @@ class GroundTask:
                                     f"{tname} transform leaves moves around one hub coordinate: exact star DP", True)
         best: tuple[str, list[tuple[Axis, int]]] | None = None
         for tname, images, need in attempts:
-            cover = _cover(images, self.k)
+            cover = cover_of(images, self.k)
             if all(i in cover for i, t in enumerate(need) if t):
                 uses = self._choose_units(chain, need, cover)
                 if uses is not None and (best is None or sum(n for _, n in uses) < sum(n for _, n in best[1])):
@@ -347,13 +335,17 @@ class GroundTask:
 
     def _view(self, name: str, transform: Transform, chain: tuple[int, ...], same: tuple[bool, ...]) -> _View:
         images = [(axis, transform(tuple(effect.get(v, 0) for v in chain), same)) for axis, effect in self._effects]
-        if not all(not any(x % self.k for x in img) or _unit(img, self.k) is not None for _, img in images):
+        if not all(not any(x % self.k for x in img) or unit_of(img, self.k) is not None for _, img in images):
             return _View(name, transform, images, None, {})
-        cover = _cover(images, self.k)
+        cover = cover_of(images, self.k)
         best = {(i, sign): min(axes, key=lambda a: self._preference(a, chain[i]))
                 for i in cover for sign in (1, -1)
                 for axes in [[axis for s, axis in cover[i] if s == sign]] if axes}
         return _View(name, transform, images, cover, best)
+
+    @_Shared
+    def _control_memo(self) -> dict[object, object]:
+        return {}
 
     @_Shared
     def _view_memo(self) -> dict[tuple[tuple[int, ...], tuple[bool, ...]], tuple[_View, ...]]:
@@ -402,7 +394,7 @@ class GroundTask:
         if len(vectors) != m:
             return None
         basis = sorted(vectors)
-        coefficients = _solve_mod([list(col) for col in zip(*basis)], need, k)
+        coefficients = solve_mod([list(col) for col in zip(*basis)], need, k)
         if coefficients is None:
             return None
         uses: list[tuple[Axis, int]] = []
@@ -451,7 +443,7 @@ class GroundTask:
         def search(moves: tuple[tuple[int, ...], ...], dims: int) -> tuple[dict[Any, Any], dict[Any, Any]]:
             key = (dims, moves)
             if key not in searches:
-                searches[key] = _breadth_first(moves, k, dims)
+                searches[key] = breadth_first(moves, k, dims)
             return searches[key]
 
         zero_pair = ({(0, 0): 0}, {(0, 0): None})
@@ -482,9 +474,9 @@ class GroundTask:
         for i in range(m - 1, -1, -1):
             carry, pair_state, u = back[i][y]
             if pairs[i]:
-                for move in _path(search(tuple(sorted(pairs[i])), 2)[1], pair_state):
+                for move in path_to(search(tuple(sorted(pairs[i])), 2)[1], pair_state):
                     counts[pairs[i][move]] = counts.get(pairs[i][move], 0) + 1
-            for move in _path(search(tuple(sorted(singles[i])), 1)[1], (u,)):
+            for move in path_to(search(tuple(sorted(singles[i])), 1)[1], (u,)):
                 counts[singles[i][move]] = counts.get(singles[i][move], 0) + 1
             y = carry
         return "solved", list(counts.items())
@@ -530,7 +522,7 @@ class GroundTask:
         def search(moves: tuple[tuple[int, ...], ...], dims: int) -> tuple[dict[Any, Any], dict[Any, Any]]:
             key = (dims, moves)
             if key not in searches:
-                searches[key] = _breadth_first(moves, k, dims)
+                searches[key] = breadth_first(moves, k, dims)
             return searches[key]
 
         dp: dict[int, int] = {0: 0}
@@ -563,14 +555,14 @@ class GroundTask:
             return "unsolvable", None
         _, y = min(finals)
         counts: dict[Axis, int] = {}
-        for move in _path(search(tuple(sorted(singles[hub])), 1)[1], ((need[hub] - y) % k,)):
+        for move in path_to(search(tuple(sorted(singles[hub])), 1)[1], ((need[hub] - y) % k,)):
             counts[singles[hub][move]] = counts.get(singles[hub][move], 0) + 1
         for i, step_back in reversed(back):
             carry, pair_state, u = step_back[y]
             if spokes[i]:
-                for move in _path(search(tuple(sorted(spokes[i])), 2)[1], pair_state):
+                for move in path_to(search(tuple(sorted(spokes[i])), 2)[1], pair_state):
                     counts[spokes[i][move]] = counts.get(spokes[i][move], 0) + 1
-            for move in _path(search(tuple(sorted(singles[i])), 1)[1], (u,)):
+            for move in path_to(search(tuple(sorted(singles[i])), 1)[1], (u,)):
                 counts[singles[i][move]] = counts.get(singles[i][move], 0) + 1
             y = carry
         return "solved", list(counts.items())
@@ -592,71 +584,3 @@ class GroundTask:
             log.error("internal check failed: replayed plan misses %s", wrong)
             return PlanStatus.ERROR, (), f"internal check failed: the plan would miss {', '.join(wrong)}", None
         return PlanStatus.SOLVED, tuple(plan), message, optimal
-
-
-BASIS_LIMIT = 60  # Gaussian elimination in pure Python: O(m^3) for m goal variables
-
-
-def _solve_mod(matrix: list[list[int]], rhs: list[int], k: int) -> list[int] | None:
-    """x with matrix @ x = rhs (mod k) by elimination with unit pivots; None when some column has no unit
-    pivot (then the vectors are not a basis this method can use)."""
-    m = len(matrix)
-    rows = [row[:] + [rhs[i] % k] for i, row in enumerate(matrix)]
-    for col in range(m):
-        pivot = next((r for r in range(col, m) if gcd(rows[r][col] % k, k) == 1), None)
-        if pivot is None:
-            return None
-        rows[col], rows[pivot] = rows[pivot], rows[col]
-        inv = pow(rows[col][col] % k, -1, k)
-        rows[col] = [(x * inv) % k for x in rows[col]]
-        for r in range(m):
-            if r != col and rows[r][col] % k:
-                f = rows[r][col]
-                rows[r] = [(a - f * b) % k for a, b in zip(rows[r], rows[col])]
-    return [rows[i][m] for i in range(m)]
-
-
-def _cover(images: list[tuple[Axis, tuple[int, ...]]], k: int) -> dict[int, list[tuple[int, Axis]]]:
-    """Coordinate -> [(sign, axis)] for every axis whose image is +-e_coordinate."""
-    cover: dict[int, list[tuple[int, Axis]]] = {}
-    for axis, img in images:
-        unit = _unit(img, k)
-        if unit is not None:
-            cover.setdefault(unit[0], []).append((unit[1], axis))
-    return cover
-
-
-def _unit(v: tuple[int, ...], k: int) -> tuple[int, int] | None:
-    """(index, sign) when v is +-e_index modulo K, else None."""
-    nonzero = [(i, x % k) for i, x in enumerate(v) if x % k]
-    if len(nonzero) == 1 and nonzero[0][1] in (1, k - 1):
-        return (nonzero[0][0], 1 if nonzero[0][1] == 1 else -1)
-    return None
-
-
-def _breadth_first(moves: tuple[tuple[int, ...], ...], k: int, dims: int) -> tuple[dict[Any, Any], dict[Any, Any]]:
-    """Fewest moves from 0 to every reachable vector of Z_K^dims, with parent links."""
-    start = (0,) * dims
-    dist = {start: 0}
-    parent: dict[tuple[int, ...], tuple[tuple[int, ...], tuple[int, ...]] | None] = {start: None}
-    frontier = [start]
-    while frontier:
-        check_deadline("planning (breadth-first search over Z_K)")
-        nxt = []
-        for s in frontier:
-            for mv in moves:
-                t = tuple((a + b) % k for a, b in zip(s, mv))
-                if t not in dist:
-                    dist[t] = dist[s] + 1
-                    parent[t] = (s, mv)
-                    nxt.append(t)
-        frontier = nxt
-    return dist, parent
-
-
-def _path(parent: Mapping[Any, Any], target: tuple[int, ...]) -> list[tuple[int, ...]]:
-    moves = []
-    while parent[target] is not None:
-        target, mv = parent[target]
-        moves.append(mv)
-    return moves

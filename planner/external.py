@@ -9,14 +9,17 @@ output contains one of `unsolvable_markers`.
 """
 from __future__ import annotations
 
+import importlib.util
 import logging
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Sequence
 
 from .errors import PlannerError
+from .normalise import for_external
 from .plan_file import read_best_plan
 from .process import run_limited
 from .result import PlanResult, PlanStatus
@@ -24,6 +27,13 @@ from .result import PlanResult, PlanStatus
 log = logging.getLogger(__name__)
 
 PROBE_TEMPLATE = ("{binary}", "-d", "{domain}", "-i", "{problem}", "-o", "{plan}")
+# LAPKT's BFWS (the `lapkt` wheel, the ``bench`` extra; its Tarski grounder needs `clingo`): what its lapkt_cmd.py
+# script does, run by this interpreter so that no script path is needed.
+BFWS_CODE = ("from lapkt.parseargs import process_arguments; from lapkt.load_planner import Planner; "
+             "Planner(process_arguments()).solve()")
+# Its last, complete search (BFWS with novelty, landmarks and h_ff) ends so when the task has no plan.
+BFWS_UNSOLVABLE = ("plan found with cost: notfound",)
+BFWS_TEMPLATE = ("{binary}", "-c", BFWS_CODE, "BFWS", "-d", "{domain}", "-p", "{problem}", "--plan_file", "{plan}")
 MADAGASCAR_TEMPLATE = ("{binary}", "{domain}", "{problem}", "-o", "{plan}")
 DEFAULT_UNSOLVABLE_MARKERS = ("unsolvable", "no plan exists", "problem has no solution", "goal not reachable")
 
@@ -49,6 +59,7 @@ class ExternalPlanner:
 
     def solve(self, domain: str, problem: str, timeout_s: float) -> PlanResult:
         start = time.perf_counter()
+        domain, problem = for_external(domain, problem)  # the text as VAL reads it (planner.normalise)
         with tempfile.TemporaryDirectory(prefix=f"planhrc-{self.name}-") as tmp:
             directory = Path(tmp)
             (directory / "domain.pddl").write_text(domain)
@@ -58,10 +69,11 @@ class ExternalPlanner:
         elapsed = time.perf_counter() - start
         if outcome.timed_out:
             return PlanResult(PlanStatus.TIMEOUT, (), elapsed, self.name, f"killed after {timeout_s} s")
-        if plan is not None:
-            return PlanResult(PlanStatus.SOLVED, plan, elapsed, self.name, f"exit code {outcome.returncode}")
         text = (outcome.stdout + "\n" + outcome.stderr).lower()
-        if any(m in text for m in self.unsolvable_markers):
+        says_unsolvable = any(m in text for m in self.unsolvable_markers)
+        if plan is not None and (plan or not says_unsolvable):  # BFWS writes an empty plan file when it finds none
+            return PlanResult(PlanStatus.SOLVED, plan, elapsed, self.name, f"exit code {outcome.returncode}")
+        if says_unsolvable:
             return PlanResult(PlanStatus.UNSOLVABLE, (), elapsed, self.name, "planner reports no plan")
         tail = " | ".join((outcome.stderr or outcome.stdout).strip().splitlines()[-5:])
         return PlanResult(PlanStatus.ERROR, (), elapsed, self.name,
@@ -75,3 +87,11 @@ def make_probe(binary: str | Path, name: str = "probe") -> ExternalPlanner:
 def make_madagascar(binary: str | Path, name: str = "madagascar") -> ExternalPlanner:
     """`binary` may be M, Mp or MpC; all take the same arguments."""
     return ExternalPlanner(name, binary, MADAGASCAR_TEMPLATE)
+
+
+def make_bfws(name: str = "bfws") -> ExternalPlanner:
+    """LAPKT's BFWS (by Probe's author) in this interpreter; PlannerError when `lapkt` or `clingo` is missing."""
+    for package in ("lapkt", "clingo"):
+        if importlib.util.find_spec(package) is None:
+            raise PlannerError(f"{name}: the {package} package is not installed (pip install planhrc[bench])")
+    return ExternalPlanner(name, sys.executable, BFWS_TEMPLATE, BFWS_UNSOLVABLE)

@@ -85,6 +85,7 @@ class GroundedProblem:
     variables: tuple[tuple[str, tuple[str, ...]], ...]  # (predicate, owner), sorted
     actions: tuple[GroundAction, ...]
     type_objects: tuple[tuple[str, frozenset[str]], ...]  # each type with its objects (subtypes included)
+    control_predicates: frozenset[str] = frozenset()  # changing predicates that are not cyclic variables
 
     def objects_of(self, type_name: str) -> frozenset[str]:
         return dict(self.type_objects).get(type_name, frozenset())
@@ -97,9 +98,10 @@ def static_predicates(domain: Domain, operators: tuple[Operator, ...]) -> frozen
 
 
 def find_state_predicates(operators: tuple[Operator, ...], changing: frozenset[str],
-                          arity: Mapping[str, int]) -> tuple[StateVariablePredicate, ...]:
-    """The value position of every changing predicate; OutsideFamilyError naming the first that has none."""
+                          arity: Mapping[str, int]) -> tuple[tuple[StateVariablePredicate, ...], dict[str, str]]:
+    """The value position of every changing predicate that has one, and why each other one has none."""
     candidates: dict[str, set[int]] = {name: set(range(arity[name])) for name in changing}
+    why_not: dict[str, str] = {}
     for op in operators:
         for block in op.effects:
             for name in changing:
@@ -108,18 +110,56 @@ def find_state_predicates(operators: tuple[Operator, ...], changing: frozenset[s
                 for atoms, others, verb in ((adds, dels, "adds"), (dels, adds, "deletes")):
                     for atom in atoms:
                         positions = {_single_difference(atom, other) for other in others} - {None}
-                        if not positions:
-                            raise OutsideFamilyError(
-                                f"action {op.name} {verb} {format_sexpr(atom)} with no matching "
-                                f"{'delete' if verb == 'adds' else 'add'} that differs in one argument: "
-                                f"{name} is not a state variable with one value")
+                        if not positions and name not in why_not:
+                            why_not[name] = (f"action {op.name} {verb} {format_sexpr(atom)} with no matching "
+                                             f"{'delete' if verb == 'adds' else 'add'} that differs in one argument: "
+                                             f"{name} is not a state variable with one value")
                         candidates[name] &= positions
     out = []
     for name in sorted(changing):
+        if name in why_not:
+            continue
         if len(candidates[name]) != 1:
-            raise OutsideFamilyError(f"predicate {name}: its actions do not agree on which argument is the value")
+            why_not[name] = f"predicate {name}: its actions do not agree on which argument is the value"
+            continue
         out.append(StateVariablePredicate(name, arity[name], candidates[name].pop()))
-    return tuple(out)
+    return tuple(out), why_not
+
+
+def split_cyclic(domain: Domain, operators: tuple[Operator, ...], state: tuple[StateVariablePredicate, ...],
+                 statics: frozenset[str]) -> tuple[tuple[StateVariablePredicate, ...], dict[str, str]]:
+    """The state variables whose values some action steps along a static relation (``(next ?a1 ?a2)`` between
+    the current value and another of the same type), and why each other one is control (``(centred ?j)``,
+    whose actions relate its values to links, not to each other)."""
+    cyclic, why_not = [], {}
+    for pred in state:
+        if any(_steps_values(op, pred, statics, state) for op in operators):
+            cyclic.append(pred)
+        else:
+            why_not[pred.name] = (f"{pred.name}: no action relates two of its values by a static relation; it is "
+                                  "part of the control, not a cycle of values")
+    return tuple(cyclic), why_not
+
+
+def _steps_values(op: Operator, pred: StateVariablePredicate, statics: frozenset[str],
+                  state: tuple[StateVariablePredicate, ...]) -> bool:
+    """Whether `op` relates a value term of `pred` to another term of the same type through a static binary
+    literal, the other term being no owner (no argument of a changing atom outside a value position)."""
+    types = dict(op.parameters + tuple(v for block in op.effects for v in block.variables))
+    values = {pred.value(atom) for atom in _atoms_of(op) if atom[0] == pred.name}
+    value_of = {p.name: p.value_position for p in state}
+    owners = {arg for atom in _atoms_of(op) if atom[0] not in statics and atom[0] != EQUALITY
+              for i, arg in enumerate(atom[1:]) if value_of.get(atom[0]) != i}
+    literals = list(op.precondition) + [lit for block in op.effects for lit in block.condition]
+    for lit in literals:
+        if lit.predicate not in statics or lit.predicate == EQUALITY or len(lit.args) != 2:
+            continue
+        a, b = lit.args
+        for mine, other in ((a, b), (b, a)):
+            if mine in values and other.startswith("?") and other not in owners and types.get(mine) == types.get(
+                    other):
+                return True
+    return False
 
 
 def _single_difference(a: Atom, b: Atom) -> int | None:
@@ -137,7 +177,9 @@ class LiftedTask:
     domain: Domain
     operators: tuple[Operator, ...]
     static_predicates: frozenset[str]
-    state_predicates: tuple[StateVariablePredicate, ...]
+    state_predicates: tuple[StateVariablePredicate, ...]  # the cyclic ones
+    control_predicates: frozenset[str] = frozenset()  # every other changing predicate (`planner.product`)
+    control_reasons: tuple[tuple[str, str], ...] = ()  # (predicate, why it is control, not a cyclic variable)
 
     def owners(self, init: frozenset[Atom]) -> frozenset[tuple[str, tuple[str, ...]]]:
         """(predicate, owner) of every state-variable atom of an init: which variables have a value."""
@@ -168,7 +210,10 @@ def analyse(domain: Domain, goal_predicates: frozenset[str]) -> LiftedTask:
     relevant = frozenset(names | goal_predicates)
     operators = tuple(_drop_irrelevant(op, relevant) for op in operators)
     changing = frozenset({atom[0] for op in operators for b in op.effects for atom in b.add + b.delete})
-    return LiftedTask(domain, operators, statics, find_state_predicates(operators, changing, arity))
+    state, not_variables = find_state_predicates(operators, changing, arity)
+    cyclic, not_cyclic = split_cyclic(domain, operators, state, statics)
+    reasons = {**not_variables, **not_cyclic}
+    return LiftedTask(domain, operators, statics, cyclic, frozenset(reasons), tuple(sorted(reasons.items())))
 
 
 def ground(domain: Domain, problem: Problem) -> GroundedProblem:
@@ -216,7 +261,8 @@ def ground_lifted(lifted: LiftedTask, problem_name: str, objects: tuple[tuple[st
               len(variables), len(actions))
     return GroundedProblem(domain.name, problem_name, objects, lifted.static_predicates, static_facts,
                            lifted.state_predicates, variables, tuple(actions),
-                           tuple(sorted((t, frozenset(objs)) for t, objs in objects_of.items())))
+                           tuple(sorted((t, frozenset(objs)) for t, objs in objects_of.items())),
+                           lifted.control_predicates)
 
 
 def _atoms_of(op: Operator) -> Iterator[Atom]:
@@ -286,6 +332,8 @@ def _value_parameters(op: Operator, by_name: Mapping[str, StateVariablePredicate
             owner.update(pred.owner(atom))
         elif atom[0] in statics and atom[0] != EQUALITY:
             static_atoms.append(atom)
+        elif atom[0] != EQUALITY:  # a control atom: its arguments are bound, like owners
+            owner.update(atom[1:])
     changed = True
     while changed:
         changed = False
@@ -319,8 +367,8 @@ def _ground_operator(op: Operator, by_name: Mapping[str, StateVariablePredicate]
         blocks.append((compile_join(free, block.condition, by_name, statics, objects_of,
                                     frozenset(v for v, _ in structural), f"{where}: effect", facts),
                        tuple((var, t) for var, t in block.variables if var in values),
-                       tuple(lit for lit in block.condition if _left(lit, values, by_name)), block))
-    pre = tuple(lit for lit in op.precondition if _left(lit, values, by_name))
+                       tuple(lit for lit in block.condition if _left(lit, values, by_name, statics)), block))
+    pre = tuple(lit for lit in op.precondition if _left(lit, values, by_name, statics))
     for binding in plan.run(facts, {}):
         check_deadline(f"grounding {where}")
         effects: list[GroundEffect] = []
@@ -333,9 +381,12 @@ def _ground_operator(op: Operator, by_name: Mapping[str, StateVariablePredicate]
                            tuple(substitute(lit, binding) for lit in pre), tuple(effects))
 
 
-def _left(lit: Literal, values: frozenset[str], by_name: Mapping[str, StateVariablePredicate]) -> bool:
-    """Whether a literal is left for recognition: it reads a state variable or mentions a value parameter."""
-    return lit.predicate in by_name or bool(set(lit.args) & values)
+def _left(lit: Literal, values: frozenset[str], by_name: Mapping[str, StateVariablePredicate],
+          statics: frozenset[str]) -> bool:
+    """Whether a literal is left for recognition: it reads a state variable or the control part, or mentions a
+    value parameter."""
+    return (lit.predicate in by_name or bool(set(lit.args) & values)
+            or (lit.predicate != EQUALITY and lit.predicate not in statics))
 
 
 def _is_var(term: str) -> bool:
@@ -427,14 +478,14 @@ def compile_join(params: list[tuple[str, str]], literals: tuple[Literal, ...],
                 relations.append(("owner:" + pred.name, pred.owner(lit.atom)))
             continue
         terms = lit.args
+        if lit.predicate != EQUALITY and lit.predicate not in statics:
+            continue  # reads the control part, which changes: left for `planner.product`, bound by type here
         if any(_is_var(t) and t not in wanted and t not in given for t in terms):
             continue  # mentions a value parameter: left for recognition
         if lit.predicate == EQUALITY or lit.negated:
             checks.append(lit)
-        elif lit.predicate in statics:
+        else:
             relations.append((lit.predicate, terms))
-        else:  # pragma: no cover - a changing predicate is always a state variable after the analyses
-            raise OutsideFamilyError(f"{where}: {lit.pddl()} reads a changing predicate")
     bound = set(given)
 
     def ready(lit: Literal) -> bool:

@@ -31,7 +31,7 @@ from .result import PlanResult, PlanStatus
 
 log = logging.getLogger(__name__)
 
-__all__ = ["GroundTask", "InprocPlanner", "OutsideFamilyError", "ground_parsed", "ground_task"]
+__all__ = ["GroundTask", "InprocPlanner", "OutsideFamilyError", "forget", "ground_parsed", "ground_task"]
 
 def ground_task(domain: str, problem: str) -> GroundTask:
     """Parse, ground and recognise once; raises PlannerError (OutsideFamilyError says why) when the task is
@@ -54,13 +54,13 @@ def _recognised(lifted: LiftedTask, prob: Problem) -> CyclicTask:
 # bounded, shared by every InprocPlanner the registry builds, so the fallback chain re-plans without
 # re-parsing the domain or grounding again.
 @lru_cache(maxsize=16)
-def _parsed_domain(text: str) -> Domain:
+def parsed_domain(text: str) -> Domain:
     return parse_domain(text)
 
 
 @lru_cache(maxsize=16)
 def _analysed(text: str, goal_predicates: frozenset[str]) -> LiftedTask:
-    return analyse(_parsed_domain(text), goal_predicates)
+    return analyse(parsed_domain(text), goal_predicates)
 
 
 @lru_cache(maxsize=16)
@@ -71,6 +71,14 @@ def _recognised_cached(lifted: LiftedTask, problem_name: str, objects: tuple[tup
     what the solver works out."""
     grounded = ground_lifted(lifted, problem_name, objects, statics, owners)
     return GroundTask(recognise(grounded, frozenset()), frozenset(), frozenset())
+
+
+def forget() -> None:
+    """Empty the memoised stages, so that the next call parses, grounds and recognises from scratch (a benchmark
+    that compares the in-process planner with planners that start afresh for every task)."""
+    parsed_domain.cache_clear()
+    _analysed.cache_clear()
+    _recognised_cached.cache_clear()
 
 
 def cached_ground_task(domain: str, problem: str) -> GroundTask:

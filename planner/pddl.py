@@ -1,18 +1,31 @@
 """A small PDDL reader for the rotation domain family: s-expressions -> frozen domain and problem values.
 
-It reads typed STRIPS with negative preconditions, equality, `forall` and `when` (enough for the
-relative and absolute formulations); it keeps preconditions and effects as nested tuples of lower-case
-strings and leaves their meaning to the caller (`planner.inproc`). Bad text raises `PlannerError`
-with a message that says what was expected where.
+It reads typed STRIPS with negative preconditions, equality, `forall` and `when` (the requirements `:strips`,
+`:typing`, `:equality`, `:negative-preconditions`, `:conditional-effects` and `:adl` name nothing more for the
+files of this family); it keeps preconditions and effects as nested tuples of lower-case strings and leaves their
+meaning to the caller (`planner.inproc`). Bad text raises `PlannerError` with a message that says what was
+expected where.
+
+It reads a file as VAL reads it, where the field's files differ from the grammar:
+
+* A name never starts with '-' (VAL's lexer: a name is a letter or '_', then letters, digits, '-' and '_'), so
+  ``?j -joint`` is ``?j - joint``: a token that starts with '-' and a letter is the dash and a type name.
+* An action declared twice: VAL takes the first declaration and ignores the later ones without a word (a plan
+  that uses the later parameter list is a "Bad plan description!"). So does this reader, and it says so:
+  `Domain.warnings` names each ignored declaration, and the planners that read the text themselves get a
+  normalised copy without it (`planner.normalise`).
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Union, cast
 
 from planhrc.model import Atom
 
 from .errors import PlannerError
+
+log = logging.getLogger(__name__)
 
 SExpr = Union[str, tuple["SExpr", ...]]
 
@@ -32,6 +45,7 @@ class Domain:
     types: tuple[tuple[str, str], ...]  # (type, parent type)
     predicates: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]  # (name, ((?var, type), ...))
     actions: tuple[ActionSchema, ...]
+    warnings: tuple[str, ...] = ()  # what was read differently from the text (an action declared again)
 
     def subtypes(self, type_name: str) -> frozenset[str]:
         """`type_name` and every type declared (transitively) below it."""
@@ -60,11 +74,20 @@ class Problem:
 
 # -- s-expressions ---------------------------------------------------------------------------------------
 def tokenize(text: str) -> list[str]:
+    """Parentheses and names, comments dropped; ``-joint`` is two tokens, '-' and 'joint' (`split_dash`)."""
     tokens: list[str] = []
     for line in text.splitlines():
         line = line.split(";", 1)[0]
-        tokens.extend(line.replace("(", " ( ").replace(")", " ) ").split())
+        for token in line.replace("(", " ( ").replace(")", " ) ").split():
+            tokens.extend(split_dash(token))
     return tokens
+
+
+def split_dash(token: str) -> tuple[str, ...]:
+    """``-name`` -> ('-', 'name'): no PDDL name starts with '-', and VAL reads the dash of a typed list there."""
+    if len(token) > 1 and token[0] == "-" and (token[1].isalpha() or token[1] == "_"):
+        return ("-", token[1:])
+    return (token,)
 
 
 def parse_sexpr(text: str, what: str = "PDDL") -> SExpr:
@@ -143,6 +166,7 @@ def parse_domain(text: str) -> Domain:
     types: tuple[tuple[str, str], ...] = ()
     predicates: list[tuple[str, tuple[tuple[str, str], ...]]] = []
     actions: list[ActionSchema] = []
+    warnings: list[str] = []
     for sec in sections:
         key = sec[0]
         if key == ":requirements":
@@ -155,14 +179,20 @@ def parse_domain(text: str) -> Domain:
                     raise PlannerError(f"{what} {name}: bad predicate declaration {format_sexpr(pred)}")
                 predicates.append((pred[0], parse_typed_list(pred[1:], f"{what} {name}: predicate {pred[0]}")))
         elif key == ":action":
-            actions.append(_parse_action(sec, f"{what} {name}"))
+            action = _parse_action(sec, f"{what} {name}")
+            if any(a.name == action.name for a in actions):
+                warnings.append(f"action {action.name} is declared again; as VAL does, the first declaration is "
+                                "the action and this one is ignored")
+                log.warning("%s %s: %s", what, name, warnings[-1])
+                continue
+            actions.append(action)
         elif key in (":constants", ":functions", ":derived", ":durative-action"):
             raise PlannerError(f"{what} {name}: section {key} is not supported by this reader")
         else:
             raise PlannerError(f"{what} {name}: unknown section {key}")
     if not actions:
         raise PlannerError(f"{what} {name}: declares no action")
-    return Domain(name, requirements, types, tuple(predicates), tuple(actions))
+    return Domain(name, requirements, types, tuple(predicates), tuple(actions), tuple(warnings))
 
 
 def _parse_action(sec: tuple[SExpr, ...], what: str) -> ActionSchema:

@@ -12,6 +12,11 @@ The family the in-process planner solves optimally (`planner.cyclic`):
 
 Then each ground action adds a fixed vector modulo K to the variables. `recognise` computes those vectors
 (`Axis`) or raises `OutsideFamilyError` saying which action, literal or fact breaks the family.
+
+The changing predicates that are not cyclic variables (grippers' ``(free ?g)``, a working position
+``(in-centre ?j)``: `planner.ground.split_cyclic`) are the *control part*: their literals stay ground in the
+axis (`control_pre`, `control_add`, `control_del`), to be planned over by `planner.product`. An action changes
+the cyclic variables or the control, not both, and a conditional effect neither reads nor changes the control.
 Static literals over values (``(not (= ?o1 ?o2))``, a unary static predicate on a value) are evaluated for
 all K values: always true is dropped, never true removes the action, sometimes true is outside the family.
 """
@@ -43,6 +48,15 @@ class Axis:
     values: tuple[tuple[str, int, int], ...]  # value parameter -> (variable index, offset)
     effect: tuple[tuple[int, int], ...]  # (variable index, step mod K), by variable index
     pinned: tuple[int, ...]  # variables the precondition pins, in precondition order
+    # The control part (`planner.product`): ground literals the action needs, ground atoms it adds and deletes.
+    # An action changes the cyclic variables or the control, never both.
+    control_pre: tuple[Literal, ...] = ()
+    control_add: tuple[Atom, ...] = ()
+    control_del: tuple[Atom, ...] = ()
+
+    @property
+    def moves_control(self) -> bool:
+        return bool(self.control_add or self.control_del)
 
     def format(self, state: Sequence[int], cycle: Sequence[str]) -> str:
         """The concrete ground action applicable in `state` (current value index per variable)."""
@@ -64,6 +78,7 @@ class CyclicTask:
     axes: tuple[Axis, ...]
     static_predicates: frozenset[str]
     static_facts: frozenset[Atom]
+    control_predicates: frozenset[str] = frozenset()
 
 
 class _Never(Exception):
@@ -94,12 +109,13 @@ def recognise(grounded: GroundedProblem, init: frozenset[Atom]) -> CyclicTask:
             axis = context.axis(action)
         except _Never:
             continue
-        if axis.effect:
+        if axis.effect or axis.moves_control:
             axes.append(axis)
     log.debug("recognised %s/%s: %d variables, K=%d, %d axes", grounded.domain_name, grounded.problem_name,
               len(grounded.variables), k, len(axes))
     return CyclicTask(grounded.domain_name, grounded.problem_name, grounded.state_predicates, grounded.variables,
-                      cycle, cycle_relation, tuple(axes), grounded.static_predicates, grounded.static_facts)
+                      cycle, cycle_relation, tuple(axes), grounded.static_predicates, grounded.static_facts,
+                      grounded.control_predicates)
 
 
 def _value_relations(grounded: GroundedProblem, by_name: Mapping[str, StateVariablePredicate]) -> frozenset[str]:
@@ -187,7 +203,8 @@ class _Context:
         args = dict(action.binding)
         shown = " ".join(args.get(p, p) for p in action.parameters)
         return OutsideFamilyError(f"action ({action.operator} {shown}): {why}; the in-process planner only "
-                                  "solves tasks where every action adds a fixed step to cyclic variables")
+                                  "solves tasks where every action adds a fixed step to cyclic variables or "
+                                  "changes only the control part")
 
     def _check_types(self, action: GroundAction, params: Sequence[tuple[str, str]]) -> None:
         values = set(self.cycle)
@@ -199,13 +216,21 @@ class _Context:
     def axis(self, action: GroundAction) -> Axis:
         self._check_types(action, action.value_parameters)
         env: dict[str, Term] = {}
-        pinned = self._resolve(action, action.precondition, env, conditional=False)
+        control = self.grounded.control_predicates
+        control_pre = tuple(lit for lit in action.precondition if lit.predicate in control)
+        pinned = self._resolve(action, [lit for lit in action.precondition if lit.predicate not in control], env,
+                               conditional=False)
         unresolved = [name for name, _ in action.value_parameters if name not in env]
         if unresolved:
             raise self._fail(action, f"{', '.join(unresolved)} is not fixed by the current values")
         steps: dict[int, int] = {}
+        control_add: list[Atom] = []
+        control_del: list[Atom] = []
         for effect in action.effects:
             self._check_types(action, effect.variables)
+            reads = [lit.pddl() for lit in effect.condition if lit.predicate in control]
+            if reads:
+                raise self._fail(action, f"a conditional effect reads the control part ({reads[0]})")
             local = dict(env)
             try:
                 self._resolve(action, effect.condition, local, conditional=True)
@@ -214,13 +239,23 @@ class _Context:
             free = [name for name, _ in effect.variables if name not in local]
             if free:
                 raise self._fail(action, f"conditional effect: {', '.join(free)} is not fixed by the current values")
-            changed = self._effect_steps(action, effect.add, effect.delete, local)
+            adds = [a for a in effect.add if a[0] in control]
+            dels = [a for a in effect.delete if a[0] in control]
+            if (adds or dels) and (effect.condition or effect.variables):
+                raise self._fail(action, "a conditional effect changes the control part")
+            control_add += adds
+            control_del += dels
+            changed = self._effect_steps(action, [a for a in effect.add if a[0] not in control],
+                                         [a for a in effect.delete if a[0] not in control], local)
             for var, step in changed.items():
                 if steps.setdefault(var, step) != step:
                     raise self._fail(action, f"gives {self._name(var)} two different new values")
         values = tuple((name, *env[name]) for name, _ in action.value_parameters)
         effect_vector = tuple(sorted((v, s) for v, s in steps.items() if s % self.k))
-        return Axis(action.operator, action.parameters, action.binding, values, effect_vector, tuple(pinned))
+        if effect_vector and (control_add or control_del):
+            raise self._fail(action, "changes both cyclic values and the control part")
+        return Axis(action.operator, action.parameters, action.binding, values, effect_vector, tuple(pinned),
+                    control_pre, tuple(sorted(set(control_add))), tuple(sorted(set(control_del))))
 
     def _name(self, var: int) -> str:
         pred, owner = self.grounded.variables[var]

@@ -3,6 +3,7 @@
     get_planner("fd-lama")                                  # Fast Downward, lama-first
     get_planner("probe", binary="/opt/probe/probe")        # or set PLANHRC_PROBE
     get_planner("madagascar")                              # needs PLANHRC_MADAGASCAR (path to M / MpC)
+    get_planner("symk"), get_planner("bfws")               # SymK, LAPKT's BFWS: the `bench` extra
 
 External binaries are looked up at call time (an option, else the environment variable); nothing is
 configured at import time.
@@ -14,8 +15,8 @@ from typing import Any, Callable, Mapping
 
 from .base import Planner
 from .errors import PlannerError
-from .external import make_madagascar, make_probe
-from .fast_downward import FastDownwardPlanner
+from .external import make_bfws, make_madagascar, make_probe
+from .fast_downward import SYMK_BIDIRECTIONAL, FastDownwardPlanner, symk_script
 from .inproc import InprocPlanner
 
 BINARY_ENV = {"probe": "PLANHRC_PROBE", "madagascar": "PLANHRC_MADAGASCAR"}
@@ -33,6 +34,16 @@ def _fd(name: str, search: str) -> Callable[..., Planner]:
             raise PlannerError(f"{name}: unknown option(s) {', '.join(sorted(unknown))}")
         return FastDownwardPlanner(name, options.get("search", search), options.get("script"), options.get("python"))
     return build
+
+
+def _symk(**options: Any) -> Planner:
+    _no_options("symk", options)
+    return FastDownwardPlanner("symk", SYMK_BIDIRECTIONAL, symk_script(), proves_optimal=True)
+
+
+def _bfws(**options: Any) -> Planner:
+    _no_options("bfws", options)
+    return make_bfws()
 
 
 def _external(name: str, make: Callable[..., Planner]) -> Callable[..., Planner]:
@@ -56,6 +67,8 @@ PLANNERS: dict[str, Callable[..., Planner]] = {
     "inproc": _inproc,
     "fd-lama": _fd("fd-lama", "lama"),
     "fd-opt": _fd("fd-opt", "opt"),
+    "symk": _symk,
+    "bfws": _bfws,
     "probe": _external("probe", make_probe),
     "madagascar": _external("madagascar", make_madagascar),
 }

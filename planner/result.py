@@ -24,6 +24,9 @@ class PlanResult:
     `seconds` is wall-clock time of the call; `optimal` is True only when the backend proves the plan
     shortest, False when it is known not to, None when unknown. `attempts` lists, in order, every planner a
     fallback chain tried (the last one produced this result); it is empty for a single planner's call.
+    `validated` is True once VAL accepted `plan` against the domain and problem as given (the fallback chain's
+    check, `planner.chain`); a single planner's answer, or the chain's with `validate=False`, is unvalidated.
+    `warnings` are the domain's reading notes (`planner.pddl.Domain.warnings`).
     """
 
     status: PlanStatus
@@ -33,6 +36,8 @@ class PlanResult:
     message: str = ""
     optimal: bool | None = None
     attempts: tuple[PlannerAttempt, ...] = ()
+    validated: bool = False
+    warnings: tuple[str, ...] = ()
 
     @property
     def solved(self) -> bool:

@@ -19,6 +19,7 @@ import os
 import select
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -197,6 +198,10 @@ def start_validation(domain: str, problem: str, plan: Sequence[str], *, nice: in
 
 
 VAL_FILES = ("domain.pddl", "problem.pddl", "plan.txt")
+# VAL grounds every instance of a quantified effect: on a domain whose effects quantify over several angles (the
+# bimanual macros) one check can ask for tens of GB. A VAL process gets at most this much address space; past it
+# VAL fails (no verdict, which the callers report as such) instead of the host's memory running out.
+VAL_ADDRESS_SPACE_BYTES = 8 * 2**30
 
 
 def plan_text(plan: Sequence[str]) -> str:
@@ -208,8 +213,23 @@ def spawn_val(files: Sequence[str], cwd: str) -> subprocess.Popen[bytes]:
     """VAL on (domain, problem, plan) files, in a session of its own (its process group is killed at a time limit),
     stderr in the same pipe as stdout (one descriptor to wait on, VAL's messages in their order)."""
     binary = validate_binary()
-    return subprocess.Popen([str(binary), *files], cwd=cwd, env=val_env(binary), stdin=subprocess.DEVNULL,
+    proc = subprocess.Popen([str(binary), *files], cwd=cwd, env=val_env(binary), stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    cap_address_space(proc.pid, VAL_ADDRESS_SPACE_BYTES)
+    return proc
+
+
+def cap_address_space(pid: int, limit_bytes: int) -> None:
+    """Limit a started child's address space (Linux `prlimit`; set from here rather than in the child before exec,
+    which is unsafe in a process with threads). Elsewhere, or when the child has already gone, nothing."""
+    if sys.platform != "linux":
+        return
+    import resource
+
+    try:
+        resource.prlimit(pid, resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+    except (ProcessLookupError, PermissionError, ValueError, OSError):
+        pass
 
 
 def remove_files(files: Sequence[str], tmp: str | None) -> None:

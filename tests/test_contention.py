@@ -39,7 +39,7 @@ def _angles(rng: random.Random, n: int) -> list[int]:
 
 def test_a_large_task_plans_while_another_object_and_health_answer(tmp_path):
     """A 200-link x 12 absolute object's perception plans into its 4 s deadline (503); meanwhile an 8-link
-    object's re-planning perceptions answer in well under a second and `/health` within 50 ms each time: the
+    object's re-planning perceptions and `/health` keep answering (none waits for the large task's deadline): the
     large task's grounding and replay run in a worker process, not in the service's interpreter."""
     rng = random.Random(3)
     with serving(tmp_path / "kb.sqlite3", env={"PLANHRC_PLANNING_DEADLINE_S": "4"}) as base, \
@@ -65,8 +65,11 @@ def test_a_large_task_plans_while_another_object_and_health_answer(tmp_path):
         assert big_answer.status_code == 503 and "deadline of 4 s" in big_answer.json()["detail"], big_answer.text
         small_times = sorted(v for k, v in timings.items() if k.startswith("small"))
         health_times = sorted(v for k, v in timings.items() if k.startswith("health"))
-        assert small_times[-1] < 0.5, small_times[-5:]
-        assert health_times[-1] < 0.05, health_times[-5:]
+        # A stall behind the large task would last its whole 4 s deadline; on a loaded two-core machine a single
+        # call may still wait a few hundred milliseconds for a core, so the slowest is held well under the stall
+        # and the typical call to what an idle service answers.
+        assert small_times[-1] < 2.0 and small_times[len(small_times) // 2] < 0.25, small_times[-5:]
+        assert health_times[-1] < 1.0 and health_times[len(health_times) // 2] < 0.05, health_times[-5:]
         assert done_before < 4.0, done_before  # the calls ran while the large task planned
 
 

@@ -1,4 +1,4 @@
-"""The knowledge routes in process (FastAPI TestClient, in-memory store): /sparql as the SPARQL 1.1 Protocol
+"""The knowledge routes in process (FastAPI TestClient, on each store backend): /sparql as the SPARQL 1.1 Protocol
 says (GET, POST form, POST query; formats by Accept; updates, SERVICE and unknown graphs refused; time and size
 limits), a graph that follows the store as perceptions arrive, the subsumption route, the token policy."""
 from __future__ import annotations
@@ -14,6 +14,7 @@ from planhrc.kb_service.app import create_app
 from planhrc.kb_service.knowledge.graph import GRAPHS, KnowledgeGraph
 from planhrc.model import is_subsumed
 from planhrc.settings import make_settings
+from tests.servers import store_location
 
 TOKEN, READ = "write-token", "read-token"
 W = {"Authorization": f"Bearer {TOKEN}"}
@@ -27,9 +28,11 @@ CURRENT = """SELECT ?object ?joint ?deg WHERE {
 } ORDER BY ?joint"""
 
 
-@pytest.fixture(scope="module")
-def service():
-    settings = make_settings(db_path=None, token=TOKEN, read_token=READ, validate_plans=False, sparql_max_results=500)
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def service(request, tmp_path_factory):
+    """A service on each backend (`tests/store_backends.py`), the knowledge routes reading it through its interface."""
+    db = store_location(request.param, tmp_path_factory.mktemp("knowledge"), request)
+    settings = make_settings(db_path=db, token=TOKEN, read_token=READ, validate_plans=False, sparql_max_results=500)
     with TestClient(create_app(settings)) as client:
         oid = client.post("/objects", json={"name": "rod", "links": 4, "orientations": 4,
                                             "formulation": "relative"}, headers=W).json()["id"]

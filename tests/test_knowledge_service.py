@@ -1,6 +1,7 @@
 """The knowledge service of a real `planhrc serve`, asked by a client we did not write (SPARQLWrapper): SELECT in
 JSON, XML and CSV, ASK, CONSTRUCT, an update refused; the subsumption route against the in-process check; and
-reasoning jobs with both reasoners, on a consistent ABox and on one made inconsistent on disk."""
+reasoning jobs with both reasoners, on a consistent ABox and on one made inconsistent on disk. The service under
+the first three runs on each store backend."""
 from __future__ import annotations
 
 import csv
@@ -16,7 +17,7 @@ from planhrc.kb_service.store import KnowledgeBase
 from planhrc.kb_service.store.owl import RDF_TYPE
 from planhrc.model import is_subsumed
 from planhrc.paths import default_tbox_path
-from tests.servers import TOKEN, serving, token_client
+from tests.servers import TOKEN, serving, store_location, token_client
 
 SPARQLWrapper = pytest.importorskip("SPARQLWrapper", reason="SPARQLWrapper is in the test extra")
 
@@ -25,10 +26,13 @@ pytestmark = pytest.mark.integration
 CURRENT = CURRENT_STATE_QUERY  # the console's first example too
 
 
-@pytest.fixture(scope="module")
-def served(tmp_path_factory):
-    db = tmp_path_factory.mktemp("knowledge") / "kb.sqlite3"
-    with serving(db, args=["--token", TOKEN], env={"PLANHRC_VALIDATE_PLANS": "false"}) as base:
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def served(request, tmp_path_factory):
+    """A service on each backend (`tests/store_backends.py`): the knowledge service reads any store through its
+    interface, so every test here runs on both."""
+    folder = tmp_path_factory.mktemp("knowledge")
+    db = store_location(request.param, folder, request)
+    with serving(db, args=["--token", TOKEN], env={"PLANHRC_VALIDATE_PLANS": "false"}, folder=folder) as base:
         with token_client(base) as client:
             made = {}
             for links, formulation in ((4, "relative"), (3, "absolute")):

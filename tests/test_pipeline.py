@@ -127,3 +127,24 @@ def test_a_task_the_in_process_planner_refuses_goes_to_the_fallback_planner(conf
     assert outcome.solved and outcome.planner == "fd-lama"
     assert len(outcome.actions) == 2
     assert plan(obj, init, goal, replace(config, fallback_planner=None)).status == "error"
+
+
+def test_a_plan_val_refuses_passes_the_task_to_the_next_planner(config, monkeypatch):
+    """Isolates the pipeline's reaction to VAL's refusal: VAL (the real one) is handed a tampered copy of the
+    in-process planner's plan; the next planner of the chain (Fast Downward, real) plans the task and VAL accepts it,
+    and the answer's attempts say why the first plan was not taken."""
+    real_validate = pipeline.stages.validate
+
+    def tampered(outcome, obj, cfg, deadline_at=None):
+        if outcome.planner == "inproc":
+            outcome = replace(outcome, steps=outcome.steps[1:])  # VAL sees a plan without its first step
+        return real_validate(outcome, obj, cfg, deadline_at)
+
+    monkeypatch.setattr(pipeline.stages, "validate", tampered)
+    obj, init, goal = _setup("relative", 4, 4, (0, 0, 0, 0), (0, 90, 90, 0))
+    outcome = plan(obj, init, goal, config)
+    assert outcome.solved and outcome.validated and outcome.planner == "fd-lama"
+    refused = [a for a in outcome.attempts if a.status is PlanStatus.INVALID]
+    assert [a.planner for a in refused] == ["inproc"] and "VAL" in refused[0].message
+    alone = plan(obj, init, goal, replace(config, fallback_planner=None))  # no planner left: the refusal stands
+    assert alone.status == "invalid" and not alone.actions

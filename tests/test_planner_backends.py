@@ -48,7 +48,7 @@ def private_tmp(tmp_path, monkeypatch):
 
 
 def test_registry_names():
-    assert set(PLANNERS) == {"inproc", "fd-lama", "fd-opt", "probe", "madagascar"}
+    assert set(PLANNERS) == {"inproc", "fd-lama", "fd-opt", "symk", "bfws", "probe", "madagascar"}
     assert {"inproc", "fd-lama", "fd-opt"} <= set(BACKENDS)
 
 

@@ -310,16 +310,38 @@ LOCKING = RENAMED.replace("(AngleOrd ?a ?b - angle))", "(AngleOrd ?a ?b - angle)
   (:action increase_angle""").replace("(HasAngle ?h ?a1) (Joins ?held ?h)", "(HasAngle ?h ?a1) (Unlocked ?h) (Joins ?held ?h)")
 
 
-def test_outside_the_family_says_why_and_the_chain_falls_back(tmp_path):
-    problem, _ = renamed_problem(3, 4, seed=2)
-    problem = problem.replace("(:domain renamed)", "(:domain locking)").replace(
-        "(:init", "(:init\n    (unlocked h1) (unlocked h2)", 1)
-    with pytest.raises(OutsideFamilyError, match=r"action lock deletes \(unlocked \?h\).*unlocked is not a state variable"):
-        ground_task(LOCKING, problem)
-    result = plan_with_fallback(LOCKING, problem, ["inproc", "fd-lama"], 30.0)
-    assert result.solved and result.planner == "fd-lama" and "unlocked" in result.attempts[0].message
+def locking_problem(seed: int = 2) -> tuple[str, int]:
+    problem, optimal = renamed_problem(3, 4, seed=seed)
+    return problem.replace("(:domain renamed)", "(:domain locking)").replace(
+        "(:init", "(:init\n    (unlocked h1) (unlocked h2)", 1), optimal
+
+
+def test_a_control_fact_the_turns_need_is_planned_around():
+    """`unlocked` is deleted without an add: not a cyclic variable but a control fact the turns need. The control
+    part times the cycle (planner.product) keeps the hinges unlocked and plans as the renamed domain does."""
+    problem, optimal = locking_problem()
+    result = InprocPlanner().solve(LOCKING, problem, 10.0)
+    assert result.status is PlanStatus.SOLVED and result.optimal is True, result.message
+    assert len(result.plan) == optimal and not any(step.startswith("(lock") for step in result.plan)
     assert validate_plan(LOCKING, problem, result.plan).valid
-    (tmp_path / "d.pddl").write_text(LOCKING)
+
+
+# A turn that also locks its hinge changes the cycle and the control at once: outside the family.
+TURN_AND_LOCK = LOCKING.replace("(domain locking)", "(domain turn-and-lock)").replace(
+    "(:effect (and (HasAngle ?h ?a2) (not (HasAngle ?h ?a1))))".lower(), "").replace(
+    ":effect (and (HasAngle ?h ?a2) (not (HasAngle ?h ?a1))))",
+    ":effect (and (HasAngle ?h ?a2) (not (HasAngle ?h ?a1)) (not (Unlocked ?h))))")
+
+
+def test_outside_the_family_says_why_and_the_chain_falls_back(tmp_path):
+    problem = locking_problem()[0].replace("(:domain locking)", "(:domain turn-and-lock)")
+    assert TURN_AND_LOCK != LOCKING
+    with pytest.raises(OutsideFamilyError, match=r"action \(increase_angle .*changes both cyclic values and the control"):
+        ground_task(TURN_AND_LOCK, problem)
+    result = plan_with_fallback(TURN_AND_LOCK, problem, ["inproc", "fd-lama"], 30.0)
+    assert result.solved and result.planner == "fd-lama" and "control" in result.attempts[0].message
+    assert result.validated and validate_plan(TURN_AND_LOCK, problem, result.plan).valid
+    (tmp_path / "d.pddl").write_text(TURN_AND_LOCK)
     (tmp_path / "p.pddl").write_text(problem)
     assert cli_main(["plan", str(tmp_path / "d.pddl"), str(tmp_path / "p.pddl"), "--json"]) == 0
 

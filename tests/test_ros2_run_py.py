@@ -85,10 +85,14 @@ def test_a_folder_that_is_not_a_venv_is_left_alone(run_py):
     assert (run_py.ROS2_VENV / "notes.txt").exists()
 
 
-def test_the_test_task_goes_on_when_the_ros2_environment_cannot_be_made(run_py, monkeypatch, capsys):
+def test_the_test_task_goes_on_when_the_ros2_environment_cannot_be_made(run_py, monkeypatch, capsys, tmp_path):
+    log = tmp_path / "install.log"
+    log.write_text("ERROR: No matching distribution found for ros-rclpy\n")
+
     def fail():
-        raise subprocess.CalledProcessError(1, ["pip", "install"])
+        raise run_py.InstallFailed("installing planhrc into .venv-ros2", 1, log)
 
     monkeypatch.setattr(run_py, "ensure_ros2_environment", fail)
     run_py.try_ros2_environment()
-    assert "the ROS 2 tests will skip" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "The ROS 2 tests will skip" in err and "No matching distribution found for ros-rclpy" in err

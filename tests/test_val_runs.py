@@ -69,7 +69,9 @@ def test_a_run_past_its_time_limit_is_killed_and_leaves_no_files():
     with pytest.raises(PlannerError, match="did not finish within"):
         run.result(0.0005)
     assert not _alive(pid)
-    assert _scratch_files() == before
+    # this run's scratch folder is gone (another process on the machine may have its own meanwhile)
+    assert run._tmp is not None and os.path.basename(run._tmp) not in before
+    assert not os.path.exists(run._tmp) and os.path.basename(run._tmp) not in _scratch_files()
 
 
 def test_a_started_run_is_kept_off_the_callers_cpu_until_the_caller_waits():
@@ -175,3 +177,16 @@ def test_an_armed_process_does_not_outlive_its_owner_killed_with_sigkill(tmp_pat
     while any(_alive(p) for p in pids) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not any(_alive(p) for p in pids), "an armed VAL process outlived its owner"
+
+
+def test_a_val_process_cannot_take_the_hosts_memory():
+    """VAL grounds quantified effects instance by instance: its address space is capped, so a check too large for
+    the cap ends without a verdict instead of exhausting the machine."""
+    from planhrc.planner.validate import VAL_ADDRESS_SPACE_BYTES
+
+    problem, plan = _task()
+    run = start_validation(DOMAIN, problem, plan)
+    with open(f"/proc/{run.pid}/limits") as f:
+        line = next(l for l in f if l.startswith("Max address space"))
+    assert line.split()[3] == str(VAL_ADDRESS_SPACE_BYTES)
+    assert run.result(30).valid

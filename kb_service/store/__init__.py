@@ -15,7 +15,7 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 | `reads`, `writes`, `triples` | records read back from triples, the writes, and what each record is as triples |
 | `journal`, `backlog` | a new plan's journal row, and the plans written out as triples by a thread behind the answer |
 | `events`, `execution`, `responses`, `inferred` | the event log, the execution cursor, idempotent responses, what a reasoner inferred (side tables) |
-| `retention`, `export` | compaction of each object's history; RDF export (N-Triples, RDF/XML, Turtle) |
+| `retention`, `export`, `roots` | compaction of each object's history; RDF export (N-Triples, RDF/XML, Turtle); where an object's current ABox starts (every backend's) |
 | `owl` | every use of owlready2's internals (its SQLite tables, storids, literal encoding, reasoner settings) |
 | `postgres` | `PostgresStore`: the ABox as rows of triples in PostgreSQL, the side tables beside it, what replicas need |
 """

@@ -18,6 +18,7 @@ from typing import Any, Iterator, Sequence
 from .errors import ValidationError
 from .interface import FORMATS
 from .owl import ntriple_lines, other_contexts, reachable, storids_of, subjects_to
+from .roots import SQLITE, current_roots
 
 _CHUNK = 500
 
@@ -38,25 +39,6 @@ def export_rdf(ntriples: bytes, fmt: str, prefixes: dict[str, str]) -> bytes:
     return out.encode("utf-8") if isinstance(out, str) else out
 
 
-def current_roots(db: sqlite3.Connection, object_id: str) -> list[str]:
-    """Names of the individuals an object's current ABox starts from: the object, the goal and perceived state
-    its event log names last, the plan its execution follows (else its latest plan) and its latest problem."""
-    roots = [object_id]
-    for sql in ("SELECT json_extract(data, '$.goal_state_id') FROM planhrc_event WHERE object_id = ? "
-                "AND kind = 'goal_set' ORDER BY seq DESC LIMIT 1",
-                "SELECT json_extract(data, '$.perceived_state_id') FROM planhrc_event WHERE object_id = ? "
-                "AND json_extract(data, '$.perceived_state_id') IS NOT NULL ORDER BY seq DESC LIMIT 1",
-                "SELECT plan_id FROM planhrc_execution WHERE object_id = ?"):
-        row = db.execute(sql, (object_id,)).fetchone()
-        if row and row[0]:
-            roots.append(str(row[0]))
-    for kind in ("plan", "problem"):
-        row = db.execute("SELECT value FROM planhrc_counter WHERE name = ?", (f"{object_id}:{kind}",)).fetchone()
-        if row and row[0]:
-            roots.append(f"{object_id}_{kind}_{row[0]}")
-    return roots
-
-
 def ntriples(db: sqlite3.Connection, abox_iri: str, abox_c: int, static_fact_of: int,
              object_ids: Sequence[str] | None) -> Iterator[str]:
     """TBox + ABox as N-Triples lines: every triple (`object_ids` None), else the TBox and the current ABox of
@@ -67,7 +49,7 @@ def ntriples(db: sqlite3.Connection, abox_iri: str, abox_c: int, static_fact_of:
     others = other_contexts(db, abox_c)  # read through the index on c: the ABox's rows are never scanned
     if others:
         yield from ntriple_lines(db, f"t.c IN ({','.join('?' * len(others))})", others)
-    roots = storids_of(db, [abox_iri + name for oid in object_ids for name in current_roots(db, oid)])
+    roots = storids_of(db, [abox_iri + name for oid in object_ids for name in current_roots(db, SQLITE, oid)])
     statics = subjects_to(db, abox_c, static_fact_of, roots)  # an object's static facts point to it
     ontology = storids_of(db, [abox_iri.rstrip("#")])
     subjects = sorted(reachable(db, abox_c, roots + statics) | set(ontology))

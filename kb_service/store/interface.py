@@ -115,8 +115,9 @@ class Reads(Protocol):
         ...
 
     def revision(self) -> int:
-        """A number that changes with every committed write (no scan, no lock): a reader that keeps something
-        built from the store (the SPARQL graph) builds it again only when this changed."""
+        """A number that changes with every committed write, by any process the store is shared with (no scan:
+        cheap enough to ask before every query): a reader that keeps something built from the store (the SPARQL
+        graph) builds it again only when this changed."""
         ...
 
 

@@ -25,7 +25,7 @@ from .errors import KBError
 from .events import EventLog
 from .execution import ExecutionCursor
 from .facade import StoreFacade
-from .export import current_roots, ntriples
+from .export import ntriples
 from .inferred import InferredFacts
 from .interface import MAX_EVENTS_PAGE, MAX_SEQ
 from .names import ABOX_IRI
@@ -34,6 +34,7 @@ from .reads import Records
 from .records import Compaction, Execution, StoredEvent
 from .responses import ResponseMemory
 from .retention import compact_object
+from .roots import SQLITE, current_roots
 from .writes import Writes
 
 __all__ = ["MAX_EVENTS_PAGE", "MAX_SEQ", "KnowledgeBase", "SqliteStore"]
@@ -225,7 +226,7 @@ class SqliteStore(StoreFacade):
     def current_roots(self, object_id: str) -> tuple[str, ...]:
         with self._guard:
             self._records.info(object_id)
-            return tuple(dict.fromkeys(current_roots(self._abox.q.db, object_id)))
+            return tuple(current_roots(self._abox.q.db, SQLITE, object_id))
 
     # -- inferences -------------------------------------------------------------------------------------------
     def replace_inferred(self, scope: str, lines: Sequence[str]) -> int:

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import sqlite3
 
-from .export import current_roots
 from .owl import delete_individuals, reachable, storids_of, subjects_to
+from .roots import SQLITE, current_roots
 
 
 def perceived_to_keep(db: sqlite3.Connection, object_id: str, keep: int) -> list[str]:
@@ -30,7 +30,7 @@ def compact_object(db: sqlite3.Connection, abox_iri: str, c: int, terms: dict[st
     (obj,) = storids_of(db, [abox_iri + object_id]) or (None,)
     if obj is None:
         return 0, 0
-    keep_names = current_roots(db, object_id) + perceived_to_keep(db, object_id, keep_perceived) + shared
+    keep_names = current_roots(db, SQLITE, object_id) + perceived_to_keep(db, object_id, keep_perceived) + shared
     roots = storids_of(db, [abox_iri + name for name in keep_names])
     kept = reachable(db, c, roots + subjects_to(db, c, terms["staticFactOf"], [obj]))
     records = subjects_to(db, c, terms["stateOf"], [obj]) + subjects_to(db, c, terms["aboutObject"], [obj])

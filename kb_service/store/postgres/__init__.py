@@ -8,6 +8,7 @@ optional dependency (`planhrc[postgresql]`): nothing here is imported unless a `
 | `session` | the unit of work: one connection, transactions, counters, which individuals exist |
 | `records` | records read back from the rows, cached |
 | `history` | the current ABox of an object: the export, and compaction |
+| `inferred` | what a DL reasoner inferred, kept beside the ABox, replaced per scope |
 | `replicas` | what several processes on one store need: the per-object lock, the event feed |
 | `store` | `PostgresStore`, the parts above behind `interface.KnowledgeStore` |
 """

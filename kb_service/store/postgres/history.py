@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from typing import Any, Iterator, Sequence
 
-from ..names import ABOX_IRI, TBOX_IRI, counter_name, record_name
+from ..names import ABOX_IRI, TBOX_IRI
+from ..roots import POSTGRESQL, current_roots
 from .rows import ntriple
 from .schema import ABOX_ONTOLOGY, RDF_TYPE
 from .session import Connection
@@ -19,25 +20,6 @@ _REACHABLE = (
     "WITH RECURSIVE r(n) AS (SELECT unnest(%s::text[]) UNION "
     "SELECT t.o FROM planhrc_triple t JOIN r ON t.s = r.n WHERE t.o IS NOT NULL AND t.p <> %s) SELECT n FROM r"
 )
-
-
-def current_roots(conn: Connection, object_id: str) -> list[str]:
-    """Names of the individuals an object's current ABox starts from (`export.current_roots` on SQLite)."""
-    roots = [object_id]
-    for sql in ("SELECT data->>'goal_state_id' FROM planhrc_event WHERE object_id = %s AND kind = 'goal_set' "
-                "ORDER BY seq DESC LIMIT 1",
-                "SELECT data->>'perceived_state_id' FROM planhrc_event WHERE object_id = %s "
-                "AND data->>'perceived_state_id' IS NOT NULL ORDER BY seq DESC LIMIT 1",
-                "SELECT plan_id FROM planhrc_execution WHERE object_id = %s"):
-        row = conn.execute(sql, (object_id,)).fetchone()
-        if row and row[0]:
-            roots.append(str(row[0]))
-    for kind in ("plan", "problem"):
-        row = conn.execute("SELECT value FROM planhrc_counter WHERE name = %s",
-                           (counter_name(object_id, kind),)).fetchone()
-        if row and row[0]:
-            roots.append(record_name(object_id, kind, row[0]))
-    return roots
 
 
 def reachable(conn: Connection, roots: Sequence[str]) -> set[str]:
@@ -60,7 +42,7 @@ def abox_lines(conn: Connection, object_ids: Sequence[str] | None) -> Iterator[s
             for row in cursor:
                 yield ntriple(*row)
         return
-    roots = [ABOX_IRI + name for oid in object_ids for name in current_roots(conn, oid)]
+    roots = [ABOX_IRI + name for oid in object_ids for name in current_roots(conn, POSTGRESQL, oid)]
     statics = subjects_to(conn, "staticFactOf", roots)  # an object's static facts point to it
     subjects = sorted(reachable(conn, roots + statics) | {ABOX_ONTOLOGY})
     for i in range(0, len(subjects), _CHUNK):
@@ -82,7 +64,8 @@ def compact_object(conn: Connection, object_id: str, shared: Sequence[str], keep
     """Drop what the retention policy does not keep of one object (inside the caller's transaction), as
     `retention.compact_object` does on SQLite; (individuals, triples) deleted."""
     obj = ABOX_IRI + object_id
-    keep_names = current_roots(conn, object_id) + perceived_to_keep(conn, object_id, keep_perceived) + list(shared)
+    keep_names = (current_roots(conn, POSTGRESQL, object_id) + perceived_to_keep(conn, object_id, keep_perceived)
+                  + list(shared))
     kept = reachable(conn, [ABOX_IRI + name for name in keep_names] + subjects_to(conn, "staticFactOf", [obj]))
     records = subjects_to(conn, "stateOf", [obj]) + subjects_to(conn, "aboutObject", [obj])
     old = [s for s in records if s not in kept]

@@ -4,7 +4,8 @@ The ABox is one table of triples, `planhrc_triple (s, p, o, lit, dt)`, with the 
 its individuals (`names`): an object property's row has the object's IRI in `o`; a data property's row has the
 literal's lexical form in `lit` and its datatype IRI in `dt` (the forms owlready2 writes, so both stores export the
 same N-Triples). The service's side tables (events, execution cursor, idempotent responses, counters) are tables
-beside it, in the same transactions, and so is the plan journal.
+beside it, in the same transactions, and so are the plan journal, what a reasoner inferred (`planhrc_inferred`) and
+the count of commits (`planhrc_revision`).
 """
 from __future__ import annotations
 
@@ -36,6 +37,11 @@ TABLES = (
     # Plans whose triples are not written yet (`journal`), oldest first; a row names the expected states it holds.
     "CREATE TABLE IF NOT EXISTS planhrc_plan_journal (seq bigserial PRIMARY KEY, plan_id text UNIQUE NOT NULL,"
     " object_id text NOT NULL, first_state bigint NOT NULL, last_state bigint NOT NULL, payload bytea NOT NULL)",
+    # What a DL reasoner inferred, as N-Triples lines under a scope (`inferred`): never among the ABox's triples.
+    "CREATE TABLE IF NOT EXISTS planhrc_inferred (seq bigserial PRIMARY KEY, scope text NOT NULL, line text NOT NULL)",
+    "CREATE INDEX IF NOT EXISTS planhrc_inferred_scope ON planhrc_inferred (scope)",
+    # Commits that wrote, counted per connection's shard (`session.COUNT_COMMIT`); their sum is `Reads.revision`.
+    "CREATE TABLE IF NOT EXISTS planhrc_revision (shard integer PRIMARY KEY, value bigint NOT NULL)",
 )
 # Two processes opening a new database at once must not both create it: creation holds this lock.
 SCHEMA_LOCK = 0x706C616E68726301  # "planhrc\x01"

@@ -2,10 +2,11 @@
 and which individuals are stored.
 
 The connection runs in autocommit mode, so a read outside a transaction holds no snapshot open; a write, or a
-`transaction()` block, is one `BEGIN ... COMMIT`, and nested blocks join the outermost one. What reacts to a commit
-or a rollback (the record caches) registers as a `TransactionListener`. Every method here is called with `lock`
-held; the store takes it (`guard`), which also reconnects a connection the server dropped (between transactions
-only: a transaction cut off is rolled back, never replayed) and turns a lost connection into `UnavailableError`.
+`transaction()` block, is one `BEGIN ... COMMIT`, and nested blocks join the outermost one; each commit that wrote is
+counted in the database (`revision`). What reacts to a commit or a rollback (the record caches) registers as a
+`TransactionListener`. Every method here is called with `lock` held; the store takes it (`guard`), which also
+reconnects a connection the server dropped (between transactions only: a transaction cut off is rolled back, never
+replayed) and turns a lost connection into `UnavailableError`.
 """
 from __future__ import annotations
 
@@ -27,6 +28,16 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 Connection = psycopg.Connection[tuple[Any, ...]]
 CONNECT_TIMEOUT_S = 10
+# `Reads.revision`, which must change with every commit that wrote, by any process on the database. A transaction
+# that wrote (it has a transaction id; one that only read has none) adds one to its connection's row just before it
+# commits, so the sum changes exactly when its writes become visible: a sequence would change at `nextval`, before
+# the commit, and a reader that saw the new number with the old data would keep that data as current. Rows spread
+# by connection rather than one counter: a row is locked until its transaction's commit is flushed, and one row
+# would queue every writer of every process behind each other's flush.
+REVISION_SHARDS = 16
+COUNT_COMMIT = ("INSERT INTO planhrc_revision AS r (shard, value) SELECT mod(pg_backend_pid(), %s), 1 "
+                "WHERE pg_current_xact_id_if_assigned() IS NOT NULL "
+                "ON CONFLICT (shard) DO UPDATE SET value = r.value + 1")
 
 
 def connect(db: str, password: str | None, what: str = "planhrc") -> Connection:
@@ -66,7 +77,8 @@ class Guard:
     def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
         self._session.lock.release()
         if isinstance(exc, psycopg.OperationalError):
-            raise UnavailableError(f"db: the connection to the database was lost ({str(exc).strip()[:200]}); "
+            reason = " ".join(str(exc).split())[:200]  # libpq's messages may run over several lines
+            raise UnavailableError(f"db: the connection to the database was lost ({reason}); "
                                    "nothing of this request was written") from None
 
 
@@ -112,6 +124,11 @@ class Session:
 
     def execute(self, sql: str, params: Sequence[Any] = ()) -> psycopg.Cursor[tuple[Any, ...]]:
         return self.conn.execute(sql, params)
+
+    def revision(self) -> int:
+        """Commits that wrote, by every process, since the database was made (`COUNT_COMMIT`)."""
+        row = self.execute("SELECT coalesce(sum(value), 0)::bigint FROM planhrc_revision").fetchone()
+        return int(row[0]) if row else 0
 
     # -- what the backend-neutral writes ask (`unit.AboxWriter`) ------------------------------------------
     def existing(self, names: Sequence[str]) -> list[str]:
@@ -177,6 +194,7 @@ class Session:
         try:
             with self.conn.transaction():
                 yield
+                self.execute(COUNT_COMMIT, (REVISION_SHARDS,))
         except BaseException:
             self._rolled_back()
             raise

@@ -1,8 +1,8 @@
 """The PostgreSQL backend of the knowledge base (`PostgresStore`): the ABox as rows of triples (`schema`, `rows`),
 written by the backend-neutral writes (`writes`, `triples`) through this backend's unit of work (`session`) and read
 back by `records`, with the event log, the execution cursor and idempotent responses as tables beside it, retention
-and the RDF export (`history`). It implements `interface.KnowledgeStore`, and what replicas need
-(`replicas.ObjectLocking`, `event_feed`).
+and the RDF export (`history`), and what a reasoner inferred beside them (`inferred`). It implements
+`interface.KnowledgeStore`, and what replicas need (`replicas.ObjectLocking`, `event_feed`).
 
 Every public method takes the store's lock and refuses a closed store. Each write checks its input completely
 before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan is
@@ -30,13 +30,16 @@ from ..checks import check_events_page, check_export, check_keep_perceived
 from ..errors import DamagedStoreError, KBError
 from ..events import EventLog
 from ..facade import StoreFacade
+from ..inferred import InferredFacts
 from ..location import shown_location
 from ..names import TBOX_IRI, counter_name
 from ..owl import QuadStore, ntriple_lines
 from ..records import Compaction, Execution, StoredEvent
 from ..responses import ResponseMemory
+from ..roots import POSTGRESQL, current_roots
 from ..writes import Writes
 from .history import abox_lines, compact_object
+from .inferred import PgInferred
 from .journal import PgJournal
 from .records import PgRecords
 from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
@@ -77,6 +80,7 @@ class PostgresStore(StoreFacade):
             self._journal = PgJournal(session, self._records)
             session.listen(self._records, self._journal)
             self._writes = Writes(session, self._records, self._journal)
+            self._inferred = PgInferred(session)
             self._journal.recover()  # before anything is served
         except BaseException:
             session.close()
@@ -216,6 +220,11 @@ class PostgresStore(StoreFacade):
         self._session.check_open()
         return self._session.objects
 
+    def revision(self) -> int:
+        """Changes with every commit that wrote, by any process on the database: one query of a few rows."""
+        with self._guard:
+            return self._session.revision()
+
     # -- the plan journal -------------------------------------------------------------------------------------
     def settle(self) -> None:
         with self._guard:
@@ -266,6 +275,21 @@ class PostgresStore(StoreFacade):
             yield from abox_lines(reader, ids)
         finally:
             reader.close()
+
+    def current_roots(self, object_id: str) -> tuple[str, ...]:
+        with self._guard:
+            self._records.info(object_id)
+            return tuple(current_roots(self._session.conn, POSTGRESQL, object_id))
+
+    # -- inferences -------------------------------------------------------------------------------------------
+    def replace_inferred(self, scope: str, lines: Sequence[str]) -> int:
+        checked = InferredFacts.check(scope, lines)
+        with self._guard:
+            return self._inferred.replace(scope, checked)
+
+    def inferred_lines(self) -> Iterator[str]:
+        with self._guard:
+            return iter(self._inferred.lines())
 
 
 def _tbox_lines(tbox_path: Path) -> tuple[str, ...]:

@@ -1,0 +1,5 @@
+(define (problem twice-2)
+  (:domain twice)
+  (:objects a b - item)
+  (:init (ready a) (ready b))
+  (:goal (and (done a) (done b))))
