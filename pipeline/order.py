@@ -15,13 +15,16 @@ from planhrc.transition import StateIndex, apply, ground_action
 
 from .motion import move_of
 
-# How long the search for a detour may take, in time and step checks, then the search for room (a detour where the
-# object cannot be turned at all would take every check it may: room is tried within its own time), and what they
-# leave of the planning deadline for grounding, replaying and validating the plan they find.
-DETOUR_S = 2.5
+# How long the search for a detour may take, in step checks and as a share of the planning time left, then the
+# search for room (a detour where the object cannot be turned at all would take every check it may: room gets the
+# rest), and what they leave of the planning deadline for grounding, replaying and validating the plan they find.
+# Shares rather than seconds: on a loaded machine a check takes longer, and a longer deadline gives the searches
+# what they need to come to the same answer. Without a deadline each search gets UNBOUNDED_SEARCH_S.
 DETOUR_CHECKS = 2000
-ROOM_S = 2.5
+DETOUR_SHARE = 0.5
+ROOM_SHARE = 1.0
 VAL_RESERVE_S = 2.0
+UNBOUNDED_SEARCH_S = 2.5
 
 
 @dataclass(frozen=True)
@@ -53,7 +56,7 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
     if answer.moves is None:
         alphabet = alphabet_of(obj)
         detour = find_detour(placement, moves, alphabet, obj.orientations, budget=DETOUR_CHECKS,
-                             deadline_at=search_deadline(deadline_at, DETOUR_S))
+                             deadline_at=search_deadline(deadline_at, DETOUR_SHARE))
         if detour.moves is not None:
             longer = len(detour.moves) - len(moves)
             obstacle = answer.problem.sentence() if answer.problem is not None else "no order found"
@@ -62,7 +65,7 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
                    "intermediate configurations")
             return Ordered(steps_of(obj, model, init, detour.moves), why)
         room = find_room(placement, moves, alphabet, obj.orientations,
-                         deadline_at=search_deadline(deadline_at, ROOM_S))
+                         deadline_at=search_deadline(deadline_at, ROOM_SHARE))
         return Refusal(answer.sentence(), answer.help, room)
     clearance = f" ({answer.clearance_m * 100:.1f} cm from its edges at rest)"
     if list(answer.moves) == moves:
@@ -89,11 +92,13 @@ def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves:
     return tuple(steps)
 
 
-def search_deadline(deadline_at: float | None, seconds: float) -> float:
-    """When a search for a longer plan or for room stops: `seconds` from now, and `VAL_RESERVE_S` before the
-    planning deadline (the plan found is still grounded, replayed and checked by VAL within it)."""
-    until = time.monotonic() + seconds
-    return until if deadline_at is None else min(until, deadline_at - VAL_RESERVE_S)
+def search_deadline(deadline_at: float | None, share: float) -> float:
+    """When a search for a longer plan or for room stops: after `share` of the time left until `VAL_RESERVE_S`
+    before the planning deadline (the plan found is still grounded, replayed and checked by VAL within it)."""
+    now = time.monotonic()
+    if deadline_at is None:
+        return now + UNBOUNDED_SEARCH_S
+    return now + max(0.0, deadline_at - VAL_RESERVE_S - now) * share
 
 
 def alphabet_of(obj: ArticulatedObject) -> tuple[Move, ...]:
