@@ -500,7 +500,8 @@ class GiveUpPublic(BaseModel):
                         examples=["the robot stopped (repeated_failure: ...)"])
     help: list[HelpRequestPublic] = Field(
         default_factory=list, description="What the human should do to reach the goal, one item per link, "
-        "upstream first.", examples=[[{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"}]])
+        "upstream first; empty in a help request when no perception of the whole object is stored (the reason asks "
+        "for the goal as a whole).", examples=[[{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"}]])
 
 
 # -- stored records -------------------------------------------------------------------------------------

@@ -545,6 +545,8 @@ def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str
     answer = kb.give_up(object_id, reason, message[:500])
     asked = list(answer.get("help") or [])
     run.final_help = tuple(str(item.get("sentence")) for item in asked)
+    if not asked and answer.get("decision") == DecisionKind.HUMAN_HELP_REQUESTED:
+        run.final_help = (str(answer.get("reason")),)  # nothing seen to name links by: the object as a whole
     return asked
 
 

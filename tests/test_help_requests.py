@@ -172,6 +172,25 @@ def test_a_worker_that_gives_up_is_recorded_and_nothing_stays_dispatched(client)
     assert again["decision"] in ("continue", "resume") and again["next_action"]["id"] == action["id"]
 
 
+def test_a_give_up_before_the_whole_object_was_seen_still_asks_the_human_for_the_goal(client):
+    idle = placed(client)  # no goal: nothing to ask for, the give-up alone is recorded
+    answer = client.post(f"/objects/{idle}/give-up", json={"reason": "unseen_links", "message": "nothing seen"}).json()
+    assert answer["decision"] is None and "no goal is left" in answer["reason"]
+    assert client.get(f"/objects/{idle}/events").json()[-1]["kind"] == "worker_gave_up"
+
+    oid = placed(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 45]})
+    unseen = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [90, None, 90, 90, 90]})
+    assert unseen.json()["decision"] == "incomplete_perception"  # stores no state: nothing to plan from
+    answer = client.post(f"/objects/{oid}/give-up",
+                         json={"reason": "unseen_links", "message": "links [2] not seen in 3 perceptions"}).json()
+    gave_up, asked = client.get(f"/objects/{oid}/events").json()[-2:]
+    assert gave_up["kind"] == "worker_gave_up" and asked["kind"] == answer["decision"] == "human_help_requested"
+    assert answer["help"] == [] and asked["data"]["help"] == []  # no link named from nothing seen
+    assert "bring the object to its goal" in answer["reason"] and "links [2] not seen" in answer["reason"]
+    assert asked["reason"] == answer["reason"]
+
+
 @pytest.mark.parametrize("path, body, field", [
     ("/objects", {**PLACED, "formulation": "relative", "base_point_xy": [0.6]}, "base_point_xy"),
     ("/objects", {**PLACED, "formulation": "relative", "base_point_xy": [0.6, "x"]}, "base_point_xy[1]"),

@@ -2,7 +2,9 @@
 the next perception decides anew). A give-up is never silent: it becomes a help request, recorded as the decision
 `human_help_requested` beside the give-up (the console shows it), naming what the human should do (each link the
 object still has to change, to its orientation at the goal, upstream first) and why no robot motion exists (the
-worker's reason)."""
+worker's reason). Without a perception of the whole object to plan from, the request asks the human to bring the
+object to its goal (or into the robot's view) and names no link: no robot motion can be planned from nothing seen.
+Only an object without a goal, or at it, ends without a request."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -37,20 +39,27 @@ def give_up(context: Context, request: GiveUpRequest) -> GaveUp:
         memo = context.memory.of(store, object_id)
         why = f"the robot stopped ({request.reason}: {request.message})"
         items = help_after(store, obj, execution, memo, why)
-        reason = (f"{why}; the robot asks the human for help: {'; '.join(h.sentence for h in items)}" if items else
-                  f"{why}; no goal is left to ask the human for")
+        unseen = not items and goal_open_unseen(store, obj, memo)
+        if items:
+            reason = f"{why}; the robot asks the human for help: {'; '.join(h.sentence for h in items)}"
+        elif unseen:
+            reason = (f"{why}; the robot asks the human for help: bring the object to its goal, or into the robot's "
+                      "view (no perception of the whole object is stored, so no robot motion can be planned)")
+        else:
+            reason = f"{why}; no goal is left to ask the human for"
+        asking = bool(items) or unseen
         with store.transaction():
             store.set_execution(object_id, Execution(execution.plan_id, None, ExecutionStatus.IDLE, None))
             event = store.add_event(object_id, EventKind.WORKER_GAVE_UP,
                                     f"the worker gave up ({request.reason}): {request.message}",
                                     {"reason": request.reason, "message": request.message,
                                      "plan_id": execution.plan_id, "dropped_action_id": execution.dispatched_action_id})
-            if items:
+            if asking:
                 store.add_event(object_id, DecisionKind.HUMAN_HELP_REQUESTED, reason,
                                 {"perceived_state_id": memo.perceived_state_id, "plan_id": execution.plan_id,
                                  "next_step": None, "next_action_id": None, "matched_expected_step": None,
                                  "help": help_data(items), "gave_up": request.reason})
-        return GaveUp(event.seq, DecisionKind.HUMAN_HELP_REQUESTED if items else None, reason, items)
+        return GaveUp(event.seq, DecisionKind.HUMAN_HELP_REQUESTED if asking else None, reason, items)
 
 
 def help_after(store: KnowledgeStore, obj: ArticulatedObject, execution: Execution, memo: ObjectMemo,
@@ -75,6 +84,17 @@ def help_after(store: KnowledgeStore, obj: ArticulatedObject, execution: Executi
         if items:
             return items
     return goal_help(obj, seen, goal.atoms, why)
+
+
+def goal_open_unseen(store: KnowledgeStore, obj: ArticulatedObject, memo: ObjectMemo) -> bool:
+    """A goal is set and no perception of the whole object is stored to tell what it still changes (so nothing
+    says it is reached)."""
+    if memo.goal_state_id is None:
+        return False
+    if memo.perceived_state_id is None:
+        return True
+    raw = store.get_state(memo.perceived_state_id).link_orientations_deg or ()
+    return len(raw) != obj.n_links
 
 
 def goal_help(obj: ArticulatedObject, seen: tuple[float, ...], goal: State, why: str) -> tuple[HelpItem, ...]:
