@@ -17,18 +17,17 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence, Union
 
 import numpy as np
-import pybullet
 
 from planhrc.geometry import reach_shortfall
 from planhrc.vocabulary import ActionOutcome, FailureReason  # the words of a result, shared with the service
 from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.grip import Hands, drive_arm
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
     Scene,
     arm_joints,
     direction,
-    drive_gripper,
     hold_arm,
     joint_between,
     rotate_point,
@@ -90,6 +89,7 @@ class ActionResult:
     commanded_deg: float
     reached_deg: float
     refusal: Mapping[str, Any] | None = None  # a turn not started: the geometric fact, for the service
+
     @property
     def value(self) -> str:
         return self.outcome.value
@@ -319,7 +319,7 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
                  ) -> tuple[np.ndarray, float] | Unreachable:
         """Above the link, then down onto it: the grasp point and yaw used, or the smallest miss."""
         centre, along = scene.link_center(link), direction(theta[link - 1])
-        offsets = (0.0, -quarter, quarter)
+        offsets: tuple[float, ...] = (0.0, -quarter, quarter)
         if link == action.turned_link:
             centre = rotate_point(centre, pivot, turned_so_far)
             if near_joint:  # the quarter towards the joint, then half-way between it and the centre
@@ -385,76 +385,6 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
 
 # -- execution -----------------------------------------------------------------------------------------------
 Interrupt = Callable[[int, int], bool]
-
-
-class Hands:
-    """The grasps an execution holds: arm -> (constraint id, link, grasp point in the link's frame)."""
-
-    def __init__(self, scene: Scene, robot: Robot) -> None:
-        self.scene, self.robot = scene, robot
-        self.held: dict[str, tuple[int, int]] = {}
-
-    def grasp(self, arm: str, link: int, steps: int = 8) -> bool:
-        """Close the fingers; once a finger touches the link, fix the link to the gripper. False: it closed
-        on nothing."""
-        s, c = self.scene, self.scene.client
-        drive_gripper(s, arm, close=True)
-        target = s.object_link_index(link)
-        for _ in range(steps):
-            s.step()
-            if any(s.near(s.robot, f, s.body, target, 0.006) for f in self.robot.hand_links[arm]):
-                break
-        else:
-            return False
-        # a constraint's frames are given in each body's centre-of-mass frame
-        ee = s.arms[arm].end_effector
-        ee_state = c.getLinkState(s.robot, ee, computeForwardKinematics=True)
-        link_pos, link_quat = s.link_pose(link)
-        inv_pos, inv_quat = c.invertTransform(link_pos.tolist(), link_quat)
-        rel_pos, rel_quat = c.multiplyTransforms(inv_pos, inv_quat, ee_state[0], ee_state[1])
-        cid = c.createConstraint(s.robot, ee, s.body, target, pybullet.JOINT_PRISMATIC, [0, 0, 1],
-                                 parentFramePosition=[0, 0, 0], childFramePosition=rel_pos,
-                                 parentFrameOrientation=[0, 0, 0, 1], childFrameOrientation=rel_quat)
-        c.changeConstraint(cid, maxForce=200.0)
-        self.held[arm] = (cid, link)
-        s.gripped.add(link)
-        return True
-
-    def offset(self, arm: str) -> float:
-        """How far the grasped link has slid from the gripper (metres)."""
-        cid, link = self.held[arm]
-        c = self.scene.client
-        info = c.getConstraintInfo(cid)
-        ee_pos = np.asarray(c.getLinkState(self.scene.robot, info[1], computeForwardKinematics=True)[0])
-        link_pos, link_quat = self.scene.link_pose(link)
-        grip_pos, _ = c.multiplyTransforms(link_pos.tolist(), link_quat, info[7], info[9])
-        return float(np.linalg.norm(np.asarray(grip_pos) - ee_pos))
-
-    def release(self, arm: str) -> None:
-        if arm in self.held:
-            cid, link = self.held.pop(arm)
-            self.scene.client.removeConstraint(cid)
-            self.scene.gripped.discard(link)
-        drive_gripper(self.scene, arm, close=False)
-
-    def release_all(self) -> None:
-        for arm in tuple(self.held):
-            self.release(arm)
-
-
-def drive_arm(scene: Scene, robot: Robot, arm: str, target: Sequence[float], max_steps: int = 60,
-           tolerance_rad: float = 0.004) -> bool:
-    """Drive `arm`'s joint motors to `target`, stepping the physics until the arm is there (True) or
-    `max_steps` have passed (False: the arm stalls)."""
-    goal = np.asarray(target, dtype=float)
-    hold_arm(scene, arm, target)
-    for _ in range(max_steps):
-        scene.step()
-        if robot.realtime_s:
-            time.sleep(robot.realtime_s)
-        if float(np.max(np.abs(np.asarray(arm_joints(scene, arm)) - goal))) < tolerance_rad:
-            return True
-    return False
 
 
 def _follow(scene: Scene, robot: Robot, arm: str, target: Sequence[float], tolerance_rad: float = 0.03) -> bool:

@@ -19,8 +19,9 @@ from typing import Sequence
 
 import numpy as np
 
+from planhrc.robot_sim.grip import Hands, drive_arm
 from planhrc.robot_sim.scene import ARMS, HOME_POSE, Scene, arm_joints, hold_arm, set_arm_joints
-from planhrc.robot_sim.skills import Hands, Robot, drive_arm
+from planhrc.robot_sim.skills import Robot
 from planhrc.vocabulary import ActionOutcome, FailureReason
 
 log = logging.getLogger(__name__)
