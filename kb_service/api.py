@@ -285,14 +285,14 @@ def read_ontology(
                                            description="Only this object's current ABox (with the TBox).")] = None,
 ) -> Response:
     """TBox and ABox as RDF/XML (default), Turtle (`Accept: text/turtle`) or N-Triples
-    (`Accept: application/n-triples`, streamed as it is read: the way to fetch the whole history). By default the
+    (`Accept: application/n-triples`), each written and streamed as it is read, the whole history too. By default the
     ABox is each object's current state of affairs, so the export costs what it returns however long the history;
     `?history=all` adds every past perception, problem and plan; `?object=objN` restricts it to one object."""
     media = _rdf_media_type(accept)
-    if RDF_TYPES[media] == "nt":
-        lines = usecases.export_ntriples(context, history, object_id)
-        return StreamingResponse(_in_pieces(lines), media_type=media)
-    return Response(usecases.export_ontology(context, RDF_TYPES[media], history, object_id), media_type=media)
+    # streamed in every format: the response holds a piece at a time, and a client (or a shutdown) that stops
+    # reading stops the export
+    return StreamingResponse(_in_pieces(usecases.export_ontology(context, RDF_TYPES[media], history, object_id)),
+                             media_type=media)
 
 
 # -- events ---------------------------------------------------------------------------------------------

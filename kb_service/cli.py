@@ -7,8 +7,11 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import socket
 import sys
+import threading
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
@@ -23,6 +26,8 @@ _Parser = TypeVar("_Parser", bound=argparse.ArgumentParser)
 
 __all__ = ["SERVE_OPTIONS", "SettingsProblem", "add_compact_parser", "add_serve_parser", "check_serve_settings",
            "main", "run_compact", "run_serve"]
+
+REQUEST_THREADS_WAIT_S = 2.0  # what request threads still running when the server has stopped are given
 
 # Settings field -> the option that sets it, to name the right one in an error.
 SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "db_password_file": "--db-password-file",
@@ -178,11 +183,36 @@ def run_serve(args: argparse.Namespace) -> int:
     level = settings.log_level.lower()
     logging.basicConfig(level=logging.DEBUG if level == "trace" else level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=level,
-                ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
-                # an open event stream (a console page) must not keep a stopping service alive
-                timeout_graceful_shutdown=2)
+    try:
+        uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=level,
+                    ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
+                    # an open event stream (a console page) must not keep a stopping service alive
+                    timeout_graceful_shutdown=2)
+    except KeyboardInterrupt:
+        _leave_request_threads(128 + signal.SIGINT, "interrupted")
+        raise
+    except BaseException as exc:  # SIGTERM arrives as the command line's Terminated
+        _leave_request_threads(128 + signal.SIGTERM if type(exc).__name__ == "Terminated" else 1, "terminated")
+        raise
+    _leave_request_threads(0, "stopped")
     return 0
+
+
+def _leave_request_threads(code: int, how: str) -> None:
+    """End the process when request threads outlive the server. uvicorn, stopping, cancels what awaits a request
+    run on a thread but not the thread itself, and the interpreter joins such threads at exit: a long export kept
+    a stopped service alive (and growing) for minutes. They get `REQUEST_THREADS_WAIT_S`; the app's shutdown has
+    closed the store by then, and what a thread still writes is one transaction that commits or does not."""
+    deadline = time.monotonic() + REQUEST_THREADS_WAIT_S
+    for thread in threading.enumerate():
+        if thread is not threading.current_thread() and not thread.daemon:
+            thread.join(max(0.0, deadline - time.monotonic()))
+    left = [t for t in threading.enumerate() if t is not threading.current_thread() and not t.daemon and t.is_alive()]
+    if left:
+        print(f"planhrc serve: {how}; {len(left)} request(s) still running were abandoned", file=sys.stderr,
+              flush=True)
+        logging.shutdown()
+        os._exit(code)
 
 
 def add_compact_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:

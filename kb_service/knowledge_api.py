@@ -4,8 +4,9 @@ chooses the status codes of its errors:
 
 QueryError (malformed query, update, SERVICE, unknown graph, answer over the size limit) -> 400 (the SPARQL
 Protocol's "malformed query"), BusyError (the reasoning queue is full) -> 429 with Retry-After; DeadlineError
-(a query past its time limit) -> 503, and as everywhere (`api`'s mapping) NotFoundError -> 404, ValidationError ->
-422 and UnavailableError (the store lost its database connection; nothing written) -> 503.
+(a query past its time limit) and EngineError (the query process failed) -> 503, and as everywhere (`api`'s mapping)
+NotFoundError -> 404, ValidationError -> 422 and UnavailableError (the store lost its database connection; nothing
+written) -> 503.
 
 Reads follow the service's token policy for reads (the request guard counts `POST /sparql` as a read: a query
 changes nothing); `POST /reasoning` stores what the reasoner inferred, so it needs the write token.
@@ -20,10 +21,12 @@ from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.concurrency import run_in_threadpool
 
+from planhrc.vocabulary import ReasoningScope
+
 from .api import ERRORS, require_writer
 from .knowledge.reasoning_jobs import BusyError
 from .knowledge.service import KnowledgeService
-from .knowledge.sparql import GRAPH_TYPES, RESULT_TYPES, QueryError, SparqlRequest
+from .knowledge.sparql import GRAPH_TYPES, RESULT_TYPES, EngineError, QueryError, SparqlRequest
 
 SPARQL_QUERY = "application/sparql-query"
 SPARQL_UPDATE = "application/sparql-update"
@@ -53,6 +56,10 @@ class ReasoningCreate(BaseModel):
     reasoner: Literal["pellet", "hermit"] = Field(description="The DL reasoner to run.")
     object_id: str | None = Field(default=None, min_length=1, max_length=200,
                                   description="Only this object's current ABox (with the TBox); else every object's.")
+    scope: ReasoningScope = Field(default=ReasoningScope.STATES, description="`states`: each object with its goal "
+                                  "and latest perceived state (what consistency, the states' types and the rules "
+                                  "are about); `current`: the whole current ABox, the plan's actions and expected "
+                                  "states included (slower).")
 
 
 async def get_knowledge(request: Request) -> KnowledgeService:
@@ -172,5 +179,9 @@ def install_knowledge_errors(app: FastAPI) -> None:
     async def busy(request: Request, exc: Exception) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status_code=429, headers={"Retry-After": str(RETRY_AFTER_S)})
 
+    async def unavailable(request: Request, exc: Exception) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "1"})
+
     app.add_exception_handler(QueryError, bad_query)
+    app.add_exception_handler(EngineError, unavailable)
     app.add_exception_handler(BusyError, busy)

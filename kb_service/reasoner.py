@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import io
 import logging
+import os
 import subprocess
 import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Union
+from typing import Callable, Sequence, Union
 
 import owlready2
 from owlready2 import World
@@ -113,8 +114,10 @@ def _count_inferred(world: World) -> int:
     return facts_in(world, INFERENCES_IRI)
 
 
-def reason_in_place(world: World, name: str, timeout_s: float) -> tuple[bool, float]:
-    """Run a reasoner on `world` itself (inferences are added to it). Returns (consistent, seconds)."""
+def reason_in_place(world: World, name: str, timeout_s: float,
+                    java_options: Sequence[str] = ()) -> tuple[bool, float]:
+    """Run a reasoner on `world` itself (inferences are added to it). Returns (consistent, seconds).
+    `java_options`: for the reasoner's JVM (through JAVA_TOOL_OPTIONS: owlready2 writes the command itself)."""
     run = REASONERS.get(name)
     if run is None:
         raise ReasonerError(f"reasoner: must be one of {', '.join(REASONERS)}, got {name!r}")
@@ -122,6 +125,8 @@ def reason_in_place(world: World, name: str, timeout_s: float) -> tuple[bool, fl
     kwargs = reasoner_subprocess_kwargs()
     with _RUN_LOCK:
         kwargs["timeout"] = float(timeout_s)
+        if java_options:
+            kwargs["env"] = {**os.environ, "JAVA_TOOL_OPTIONS": " ".join(java_options)}
         t0 = time.perf_counter()
         try:
             run(world)
@@ -136,6 +141,7 @@ def reason_in_place(world: World, name: str, timeout_s: float) -> tuple[bool, fl
             raise ReasonerError(f"{name}: cannot start Java: {exc}") from None
         finally:
             kwargs.pop("timeout", None)
+            kwargs.pop("env", None)
         return consistent, time.perf_counter() - t0
 
 

@@ -24,6 +24,7 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterator, Sequence
+from urllib.parse import quote
 
 import httpx
 
@@ -95,6 +96,13 @@ class Decision:
             unseen_links=data.get("unseen_links"),
             skill=data.get("skill"),
         )
+
+
+@dataclass(frozen=True)
+class SparqlAnswer:
+    media_type: str
+    text: str
+    rows: int  # solutions, triples, or 1 for ASK (the service's X-Result-Count)
 
 
 class KBClient:
@@ -262,6 +270,40 @@ class KBClient:
 
     def health(self) -> dict[str, Any]:
         return self._object("GET", "/health")
+
+    # -- the knowledge service -------------------------------------------------------------------------------
+    def sparql(self, query: str, accept: str | None = None, default_graphs: Sequence[str] = (),
+               named_graphs: Sequence[str] = ()) -> SparqlAnswer:
+        """A SPARQL query (`POST /sparql`, a form): the answer in the format `accept` names. A query the service
+        refuses (400) or stops at its time limit (503) raises ProtocolError with its message, without a retry: the
+        same query would meet the same end."""
+        form = {"query": query, "default-graph-uri": list(default_graphs), "named-graph-uri": list(named_graphs)}
+        try:
+            response = self._http.post("/sparql", data=form, headers={"Accept": accept} if accept else {})
+        except httpx.TransportError as exc:
+            raise ProtocolError(f"POST /sparql: {type(exc).__name__}: {exc}") from None
+        if response.status_code >= 400:
+            raise ProtocolError(f"POST /sparql: {response.status_code} {_detail(response)}", response.status_code)
+        media = response.headers.get("content-type", "").split(";")[0].strip()
+        return SparqlAnswer(media, response.text, int(response.headers.get("X-Result-Count", "0") or 0))
+
+    def subsumption(self, state_id: str, by_state_id: str) -> dict[str, Any]:
+        """Is D(state) ⊑ D(by)? `{"subsumed", "missing", "differs", ...}`."""
+        return self._object("GET", f"/states/{quote(state_id, safe='')}/subsumed-by/{quote(by_state_id, safe='')}")
+
+    def submit_reasoning(self, reasoner: str, object_id: str | None = None, scope: str | None = None
+                         ) -> dict[str, Any]:
+        """Start a reasoning job (`POST /reasoning`): its body, finished or not (`status`); follow an unfinished
+        one with `read_reasoning`."""
+        body: dict[str, Any] = {"reasoner": reasoner}
+        if object_id is not None:
+            body["object_id"] = object_id
+        if scope is not None:
+            body["scope"] = scope
+        return self._object("POST", "/reasoning", body)
+
+    def read_reasoning(self, job_id: str) -> dict[str, Any]:
+        return self._object("GET", f"/reasoning/{quote(job_id, safe='')}")
 
 
 def _detail(response: httpx.Response) -> str:

@@ -12,6 +12,7 @@ from pydantic import AliasChoices, Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from planhrc.paths import default_tbox_path
+from planhrc.vocabulary import SparqlEngineName
 
 
 class Settings(BaseSettings):
@@ -141,6 +142,11 @@ class Settings(BaseSettings):
         default=5.0, gt=0, le=600,
         description="Time one SPARQL query may take (waiting for the query before it included); a longer one is "
         "stopped and answered 503.",
+    )
+    sparql_engine: SparqlEngineName = Field(
+        default=SparqlEngineName.OXIGRAPH,
+        description="What evaluates SPARQL queries: `oxigraph` (in a process of its own, stopped when a query "
+        "overruns its time limit) or `rdflib` (in the service's process; slower, kept to compare).",
     )
     sparql_max_results: int = Field(
         default=10_000, ge=1, le=10_000_000,

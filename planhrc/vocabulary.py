@@ -12,7 +12,9 @@ as plain JSON strings and appear as enums in the service's OpenAPI schemas.
 * `StopReason`: why a worker's run ended (its summary, the demo's results);
 * `Infeasible`: why a configuration of an object is not feasible in the cell (`planhrc.geometry`);
 * `PlanStatus`: how planning ended, for one planner call (the planner package uses this very enum) and for one
-  run of the planning pipeline, which adds `invalid` when VAL or the replay refused the planner's plan.
+  run of the planning pipeline, which adds `invalid` when VAL or the replay refused the planner's plan;
+* `SparqlEngineName`: which engine evaluates the knowledge service's SPARQL queries;
+* `ReasoningScope`: what part of the current ABox a reasoning job gives the DL reasoner.
 """
 from __future__ import annotations
 
@@ -125,3 +127,13 @@ def one_of(enum: type[StrEnum]) -> str:
     """The allowed values of an enum for an error message: `a, b or c`."""
     values = [member.value for member in enum]
     return ", ".join(values[:-1]) + " or " + values[-1] if len(values) > 1 else values[0]
+
+
+class SparqlEngineName(StrEnum):
+    OXIGRAPH = "oxigraph"  # Oxigraph (Rust), in a process of its own: the default
+    RDFLIB = "rdflib"  # rdflib's evaluator in the service's process: the earlier engine, kept to compare
+
+
+class ReasoningScope(StrEnum):
+    STATES = "states"  # each object with its goal and latest perceived state: the default
+    CURRENT = "current"  # the whole current ABox, the plan with its actions and expected states too

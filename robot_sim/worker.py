@@ -37,11 +37,12 @@ from pybullet_utils.bullet_client import BulletClient
 from planhrc.cli_args import (SubParsers, float_tuple, http_url, non_negative_float, non_negative_int, positive_int,
                               writable_dir)
 from planhrc.client import KBClient, ProtocolError
-from planhrc.robot_sim.human import (Human, HumanContext, HumanEvent, RobotTurn, Scenario, apply_event,
-                                     assist_failed_action, get_scenario, goal_differences, help_turns, safe_way)
+from planhrc.robot_sim.human import (Human, HumanContext, RobotTurn, apply_event, assist_failed_action,
+                                     goal_differences, help_turns, safe_way)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perceiver, Perception
 from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
                                        draw_configurations, step_caption, write_movie)
+from planhrc.robot_sim.scenarios import HumanEvent, Scenario, get_scenario
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
 from planhrc.robot_sim.service_link import ServiceLink

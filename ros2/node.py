@@ -1,8 +1,8 @@
 """The bridge: one rclpy node that serves the objects of a running KB service on the ROS 2 graph (rclpy).
 
 `run_bridge(settings)` starts the node, serves the objects named (or every object, and each one created later:
-the service's list is read again every `poll_s` seconds), publishes its health on /diagnostics once a second,
-and spins until Ctrl-C or SIGTERM (the command line's handlers unwind the stack; everything is closed then).
+the service's list is read again every `poll_s` seconds), answers questions to the knowledge service (`knowledge`,
+on a thread of its own), publishes its health on /diagnostics once a second, and spins until Ctrl-C or SIGTERM (the command line's handlers unwind the stack; everything is closed then).
 Each object has a node of its own; every node is spun by one single-threaded executor on the main thread, so
 requests are handled one at a time, in the order they are taken: a re-plan of one object waits for the request
 before it, whichever object that was. Callbacks handed to other threads (a multi-threaded executor, or an executor
@@ -26,6 +26,7 @@ from planhrc.client import KBClient, ProtocolError, RetryPolicy
 from . import topics
 from .channel import EventFollower, ObjectChannel, latest_seq
 from .errors import Ros2Error
+from .knowledge import KnowledgeThread
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +55,9 @@ class Bridge:
         self.service_problem = ""
         self.lock = threading.Lock()
         self.diagnostics = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, 10)
+        # the knowledge service's topics and service, on a node and a thread of their own (`knowledge`)
+        self.knowledge = KnowledgeThread(Node(f"{settings.node_name}_knowledge", context=node.context),
+                                         settings.kb_url, settings.token, self.stop)
         self.timers = [node.create_timer(1.0, self.publish_health)]
         if not settings.object_ids:
             self.timers.append(node.create_timer(settings.poll_s, self.discover))
@@ -109,6 +113,8 @@ class Bridge:
         service.message = self.service_problem or f"service {health.get('version', '')} answers"
         service.values = [KeyValue(key="objects_served", value=str(len(self.channels))),
                           KeyValue(key="objects_stored", value=str(health.get("objects", "")))]
+        service.values += [KeyValue(key=f"knowledge_{key}", value=str(n))
+                           for key, n in self.knowledge.channel.counts.items()]
         array.status.append(service)
         for object_id, channel in sorted(self.channels.items()):
             status = DiagnosticStatus(name=f"{self.settings.node_name}: {object_id}", hardware_id=object_id)
@@ -122,6 +128,7 @@ class Bridge:
 
     def close(self) -> None:
         self.stop.set()
+        self.knowledge.close()
         for follower in self.followers:
             follower.join(timeout=0.5)  # daemon threads: one still inside a read ends with the process
         for timer in self.timers:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 NAMESPACE = "/planhrc/objects"
+KNOWLEDGE_NAMESPACE = "/planhrc/knowledge"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 
 
@@ -75,3 +76,37 @@ OBJECT_TOPICS: tuple[TopicSpec, ...] = (PERCEIVED, GOAL, FEEDBACK, GIVE_UP, DECI
                                         PLAN, OBJECT)
 DIAGNOSTICS = ("diagnostic_msgs/msg/DiagnosticArray", "reliable, volatile, depth 10",
                "the bridge's health once a second: one status for the service, one per object")
+
+
+# -- the knowledge service: questions about the whole knowledge base, not one object --------------------------------
+@dataclass(frozen=True)
+class KnowledgeTopicSpec(TopicSpec):
+    """A topic under /planhrc/knowledge/ (`suffix`), the same for every object."""
+
+    @property
+    def full_name(self) -> str:
+        return f"{KNOWLEDGE_NAMESPACE}/{self.suffix}"
+
+
+def _pair(name: str, asks: str, answers: str) -> tuple[KnowledgeTopicSpec, KnowledgeTopicSpec]:
+    # answers are latched (depth 10) like the object topic's: a reader matched late still gets its answer
+    return (KnowledgeTopicSpec(f"{name}/request", "std_msgs/msg/String", Direction.IN, Durability.VOLATILE, 10, asks),
+            KnowledgeTopicSpec(f"{name}/answer", "std_msgs/msg/String", Direction.OUT, Durability.TRANSIENT_LOCAL, 10,
+                               answers))
+
+
+SPARQL_REQUEST, SPARQL_ANSWER = _pair(
+    "sparql", "a SPARQL query as JSON {request_id, query, accept?, default_graph_uri?, named_graph_uri?}",
+    "JSON {request_id, ok, media_type, result_count, body} (body: the answer's text in that media type), or "
+    "{request_id, ok: false, status, detail}")
+SUBSUMPTION_REQUEST, SUBSUMPTION_ANSWER = _pair(
+    "subsumption", "JSON {request_id, state_id, by_state_id}: is D(state) ⊑ D(by)?",
+    "JSON {request_id, ok, subsumed, missing, differs, atoms_checked, ...} (the HTTP route's body)")
+REASONING_REQUEST, REASONING_ANSWER = _pair(
+    "reasoning", "JSON {request_id, reasoner: pellet|hermit, object_id?, scope?: states|current}",
+    "JSON {request_id, ok, status: done|failed, consistent, inferred, seconds, ...} (the finished job's body)")
+KNOWLEDGE_TOPICS: tuple[KnowledgeTopicSpec, ...] = (SPARQL_REQUEST, SPARQL_ANSWER, SUBSUMPTION_REQUEST,
+                                                    SUBSUMPTION_ANSWER, REASONING_REQUEST, REASONING_ANSWER)
+REASON_NOW = (f"{KNOWLEDGE_NAMESPACE}/reason_now", "std_srvs/srv/Trigger",
+              "Pellet on every object now (scope states); success: the job finished and the ABox is consistent; "
+              "message: the job's body as JSON")

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import pytest
 from rdflib import RDF, URIRef
 
-from planhrc.kb_service.knowledge.graph import GRAPHS, KnowledgeGraph
+from planhrc.kb_service.knowledge.graph import KnowledgeGraph
 from planhrc.kb_service.store import ABOX_IRI, TBOX_IRI, ValidationError, open_store
 from planhrc.model import make_object, perceive
 from planhrc.paths import default_tbox_path
@@ -65,16 +65,17 @@ def test_the_sparql_graph_of_one_process_follows_the_writes_of_another(pg_url):
         obj = make_object("obj1", "relative", 3, 4)
         one.create_object(obj)
         graph = KnowledgeGraph(two, TBOX)
-        abox = graph.graph(GRAPHS["abox"])
         with graph.lock:
             graph.refresh()
-            assert (URIRef(ABOX_IRI + "obj1"), RDF.type, URIRef(TBOX_IRI + "ArticulatedObject")) in abox
+            abox = graph.contents()["abox"]
+        assert (URIRef(ABOX_IRI + "obj1"), RDF.type, URIRef(TBOX_IRI + "ArticulatedObject")) in abox
         for angles in ([0.0, 90.0, 90.0], [0.0, 0.0, 180.0]):
             state = one.add_perception(perceive(obj, angles))
             one.add_event("obj1", "replan", "", {"perceived_state_id": state.id})
             with graph.lock:
                 graph.refresh()
-                perceived = set(abox.subjects(RDF.type, URIRef(TBOX_IRI + "PerceivedState")))
+                abox = graph.contents()["abox"]
+            perceived = {s for s, p, o in abox if p == RDF.type and o == URIRef(TBOX_IRI + "PerceivedState")}
             assert perceived == {URIRef(ABOX_IRI + state.id)}  # the latest one only: the current ABox
         read = graph.objects_read
         with graph.lock:

@@ -122,14 +122,14 @@ def test_entailment_is_what_pellet_derives(vocab, formulation, links, raw):
 
 
 @pytest.mark.reasoner
-def test_reasoning_names_the_individuals_of_an_inconsistency():
+def test_reasoning_names_the_individuals_of_an_inconsistency(vocab):
     with store_with("relative", 3, [0.0, 90.0, 90.0]) as kb:
         abox = kb._abox  # the SQLite store's internals: a fact no write of the store would accept
         with kb.lock:
             abox.q.insert_objs(abox.c, [(abox.sid("obj1_l2"), RDF_TYPE_SID, abox.t["Joint"])])
             abox.q.commit()
         for name in ("pellet", "hermit"):
-            result = reason(kb, ReasoningRequest(name, "obj1"), 120)
+            result = reason(kb, ReasoningRequest(name, "obj1"), 120, vocab)
             assert not result.consistent
             assert result.individuals == ("obj1_l2",)
             assert any("Joint" in axiom for axiom in result.axioms)

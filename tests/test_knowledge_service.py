@@ -11,6 +11,7 @@ import time
 
 import httpx
 import pytest
+import rdflib
 
 from planhrc.bench.knowledge import CURRENT_STATE_QUERY
 from planhrc.kb_service.store import KnowledgeBase
@@ -78,8 +79,9 @@ def test_sparqlwrapper_in_xml_csv_by_post_ask_and_construct(served):
     assert ask.queryAndConvert()["boolean"] is True
     construct = wrapper(base, "CONSTRUCT { ?s a ?c } WHERE { ?s a <http://planhrc.org/ontology/planhrc.owl#State> "
                         ". BIND(<http://planhrc.org/ontology/planhrc.owl#State> AS ?c) }", SPARQLWrapper.TURTLE)
-    graph = construct.queryAndConvert()
-    assert b"planhrc.owl#State" in graph
+    graph = rdflib.Graph().parse(data=construct.queryAndConvert(), format="turtle")
+    state = rdflib.URIRef("http://planhrc.org/ontology/planhrc.owl#State")
+    assert len(graph) >= 2 and set(graph.objects(None, rdflib.RDF.type)) == {state}
 
 
 def test_sparqlwrapper_gets_a_bad_query_error_for_an_update(served):

@@ -58,7 +58,12 @@ def bridge(url: str, env: dict[str, str], log: Path, *args: str) -> Iterator[sub
 
 def peer(object_id: str, steps: list[dict[str, Any]], env: dict[str, str], timeout_s: float = 90) -> list[dict]:
     """Run a peer to the end; its messages, or a failure showing what it printed."""
-    proc = subprocess.Popen([str(ROS2_PYTHON), str(PEER), object_id, json.dumps(steps)], env=env,
+    return run_peer(PEER, [object_id, json.dumps(steps)], env, timeout_s)
+
+
+def run_peer(script: Path, args: list[str], env: dict[str, str], timeout_s: float) -> list[dict]:
+    """Run a peer script (`.venv-ros2`'s Python) to the end; the JSON lines it printed before `{"done": true}`."""
+    proc = subprocess.Popen([str(ROS2_PYTHON), str(script), *args], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         out, err = proc.communicate(timeout=timeout_s)

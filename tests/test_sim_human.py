@@ -6,7 +6,8 @@ from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.geometry import configuration_feasible, rotated
 from planhrc.robot_sim.demo import random_scenario
-from planhrc.robot_sim.human import Human, HumanMove, get_scenario
+from planhrc.robot_sim.human import Human, HumanMove
+from planhrc.robot_sim.scenarios import get_scenario
 from planhrc.robot_sim.perception import angle_difference_deg
 from planhrc.robot_sim.scene import SceneSpec, build_scene
 
@@ -49,7 +50,8 @@ def test_random_scenarios_start_anywhere_change_several_links_and_the_human_acts
 
 
 def test_a_considerate_human_leaves_the_object_on_the_table_not_hanging_over_its_edge():
-    from planhrc.robot_sim.human import HumanContext, HumanEvent, choose_move
+    from planhrc.robot_sim.human import HumanContext, choose_move
+    from planhrc.robot_sim.scenarios import HumanEvent
 
     client = BulletClient(connection_mode=pybullet.DIRECT)
     scene = build_scene(client, SceneSpec(load_robot=False, initial_orientations_deg=(90, 90, 90, 45, 45)))
@@ -72,7 +74,8 @@ def test_a_considerate_human_leaves_the_object_on_the_table_not_hanging_over_its
 
 
 def test_a_human_acting_during_a_robot_turn_counts_the_rest_of_that_turn():
-    from planhrc.robot_sim.human import HumanContext, HumanEvent, RobotTurn, choose_move
+    from planhrc.robot_sim.human import HumanContext, RobotTurn, choose_move
+    from planhrc.robot_sim.scenarios import HumanEvent
 
     client = BulletClient(connection_mode=pybullet.DIRECT)
     scene = build_scene(client, SceneSpec(load_robot=False))  # straight, along -y

@@ -6,7 +6,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 
-from planhrc.robot_sim.human import HumanEvent, Scenario, get_scenario
+from planhrc.robot_sim.scenarios import HumanEvent, Scenario, get_scenario
 from planhrc.robot_sim.scene import SceneSpec
 from planhrc.robot_sim.worker import run_worker
 

@@ -1,10 +1,12 @@
 """A DL reasoner (Pellet or HermiT) on the live ABox: consistency, classification and the SWRL rules on a copy of
-the current ABox (of one object, or of every object) with the TBox, read through the store's interface
-(`Export.export_lines`), so it runs on any backend and never writes into the asserted facts.
+the current ABox (of one object, or of every object; of the part the question needs, `reasoning_input`) with the
+TBox, read through the store's interface (`Export.export_lines`), so it runs on any backend and never writes into
+the asserted facts.
 
 What the reasoner inferred comes back as N-Triples lines, for the store to keep apart (`Inferences`). An
 inconsistent ABox is explained by Pellet (`pellet explain --inconsistent`, whichever reasoner found it): the
-axioms of one minimal inconsistent subset, and the ABox individuals they name.
+axioms of one minimal inconsistent subset, and the ABox individuals they name. The reasoners' JVMs run with the
+options of `jvm` (a short run, and their classes cached ahead of time).
 """
 from __future__ import annotations
 
@@ -19,10 +21,15 @@ from typing import Any, Sequence
 import owlready2
 from owlready2 import World
 
+from planhrc.vocabulary import ReasoningScope
+
 from ..reasoner import INFERENCES_IRI, REASONERS, _configure_java, drop_builtin_rules, reason_in_place
 from ..store import ABOX_IRI, TBOX_IRI, ReasonerError, ValidationError
-from ..store.interface import Export
 from ..store.owl import load_ntriples, ntriples_in, pellet_command
+from .entailment import Vocabulary
+from .graph import KnowledgeSource
+from .jvm import cache_file, java_options, make_cache
+from .reasoning_input import ReasonerInput, reasoner_input
 
 EXPLANATION_AXIOMS = 50  # axioms of an explanation shown at most
 _ABOX_LINE = "<" + ABOX_IRI
@@ -33,6 +40,7 @@ _NAME = re.compile(r"\b(obj\d+[A-Za-z0-9_]*|deg_\d+)\b")
 class ReasoningRequest:
     reasoner: str
     object_id: str | None = None
+    scope: ReasoningScope = ReasoningScope.STATES
 
 
 @dataclass(frozen=True)
@@ -56,22 +64,29 @@ class ReasoningResult:
         return out
 
 
-def check_request(reasoner: object, object_id: object) -> ReasoningRequest:
+def check_request(reasoner: object, object_id: object, scope: object = ReasoningScope.STATES) -> ReasoningRequest:
     if reasoner not in REASONERS:
         raise ValidationError(f"reasoner: must be one of {', '.join(sorted(REASONERS))}, got {reasoner!r}")
     if object_id is not None and (not isinstance(object_id, str) or not object_id):
         raise ValidationError("object_id: must be an object's id")
-    return ReasoningRequest(str(reasoner), object_id)
+    if not isinstance(scope, str) or scope not in tuple(ReasoningScope):
+        raise ValidationError(f"scope: must be one of {', '.join(ReasoningScope)}, got {scope!r}")
+    return ReasoningRequest(str(reasoner), object_id, ReasoningScope(scope))
 
 
-def reason(store: Export, request: ReasoningRequest, timeout_s: float) -> ReasoningResult:
-    """Run the reasoner on a copy of the current ABox (of `request.object_id`, else of every object)."""
+def reason(store: KnowledgeSource, request: ReasoningRequest, timeout_s: float, vocabulary: Vocabulary,
+           cache_dir: Path | None = None) -> ReasoningResult:
+    """Run the reasoner on a copy of the current ABox (of `request.object_id`, else of every object) in
+    `request.scope`; `cache_dir`: the folder of the JVM's class caches (`jvm`)."""
     started = time.monotonic()
-    lines = list(store.export_lines("current", None if request.object_id is None else [request.object_id]))
+    given = reasoner_input(store, None if request.object_id is None else [request.object_id], request.scope,
+                           vocabulary)
+    _configure_java()
+    cache = cache_file(request.reasoner, str(owlready2.JAVA_EXE), _classpath(request.reasoner), cache_dir)
     world = World()
     try:
-        load_ntriples(world, TBOX_IRI.rstrip("#"), [line for line in lines if not line.startswith(_ABOX_LINE)])
-        load_ntriples(world, ABOX_IRI.rstrip("#"), [line for line in lines if line.startswith(_ABOX_LINE)])
+        load_ntriples(world, TBOX_IRI.rstrip("#"), list(given.tbox))
+        load_ntriples(world, ABOX_IRI.rstrip("#"), [*given.abox, *given.seeded])
         notes: list[str] = []
         if request.reasoner == "hermit":
             dropped = drop_builtin_rules(world)
@@ -79,27 +94,54 @@ def reason(store: Export, request: ReasoningRequest, timeout_s: float) -> Reason
                 notes.append(f"HermiT does not support SWRL built-in atoms: {dropped} rule(s) using them (the "
                              "relative angles) were left out")
         remaining = max(1.0, timeout_s - (time.monotonic() - started))
-        consistent, _ = reason_in_place(world, request.reasoner, remaining)
+        consistent, _ = reason_in_place(world, request.reasoner, remaining, java_options(cache))
         if not consistent:
             remaining = max(1.0, timeout_s - (time.monotonic() - started))
-            axioms = explain_inconsistency(world, remaining)
+            axioms = explain_inconsistency(world, remaining, cache)
             names = sorted({n for axiom in axioms for n in _NAME.findall(axiom)})
             return ReasoningResult(False, request.reasoner, request.object_id, (), time.monotonic() - started,
                                    tuple(notes), tuple(names), tuple(axioms[:EXPLANATION_AXIOMS]))
-        inferred = tuple(line for line in ntriples_in(world, INFERENCES_IRI) if line.startswith(_ABOX_LINE))
-        return ReasoningResult(True, request.reasoner, request.object_id, inferred, time.monotonic() - started,
-                               tuple(notes))
+        found = [line for line in ntriples_in(world, INFERENCES_IRI) if line.startswith(_ABOX_LINE)]
+        inferred = tuple(sorted(set(found) | set(given.seeded)))
+        seconds = time.monotonic() - started
+        if request.reasoner == "pellet" and cache is not None and not cache.is_file():
+            notes.append(_made_cache(cache, given, timeout_s))
+        return ReasoningResult(True, request.reasoner, request.object_id, inferred, seconds, tuple(notes))
     finally:
         world.close()
 
 
-def explain_inconsistency(world: World, timeout_s: float) -> list[str]:
+def _made_cache(cache: Path, given: ReasonerInput, timeout_s: float) -> str:
+    """Make Pellet's class cache with a run on this job's input (once; later jobs start faster); the note."""
+    started = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="planhrc-pellet-") as tmp:
+        path = Path(tmp) / "input.nt"
+        path.write_text("".join([*given.tbox, *given.abox, *given.seeded]), encoding="utf-8")
+        command = pellet_command(str(owlready2.JAVA_EXE)) + [
+            "realize", "--loader", "Jena", "--input-format", "N-Triples", "--infer-prop-values",
+            "--infer-data-prop-values", "--ignore-imports", str(path)]
+        made = make_cache(cache, command, timeout_s)
+    took = time.monotonic() - started
+    if made:
+        return f"after this job, Pellet's classes were cached for the next jobs ({took:.1f} s, not in `seconds`)"
+    return "Pellet's classes could not be cached (see the service's log): every job starts Pellet afresh"
+
+
+def _classpath(reasoner: str) -> str:
+    if reasoner == "hermit":
+        return str(owlready2.reasoning._HERMIT_CLASSPATH)
+    return str(owlready2.reasoning._PELLET_CLASSPATH)
+
+
+def explain_inconsistency(world: World, timeout_s: float, cache: Path | None = None) -> list[str]:
     """The axioms of one explanation of the inconsistency of `world`, by `pellet explain --inconsistent`."""
     _configure_java()
     with tempfile.TemporaryDirectory(prefix="planhrc-explain-") as tmp:
         path = Path(tmp) / "abox.owl"
         world.save(str(path), format="rdfxml")
-        command = pellet_command(owlready2.JAVA_EXE) + ["explain", "--inconsistent", "--ignore-imports", str(path)]
+        command = pellet_command(owlready2.JAVA_EXE)
+        command[1:1] = java_options(cache)
+        command += ["explain", "--inconsistent", "--ignore-imports", str(path)]
         try:
             proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
         except subprocess.TimeoutExpired:

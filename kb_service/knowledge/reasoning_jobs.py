@@ -38,7 +38,7 @@ class Job:
 
     def public(self) -> dict[str, Any]:
         out: dict[str, Any] = {"id": self.id, "status": self.status, "reasoner": self.request.reasoner,
-                               "object_id": self.request.object_id}
+                               "object_id": self.request.object_id, "scope": str(self.request.scope)}
         if self.result is not None:
             out.update(self.result.public())
         if self.error is not None:
@@ -59,11 +59,14 @@ class ReasoningJobs:
         self._pending = 0  # queued or running
         self._count = 0
         self._queue: queue.Queue[Job | None] = queue.Queue()
+        self._closed = False
         self._thread = threading.Thread(target=self._work, name="planhrc-reasoning", daemon=True)
         self._thread.start()
 
     def submit(self, request: ReasoningRequest) -> Job:
         with self._lock:
+            if self._closed:
+                raise BusyError("reasoning: the service is stopping; try again when it is back")
             if self._pending >= self._capacity:
                 raise BusyError(f"reasoning: {self._pending} job(s) are waiting or running, the most this service "
                                 "takes (its reasoning_queue); try again when one has finished")
@@ -87,6 +90,10 @@ class ReasoningJobs:
         return job
 
     def close(self) -> None:
+        """Stop taking jobs; the queued ones fail at once (a request waiting for one answers), the running one is
+        waited for a few seconds (its reasoner's JVM ends with its time limit or with the process)."""
+        with self._lock:
+            self._closed = True
         self._queue.put(None)
         self._thread.join(timeout=5)
 
@@ -95,6 +102,12 @@ class ReasoningJobs:
             job = self._queue.get()
             if job is None:
                 return
+            if self._closed:
+                job.error, job.status = "the service stopped before the job ran", "failed"
+                with self._lock:
+                    self._pending -= 1
+                job.finished.set()
+                continue
             job.status = "running"
             try:
                 result = self._run(job.request)

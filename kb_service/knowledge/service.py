@@ -14,12 +14,14 @@ from pathlib import Path
 from typing import Any
 
 from planhrc.settings import Settings
+from planhrc.vocabulary import ReasoningScope
 
 from .explain import explain_subsumption
 from .graph import KnowledgeGraph, KnowledgeSource
+from .jvm import cache_folder
 from .reasoning import ReasoningRequest, ReasoningResult, check_request, reason, scope_of
 from .reasoning_jobs import Job, ReasoningJobs
-from .sparql import SparqlAnswer, SparqlEngine, SparqlRequest
+from .sparql import ENGINES, SparqlAnswer, SparqlEndpoint, SparqlRequest
 
 log = logging.getLogger(__name__)
 
@@ -29,15 +31,19 @@ class KnowledgeService:
         self.store = store
         self.settings = settings
         self.graph = KnowledgeGraph(store, Path(settings.tbox_path))
-        self.engine = SparqlEngine(self.graph, settings.sparql_timeout_s, settings.sparql_max_results)
+        self.endpoint = SparqlEndpoint(self.graph, ENGINES[settings.sparql_engine](settings.sparql_timeout_s),
+                                       settings.sparql_timeout_s, settings.sparql_max_results)
+        self.jvm_cache = cache_folder()  # where the reasoners' class caches go (`jvm`)
         self.jobs = ReasoningJobs(self._reason, self._keep, settings.reasoning_queue)
 
     def close(self) -> None:
         self.jobs.close()
+        with self.graph.lock:  # after the query that runs, if one does
+            self.endpoint.close()
 
     # -- SPARQL ---------------------------------------------------------------------------------------------
     def sparql(self, request: SparqlRequest) -> SparqlAnswer:
-        return self.engine.run(request)
+        return self.endpoint.run(request)
 
     # -- subsumption ----------------------------------------------------------------------------------------
     def subsumption(self, state_id: str, by_state_id: str) -> dict[str, Any]:
@@ -45,9 +51,9 @@ class KnowledgeService:
 
     # -- reasoning ------------------------------------------------------------------------------------------
     def submit_reasoning(self, body: dict[str, Any]) -> Job:
-        """Queue a reasoning job (`{"reasoner": "pellet"|"hermit", "object_id"?: ...}`); an unknown object is
+        """Queue a reasoning job (`{"reasoner": "pellet"|"hermit", "object_id"?: ..., "scope"?: ...}`); an unknown object is
         refused here, before the job is queued."""
-        request = check_request(body.get("reasoner"), body.get("object_id"))
+        request = check_request(body.get("reasoner"), body.get("object_id"), body.get("scope", ReasoningScope.STATES))
         if request.object_id is not None:
             self.store.current_roots(request.object_id)  # NotFoundError now rather than a failed job later
         return self.jobs.submit(request)
@@ -60,14 +66,14 @@ class KnowledgeService:
         return self.jobs.get(job_id).public()
 
     def _reason(self, request: ReasoningRequest) -> ReasoningResult:
-        return reason(self.store, request, self.settings.reasoning_timeout_s)
+        return reason(self.store, request, self.settings.reasoning_timeout_s, self.graph.vocabulary, self.jvm_cache)
 
     def _keep(self, result: ReasoningResult) -> None:
         """Store what a consistent run inferred, apart from the asserted facts (an inconsistent one infers
         nothing and leaves what earlier runs stored)."""
         if not result.consistent:
             return
-        scope = scope_of(ReasoningRequest(result.reasoner, result.object_id))
+        scope = scope_of(ReasoningRequest(result.reasoner, result.object_id))  # where the store keeps them
         self.store.replace_inferred(scope, result.inferred)
         with self.graph.lock:
             self.graph.inferred_changed()

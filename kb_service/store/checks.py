@@ -8,6 +8,7 @@ service runs it while VAL checks the same plan). Nothing here depends on a backe
 from __future__ import annotations
 
 import time
+from functools import cached_property
 from typing import Any
 
 from planhrc.model import (
@@ -28,29 +29,43 @@ from .records import STATE_KINDS, ActionSpec, CheckedPlan, CondEffect
 
 
 class ObjectInfo:
-    """An object and the lookups the checks need (names -> PDDL type, static facts, its orientation atoms)."""
-
-    __slots__ = ("obj", "joints", "types", "static", "static_fragment", "orientation_atom_name",
-                 "orientation_atoms")
+    """An object and the lookups the checks need (names -> PDDL type, static facts, its orientation atoms), each
+    built when a check first asks for it: listing or reading objects needs none of them (building them all took
+    most of a first `GET /objects` on a store of many objects)."""
 
     def __init__(self, obj: ArticulatedObject) -> None:
         self.obj = obj
         self.joints = obj.joints
-        self.types: dict[str, str] = {}
-        for name in obj.all_links:
-            self.types[name] = "link"
-        for name in obj.joints:
-            self.types[name] = "joint"
-        for name in obj.orientation_names:
-            self.types[name] = "orientation"
-        self.static = obj.static_atoms()
-        self.static_fragment = {atom: atom_fragment(obj, obj.ident, atom) for atom in self.static}
-        # every well-formed HasOrientation atom of the object, with the name of its individual
-        self.orientation_atom_name: dict[Atom, str] = {
-            (HAS_ORIENTATION, o, j): atom_fragment(obj, obj.ident, (HAS_ORIENTATION, o, j))
-            for j in obj.joints for o in obj.orientation_names
-        }
-        self.orientation_atoms = frozenset(self.orientation_atom_name)
+
+    @cached_property
+    def types(self) -> dict[str, str]:
+        types: dict[str, str] = {}
+        for name in self.obj.all_links:
+            types[name] = "link"
+        for name in self.obj.joints:
+            types[name] = "joint"
+        for name in self.obj.orientation_names:
+            types[name] = "orientation"
+        return types
+
+    @cached_property
+    def static(self) -> frozenset[Atom]:
+        return self.obj.static_atoms()
+
+    @cached_property
+    def static_fragment(self) -> dict[Atom, str]:
+        return {atom: atom_fragment(self.obj, self.obj.ident, atom) for atom in self.static}
+
+    @cached_property
+    def orientation_atom_name(self) -> dict[Atom, str]:
+        """Every well-formed HasOrientation atom of the object, with the name of its individual."""
+        obj = self.obj
+        return {(HAS_ORIENTATION, o, j): atom_fragment(obj, obj.ident, (HAS_ORIENTATION, o, j))
+                for j in obj.joints for o in obj.orientation_names}
+
+    @cached_property
+    def orientation_atoms(self) -> frozenset[Atom]:
+        return frozenset(self.orientation_atom_name)
 
 
 def check_kind(kind: Any) -> str:

@@ -7,36 +7,30 @@ what it returns, however long the history. The whole history (`history=all`) is 
 
 N-Triples are written row by row from SQLite on a read-only connection of their own (a snapshot of the last
 commit), so an export neither holds the store's lock nor loads individuals into owlready2; RDF/XML and Turtle
-are that N-Triples re-serialised by rdflib (which holds the graph in memory: ask for the whole history in
-N-Triples).
+are written from those lines as they come (`rdf_stream`), so an export in any format holds one subject at a time.
 """
 from __future__ import annotations
 
 import sqlite3
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 from .errors import ValidationError
 from .interface import FORMATS
 from .owl import ntriple_lines, other_contexts, reachable, storids_of, subjects_to
+from .rdf_stream import WRITERS
 from .roots import SQLITE, current_roots
 
 _CHUNK = 500
 
 
-def export_rdf(ntriples: bytes, fmt: str, prefixes: dict[str, str]) -> bytes:
-    """N-Triples re-serialised by rdflib as RDF/XML (`xml`) or Turtle (`turtle`), with readable prefixes."""
-    import rdflib
-
+def export_pieces(lines: Iterable[str], fmt: str, prefixes: Mapping[str, str]) -> Iterator[str]:
+    """N-Triples lines as N-Triples (`nt`), RDF/XML (`xml`) or Turtle (`turtle`) with readable prefixes, in
+    pieces written as the lines are read."""
     if fmt not in FORMATS:
         raise ValidationError(f"fmt: must be one of {', '.join(FORMATS)}, got {fmt!r}")
     if fmt == "nt":
-        return ntriples
-    graph = rdflib.Graph()
-    graph.parse(data=ntriples, format="nt")
-    for prefix, iri in prefixes.items():
-        graph.bind(prefix, iri)
-    out = graph.serialize(format=fmt)
-    return out.encode("utf-8") if isinstance(out, str) else out
+        return iter(lines)
+    return WRITERS[fmt](lines, prefixes)
 
 
 def ntriples(db: sqlite3.Connection, abox_iri: str, abox_c: int, static_fact_of: int,

@@ -16,7 +16,7 @@ from .cache import R, RecordCache
 from .checks import check_export, check_plan
 from .errors import NotFoundError, ValidationError
 from .execution import ExecutionCursor
-from .export import export_rdf
+from .export import export_pieces
 from .names import ABOX_IRI, TBOX_IRI
 from .records import ActionSpec, CheckedPlan, Execution, StoredAction, StoredPlan, StoredProblem, StoredState
 from .unit import RecordsOfWrites
@@ -133,6 +133,10 @@ class StoreFacade:
 
     # -- export -----------------------------------------------------------------------------------------------
     def export(self, fmt: str = "xml", history: str = "current", object_ids: Sequence[str] | None = None) -> bytes:
+        return "".join(self.export_stream(fmt, history, object_ids)).encode("utf-8")
+
+    def export_stream(self, fmt: str = "xml", history: str = "current",
+                      object_ids: Sequence[str] | None = None) -> Iterator[str]:
+        """The export in pieces, each written as the store's lines are read: what a response streams."""
         check_export(history, object_ids, fmt)
-        text = "".join(self.export_lines(history, object_ids)).encode("utf-8")
-        return export_rdf(text, fmt, PREFIXES)
+        return export_pieces(self.export_lines(history, object_ids), fmt, PREFIXES)

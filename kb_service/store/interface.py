@@ -153,6 +153,12 @@ class Export(Protocol):
         """The same as RDF in one of `FORMATS`."""
         ...
 
+    def export_stream(self, fmt: str = "xml", history: str = "current",
+                      object_ids: Sequence[str] | None = None) -> Iterator[str]:
+        """The same in pieces, each written as the lines are read (what a response streams); the arguments are
+        checked before the first piece."""
+        ...
+
     def current_roots(self, object_id: str) -> tuple[str, ...]:
         """The ids the object's current ABox starts from: the object, its goal, its latest perceived state, the
         plan its execution follows (else its latest plan) and its latest problem. The current export is every

@@ -65,14 +65,11 @@ def events_after(context: Context, object_id: str, after_seq: int = 0,
     return context.store.list_events(object_id, after_seq=after_seq, limit=limit)
 
 
-def export_ontology(context: Context, fmt: str, history: str = "current", object_id: str | None = None) -> bytes:
-    """TBox and ABox (the current ABox, or the whole `history`) as RDF/XML (`xml`) or Turtle (`turtle`)."""
-    return context.store.export(fmt, history, None if object_id is None else [object_id])
-
-
-def export_ntriples(context: Context, history: str = "current", object_id: str | None = None) -> Iterator[str]:
-    """TBox and ABox as N-Triples lines, read as they are sent."""
-    return context.store.export_lines(history, None if object_id is None else [object_id])
+def export_ontology(context: Context, fmt: str, history: str = "current",
+                    object_id: str | None = None) -> Iterator[str]:
+    """TBox and ABox (the current ABox, or the whole `history`) as RDF/XML (`xml`), Turtle (`turtle`) or
+    N-Triples (`nt`), in pieces written as the store's lines are read: a reader that stops stops the export."""
+    return context.store.export_stream(fmt, history, None if object_id is None else [object_id])
 
 
 def read_health(context: Context) -> Health:
