@@ -3,14 +3,15 @@ object towards the table's middle with both arms, a turn re-grasped when one arm
 worker that stops short of the goal always ends with a help request the service recorded."""
 from __future__ import annotations
 
+import numpy as np
 import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.client import KBClient
 from planhrc.robot_sim.regrasp import perform_with_regrasp, regrasp_skill
-from planhrc.robot_sim.scene import SceneSpec, build_scene
-from planhrc.robot_sim.skills import Robot, RotationAction, Unreachable, rotate_skill
+from planhrc.robot_sim.scene import ARMS, SceneSpec, arm_joints, build_scene, set_arm_joints
+from planhrc.robot_sim.skills import Command, Robot, RotationAction, Unreachable, execute, rotate_skill
 from planhrc.robot_sim.slide import slide, slide_skill
 from planhrc.robot_sim.worker import run_worker
 from planhrc.vocabulary import ActionOutcome
@@ -61,6 +62,39 @@ def test_a_slide_no_arm_can_follow_is_not_planned_and_nothing_moves(cell):
     assert slide_skill(scene, robot, (0.95, 0.6), (1, 5)) is None  # the far corner: beyond both arms
     assert slide_skill(scene, robot, TARGET, (1, 1)) is None  # one link for two arms
     assert scene.configuration() == before
+
+
+def _grasp_xy(scene, command, link):
+    """Where the gripper that grasps `link` closes: its pose in the arm move just before that grasp."""
+    moves = {}
+    for primitive in command.primitives:
+        if type(primitive).__name__ == "MoveArm":
+            moves[primitive.arm] = primitive.joint_positions
+        elif type(primitive).__name__ == "Grasp" and primitive.link == link:
+            set_arm_joints(scene, primitive.arm, moves[primitive.arm])
+            state = scene.client.getLinkState(scene.robot, scene.arms[primitive.arm].end_effector,
+                                              computeForwardKinematics=True)
+            return np.asarray(state[0][:2])
+    raise AssertionError(f"no grasp of link {link}")
+
+
+def test_a_turn_grasped_nearer_the_joint_takes_the_link_there_and_still_turns_it(cell):
+    scene, robot = cell(SceneSpec())
+    action = RotationAction(turned_link=4, held_link=3, delta_deg=45)
+    centre, joint = np.asarray(scene.link_center(4)), np.asarray(scene.joint_points()[3 - 1])
+    home = {arm: arm_joints(scene, arm) for arm in ARMS}
+    at_centre = rotate_skill(scene, robot, action)
+    nearer = rotate_skill(scene, robot, action, near_joint=True)
+    assert isinstance(at_centre, Command) and isinstance(nearer, Command)
+    half = float(np.linalg.norm(centre - joint))
+    assert np.linalg.norm(_grasp_xy(scene, at_centre, 4) - centre) < 0.02
+    assert np.linalg.norm(_grasp_xy(scene, nearer, 4) - joint) < half - 0.005  # between the centre and the joint
+    for arm, q in home.items():
+        set_arm_joints(scene, arm, q)
+    before = scene.link_orientations_deg()[3]
+    result = execute(scene, nearer, robot)
+    assert result.outcome is ActionOutcome.SUCCEEDED, result.message
+    assert abs(((scene.link_orientations_deg()[3] - before) - 45.0 + 180.0) % 360.0 - 180.0) < 4.0
 
 
 # An arm's wrist cannot follow this turn of link 4 (held by link 3) to its end in one grasp; found by trying random
