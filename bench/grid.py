@@ -19,7 +19,9 @@ run: the in-process stages on PDDL text (grounding once, planning, VAL, the whol
 library pipeline with the knowledge base (new perceived state -> translation -> planning -> VAL -> expected
 states stored), Fast Downward's whole process (bounded by `--fd-timeout` and `--fd-runs`; a timeout is
 reported as such and not repeated) and a re-planning `POST /objects/{id}/perceptions` to a real
-`planhrc serve` process; medians and p90.
+`planhrc serve` process; medians and p90. Beside them, the CPU a re-plan costs, whole (`planhrc.bench.cpu`): the
+service's process, its reaped VAL children and the work behind each answer, per re-plan over paced re-plans, and
+the anchor planner's whole process on tasks of the same size measured right after it in the same run.
 
 `--bimanual` runs only the bimanual grid (`planhrc.bench.bimanual`): the chain beside packaged planners on random
 tasks with two hands, a centre, grasp and release.
@@ -48,6 +50,7 @@ from typing import Any, Iterable, Sequence
 from planhrc.cli_args import SubParsers, int_list, name_list, positive_float, positive_int, writable_dir
 from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
+from planhrc.bench.cpu import cpu_row, cpu_text
 from planhrc.bench.bimanual import add_bimanual_arguments, run_bimanual
 from planhrc.bench.errors import BenchError
 from planhrc.bench.scale import SCALE_LINKS, SCALE_ORIENTATIONS, scale_plot, scale_report, scale_table
@@ -442,6 +445,7 @@ def replan_report(formulations: Sequence[str], runs: int, fd_runs: int, fd_timeo
             row["fast_downward"] = measure_fast_downward(f, runs=fd_runs, timeout_s=fd_timeout_s)
         if http:
             row["http"] = measure_http(f, runs=runs)
+            row["cpu"] = cpu_row(f, runs, anchor_runs=fd_runs, anchor_timeout_s=fd_timeout_s)
         report["formulations"][f] = row
     return report
 
@@ -450,8 +454,9 @@ def replan_table(report: dict[str, Any]) -> str:
     lines = [f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores; "
              f"{report['links']} links x {report['orientations']} orientations; medians (p90) in ms",
              "| formulation | ground (once) | plan | VAL | in-process loop | pipeline (KB) | its VAL | its store | "
-             "written out behind | Fast Downward process | HTTP perception | back to back | /health meanwhile, max |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "written out behind | Fast Downward process | HTTP perception | back to back | /health meanwhile, max | "
+             "service CPU per re-plan | anchor's whole process CPU |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for f, row in report["formulations"].items():
         p = row["planner"]
         fd = row.get("fast_downward")
@@ -469,7 +474,8 @@ def replan_table(report: dict[str, Any]) -> str:
             f"{stages.get('store', '-')} | {stages.get('write_out', '-')} | {fd_text} | "
             + (f"{http['median_ms']} ({http['p90_ms']}) | {http['back_to_back']['median_ms']} "
                f"({http['back_to_back']['p90_ms']}) |" if http else "- | - |")
-            + (f" {health['max_ms']} |" if health.get("max_ms") is not None else " - |"))
+            + (f" {health['max_ms']} |" if health.get("max_ms") is not None else " - |")
+            + f" {cpu_text(row.get('cpu'))}")
     return "\n".join(lines)
 
 

@@ -8,7 +8,9 @@ Each part starts its own `planhrc serve` process on a fresh SQLite file and driv
   worst wait of `/health` while the slowest read runs;
 * **contention** — another object's worst perception latency while a large absolute object plans;
 * **refusal** — the time to refuse a 150 MB body without the token, and over the size limit with it;
-* **knowledge** — SPARQL, subsumption over HTTP and reasoning jobs after a long history (`bench.knowledge`).
+* **knowledge** — SPARQL, subsumption over HTTP and reasoning jobs after a long history (`bench.knowledge`);
+* **scale-out** — perceptions per second, latency and CPU per perception of SQLite against 1, 2, 4 replicas on one
+  PostgreSQL database (`--db`), 10 and 100 objects (`bench.scale_out`).
 
 Prints one JSON document on stdout (`--out DIR` also writes `service-bench.json` and a Markdown table).
 """
@@ -36,6 +38,8 @@ from planhrc.service_process import RunningService as Server
 from planhrc.service_process import running_service as start_service
 from planhrc.stats import cpu_model, percentile
 from planhrc.vocabulary import DecisionKind
+
+from .errors import BenchError
 
 TOKEN = "service-bench-token"
 READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
@@ -393,9 +397,9 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("service-bench", help="measure the KB service with a long history (not a test)",
                               description=__doc__.splitlines()[0] if __doc__ else None)
     p.add_argument("--parts", default="objects,history,contention,refusal",
-                   help="comma-separated: objects, history, side-by-side, contention, refusal, knowledge (side-by-side: "
-                   "the first and last --checkpoints on two services at once, measured in alternating rounds; "
-                   "knowledge: after the last --checkpoints perceptions)")
+                   help="comma-separated: objects, history, side-by-side, contention, refusal, knowledge, scale-out "
+                   "(side-by-side: the first and last --checkpoints on two services at once, measured in alternating "
+                   "rounds; knowledge: after the last --checkpoints perceptions; scale-out: needs --db)")
     p.add_argument("--objects", type=_int_list, default=[1, 200, 1000], help="stored-object counts (1,200,1000)")
     p.add_argument("--checkpoints", type=_int_list, default=[100, 1000, 10000],
                    help="perception counts on one object at which to measure (100,1000,10000)")
@@ -408,6 +412,13 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p.add_argument("--planning-workers", type=_non_negative_int, default=None,
                    help="the service's planning pool size for the contention part (default: the service's; 0: "
                    "plan everything in the service's process, to compare)")
+    p.add_argument("--db", default=None, help="scale-out: a PostgreSQL database the bench may fill and empty "
+                   "(postgresql://user@host:port/database)")
+    p.add_argument("--scale-replicas", type=_int_list, default=[1, 2, 4], help="scale-out: replica counts (1,2,4)")
+    p.add_argument("--scale-objects", type=_int_list, default=[10, 100], help="scale-out: object counts (10,100)")
+    p.add_argument("--scale-size", type=_int_list, default=[20, 12], help="scale-out: links,orientations (20,12)")
+    p.add_argument("--scale-clients", type=_positive_int, default=8, help="scale-out: closed-loop clients (8)")
+    p.add_argument("--scale-seconds", type=float, default=20.0, help="scale-out: seconds per configuration (20)")
     p.add_argument("--read-timeout", type=float, default=120.0, help="seconds before a read counts as a timeout")
     p.add_argument("--seed", type=int, default=7)
     p.add_argument("--out", type=Path, default=None, help="also write service-bench.json and .md here")
@@ -417,9 +428,12 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
 
 def run_service_bench(args: argparse.Namespace) -> int:
     parts = {p.strip() for p in args.parts.split(",") if p.strip()}
-    unknown = parts - {"objects", "history", "side-by-side", "contention", "refusal", "knowledge"}
+    unknown = parts - {"objects", "history", "side-by-side", "contention", "refusal", "knowledge", "scale-out"}
     if unknown:
         print(f"planhrc service-bench: --parts: unknown part(s) {', '.join(sorted(unknown))}", file=sys.stderr)
+        return 2
+    if len(args.scale_size) != 2:
+        print("planhrc service-bench: --scale-size: expected links,orientations (two numbers)", file=sys.stderr)
         return 2
     report: dict[str, Any] = {"machine": {"cpu": cpu_model(), "cores": os.cpu_count(),
                                           "python": platform.python_version(),
@@ -445,7 +459,14 @@ def run_service_bench(args: argparse.Namespace) -> int:
 
             report["knowledge"] = bench_knowledge(max(args.checkpoints), args.samples, args.links, args.orientations,
                                                   args.seed)
-    except (RuntimeError, httpx.HTTPError) as exc:
+        if "scale-out" in parts:
+            from .scale_out import bench_scale_out
+
+            report["scale_out"] = bench_scale_out(
+                args.db, args.scale_replicas, args.scale_objects, args.scale_clients, args.scale_seconds,
+                args.scale_size[0], args.scale_size[-1], args.seed,
+                log=lambda line: print(f"[service-bench] {line}", file=sys.stderr, flush=True))
+    except (RuntimeError, httpx.HTTPError, BenchError) as exc:
         print(f"planhrc service-bench: {exc}", file=sys.stderr)
         return 1
     report["machine"]["load_at_end"] = round(os.getloadavg()[0], 2)
@@ -494,6 +515,10 @@ def markdown(report: dict[str, Any]) -> str:
         from .knowledge import knowledge_markdown
 
         lines += knowledge_markdown(report["knowledge"])
+    if "scale_out" in report:
+        from .scale_out import scale_out_markdown
+
+        lines += scale_out_markdown(report["scale_out"])
     lines += [f"* {line}" for line in targets(report)] + [""]
     if "contention" in report:
         c = report["contention"]

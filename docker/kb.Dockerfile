@@ -1,4 +1,5 @@
-# KB service: the ontology store, planners, VAL and the HTTP API. The core install only: no PyBullet, OpenCV or
+# KB service: the ontology store, planners, VAL and the HTTP API, and `planhrc planning-worker`. The core install
+# with the `postgresql` extra (psycopg, for replicas on one PostgreSQL: docker/replicas.yaml): no PyBullet, OpenCV or
 # robot meshes (the `sim` extra), no JDK (the service runs no DL reasoner; `reasoner` extra).
 # Build from the repository root:  docker build -f docker/kb.Dockerfile -t planhrc-kb .
 FROM python:3.11-slim-bookworm
@@ -13,7 +14,7 @@ WORKDIR /app
 # 1. The dependencies alone, pinned by constraints.txt: this layer is rebuilt only when pyproject.toml or
 #    constraints.txt change, not when the code does.
 COPY pyproject.toml constraints.txt docker/requirements.py ./
-RUN python requirements.py > requirements.txt \
+RUN python requirements.py postgresql > requirements.txt \
     && pip install --no-cache-dir -c constraints.txt -r requirements.txt
 # 2. The project, a regular (non-editable) install: the TBox travels as package data of planhrc.ontology.
 COPY README.md LICENSE ./

@@ -325,8 +325,10 @@ def stream_object_events(
     usecases.events_after(context, object_id, after_seq, limit=1)  # an unknown object is a 404 before the stream starts
     if last_event_id and last_event_id.isascii() and last_event_id.isdigit() and int(last_event_id) <= SQLITE_MAX_INT:
         after_seq = max(after_seq, int(last_event_id))
+    bell = getattr(request.app.state, "bell", None)  # a store other processes write too: their events, as committed
     frames = stream_events(lambda seq: usecases.events_after(context, object_id, seq), request.is_disconnected,
-                           after_seq=after_seq, max_events=max_events, timeout_s=timeout_s)
+                           after_seq=after_seq, max_events=max_events, timeout_s=timeout_s,
+                           news=None if bell is None else lambda: bell.subscribe(object_id))
     return StreamingResponse(frames, media_type="text/event-stream",
                              headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
 

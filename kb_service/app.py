@@ -5,7 +5,7 @@ import gc
 import logging
 import threading
 from contextlib import asynccontextmanager
-from typing import AsyncIterator, Callable
+from typing import TYPE_CHECKING, AsyncIterator, Callable
 
 from fastapi import FastAPI
 
@@ -14,15 +14,20 @@ from planhrc.settings import Settings, get_settings
 
 from .api import install_error_handlers, router
 from .console import install_console
+from .events import EventBell
 from .guard import GuardPolicy, RequestGuard
 from .knowledge.service import KnowledgeService
 from .knowledge_api import install_knowledge_errors
 from .knowledge_api import router as knowledge_router
 from .locks import ObjectLocks
 from .planning_pool import PlanningPool
-from .store import KBError, KnowledgeStore
+from .store import EventFeeding, KBError, KnowledgeStore
+from .store.backends import backend_of
 from .store.location import shown_location
 from .usecases import close_context, open_context
+
+if TYPE_CHECKING:
+    from .planning_queue import QueuedPlanning  # psycopg: only with a PostgreSQL store
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +39,19 @@ def open_knowledge_base(settings: Settings) -> KnowledgeStore:
 
     password = settings.db_password.get_secret_value() if settings.db_password else None
     return open_store(settings.db_path, settings.tbox_path, password)
+
+
+def open_planning(settings: Settings) -> PlanningPool | QueuedPlanning:
+    """Where the service plans large tasks: the database's planning job queue (`planning_queue`, PostgreSQL), served
+    by `planhrc planning-worker` processes on any host, else its own planning worker processes."""
+    if settings.planning_queue:
+        if settings.db_path is None or backend_of(settings.db_path) != "postgresql":
+            raise KBError("planning_queue: the planning job queue is a PostgreSQL store's (--db postgresql://...)")
+        from .planning_queue import QueuedPlanning
+
+        password = settings.db_password.get_secret_value() if settings.db_password else None
+        return QueuedPlanning(settings.db_path, password, settings.planning_pool_min_atoms)
+    return PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
 
 
 def compact_on_schedule(kb: KnowledgeStore, settings: Settings, stop: threading.Event) -> None:
@@ -62,11 +80,17 @@ def create_app(settings: Settings | None = None,
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        kb = open_store(settings)
+        pool = open_planning(settings)
+        try:
+            kb = open_store(settings)
+        except BaseException:
+            pool.close()
+            raise
         app.state.kb = kb
-        pool = PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
         context = app.state.context = open_context(kb, settings, ObjectLocks(), pool)
         knowledge = app.state.knowledge = KnowledgeService(kb, settings)
+        # a store other processes write too: event streams wait on its feed of committed events
+        bell = app.state.bell = EventBell(kb.event_feed) if isinstance(kb, EventFeeding) else None
         log.info("knowledge base open: %s", shown_location(settings.db_path) if settings.db_path else "in memory")
         freeze_heap()
         stop = threading.Event()
@@ -81,6 +105,8 @@ def create_app(settings: Settings | None = None,
             stop.set()
             if compactor is not None:
                 compactor.join(timeout=60)
+            if bell is not None:
+                bell.close()
             knowledge.close()
             close_context(context)
             pool.close()

@@ -24,8 +24,8 @@ if TYPE_CHECKING:
 
 _Parser = TypeVar("_Parser", bound=argparse.ArgumentParser)
 
-__all__ = ["SERVE_OPTIONS", "SettingsProblem", "add_compact_parser", "add_serve_parser", "check_serve_settings",
-           "main", "run_compact", "run_serve"]
+__all__ = ["SERVE_OPTIONS", "SettingsProblem", "add_compact_parser", "add_planning_worker_parser", "add_serve_parser",
+           "check_serve_settings", "main", "run_compact", "run_planning_worker", "run_serve"]
 
 REQUEST_THREADS_WAIT_S = 2.0  # what request threads still running when the server has stopped are given
 
@@ -34,7 +34,7 @@ SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "db_pass
                  "token": "--token", "token_file": "--token-file", "read_token": "--read-token",
                  "read_token_file": "--read-token-file", "protect_reads": "--protect-reads", "insecure": "--insecure",
                  "ssl_certfile": "--ssl-certfile", "ssl_keyfile": "--ssl-keyfile", "tbox_path": "--tbox",
-                 "planner": "--planner", "log_level": "--log-level"}
+                 "planner": "--planner", "log_level": "--log-level", "planning_queue": "--planning-queue"}
 
 
 def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
@@ -74,6 +74,9 @@ def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser
     p.add_argument("--tbox", type=tbox_file, default=None,
                    help="TBox OWL file (default: the repository's ontology/planhrc.owl)")
     p.add_argument("--planner", default=None, choices=list(PLANNERS), help="planner backend (default inproc)")
+    p.add_argument("--planning-queue", action="store_true", default=None,
+                   help="plan large tasks through the database's planning job queue, served by `planhrc "
+                   "planning-worker` processes on any host (a PostgreSQL store; env PLANHRC_PLANNING_QUEUE)")
     p.add_argument("--log-level", default=None, choices=list(LOG_LEVELS), help="uvicorn log level (default info)")
     p.set_defaults(func=run_serve)
     return p
@@ -113,6 +116,9 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
     warnings = [] if warnings is None else warnings
     settings = resolve_secrets(settings, given, name, warnings)
     check_exposure(settings, name, warnings)
+    if settings.planning_queue and backend_of(settings.db_path) != "postgresql":
+        raise SettingsProblem(f"{name('planning_queue')}: the planning job queue is a PostgreSQL store's; give "
+                              f"{name('db_path')} a postgresql:// URL, or plan in the service's own workers")
     if backend_of(settings.db_path) != "sqlite":
         check_store_server(settings, name("db_path"))
     elif settings.db_path not in (None, "", ":memory:"):
@@ -154,13 +160,13 @@ def check_store_server(settings: Settings, option: str) -> None:
 
 
 def run_serve(args: argparse.Namespace) -> int:
-    import uvicorn
     from pydantic import ValidationError
 
     from planhrc.cli_args import settings_error_line
     from planhrc.settings import make_settings
 
     from .app import create_app
+    from .server import serve
 
     overrides = {key: value for key, value in {
         "host": args.host, "port": args.port, "db_path": args.db, "db_password_file": args.db_password_file,
@@ -168,6 +174,7 @@ def run_serve(args: argparse.Namespace) -> int:
         "read_token_file": args.read_token_file, "protect_reads": args.protect_reads, "insecure": args.insecure,
         "ssl_certfile": args.ssl_certfile, "ssl_keyfile": args.ssl_keyfile,
         "tbox_path": args.tbox, "planner": args.planner, "log_level": args.log_level,
+        "planning_queue": args.planning_queue,
     }.items() if value is not None}
     warnings: list[str] = []
     try:
@@ -184,10 +191,10 @@ def run_serve(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.DEBUG if level == "trace" else level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=level,
-                    ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
-                    # an open event stream (a console page) must not keep a stopping service alive
-                    timeout_graceful_shutdown=2)
+        serve(create_app(settings), host=settings.host, port=settings.port, log_level=level,
+              ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
+              # an open event stream (a console page) must not keep a stopping service alive
+              timeout_graceful_shutdown=2)
     except KeyboardInterrupt:
         _leave_request_threads(128 + signal.SIGINT, "interrupted")
         raise
@@ -283,6 +290,79 @@ def run_compact(args: argparse.Namespace) -> int:
     except KBError as exc:
         print(f"planhrc compact: {exc}", file=sys.stderr)
         return 1
+    return 0
+
+
+def add_planning_worker_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
+    from planhrc.cli_args import tbox_file
+
+    p = subparsers.add_parser(
+        "planning-worker", help="plan queued tasks for the services of a PostgreSQL store, on any host",
+        description="Serve the planning job queue of a PostgreSQL store: take the large tasks the services on that "
+        "database queue (`planhrc serve --planning-queue`), one at a time, plan them (and check them with VAL when "
+        "the service asks) by each task's deadline, and store the outcome for the service. Run as many as the "
+        "hosts have cores; a killed worker's task is taken again by another once its lease expires.")
+    p.add_argument("--db", default=None, help="the store: a PostgreSQL URL postgresql://user@host:port/database "
+                   "(env PLANHRC_DB)")
+    p.add_argument("--db-password-file", default=None, metavar="FILE",
+                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE and "
+                   "PGPASSWORD work too)")
+    p.add_argument("--tbox", type=tbox_file, default=None,
+                   help="TBox OWL file (default: the repository's ontology/planhrc.owl); the services' own")
+    p.add_argument("--lease-s", type=float, default=None, metavar="SECONDS",
+                   help="the lease on a task, renewed while it plans: another worker takes the task this long after "
+                   "this one stopped renewing it (default 3, env PLANHRC_PLANNING_LEASE_S)")
+    p.add_argument("--nice", type=int, default=10, choices=range(0, 20), metavar="0..19",
+                   help="scheduling priority below the other processes of the host (default 10: on a service's "
+                   "host, the service's requests come first)")
+    p.set_defaults(func=run_planning_worker)
+    return p
+
+
+def run_planning_worker(args: argparse.Namespace) -> int:
+    import threading
+
+    from pydantic import ValidationError
+
+    from planhrc.cli_args import settings_error_line
+    from planhrc.settings import make_settings
+
+    options = {"db_path": "--db", "db_password_file": "--db-password-file", "tbox_path": "--tbox",
+               "planning_lease_s": "--lease-s"}
+    overrides = {key: value for key, value in {"db_path": args.db, "db_password_file": args.db_password_file,
+                                               "tbox_path": args.tbox, "planning_lease_s": args.lease_s}.items()
+                 if value is not None}
+
+    def name(field: str) -> str:
+        if field in overrides:
+            return options[field]
+        if field == "db_path":  # the store's variable has two names, and a worker has no default store
+            given = [v for v in ("PLANHRC_DB", "PLANHRC_DB_PATH") if os.environ.get(v)]
+            return given[0] if given else "--db"
+        return f"PLANHRC_{field.upper()}"
+
+    warnings: list[str] = []
+    try:
+        settings = resolve_secrets(make_settings(**overrides), set(overrides), name, warnings)
+        if backend_of(settings.db_path) != "postgresql" or not settings.db_path:
+            raise SettingsProblem(f"{name('db_path')}: a planning worker serves the job queue of a PostgreSQL store: "
+                                  "give its URL, postgresql://user@host:port/database")
+        check_store_server(settings, name("db_path"))
+    except ValidationError as exc:
+        print(f"planhrc planning-worker: {settings_error_line(exc, {f: options[f] for f in overrides})}",
+              file=sys.stderr)
+        return 2
+    except SettingsProblem as exc:
+        print(f"planhrc planning-worker: {exc}", file=sys.stderr)
+        return 2
+    for warning in warnings:
+        print(f"planhrc planning-worker: warning: {warning}", file=sys.stderr, flush=True)
+    from .planning_queue import serve_jobs
+
+    logging.getLogger("planhrc").setLevel(logging.INFO)
+    os.nice(args.nice)
+    password = settings.db_password.get_secret_value() if settings.db_password else None
+    serve_jobs(settings.db_path, password, settings.tbox_path, settings.planning_lease_s, threading.Event())
     return 0
 
 

@@ -1,4 +1,6 @@
-"""Planning worker processes owned by the service, so a large task's planning does not hold its interpreter.
+"""Planning worker processes owned by the service, so a large task's planning does not hold its interpreter. (A
+service on PostgreSQL may instead put its large tasks in the database's job queue, for `planhrc planning-worker`
+processes on any host: `planning_queue`.)
 
 The pipeline (translate -> plan -> order -> expected states -> VAL, `pipeline.plan`) is mostly Python: while it
 runs in the service's process it holds the interpreter lock in turns with every request, and its memoised

@@ -612,9 +612,10 @@ class HealthPublic(BaseModel):
     triples: int = Field(description="Number of triples in the ABox (written ones: see plans_to_write).",
                          examples=[1520])
     plans_to_write: int = Field(
-        description="Plans stored (as their journal rows) whose triples the store's writer thread has not written "
-        "yet, usually for less than 0.1 s; the service answers for them meanwhile, and their triples are not in "
-        "`triples` yet.", examples=[0])
+        description="Plans stored as their journal rows whose triples are not written yet: they are written when "
+        "something reads the triples (the RDF export, SPARQL, a reasoner, compaction), and compaction drops those "
+        "of plans it does not keep unwritten. The service answers for them from their rows; their triples are not "
+        "in `triples` until then.", examples=[0])
     auth: bool = Field(description="Whether writes need a bearer token.", examples=[False])
 
 

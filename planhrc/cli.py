@@ -30,6 +30,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "bench": ("planhrc.bench.grid", "add_bench_parser", "the paper's planning grid and re-planning latency"),
     "serve": ("planhrc.kb_service.cli", "add_serve_parser", "run the knowledge-base HTTP service"),
     "compact": ("planhrc.kb_service.cli", "add_compact_parser", "drop the history the retention policy does not keep"),
+    "planning-worker": ("planhrc.kb_service.cli", "add_planning_worker_parser",
+                        "plan queued tasks for the services of a PostgreSQL store, on any host"),
     "worker": ("planhrc.robot_sim.worker", "add_worker_parser", "run the simulated Baxter worker"),
     "demo": ("planhrc.robot_sim.demo", "add_demo_parser", "KB service + Baxter worker: a scenario to the end"),
     "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser", "what the simulated cell measures"),

@@ -95,6 +95,18 @@ class Settings(BaseSettings):
         "with the service): a large task's translation, planning and replay run there, not in the service's "
         "interpreter; 0: every task is planned in the service's process.",
     )
+    planning_queue: bool = Field(
+        default=False,
+        description="Large tasks (`planning_pool_min_atoms`) are planned by `planhrc planning-worker` processes, on "
+        "any host that reaches the database, through its planning job queue (a PostgreSQL store only), instead of "
+        "the service's own planning workers; a task no worker finished by the planning deadline answers 503.",
+    )
+    planning_lease_s: float = Field(
+        default=3.0, gt=0, le=600,
+        description="A planning worker's lease on the job it plans, renewed every third of it while it plans: a job "
+        "whose worker stopped renewing (killed, cut off) is taken by another worker this long after the last "
+        "renewal, if its deadline leaves time.",
+    )
     planning_pool_min_atoms: int = Field(
         default=150, ge=1,
         description="A task goes to the planning pool when a state of its object holds at least this many atoms "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import NoReturn
 
 import pytest
@@ -13,6 +14,13 @@ from tests.pg_cluster import Cluster, ClusterUnavailable
 
 @pytest.fixture(scope="session")
 def pg_cluster() -> Iterator[Cluster]:
+    with throwaway_cluster() as cluster:
+        yield cluster
+
+
+@contextmanager
+def throwaway_cluster() -> Iterator[Cluster]:
+    """A new cluster, removed afterwards (a test that restarts one has its own); skipped where none can start."""
     try:
         import psycopg  # noqa: F401
     except ImportError as exc:

@@ -85,6 +85,7 @@ class Cluster:
         data = self.folder / "data"
         self.port = free_port()
         self._count = 0
+        self._server: subprocess.Popen[bytes] | None = None
         self._log = open(self.folder / "server.log", "wb")
         done = subprocess.run([str(bindir / "initdb"), "-D", str(data), "-U", USER, "--auth=trust", "-E", "UTF8",
                                "--no-sync", "--no-instructions"], preexec_fn=before_exec, capture_output=True,
@@ -93,12 +94,34 @@ class Cluster:
             self.close()
             raise ClusterUnavailable(f"initdb failed: {done.stderr.decode(errors='replace')[-500:]}")
         (data / "pg_hba.conf").write_text(HBA)
-        self._server: subprocess.Popen[bytes] | None = subprocess.Popen(
-            [str(bindir / "postgres"), "-D", str(data), "-p", str(self.port), "-k", str(self.folder),
-             "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off", "-c", "synchronous_commit=off",
-             "-c", "full_page_writes=off", "-c", "max_connections=200"],
-            preexec_fn=before_exec, stdout=self._log, stderr=subprocess.STDOUT, cwd=self.folder)
+        self._command = [str(bindir / "postgres"), "-D", str(data), "-p", str(self.port), "-k", str(self.folder),
+                         "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off", "-c", "synchronous_commit=off",
+                         "-c", "full_page_writes=off", "-c", "max_connections=200"]
+        self._before_exec = before_exec
+        self._start()
+
+    def _start(self) -> None:
+        self._server = subprocess.Popen(self._command, preexec_fn=self._before_exec, stdout=self._log,
+                                        stderr=subprocess.STDOUT, cwd=self.folder)
         self._wait_ready()
+
+    def _stop(self) -> None:
+        """Fast shutdown: every client's connection is cut, open transactions are rolled back."""
+        if self._server is not None:
+            self._server.send_signal(signal.SIGINT)
+            try:
+                self._server.wait(30)
+            except subprocess.TimeoutExpired:
+                self._server.kill()
+                self._server.wait()
+            self._server = None
+
+    def restart(self, down_s: float = 0.0) -> None:
+        """Stop the server (its clients' connections cut, their transactions rolled back) and, after `down_s`
+        seconds without it, start it again on the same port and data."""
+        self._stop()
+        time.sleep(down_s)
+        self._start()
 
     @property
     def url(self) -> str:
@@ -165,13 +188,6 @@ class Cluster:
 
     def close(self) -> None:
         """Stop the server (fast shutdown: clients are disconnected) and remove its folder."""
-        if self._server is not None:
-            self._server.send_signal(signal.SIGINT)
-            try:
-                self._server.wait(30)
-            except subprocess.TimeoutExpired:
-                self._server.kill()
-                self._server.wait()
-            self._server = None
+        self._stop()
         self._log.close()
         shutil.rmtree(self.folder, ignore_errors=True)

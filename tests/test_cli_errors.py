@@ -51,6 +51,16 @@ CASES = [
     (["serve", "--ssl-certfile", "/proc/nope/cert.pem"], {}, "--ssl-certfile"),
     (["serve", "--ssl-certfile", NOT_OWL], {}, "--ssl-certfile"),
     (["serve"], {"PLANHRC_INSECURE": "maybe"}, "PLANHRC_INSECURE"),
+    # the planning job queue: a PostgreSQL store's, served by planning workers
+    (["serve", "--planning-queue"], {}, "--planning-queue"),
+    (["serve"], {"PLANHRC_PLANNING_QUEUE": "true"}, "PLANHRC_PLANNING_QUEUE"),
+    (["planning-worker"], {}, "--db: a planning worker serves the job queue of a PostgreSQL store"),
+    (["planning-worker"], {"PLANHRC_DB": "kb.sqlite3"}, "PLANHRC_DB: a planning worker"),
+    (["planning-worker", "--db", "kb.sqlite3"], {}, "--db: a planning worker"),
+    (["planning-worker", "--db", "postgresql://planhrc@127.0.0.1:1/kb"], {}, "--db: cannot connect"),
+    (["planning-worker", "--lease-s", "0"], {}, "--lease-s"),
+    (["planning-worker", "--nice", "40"], {}, "--nice"),
+    (["planning-worker", "--db-password-file", "/proc/nope/pw"], {}, "--db-password-file"),
     # compact on a server
     (["compact", "--db", "postgresql://planhrc@127.0.0.1:1/kb"], {}, "db: cannot connect"),
     (["compact", "--db", "postgresql://planhrc@127.0.0.1:1/kb", "--vacuum"], {}, "--vacuum"),
@@ -158,6 +168,7 @@ PROCESS_CASES = [
     (["sim-bench", "--configurations", "0", "--rotations", "0"], {}, "--configurations"),
     (["demo", "--episodes", "-2"], {}, "--episodes"),
     (["worker", "--kb", "not-a-url", "--object", "o1"], {}, "--kb"),
+    (["planning-worker", "--db", "postgresql://planhrc@127.0.0.1:1/kb"], {}, "--db"),
 ]
 
 

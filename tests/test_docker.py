@@ -16,7 +16,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 DOCKER = REPO / "docker"
-IMAGES = {"kb": [], "worker": ["sim"]}  # image -> extras it installs
+IMAGES = {"kb": ["postgresql"], "worker": ["sim"]}  # image -> extras it installs
+COMPOSE_FILES = ("compose.yaml", "replicas.yaml")
 SIM_PACKAGES = {"pybullet", "opencv-python-headless", "example-robot-data", "matplotlib", "pillow"}
 SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "example_robot_data", "matplotlib", "PIL")
 
@@ -99,6 +100,47 @@ def test_the_compose_file_wires_the_two_images():
     assert "http://kb:8000" in services["worker"]["command"]
 
 
+def test_the_replicas_compose_file_runs_two_replicas_and_a_worker_on_one_postgresql():
+    """docker/replicas.yaml: PostgreSQL, two service replicas (the planning queue on) and a planning worker, all of
+    one image; the database password and the token reach every container as secret files only (no secret in an
+    environment value or a command line), from a folder that neither git nor the build context takes; each
+    command is one planhrc's own parser accepts."""
+    yaml = pytest.importorskip("yaml", reason="PyYAML (test extra) reads the compose file")
+    from planhrc.cli import build_parser
+
+    compose = yaml.safe_load((DOCKER / "replicas.yaml").read_text())
+    services = compose["services"]
+    assert set(services) == {"db", "kb1", "kb2", "planning-worker"}
+    assert services["db"]["environment"]["POSTGRES_PASSWORD_FILE"] == "/run/secrets/db_password"
+    assert "db_password" in services["db"]["secrets"]
+    assert services["kb1"]["build"]["dockerfile"] == "docker/kb.Dockerfile"
+    for name in ("kb1", "kb2", "planning-worker"):
+        service = services[name]
+        env = service["environment"]
+        assert env["PLANHRC_DB"] == "postgresql://planhrc@db:5432/planhrc"  # no password in the URL
+        assert env["PLANHRC_DB_PASSWORD_FILE"] == "/run/secrets/db_password" and "db_password" in service["secrets"]
+        assert service["depends_on"]["db"]["condition"] == "service_healthy"
+        assert service["image"] == services["kb1"]["image"]
+        command = service["command"]
+        args = build_parser(command[1:]).parse_args(command[1:])
+        assert args.command == command[1]
+    for name in ("kb1", "kb2"):
+        assert "--planning-queue" in services[name]["command"] and "0.0.0.0" in services[name]["command"]
+        assert services[name]["environment"]["PLANHRC_TOKEN_FILE"] == "/run/secrets/token"
+        assert "token" in services[name]["secrets"]
+    assert services["planning-worker"]["command"][:2] == ["planhrc", "planning-worker"]
+    ports = [p for name in ("kb1", "kb2") for p in services[name]["ports"]]
+    assert len(set(ports)) == 2 and all(p.startswith("127.0.0.1:") for p in ports)
+    for service in services.values():
+        for key, value in service.get("environment", {}).items():
+            secret = any(word in key for word in ("PASSWORD", "TOKEN")) and not key.endswith("_FILE")
+            assert not secret, f"{key} holds a secret in the compose file"
+        assert not any(word in " ".join(service.get("command", [])) for word in ("--token ", "password"))
+    assert all(s["file"].startswith("./secrets/") for s in compose["secrets"].values())
+    assert "docker/secrets" in (REPO / ".dockerignore").read_text().split()
+    assert "docker/secrets/" in (REPO / ".gitignore").read_text().split()
+
+
 def hadolint() -> str | None:
     beside = Path(sys.executable).parent / "hadolint"
     return str(beside) if beside.exists() else shutil.which("hadolint")
@@ -119,14 +161,15 @@ def compose_spec_errors(path: Path) -> subprocess.CompletedProcess[str]:
                            "--no-cache", str(path)], capture_output=True, text=True, timeout=60)
 
 
-def test_the_compose_file_follows_the_compose_spec(tmp_path):
+@pytest.mark.parametrize("name", COMPOSE_FILES)
+def test_the_compose_file_follows_the_compose_spec(tmp_path, name):
     """`docker compose config` offline: the compose file against the compose specification's schema; a copy with
     a misspelt key and a condition the spec does not know is refused, naming both."""
     pytest.importorskip("check_jsonschema", reason="check-jsonschema (test extra) validates the compose file")
-    result = compose_spec_errors(DOCKER / "compose.yaml")
+    result = compose_spec_errors(DOCKER / name)
     assert result.returncode == 0, result.stdout + result.stderr
-    broken = tmp_path / "compose.yaml"
-    broken.write_text((DOCKER / "compose.yaml").read_text().replace("read_only: true", "readonly: true", 1)
+    broken = tmp_path / name
+    broken.write_text((DOCKER / name).read_text().replace("read_only: true", "readonly: true", 1)
                       .replace("condition: service_healthy", "condition: service_ready"))
     result = compose_spec_errors(broken)
     assert result.returncode == 1, result.stdout + result.stderr
@@ -141,8 +184,9 @@ def compose_available() -> bool:
 
 @pytest.mark.skipif(not compose_available(), reason="`docker compose` is not installed here (the docker CLI has "
                                                      "no compose plugin, or there is no docker CLI)")
-def test_docker_compose_config_accepts_the_file():
-    result = subprocess.run(["docker", "compose", "-f", str(DOCKER / "compose.yaml"), "config", "--quiet"],
+@pytest.mark.parametrize("name", COMPOSE_FILES)
+def test_docker_compose_config_accepts_the_file(name):
+    result = subprocess.run(["docker", "compose", "-f", str(DOCKER / name), "config", "--quiet"],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
 

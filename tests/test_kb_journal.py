@@ -1,6 +1,6 @@
-"""A plan is stored as one journal row in the transaction that adopts it and written out as triples by the store's
-writer thread soon after (`kb_service/store/journal.py`, `backlog.py`): answered at once, never lost, the same
-triples in the end."""
+"""A plan is stored as one journal row in the transaction that adopts it, read from that row, and written out as
+triples only when a reader of the triples needs them (`kb_service/store/journal.py`, `backlog.py`): answered at once,
+never lost, the same triples whenever they are written."""
 from __future__ import annotations
 
 import subprocess
@@ -41,8 +41,7 @@ def test_a_row_holds_every_part_of_the_plan():
     assert decode(encode(entry)) == entry
 
 
-def test_a_plan_is_answered_at_once_and_its_triples_follow(place, monkeypatch):
-    monkeypatch.setattr(journal, "WRITE_DELAY_S", 1.0)  # the checks right after the commit come first, under any load
+def test_a_plan_is_answered_from_its_row_and_written_out_when_the_triples_are_read(place):
     with place.open() as kb:
         _, problem, actions, states = _object_with_problem(kb)
         before = kb.triple_count()
@@ -50,22 +49,25 @@ def test_a_plan_is_answered_at_once_and_its_triples_follow(place, monkeypatch):
         assert kb.get_plan(plan.id) == plan
         assert kb.get_state(plan.expected_state_ids[-1]).atoms == frozenset(states[-1])
         assert kb.get_action(plan.actions[0].id) == plan.actions[0]
-        assert place.journal_rows() == kb.plans_to_write() == 1  # answered from the journal ...
+        time.sleep(0.3)  # nothing writes the plan out behind the answer
+        assert place.journal_rows() == kb.plans_to_write() == 1
         assert kb.triple_count() == before
-        deadline = time.monotonic() + 10
-        while place.journal_rows() and time.monotonic() < deadline:  # ... written by the writer thread, not a reader
-            time.sleep(0.02)
-        assert place.journal_rows() == kb.plans_to_write() == 0
-        assert kb.triple_count() > before + 100
-    with place.open() as again:  # read back from the triples alone
+    with place.open() as again:  # another process: read from the row, which opening leaves as it is
         assert again.get_plan(plan.id) == plan
+        assert [again.get_state(s).atoms for s in plan.expected_state_ids] == [frozenset(s) for s in states]
+        assert again.get_action(plan.actions[2].id) == plan.actions[2]
+        assert place.journal_rows() == again.plans_to_write() == 1
+        assert f"<{ABOX_IRI}{plan.actions[2].id}>" in again.export("nt").decode()  # a reader of the triples ...
+        assert place.journal_rows() == again.plans_to_write() == 0  # ... has it written out first
+        assert again.triple_count() > before + 100
+    with place.open() as third:  # read back from the triples alone
+        assert third.get_plan(plan.id) == plan
+        assert [third.get_state(s).atoms for s in plan.expected_state_ids] == [frozenset(s) for s in states]
 
 
-def test_a_process_killed_before_the_write_out_keeps_its_plan(place):
+def test_a_process_killed_right_after_its_commit_keeps_its_plan(place):
     child = textwrap.dedent(f"""
         import os, sys
-        from planhrc.kb_service.store import journal
-        journal.WRITE_DELAY_S = 600.0  # the writer never gets to it: the process dies first
         from planhrc.kb_service.store import open_store
         from planhrc.paths import default_tbox_path
         from tests.test_kb_journal import _object_with_problem
@@ -79,14 +81,14 @@ def test_a_process_killed_before_the_write_out_keeps_its_plan(place):
     assert done.returncode == 0, done.stderr
     plan_id = done.stdout.split()[-1]
     assert place.journal_rows() == 1
-    with place.open() as kb:  # opening writes the row out before anything is served
-        assert place.journal_rows() == kb.plans_to_write() == 0
+    with place.open() as kb:  # the row is the plan
         plan = kb.get_plan(plan_id)
+        assert len(plan.actions) == 3
+        text = kb.export("nt").decode()
+        assert f"<{ABOX_IRI}{plan.actions[2].id}>" in text
+        assert place.journal_rows() == 0
     with place.open() as again:
         assert again.get_plan(plan_id) == plan
-        assert len(plan.actions) == 3
-        text = again.export("nt").decode()
-        assert f"<{ABOX_IRI}{plan.actions[2].id}>" in text
 
 
 def test_a_failed_write_out_keeps_the_row_and_the_plan(tmp_path, monkeypatch):
@@ -152,30 +154,23 @@ def test_a_row_holds_the_expected_states_as_changes_and_rows_of_the_layout_befor
         decode(row[: len(row) // 2])
 
 
-def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(monkeypatch):
-    """The writer takes the store's lock once per plan; a thread waiting for that lock must get it after the plan
-    being written, not after every plan left (a lock released and taken again at once is not handed over)."""
-    monkeypatch.setattr(journal, "WRITE_DELAY_S", 0.0)
-    lock = threading.RLock()
-    left = [20]
-    writing = threading.Event()
-
-    def write_one() -> bool:  # one plan: 5 ms with the store's lock held
-        with lock:
-            writing.set()
-            time.sleep(0.005)
-            left[0] -= 1
-            return left[0] > 0
-
-    writer = journal.PlanWriter(write_one)
-    try:
-        writer.poke()
-        assert writing.wait(5)
-        with lock:
-            behind = left[0]  # plans still to write when the waiting thread got the store
-    finally:
-        writer.close()
-    assert behind >= 15, f"the waiting thread got the store only with {behind} of 20 plans left"
+def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(tmp_path):
+    """An export of the whole history writes out every journalled plan, taking the store's lock once per plan; a
+    request waiting for that lock gets it after the plan being written, not after every plan left (a lock released
+    and taken again at once is not handed over)."""
+    with KnowledgeBase(str(tmp_path / "kb.sqlite3"), TBOX) as kb:
+        _, problem, actions, states = _object_with_problem(kb, "relative")
+        plans = [kb.add_plan(problem.id, "inproc", actions, states) for _ in range(20)]
+        exporting = threading.Thread(target=lambda: kb.export("nt", "all"))
+        exporting.start()
+        deadline = time.monotonic() + 10
+        while kb.plans_to_write() == 20 and time.monotonic() < deadline:
+            time.sleep(0.001)
+        kb.get_object("obj1")  # takes the store's lock
+        behind = kb.plans_to_write()
+        exporting.join(60)
+        assert kb.plans_to_write() == 0 and all(kb.get_plan(p.id) == p for p in plans)
+    assert behind >= 15, f"the waiting request got the store only with {behind} of 20 plans left"
 
 
 def test_a_damaged_journal_row_refuses_the_store_and_leaves_no_thread_behind(tmp_path):
@@ -187,7 +182,8 @@ def test_a_damaged_journal_row_refuses_the_store_and_leaves_no_thread_behind(tmp
     with KnowledgeBase(path, TBOX) as kb:
         _object_with_problem(kb)
     with sqlite3.connect(path) as conn:
-        conn.execute("INSERT INTO planhrc_plan_journal VALUES ('obj1_plan_1', ?)", (b"\x80\x05not a pickle",))
+        conn.execute("INSERT INTO planhrc_plan_journal VALUES ('obj1_plan_1', ?, 'obj1', 9, 12)",
+                     (b"\x80\x05not a pickle",))
     before = {t.name for t in threading.enumerate()}
     with pytest.raises(DamagedStoreError, match="^plan journal: a row that does not read back"):
         KnowledgeBase(path, TBOX)
@@ -195,3 +191,109 @@ def test_a_damaged_journal_row_refuses_the_store_and_leaves_no_thread_behind(tmp
     while {t.name for t in threading.enumerate()} - before and time.monotonic() < deadline:
         time.sleep(0.02)
     assert {t.name for t in threading.enumerate()} - before == set()
+
+
+def test_a_journal_table_written_before_rows_named_their_states_is_read(tmp_path):
+    """A store whose journal rows hold only the plan's id and payload (the layout before a row named its object
+    and states): opening it adds the columns, filled from the payloads, and every state is read from its row."""
+    import sqlite3
+
+    path = str(tmp_path / "kb.sqlite3")
+    with KnowledgeBase(path, TBOX) as kb:
+        _, problem, actions, states = _object_with_problem(kb)
+        plan = kb.add_plan(problem.id, "inproc", actions, states)
+    with sqlite3.connect(path) as conn:
+        payload = conn.execute("SELECT payload FROM planhrc_plan_journal").fetchone()[0]
+        conn.execute("DROP TABLE planhrc_plan_journal")
+        conn.execute("CREATE TABLE planhrc_plan_journal (plan_id TEXT PRIMARY KEY, payload BLOB NOT NULL)")
+        conn.execute("INSERT INTO planhrc_plan_journal VALUES (?, ?)", (plan.id, payload))
+    with KnowledgeBase(path, TBOX) as kb:
+        assert kb.plans_to_write() == 1
+        assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == [frozenset(s) for s in states]
+        assert kb.get_plan(plan.id) == plan
+
+
+def _history_of_plans(kb: KnowledgeStore, write_out: bool) -> None:
+    """An object with two re-plans: with `write_out` every plan's triples are written at once (as the store did
+    behind every answer), else they stay journal rows until a reader needs them."""
+    obj = make_object("obj1", "absolute", 4, 8)
+    kb.create_object(obj)
+    goal = kb.add_state("obj1", "goal", obj.configuration_atoms([90, 0, 45, 0]))
+    for values, moves in (([0, 0, 0, 0], [(1, True), (3, False), (2, True)]), ([45, 0, 0, 90], [(4, False)])):
+        start = kb.add_state("obj1", "perceived", obj.state(values), [float(v) for v in values])
+        actions, states = plan_for(obj, start.atoms, moves)
+        kb.add_plan(kb.add_problem("obj1", start.id, goal.id).id, "inproc", actions, states)
+        if write_out:
+            kb.settle()
+
+
+def _lines(kb: KnowledgeStore, history: str) -> set[str]:
+    return set(kb.export("nt", history).decode().splitlines())
+
+
+def test_plans_written_out_when_read_give_the_facts_written_at_once(place, tmp_path, monkeypatch):
+    """The export of a store whose plans stayed journal rows until it was read is the export of the same writes
+    with every plan written out at once: the current ABox and the whole history, fact for fact."""
+    monkeypatch.setattr(time, "time", lambda: 1_700_000_000.0)  # the records' createdAt: the same in both
+    other = place.another(tmp_path / "eager")
+    with place.open() as lazy, other.open() as eager:
+        _history_of_plans(lazy, write_out=False)
+        _history_of_plans(eager, write_out=True)
+        assert (lazy.plans_to_write(), eager.plans_to_write()) == (2, 0)
+        current = _lines(lazy, "current")
+        assert lazy.plans_to_write() == 1  # the current export wrote out the current plan only
+        assert current == _lines(eager, "current")
+        assert _lines(lazy, "all") == _lines(eager, "all")
+        assert lazy.plans_to_write() == 0 and lazy.triple_count() == eager.triple_count()
+
+
+@pytest.mark.reasoner
+def test_plans_written_out_when_read_give_the_inferences_of_plans_written_at_once(monkeypatch):
+    """Pellet infers the same facts from the world of a store whose plans stayed journal rows (written out when the
+    reasoner's copy is made) as from one whose plans were written at once, and finds both consistent."""
+    from planhrc.kb_service.reasoner import INFERENCES_IRI, copy_world, reason_in_place
+    from planhrc.kb_service.store.owl import ntriples_in
+
+    monkeypatch.setattr(time, "time", lambda: 1_700_000_000.0)
+    inferred = []
+    for write_out in (False, True):
+        with KnowledgeBase(None, TBOX) as kb:
+            _history_of_plans(kb, write_out)
+            world = copy_world(kb)
+            assert kb.plans_to_write() == 0
+        try:
+            consistent, _ = reason_in_place(world, "pellet", 120.0)
+            assert consistent
+            inferred.append(set(ntriples_in(world, INFERENCES_IRI)))
+        finally:
+            world.close()
+    assert inferred[0] and inferred[0] == inferred[1]
+
+
+@pytest.mark.reasoner
+def test_the_reasoning_service_infers_the_same_from_plans_written_out_when_read(place, tmp_path, monkeypatch):
+    """The knowledge service's DL check (`knowledge.reasoning.reason`, on the store's export) of the whole current
+    ABox, the plan with its actions and expected states too, finds the same inferences, consistent, in a store whose
+    plans stayed journal rows as in one whose plans were written at once, on each backend."""
+    from rdflib import Graph
+
+    from planhrc.kb_service.knowledge.reasoning import ReasoningRequest, reason
+    from planhrc.kb_service.knowledge.entailment import Vocabulary
+    from planhrc.vocabulary import ReasoningScope
+
+    tbox = Graph()
+    tbox.parse(str(TBOX), format="xml")
+    vocabulary = Vocabulary.of(tbox)
+    monkeypatch.setattr(time, "time", lambda: 1_700_000_000.0)
+    other = place.another(tmp_path / "eager")
+    request = ReasoningRequest("pellet", "obj1", ReasoningScope.CURRENT)
+    with place.open() as lazy, other.open() as eager:
+        _history_of_plans(lazy, write_out=False)
+        _history_of_plans(eager, write_out=True)
+        plan = lazy.latest_plan("obj1")
+        assert plan is not None and lazy.plans_to_write() == 2  # the plans are rows until the reasoner reads them
+        results = [reason(kb, request, 120.0, vocabulary, tmp_path) for kb in (lazy, eager)]
+    assert all(result.consistent for result in results)
+    assert results[0].inferred and set(results[0].inferred) == set(results[1].inferred)
+    # the current plan's expected states were among what the reasoner read
+    assert any(f"#{state}>" in line for state in plan.expected_state_ids for line in results[0].inferred)

@@ -130,7 +130,7 @@ def test_a_replanning_perception_writes_little_to_the_log_however_long_the_histo
                 usecases.perceive(context, usecases.PerceptionRequest(ident, links))
 
         perceive(20)
-        kb.settle()  # the plans' triples too (the store's writer thread writes them behind each answer)
+        kb.settle()  # the plans' triples too, as a reader of the triples has them written
         quads = kb._abox.q
         db = quads.db
         quads._checkpointer.close()  # its copies would race the count (a refused TRUNCATE leaves old frames)

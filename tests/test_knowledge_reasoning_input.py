@@ -15,7 +15,8 @@ from planhrc.kb_service.app import create_app
 from planhrc.kb_service.knowledge import reasoning_input
 from planhrc.kb_service.knowledge.entailment import Vocabulary
 from planhrc.kb_service.knowledge.jvm import cache_file, java_options
-from planhrc.kb_service.knowledge.reasoning import ReasoningRequest, _classpath, reason
+from planhrc.kb_service.knowledge.reasoning import ReasoningRequest, reason
+from planhrc.kb_service.store.owl import reasoner_classpath
 from planhrc.kb_service.knowledge.reasoning_input import reasoner_input
 from planhrc.kb_service.reasoner import _configure_java
 from planhrc.paths import default_tbox_path
@@ -82,7 +83,7 @@ def test_pellets_class_cache_is_made_once_and_used(served, vocab, tmp_path):
     kb, oid = served
     _configure_java()
     java = str(owlready2.JAVA_EXE)
-    cache = cache_file("pellet", java, _classpath("pellet"), tmp_path)
+    cache = cache_file("pellet", java, reasoner_classpath("pellet"), tmp_path)
     assert cache is not None and not cache.exists()
     first = reason(kb, ReasoningRequest("pellet", oid), 120, vocab, tmp_path)
     assert cache.is_file() and "cached" in " ".join(first.notes)
@@ -90,6 +91,6 @@ def test_pellets_class_cache_is_made_once_and_used(served, vocab, tmp_path):
     second = reason(kb, ReasoningRequest("pellet", oid), 120, vocab, tmp_path)
     assert second.notes == () and set(second.inferred) == set(first.inferred)
     assert list(tmp_path.iterdir()) == [cache]  # nothing left of the making
-    assert cache_file("hermit", java, _classpath("hermit"), tmp_path) is None
+    assert cache_file("hermit", java, reasoner_classpath("hermit"), tmp_path) is None
     hermit = reason(kb, ReasoningRequest("hermit", oid), 120, vocab, tmp_path)
     assert hermit.consistent and list(tmp_path.iterdir()) == [cache]

@@ -68,3 +68,29 @@ def test_service_bench_contention_reports_health_and_the_pool(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--planning-workers", "-1"],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "--planning-workers" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_service_bench_scale_out_compares_sqlite_and_replicas_in_one_run(tmp_path, pg_cluster, request):
+    from tests.servers import store_location
+
+    db = store_location("postgresql", tmp_path, request)
+    out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "scale-out", "--db", db,
+                          "--scale-replicas", "1,2", "--scale-objects", "3", "--scale-size", "4,4",
+                          "--scale-clients", "2", "--scale-seconds", "2", "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    part = json.loads(out.stdout)["scale_out"]
+    assert [(r["backend"], r["replicas"], r["routing"], r["objects"]) for r in part["rows"]] == [
+        ("sqlite", 1, "-", 3), ("postgresql", 1, "-", 3), ("postgresql", 2, "turns", 3), ("postgresql", 2, "object", 3)]
+    for row in part["rows"]:
+        assert row["perceptions"] > 0 and row["per_s"] > 0 and row["not_200"] == 0
+        assert 0 < row["p50_ms"] <= row["p95_ms"]
+        assert row["cpu_ms"] > 0
+    assert all(r["database_cpu_ms"] > 0 for r in part["rows"] if r["backend"] == "postgresql")
+    assert [r["throughput_vs_1_replica"] is not None for r in part["ratios"]] == [True] * 4
+    assert "| 3 | postgresql | 2 | object |" in (tmp_path / "service-bench.md").read_text()
+    refused = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "scale-out"],
+                             capture_output=True, text=True, timeout=120)
+    assert refused.returncode == 1 and refused.stderr.strip().splitlines() == [
+        "planhrc service-bench: --db: the scale-out part needs a PostgreSQL database it may fill "
+        "(postgresql://user@host:port/database)"]

@@ -25,7 +25,7 @@ from planhrc.vocabulary import ReasoningScope
 
 from ..reasoner import INFERENCES_IRI, REASONERS, _configure_java, drop_builtin_rules, reason_in_place
 from ..store import ABOX_IRI, TBOX_IRI, ReasonerError, ValidationError
-from ..store.owl import load_ntriples, ntriples_in, pellet_command
+from ..store.owl import load_ntriples, ntriples_in, pellet_command, reasoner_classpath
 from .entailment import Vocabulary
 from .graph import KnowledgeSource
 from .jvm import cache_file, java_options, make_cache
@@ -82,7 +82,7 @@ def reason(store: KnowledgeSource, request: ReasoningRequest, timeout_s: float, 
     given = reasoner_input(store, None if request.object_id is None else [request.object_id], request.scope,
                            vocabulary)
     _configure_java()
-    cache = cache_file(request.reasoner, str(owlready2.JAVA_EXE), _classpath(request.reasoner), cache_dir)
+    cache = cache_file(request.reasoner, str(owlready2.JAVA_EXE), reasoner_classpath(request.reasoner), cache_dir)
     world = World()
     try:
         load_ntriples(world, TBOX_IRI.rstrip("#"), list(given.tbox))
@@ -125,12 +125,6 @@ def _made_cache(cache: Path, given: ReasonerInput, timeout_s: float) -> str:
     if made:
         return f"after this job, Pellet's classes were cached for the next jobs ({took:.1f} s, not in `seconds`)"
     return "Pellet's classes could not be cached (see the service's log): every job starts Pellet afresh"
-
-
-def _classpath(reasoner: str) -> str:
-    if reasoner == "hermit":
-        return str(owlready2.reasoning._HERMIT_CLASSPATH)
-    return str(owlready2.reasoning._PELLET_CLASSPATH)
 
 
 def explain_inconsistency(world: World, timeout_s: float, cache: Path | None = None) -> list[str]:

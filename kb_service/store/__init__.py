@@ -7,13 +7,13 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 | `records`, `errors` | the immutable records the store hands out and its typed errors (root `KBError`) |
 | `names` | the IRIs of the TBox and the ABox, and how each record and ground predicate is named |
 | `checks` | the input checks of every write (pure: they read only the object), `check_plan` -> `CheckedPlan` |
-| `cache` | the one cached get of records (cache -> held in memory -> load -> `NotFoundError`) |
+| `cache` | the one cached get of records (cache -> load -> `NotFoundError`) |
 | `backends`, `location` | the backends by name; `open_store(db, tbox)` opens the one a location names; a location as it may be shown (no password) |
 | `unit`, `facade` | what the shared writes ask of a backend's unit of work; what every backend's store class does alike |
 | `knowledge_base` | `SqliteStore` (alias `KnowledgeBase`): the SQLite backend, the parts below in one database |
 | `abox` | the SQLite ABox's unit of work: the owlready2 world, names of individuals, counters, `transaction()` |
 | `reads`, `writes`, `triples` | records read back from triples, the writes, and what each record is as triples |
-| `journal`, `backlog` | a new plan's journal row, and the plans written out as triples by a thread behind the answer |
+| `journal`, `backlog` | a new plan's journal row (the plan, read from it), written out as triples when a reader of the triples needs them |
 | `events`, `execution`, `responses`, `inferred` | the event log, the execution cursor, idempotent responses, what a reasoner inferred (side tables) |
 | `retention`, `export`, `roots` | compaction of each object's history; RDF export (N-Triples, RDF/XML, Turtle); where an object's current ABox starts (every backend's) |
 | `owl` | every use of owlready2's internals (its SQLite tables, storids, literal encoding, reasoner settings) |
@@ -22,8 +22,8 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 from .backends import BACKENDS, open_store
 from .errors import (ConflictError, DamagedStoreError, DeadlineError, KBError, NotFoundError, ReasonerError,
                      UnavailableError, ValidationError)
-from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, Export, Inferences, KnowledgeStore, PlanChecks, PlanJournal,
-                        Reads, Retention, Writes)
+from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, EventFeed, EventFeeding, Export, Inferences, KnowledgeStore,
+                        ObjectLocking, PlanChecks, PlanJournal, Reads, Retention, Writes)
 from .knowledge_base import KnowledgeBase, SqliteStore
 from .names import ABOX_IRI, PREDICATES, TBOX_IRI, atom_fragment
 from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffect, Execution, StoredAction,
@@ -31,8 +31,9 @@ from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffe
 
 __all__ = [
     "ABOX_IRI", "BACKENDS", "MAX_EVENTS_PAGE", "MAX_SEQ", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec",
-    "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "Execution",
-    "Export", "Inferences", "KBError", "KnowledgeBase", "KnowledgeStore", "NotFoundError", "PlanChecks", "PlanJournal", "Reads",
-    "ReasonerError", "Retention", "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem",
-    "StoredState", "UnavailableError", "ValidationError", "Writes", "atom_fragment", "open_store",
+    "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "EventFeed",
+    "EventFeeding", "Execution", "Export", "Inferences", "KBError", "KnowledgeBase", "KnowledgeStore",
+    "NotFoundError", "ObjectLocking", "PlanChecks", "PlanJournal", "Reads", "ReasonerError", "Retention",
+    "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem", "StoredState", "UnavailableError",
+    "ValidationError", "Writes", "atom_fragment", "open_store",
 ]

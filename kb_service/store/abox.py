@@ -5,8 +5,8 @@ The ontology lives in an owlready2 `World` backed by SQLite. The TBox file is lo
 ABox is written straight into owlready2's quad tables (`objs`, `datas`) through the adapter (`owl.QuadStore`), a
 `Batch` of triples at a time, after the whole input has been checked (`checks`): a write either commits completely
 or not at all. Nothing loads ABox individuals as owlready2 Python objects, so owlready2's entity cache never goes
-stale. What reacts to a commit or a rollback (the record caches of `reads`, the plan backlog of `backlog`)
-registers as a `TransactionListener`.
+stale. What reacts to a commit or a rollback (the record caches of `reads`, the count of journalled plans of
+`backlog`) registers as a `TransactionListener`.
 
 Every method here is called with `lock` held; the store (`knowledge_base.SqliteStore`) takes it.
 """

@@ -1,12 +1,12 @@
-"""The one cached get of the store's records (and of objects' infos, `object_info`): from the cache, else from the records held in memory until they are
-written (a journalled plan, its actions and expected states), else loaded from the backend, else NotFoundError.
+"""The one cached get of the store's records (and of objects' infos, `object_info`): from the cache, else loaded from
+the backend (a journalled plan, its actions and expected states from its row), else NotFoundError.
 
 Records are immutable, so a cached one is never stale; the cache is dropped whole (after a rollback, or when it
 grows past its limit) and refills on demand. Nothing here depends on a backend: it is given the loader.
 """
 from __future__ import annotations
 
-from typing import Callable, Generic, Mapping, Protocol, TypeVar
+from typing import Callable, Generic, Protocol, TypeVar
 
 from planhrc.model import ArticulatedObject
 
@@ -23,13 +23,12 @@ R = TypeVar("R", bound=Record)
 
 
 class RecordCache(Generic[R]):
-    """Records of one kind by id. `held` is shared by every kind (what it holds is told apart by its class)."""
+    """Records of one kind by id."""
 
-    def __init__(self, noun: str, kind: type[R], load: Callable[[str], R | None], held: Mapping[str, object]) -> None:
+    def __init__(self, noun: str, kind: type[R], load: Callable[[str], R | None]) -> None:
         self.noun = noun
         self._kind = kind
         self._load = load
-        self._held = held
         self._records: dict[str, R] = {}
 
     def get(self, ident: str) -> R:
@@ -38,9 +37,6 @@ class RecordCache(Generic[R]):
             raise NotFoundError(f"{self.noun}_id: no {self.noun} {ident!r}")
         record = self._records.get(ident)
         if record is None:
-            held = self._held.get(ident)
-            if isinstance(held, self._kind):
-                return held
             record = self._load(ident)
             if record is None:
                 raise NotFoundError(f"{self.noun}_id: no {self.noun} {ident!r}")

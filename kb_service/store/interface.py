@@ -6,11 +6,12 @@
 | `Writes` | new ids, objects, states and perceptions, problems, plans, events, the execution cursor, idempotent responses; `transaction()`, the one unit of work |
 | `Reads` | one record by id (cached), the latest problem and plan of an object, objects and events, counts |
 | `PlanChecks` | a plan checked against its object ahead of its write (`check_plan` -> `CheckedPlan`) |
-| `PlanJournal` | plans stored as one journal row each and written out behind the answer (`settle`, `plans_to_write`) |
+| `PlanJournal` | plans stored as one journal row each, written out as facts when they are read as facts (`settle`, `plans_to_write`) |
 | `Export` | the TBox with the ABox as RDF: N-Triples lines, or bytes in a format |
 | `Retention` | compaction of each object's history |
 | `Inferences` | what a DL reasoner inferred, kept apart from the asserted facts |
 | `KnowledgeStore` | all of them, and closing: what a backend must offer |
+| `ObjectLocking`, `EventFeeding` | what a store shared by several service processes adds (PostgreSQL): an object's lock across processes, a feed of the events every process commits |
 
 Records are the frozen dataclasses of `records`; ids are the readable IRI fragments of `names`, whatever the
 backend. Nothing here names a backend's internals (worlds, storids, connections): a backend that keeps the facts
@@ -21,8 +22,9 @@ Guarantees every backend keeps:
   written. Unknown ids read raise `NotFoundError`; every error is a `KBError`.
 - Inside `transaction()` every write commits together at its end, or none does (an exception rolls back all).
 - Records are immutable; a record once handed out reads back equal, across restarts too.
-- A plan is answered at once by `add_plan`; its facts may be written out later (`plans_to_write`), but it is
-  never lost once its transaction committed, and readers of the facts (`export_lines`) see it.
+- A plan is answered at once by `add_plan`; its facts may be written out later (`plans_to_write`: when a reader
+  of the facts needs them), but it is never lost once its transaction committed, and readers of the facts
+  (`export_lines`, the reasoners' copy) see it.
 - Every method is safe to call from several threads.
 """
 from __future__ import annotations
@@ -134,11 +136,12 @@ class PlanChecks(Protocol):
 @runtime_checkable
 class PlanJournal(Protocol):
     def settle(self) -> None:
-        """Write out every journalled plan's facts now (inside an open transaction: after it commits)."""
+        """Write out every journalled plan's facts now (inside an open transaction: nothing, its plans are not
+        committed yet)."""
         ...
 
     def plans_to_write(self) -> int:
-        """Committed plans whose facts are not written yet (no lock)."""
+        """Committed plans whose facts are not written yet (kept as their journal rows)."""
         ...
 
 
@@ -198,3 +201,29 @@ class KnowledgeStore(Writes, Reads, PlanChecks, PlanJournal, Export, Retention, 
     def __enter__(self) -> Self: ...
 
     def __exit__(self, *exc: object) -> None: ...
+
+
+# -- what a store several service processes share adds (`postgres.replicas`) ---------------------------------
+@runtime_checkable
+class ObjectLocking(Protocol):
+    def lock_object(self, object_id: str) -> None:
+        """Hold the object's lock, across every process on the store, until the open transaction ends (inside
+        `transaction()` only): the object's writes are one at a time, as the service's in-process locks make them
+        within one process."""
+        ...
+
+
+class EventFeed(Protocol):
+    def wait(self, timeout_s: float) -> list[tuple[str, int]]:
+        """(object id, seq) of every event committed (by any process) since the last call, waiting up to
+        `timeout_s` for one; `UnavailableError` when the feed lost its connection."""
+        ...
+
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class EventFeeding(Protocol):
+    def event_feed(self) -> EventFeed:
+        """A feed of the events every process commits; the caller closes it (one per process is enough)."""
+        ...

@@ -1,24 +1,26 @@
-"""The plan journal: a new plan is stored first as one row, in the transaction that adopts it, and written out as
-ABox triples (its actions, expected states and their links, thousands of triples for a 20-link plan) by a thread
-of the store's own soon after (`backlog`).
+"""The plan journal: a new plan is stored as one row, in the transaction that adopts it, and its triples (its
+actions, expected states and their links, thousands of triples for a 20-link plan) are written only when something
+reads the triples themselves (`backlog`).
 
-Why: those triples are SQLite index inserts that the answer to a re-planning perception would otherwise wait
-for, while the robot needs only the plan's first action and the guarantee that the plan is stored (the README's
-re-planning section has the figures). The row is that guarantee: it commits with the perception, the problem and
-the execution (all or nothing), and a store opened after a crash writes out every row it finds before it serves
-anything. Until its triples are written, the store answers for the plan from memory, and every reader of the
-triples themselves (export, reasoners, retention, the file's rewrite) waits for the writer first (`settle`).
+Why: a robot re-plans far more often than anything reads a plan's triples, and most plans are replaced before that
+happens. Written behind every answer, those triples (SQLite index inserts, the pages they dirty copied into the
+file) were most of a relative re-plan's CPU. The row is the plan: it commits with the perception, the problem and
+the execution (all or nothing), the store reads the plan, its actions and expected states from it, and a reader of
+the triples (the export, the reasoners' copy of the world, retention) writes out the rows it needs first, by the
+same code that would have written them behind the answer (`triples.plan_triples`), so every reader sees the same
+facts. Retention drops the rows of plans it does not keep without writing them.
 
 A row holds only Python builtins (tuples, strings, numbers, frozensets), pickled: no class of this package is
-named in it, so a newer version reads an older row; only this store writes and reads the table.
+named in it, so a newer version reads an older row; only this store writes and reads the table. Beside the
+payload a row names the plan's object and the counters of its first and last expected states, so that a state is
+found in its plan's row by its name.
 """
 from __future__ import annotations
 
 import logging
 import pickle
-import threading
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from planhrc.model import Atom
 
@@ -29,18 +31,14 @@ from .records import ActionSpec, CondEffect, StoredAction, StoredPlan, StoredSta
 
 log = logging.getLogger(__name__)
 
-SCHEMA = "CREATE TABLE IF NOT EXISTS planhrc_plan_journal (plan_id TEXT PRIMARY KEY, payload BLOB NOT NULL)"
+SCHEMA = ("CREATE TABLE IF NOT EXISTS planhrc_plan_journal (plan_id TEXT PRIMARY KEY, payload BLOB NOT NULL, "
+          "object_id TEXT, first_state INTEGER, last_state INTEGER)")
+INDEX = ("CREATE INDEX IF NOT EXISTS planhrc_plan_journal_states ON planhrc_plan_journal "
+         "(object_id, first_state, last_state)")
+# the columns a table made before rows named their states lacks, with their types
+NAMED = {"object_id": "TEXT", "first_state": "INTEGER", "last_state": "INTEGER"}
 FORMAT = 2  # the payload's layout (2: expected states as changes); a row of another layout is refused when read
 WHOLE_STATES = 1  # the layout before: every expected state whole (still read, from a store written by it)
-
-# The writer waits this long after a commit before writing out the plans it adopted: the answer to the
-# perception that made the plan is on its way meanwhile (the writer would compete with it for the interpreter),
-# and a robot's next perception follows its action seconds later.
-WRITE_DELAY_S = 0.05
-# Between two plans the writer pauses this long, so that a request waiting for the store's lock gets it: a lock
-# released and taken again at once by the same thread is not handed to the thread waiting for it, so without the
-# pause a request arriving behind many unwritten plans would wait for all of them.
-YIELD_S = 0.002
 
 
 @dataclass(frozen=True)
@@ -55,6 +53,11 @@ class JournalEntry:
     first_state: int  # the counter of its first expected state: state i is <object>_state_<first_state + i - 1>
     actions: tuple[ActionSpec, ...]
     expected_states: tuple[frozenset[Atom], ...]
+
+    @property
+    def last_state(self) -> int:
+        """The counter of its last expected state."""
+        return self.first_state + len(self.expected_states) - 1
 
     def state_id(self, step: int) -> str:
         """The name of expected state `step` (1-based)."""
@@ -121,50 +124,58 @@ class JournalTable:
     def __init__(self, quads: QuadStore) -> None:
         self.quads = quads
         quads.execute(SCHEMA)
+        columns = {row[1] for row in quads.execute("PRAGMA table_info(planhrc_plan_journal)")}
+        if not set(NAMED) <= columns:
+            self._name_states(columns)
+        quads.execute(INDEX)
+
+    def _name_states(self, columns: set[str]) -> None:
+        """A table written before rows named their states: the columns added, and filled from the payloads."""
+        for column, kind in NAMED.items():
+            if column not in columns:
+                self.quads.execute(f"ALTER TABLE planhrc_plan_journal ADD COLUMN {column} {kind}")
+        for (payload,) in self.quads.execute("SELECT payload FROM planhrc_plan_journal").fetchall():
+            entry = decode(payload)
+            self.quads.execute("UPDATE planhrc_plan_journal SET object_id=?, first_state=?, last_state=? "
+                               "WHERE plan_id=?", (entry.object_id, entry.first_state, entry.last_state,
+                                                   entry.plan_id))
+
+    def check(self) -> int:
+        """Read every row once (a store opened on a row this version cannot read is refused before it serves
+        anything: `DamagedStoreError`); how many there are."""
+        rows = self.quads.execute("SELECT payload FROM planhrc_plan_journal").fetchall()
+        for (payload,) in rows:
+            decode(payload)
+        return len(rows)
 
     def append(self, entry: JournalEntry) -> None:
-        self.quads.execute("INSERT INTO planhrc_plan_journal VALUES (?, ?)", (entry.plan_id, encode(entry)))
+        self.quads.execute("INSERT INTO planhrc_plan_journal VALUES (?, ?, ?, ?, ?)",
+                           (entry.plan_id, encode(entry), entry.object_id, entry.first_state, entry.last_state))
 
     def remove(self, plan_id: str) -> None:
         self.quads.execute("DELETE FROM planhrc_plan_journal WHERE plan_id=?", (plan_id,))
 
-    def entries(self) -> list[JournalEntry]:
-        """Every row, oldest first."""
-        rows = self.quads.execute("SELECT payload FROM planhrc_plan_journal ORDER BY rowid").fetchall()
-        return [decode(row[0]) for row in rows]
+    def entry(self, plan_id: str) -> JournalEntry | None:
+        """The row of a plan, if it is in the journal."""
+        row = self.quads.execute("SELECT payload FROM planhrc_plan_journal WHERE plan_id=?", (plan_id,)).fetchone()
+        return decode(row[0]) if row else None
 
+    def entry_of_state(self, object_id: str, number: int) -> JournalEntry | None:
+        """The row of the plan whose expected states include the object's state `number`, if one is."""
+        row = self.quads.execute("SELECT payload FROM planhrc_plan_journal WHERE object_id=? AND first_state<=? "
+                                 "AND last_state>=? LIMIT 1", (object_id, number, number)).fetchone()
+        return decode(row[0]) if row else None
 
-class PlanWriter:
-    """A thread that writes journalled plans out as triples, woken by each commit that adopted one: it calls
-    `write_one()` (one plan per call, pausing `YIELD_S` between two, so other writers get the store) until that
-    returns False (nothing left, or the store busy in a transaction: the next commit wakes the thread again)."""
+    def states_of(self, object_id: str) -> list[tuple[str, int]]:
+        """The object's plans in the journal, each with how many expected states it holds."""
+        rows = self.quads.execute("SELECT plan_id, last_state - first_state + 1 FROM planhrc_plan_journal "
+                                  "WHERE object_id=?", (object_id,))
+        return [(str(plan_id), int(n)) for plan_id, n in rows]
 
-    def __init__(self, write_one: Callable[[], bool]) -> None:
-        self._write_one = write_one
-        self._wake = threading.Event()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="planhrc-plan-writer", daemon=True)
-        self._thread.start()
+    def plan_ids(self) -> list[str]:
+        """The plans in the journal, oldest first."""
+        return [str(p) for (p,) in self.quads.execute("SELECT plan_id FROM planhrc_plan_journal ORDER BY rowid")]
 
-    def poke(self) -> None:
-        self._wake.set()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            self._wake.wait(1.0)
-            if not self._wake.is_set():
-                continue
-            if self._stop.wait(WRITE_DELAY_S):
-                return
-            self._wake.clear()
-            try:
-                while self._write_one():
-                    if self._stop.wait(YIELD_S):
-                        return
-            except Exception:  # the rows stay in the journal: written at the next wake, or when the store opens
-                log.exception("store: writing a journalled plan's triples failed")
-
-    def close(self) -> None:
-        self._stop.set()
-        self._wake.set()
-        self._thread.join(60)
+    def count(self) -> int:
+        row = self.quads.execute("SELECT COUNT(*) FROM planhrc_plan_journal").fetchone()
+        return int(row[0]) if row else 0

@@ -28,6 +28,7 @@ from .facade import StoreFacade
 from .export import ntriples
 from .inferred import InferredFacts
 from .interface import MAX_EVENTS_PAGE, MAX_SEQ
+from .journal import JournalTable
 from .names import ABOX_IRI
 from .owl import World
 from .reads import Records
@@ -52,8 +53,9 @@ class SqliteStore(StoreFacade):
         abox = self._abox = Abox(path, tbox_path)
         self._guard = abox.guard
         try:
-            self._records = Records(abox)
-            self._backlog = PlanBacklog(abox, self._records)
+            journal = JournalTable(abox.q)
+            self._records = Records(abox, journal)
+            self._backlog = PlanBacklog(abox, self._records, journal)
             abox.listen(self._backlog, self._records)
             self._writes = Writes(abox, self._records, self._backlog)
             self._events = EventLog(abox.q)
@@ -61,21 +63,14 @@ class SqliteStore(StoreFacade):
             self._responses = ResponseMemory(abox.q)
             self._inferred = InferredFacts(abox.q)
             abox.q.commit()
-            self._backlog.recover()  # before anything is served
         except Exception:
             abox.q.abandon()
             raise
-        self._backlog.start()
 
     # -- life cycle -------------------------------------------------------------------------------------------
     def close(self) -> None:
-        self._backlog.stop()  # before the lock: the writer thread may be waiting for it
-        with self._abox.lock:
+        with self._abox.lock:  # the journalled plans stay rows: they are the plans, in the file
             if not self._abox.closed:
-                try:
-                    self._backlog.settle()
-                except Exception:  # the rows stay in the journal; the next open writes them out
-                    log.exception("store: writing out journalled plans at close failed")
                 self._abox.close()
 
     def __enter__(self) -> Self:
@@ -106,8 +101,9 @@ class SqliteStore(StoreFacade):
 
     def ntriples(self) -> bytes:
         """TBox + ABox as owlready2 serialises the world in N-Triples."""
+        self._backlog.settle()
         with self._guard:
-            self._backlog.settle()
+            self._backlog.settle()  # a plan adopted meanwhile
             return self._abox.q.ntriples()
 
     def rewrite(self) -> tuple[int, int]:
@@ -118,7 +114,6 @@ class SqliteStore(StoreFacade):
             path = self._abox.path
             if not path:
                 raise KBError("store: an in-memory store has no file to rewrite")
-            self._backlog.settle()
             before = _file_bytes(path)
             self._abox.q.rewrite()
             return before, _file_bytes(path)
@@ -168,6 +163,8 @@ class SqliteStore(StoreFacade):
     # -- the plan journal -------------------------------------------------------------------------------------
     def settle(self) -> None:
         self._backlog.settle()
+        with self._guard:
+            self._backlog.settle()  # a plan adopted meanwhile
 
     def plans_to_write(self) -> int:
         self._abox.check_open()
@@ -177,14 +174,17 @@ class SqliteStore(StoreFacade):
     def compact(self, keep_perceived: int) -> Compaction:
         keep = check_keep_perceived(keep_perceived)
         with self._guard:
-            self._backlog.settle()  # a plan still in the journal is history like any other
             abox = self._abox
             objects = self._records.object_ids()
             shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+            roots = {oid: current_roots(abox.q.db, SQLITE, oid) for oid in objects}
+            # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
+            self._backlog.settle(name for names in roots.values() for name in names)
 
             def fill() -> Compaction:
                 individuals = triples = 0
                 for oid in objects:
+                    individuals += self._backlog.drop(oid, roots[oid])
                     i, t = compact_object(abox.q.db, ABOX_IRI, abox.c, abox.t, oid, shared[oid], keep)
                     individuals, triples = individuals + i, triples + t
                 abox.pending_triples -= triples
@@ -204,7 +204,11 @@ class SqliteStore(StoreFacade):
                 ids = self._records.object_ids() if object_ids is None else list(object_ids)
                 for oid in ids:
                     self._records.info(oid)
-            self._backlog.settle()  # the export reads triples: every journalled plan's are written first
+        # the export reads triples: the journalled plans it shows are written out first (each object's current
+        # plan, or with the history every one)
+        self._backlog.settle(None if ids is None else self._current_names(ids))
+        with self._guard:
+            self._backlog.settle(None if ids is None else self._current_names(ids))  # adopted meanwhile
             abox = self._abox
             reader = abox.q.reader()
             if reader is None:  # an in-memory store: read on its connection, under its lock, at once
@@ -222,6 +226,10 @@ class SqliteStore(StoreFacade):
     def revision(self) -> int:
         self._abox.check_open()
         return self._abox.revision
+
+    def _current_names(self, object_ids: Sequence[str]) -> list[str]:
+        with self._guard:
+            return [name for oid in object_ids for name in current_roots(self._abox.q.db, SQLITE, oid)]
 
     def current_roots(self, object_id: str) -> tuple[str, ...]:
         with self._guard:

@@ -4,7 +4,7 @@ The knowledge base writes owlready2's quad tables directly (one SQLite transacti
 per individual), and the reasoners pass a time limit through owlready2's subprocess settings. Everything that
 relies on how owlready2 works inside — its SQLite connection, the tables `resources`, `objs`, `datas` and
 `store`, storids (`_abbreviate`), literal encoding (`_to_rdf`, `_to_python`), the graph context of an ontology
-(`graph.c`) and the reasoners' `_subprocess_kargs` and `_PELLET_CLASSPATH` — is here, behind plain methods.
+(`graph.c`) and the reasoners' `_subprocess_kargs` and class paths (`_PELLET_CLASSPATH`, `_HERMIT_CLASSPATH`) — is here, behind plain methods.
 `check_internals()` verifies each of these assumptions against the installed owlready2 and raises
 `OwlInternalsError` naming the one that broke; a test runs it, so an owlready2 upgrade that changes them fails
 loudly instead of corrupting a store.
@@ -419,6 +419,13 @@ def reasoner_subprocess_kwargs() -> dict[str, Any]:
     return kwargs
 
 
+def reasoner_classpath(reasoner: str) -> str:
+    """The Java class path of owlready2's bundled HermiT or Pellet."""
+    if reasoner == "hermit":
+        return str(owlready2.reasoning._HERMIT_CLASSPATH)
+    return str(owlready2.reasoning._PELLET_CLASSPATH)
+
+
 def pellet_command(java: str) -> list[str]:
     """`java -Xmx… -cp <owlready2's Pellet> pellet.Pellet`: Pellet as owlready2 ships it."""
     return [java, f"-Xmx{owlready2.reasoning.JAVA_MEMORY}M", "-cp", owlready2.reasoning._PELLET_CLASSPATH,
@@ -479,6 +486,8 @@ def check_internals() -> None:
              "owlready2.reasoning._subprocess_kargs is no longer a dict")
         need(isinstance(getattr(owlready2.reasoning, "_PELLET_CLASSPATH", None), str),
              "owlready2.reasoning._PELLET_CLASSPATH is gone")
+        need(isinstance(getattr(owlready2.reasoning, "_HERMIT_CLASSPATH", None), str),
+             "owlready2.reasoning._HERMIT_CLASSPATH is gone")
         # Individuals written through the tables are what owlready2's own API then reads.
         store = QuadStore.__new__(QuadStore)
         store.world, store.db = world, world.graph.db

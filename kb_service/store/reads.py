@@ -1,8 +1,9 @@
 """Records read back from the SQLite ABox's triples, through one cache per kind (`cache.RecordCache`).
 
 `Records` is the store's identity map: the objects (with the lookups the checks need), the states, problems, plans
-and actions read or written so far, and the records of journalled plans, held in memory until their triples are
-written (`backlog`). Every method is called with the store's lock held.
+and actions read or written so far. A plan whose triples are not written yet (`backlog`) is read from its journal
+row, which is looked up first: a row turns into triples in one transaction, so one or the other is found. Every
+method is called with the store's lock held.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from .abox import Abox
 from .cache import RecordCache, object_info
 from .checks import ObjectInfo
 from .errors import DamagedStoreError, NotFoundError, ValidationError
+from .journal import JournalEntry, JournalTable
 from .names import ACTION_CLASSES, PREDICATE_OF_CLASS, PREDICATES, STATE_CLASSES
 from .owl import RDF_TYPE
 from .records import ActionSpec, CondEffect, StoredAction, StoredPlan, StoredProblem, StoredState
@@ -22,24 +24,22 @@ from .records import ActionSpec, CondEffect, StoredAction, StoredPlan, StoredPro
 # so the service's memory stays flat as the history grows.
 CACHE_LIMIT = 5_000
 
-Held = StoredPlan | StoredAction | StoredState
-
 
 class Records:
     """The records of one SQLite ABox, cached; a `TransactionListener` of its `Abox`."""
 
-    def __init__(self, abox: Abox) -> None:
+    def __init__(self, abox: Abox, journal: JournalTable) -> None:
         self.abox = abox
+        self.journal = journal
         self.objects: dict[str, ObjectInfo] = {}
-        self.held: dict[str, Held] = {}  # journalled plans' records, until their triples are written
-        self.states = RecordCache("state", StoredState, self._load_state, self.held)
-        self.problems = RecordCache("problem", StoredProblem, self._load_problem, self.held)
-        self.plans = RecordCache("plan", StoredPlan, self._load_plan, self.held)
-        self.actions = RecordCache("action", StoredAction, self._load_action, self.held)
+        self.states = RecordCache("state", StoredState, self._load_state)
+        self.problems = RecordCache("problem", StoredProblem, self._load_problem)
+        self.plans = RecordCache("plan", StoredPlan, self._load_plan)
+        self.actions = RecordCache("action", StoredAction, self._load_action)
 
     # -- the identity map's life --------------------------------------------------------------------------
     def clear(self) -> None:
-        """Forget every cached record and storid (held records stay: they are not in the database yet)."""
+        """Forget every cached record and storid."""
         self.abox.forget_names()
         self.objects.clear()
         for cache in (self.states, self.problems, self.plans, self.actions):
@@ -53,14 +53,15 @@ class Records:
         # Records cached during a rolled-back transaction were never stored.
         self.clear()
 
-    def put(self, record: Held) -> None:
-        """Cache a record written out (`backlog`) like any record read back."""
-        if isinstance(record, StoredPlan):
-            self.plans.put(record)
-        elif isinstance(record, StoredAction):
-            self.actions.put(record)
-        else:
-            self.states.put(record)
+    def put_entry(self, entry: JournalEntry) -> StoredPlan:
+        """Cache a journalled plan's records (its actions and expected states); the plan's."""
+        plan, states = entry.records()
+        self.plans.put(plan)
+        for action in plan.actions:
+            self.actions.put(action)
+        for state in states:
+            self.states.put(state)
+        return plan
 
     # -- objects --------------------------------------------------------------------------------------------
     def info(self, object_id: str, field: str | None = None) -> ObjectInfo:
@@ -127,6 +128,12 @@ class Records:
         return None if key is None else (sid, key)
 
     def _load_state(self, state_id: str) -> StoredState | None:
+        object_id, _, number = state_id.rpartition("_state_")
+        if number.isdigit():
+            entry = self.journal.entry_of_state(object_id, int(number))
+            if entry is not None:
+                self.put_entry(entry)
+                return self.states.get(state_id)
         abox = self.abox
         typed = self._typed(state_id, STATE_CLASSES)
         if typed is None:
@@ -161,6 +168,12 @@ class Records:
         return StoredProblem(problem_id, o, i, g, float(abox.data1(sid, "createdAt")))
 
     def _load_action(self, action_id: str) -> StoredAction | None:
+        plan_id, _, step = action_id.rpartition("_a")
+        if step.isdigit():
+            entry = self.journal.entry(plan_id)
+            if entry is not None:
+                self.put_entry(entry)
+                return self.actions.get(action_id)
         abox = self.abox
         typed = self._typed(action_id, ACTION_CLASSES)
         if typed is None:
@@ -184,6 +197,9 @@ class Records:
         return StoredAction(action_id, int(abox.data1(sid, "stepIndex")), spec)
 
     def _load_plan(self, plan_id: str) -> StoredPlan | None:
+        entry = self.journal.entry(plan_id)
+        if entry is not None:
+            return self.put_entry(entry)
         abox = self.abox
         sid = abox.sid(plan_id)
         if sid is None or not abox.is_a(sid, "Plan"):

@@ -78,6 +78,6 @@ class RecordsOfWrites(Protocol):
 
 
 class PlanAdopter(Protocol):
-    """Stores a new plan inside the open transaction (a journal row written out later, or its triples at once)."""
+    """Stores a new plan inside the open transaction (a journal row, written out as triples when they are read)."""
 
     def adopt(self, entry: JournalEntry) -> StoredPlan: ...

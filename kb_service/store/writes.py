@@ -1,8 +1,8 @@
 """The ABox's writes: new object ids, objects, states, perceptions, problems and plans.
 
 Each write checks its whole input first (`checks`), then adds its triples in one transaction (`Abox.write`; inside
-`transaction()` it joins the open one), then caches the record it hands back. A plan is journalled, not written
-as triples (`backlog`), or its triples written at once, as the backend's `unit.PlanAdopter` chooses. Every method
+`transaction()` it joins the open one), then caches the record it hands back. A plan is journalled by the backend's
+`unit.PlanAdopter`, not written as triples (they are written when a reader of the triples needs them). Every method
 is called with the store's lock held. Nothing here names a backend: each gives its `unit.AboxWriter`.
 """
 from __future__ import annotations

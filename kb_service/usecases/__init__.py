@@ -15,7 +15,9 @@ requests and results to its bodies; nothing here knows HTTP.
 Shared per-object memory (`memory`: the event-log memo, the plan views) and the owner of validation runs
 (`pipeline.Validator`) are held by the `Context`; the store is reached through its interface (`store.KnowledgeStore`).
 Every request that touches an object runs under that object's lock, so one object's requests are serialized
-while different objects proceed in parallel; each validates its input completely before its first write.
+while different objects proceed in parallel; each validates its input completely before its first write, and writes
+in one unit of work (`unit_of_work`), which on a store several service processes share also takes the object's lock
+across them and decides again when another process wrote the object meanwhile.
 """
 from .context import Context, close_context, open_context
 from .dispatch import take_next_action

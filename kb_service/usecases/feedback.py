@@ -15,6 +15,7 @@ from .context import Context
 from .idempotency import fingerprint, recall, remember
 from .inputs import action_outcome, failure_reason, finite_or_none
 from .log import EventKind
+from .unit_of_work import object_write, read_mark, serialized
 from .values import Accepted, FeedbackResult, feedback_of, feedback_record
 
 
@@ -35,12 +36,17 @@ class FeedbackRequest:
 
 def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
     """Record the feedback and move the execution (see the module's note)."""
+    return serialized(context, request.object_id, lambda: _give_feedback(context, request))
+
+
+def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
     outcome = action_outcome(request.outcome)
     failure = failure_reason(outcome, request.reason)
     measured_deg = finite_or_none(request.measured_deg, "measured_deg")
     store, object_id, action_id, message = context.store, request.object_id, request.action_id, request.message
     with context.locks.hold(object_id):
         obj = store.get_object(object_id)
+        mark = read_mark(context, object_id)  # before the remembered answer and the execution are read
         print_ = fingerprint({"feedback": [action_id, outcome, message]}
                              if failure is None and measured_deg is None else
                              {"feedback": [action_id, outcome, message, failure, measured_deg]}
@@ -75,7 +81,7 @@ def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
         motion = action_motion(obj, action)
         refused = (refusal_data(context, object_id, request.refusal, motion)
                    if outcome == ActionOutcome.FAILED and failure in REFUSALS else None)
-        with store.transaction():
+        with object_write(context, object_id, mark):
             store.set_execution(object_id, new)
             store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""),
                             {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,

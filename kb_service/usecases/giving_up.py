@@ -21,6 +21,7 @@ from .decide import whole_turn_deg
 from .log import EventKind
 from .memory import ObjectMemo
 from .turns import help_data
+from .unit_of_work import object_write, read_mark, serialized
 from .values import GaveUp
 
 
@@ -32,9 +33,14 @@ class GiveUpRequest:
 
 
 def give_up(context: Context, request: GiveUpRequest) -> GaveUp:
+    return serialized(context, request.object_id, lambda: _give_up(context, request))
+
+
+def _give_up(context: Context, request: GiveUpRequest) -> GaveUp:
     store, object_id = context.store, request.object_id
     with context.locks.hold(object_id):
         obj = store.get_object(object_id)
+        mark = read_mark(context, object_id)  # before the execution and the object's log are read
         execution = store.get_execution(object_id)
         memo = context.memory.of(store, object_id)
         why = f"the robot stopped ({request.reason}: {request.message})"
@@ -48,7 +54,7 @@ def give_up(context: Context, request: GiveUpRequest) -> GaveUp:
         else:
             reason = f"{why}; no goal is left to ask the human for"
         asking = bool(items) or unseen
-        with store.transaction():
+        with object_write(context, object_id, mark):
             store.set_execution(object_id, Execution(execution.plan_id, None, ExecutionStatus.IDLE, None))
             event = store.add_event(object_id, EventKind.WORKER_GAVE_UP,
                                     f"the worker gave up ({request.reason}): {request.message}",

@@ -14,6 +14,7 @@ from .context import Context
 from .inputs import allowed, check_count, check_finite
 from .log import EventKind
 from .memory import ObjectMemo
+from .unit_of_work import object_write, read_mark, serialized
 from .values import GoalSet
 
 
@@ -31,13 +32,18 @@ def set_goal(context: Context, request: GoalRequest) -> GoalSet:
     """Store a goal. For a placed object a complete goal configuration is checked first: one off the table,
     inside the robot or folded onto itself is refused naming the links (unless `allow_infeasible`); links
     beyond the robot's reach are accepted with a warning (the robot will ask the human for them)."""
+    return serialized(context, request.object_id, lambda: _set_goal(context, request))
+
+
+def _set_goal(context: Context, request: GoalRequest) -> GoalSet:
     store, object_id = context.store, request.object_id
     with context.locks.hold(object_id):
         obj = store.get_object(object_id)
         atoms = goal_atoms(obj, request.link_orientations_deg, request.joint_angles_deg)
+        mark = read_mark(context, object_id)
         memo = context.memory.of(store, object_id)
         warnings = _warnings(context, obj, memo, atoms, request)
-        with store.transaction():
+        with object_write(context, object_id, mark):
             goal = store.add_state(object_id, "goal", atoms)
             problem = None
             if memo.perceived_state_id is not None:

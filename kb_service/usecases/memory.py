@@ -30,6 +30,7 @@ class ObjectMemo:
     """What the event log says about an object, up to event `seq`."""
 
     seq: int = 0
+    changed_seq: int = 0  # the last event that changed the object (every kind but VAL's verdicts: `unit_of_work`)
     goal_state_id: str | None = None
     perceived_state_id: str | None = None
     last_outcome: ActionOutcome | None = None  # a feedback informs only the next decision
@@ -68,7 +69,8 @@ class Memory:
         if not events:
             return memo
         for event in events:
-            memo = _read(replace(memo, seq=max(memo.seq, event.seq)), event)
+            changed = memo.changed_seq if event.kind == EventKind.VAL_VERDICT else max(memo.changed_seq, event.seq)
+            memo = _read(replace(memo, seq=max(memo.seq, event.seq), changed_seq=changed), event)
         with self._guard:
             self._memos[object_id] = memo
         return memo

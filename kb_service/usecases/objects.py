@@ -11,6 +11,7 @@ from ..store import ValidationError
 from .context import Context
 from .log import EventKind
 from .reads import read_object
+from .unit_of_work import object_write
 from .values import ObjectRead
 
 
@@ -46,7 +47,7 @@ def create_object(context: Context, request: NewObject) -> ObjectRead:
             raise ValidationError(f"base_point_xy: expected [x, y] in metres ({exc})") from None
     object_id = store.new_object_id()
     obj = make_object(object_id, request.formulation, request.links, request.orientations, request.name)
-    with context.locks.hold(object_id), store.transaction():
+    with context.locks.hold(object_id), object_write(context, object_id):
         store.create_object(obj)
         store.add_event(object_id, EventKind.OBJECT_CREATED, f"object {object_id} created",
                         {"formulation": obj.formulation.value, "links": obj.n_links,

@@ -34,6 +34,7 @@ from .inputs import check_count, check_finite, measured_base
 from .log import record_verdict
 from .memory import ObjectMemo
 from .turns import Written, adopt, decision_data, follow
+from .unit_of_work import object_write, read_mark, serialized
 from .values import Turn, turn_of, turn_record
 
 log = logging.getLogger(__name__)
@@ -73,22 +74,30 @@ class _Seen:
     measured: tuple[float, float] | None  # the base point the perception measured
     key: str | None  # the request's idempotency key, and its fingerprint
     fingerprint: str
+    mark: int  # where the object's log stood before anything was read (`unit_of_work.read_mark`)
     decision: Decision | None = None
 
 
 def perceive(context: Context, request: PerceptionRequest) -> Turn:
-    """Decide on one perception and store all it leads to in one write (see the module's note)."""
+    """Decide on one perception and store all it leads to in one write (see the module's note), deciding again when
+    another process wrote the object meanwhile (`unit_of_work`); the planning deadline holds for all of it."""
+    deadline_at = deadline_from(context.planning)
+    return serialized(context, request.object_id, lambda: _perceive(context, request, deadline_at), deadline_at)
+
+
+def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) -> Turn:
     store, links, key = context.store, request.link_orientations_deg, request.idempotency_key
     measured = measured_base(request.base_point_xy)
     with context.locks.hold(request.object_id):
         obj = store.get_object(request.object_id)
+        mark = read_mark(context, obj.ident)  # before the remembered answer and the state are read
         print_ = fingerprint({"perception": list(links)} if measured is None else
                              {"perception": list(links), "base_point_xy": list(measured)})
         recalled = recall(store, obj.ident, key, print_)
         if recalled is not None:
             return turn_of(recalled)
         if any(v is None for v in links):
-            return _incomplete(context, obj, request, print_, measured)
+            return _incomplete(context, obj, request, print_, measured, mark)
         try:
             perception = snap(obj, links)  # validated and snapped once, here
         except ModelError as exc:
@@ -100,12 +109,11 @@ def perceive(context: Context, request: PerceptionRequest) -> Turn:
         goal = store.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
         plan, view = context.views.get(store, execution.plan_id)
         base = (measured or memo.where) if memo.base_point_xy is not None else None
-        seen = _Seen(obj, perception, execution, goal, plan, memo, base, measured, key, print_)
+        seen = _Seen(obj, perception, execution, goal, plan, memo, base, measured, key, print_, mark)
         if goal is None:
             return _write(context, seen).turn
 
         # decide
-        deadline_at = deadline_from(context.planning)
         decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
         decision = refine.recheck_at(context, obj, base, plan, perception, decision, memo)
         decision = refine.escalate(context, obj, plan, perception, decision, memo, base)
@@ -156,7 +164,7 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
     refuses is stored as a problem without a plan), or raises _ValStillRunning (rolled back) after
     OVERLAP_WAIT_S."""
     store, obj, goal, decision = context.store, seen.obj, seen.goal, seen.decision
-    with store.transaction():
+    with object_write(context, obj.ident, seen.mark):
         perceived = store.add_perception(seen.perception)
         outcome: PlanOutcome | None = None
         if planned is not None:
@@ -190,7 +198,7 @@ def _check_plan(context: Context, obj: ArticulatedObject, outcome: PlanOutcome, 
 
 
 def _incomplete(context: Context, obj: ArticulatedObject, request: PerceptionRequest, print_: str,
-                measured: tuple[float, float] | None) -> Turn:
+                measured: tuple[float, float] | None, mark: int) -> Turn:
     """A perception with unseen links (None): validated like any, then answered `incomplete_perception`. It
     stores no state and changes no plan or execution; only its event (naming the unseen links) is kept."""
     links = request.link_orientations_deg
@@ -205,7 +213,7 @@ def _incomplete(context: Context, obj: ArticulatedObject, request: PerceptionReq
               "look again")
     turn = Turn(DecisionKind.INCOMPLETE_PERCEPTION, None, None, None, None, reason, unseen_links=tuple(unseen))
     store = context.store
-    with store.transaction():
+    with object_write(context, obj.ident, mark):
         data: dict[str, object] = {"unseen_links": unseen, "link_orientations_deg": list(links)}
         if measured is not None:  # recorded, not used: an incomplete perception changes nothing
             data["base_point_xy"] = list(measured)

@@ -37,11 +37,11 @@ class PgRecords:
         self.session = session
         self.objects: dict[str, ObjectInfo] = {}
         self._atom_of: dict[str, dict[str, Atom]] = {}  # object id -> name of its own predicate -> atom
-        held: dict[str, object] = {}  # a journalled plan's records are read from its row, in any process
-        self.states = RecordCache("state", StoredState, self._load_state, held)
-        self.problems = RecordCache("problem", StoredProblem, self._load_problem, held)
-        self.plans = RecordCache("plan", StoredPlan, self._load_plan, held)
-        self.actions = RecordCache("action", StoredAction, self._load_action, held)
+        # a journalled plan's records are read from its row, in any process
+        self.states = RecordCache("state", StoredState, self._load_state)
+        self.problems = RecordCache("problem", StoredProblem, self._load_problem)
+        self.plans = RecordCache("plan", StoredPlan, self._load_plan)
+        self.actions = RecordCache("action", StoredAction, self._load_action)
 
     def clear(self) -> None:
         self.objects.clear()

@@ -11,20 +11,16 @@ works across processes, and a channel that says which object has a new event.
 """
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
-
 from ..errors import UnavailableError
+from ..interface import ObjectLocking
 from .session import Connection, connect
 
 EVENT_CHANNEL = "planhrc_event"
 LOCK_NAMESPACE = "planhrc-object:"  # hashed with the object id into the advisory lock's key
+LOCK_OBJECT = "SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))"  # with LOCK_NAMESPACE + the object's id
 
 
-@runtime_checkable
-class ObjectLocking(Protocol):
-    def lock_object(self, object_id: str) -> None:
-        """Hold the object's lock until the open transaction ends (inside `transaction()` only)."""
-        ...
+__all__ = ["EVENT_CHANNEL", "LOCK_NAMESPACE", "LOCK_OBJECT", "EventFeed", "ObjectLocking"]  # the protocol: `interface`
 
 
 class EventFeed:

@@ -4,12 +4,13 @@ The ABox is one table of triples, `planhrc_triple (s, p, o, lit, dt)`, with the 
 its individuals (`names`): an object property's row has the object's IRI in `o`; a data property's row has the
 literal's lexical form in `lit` and its datatype IRI in `dt` (the forms owlready2 writes, so both stores export the
 same N-Triples). The service's side tables (events, execution cursor, idempotent responses, counters) are tables
-beside it, in the same transactions, and so are the plan journal, what a reasoner inferred (`planhrc_inferred`) and
-the count of commits (`planhrc_revision`).
+beside it, in the same transactions, and so are the plan journal, what a reasoner inferred (`planhrc_inferred`),
+the count of commits (`planhrc_revision`) and the planning job queue (`planhrc_planning_job`, `jobs`).
 """
 from __future__ import annotations
 
 from ..names import ABOX_IRI
+from .jobs import JOB_TABLES
 
 SCHEMA_VERSION = "1"  # planhrc_meta.schema; a database of another version is refused when it is opened
 
@@ -42,6 +43,8 @@ TABLES = (
     "CREATE INDEX IF NOT EXISTS planhrc_inferred_scope ON planhrc_inferred (scope)",
     # Commits that wrote, counted per connection's shard (`session.COUNT_COMMIT`); their sum is `Reads.revision`.
     "CREATE TABLE IF NOT EXISTS planhrc_revision (shard integer PRIMARY KEY, value bigint NOT NULL)",
+    # Planning jobs for `planhrc planning-worker` processes (`jobs`; a worker creates it too, should it come first).
+    *JOB_TABLES,
 )
 # Two processes opening a new database at once must not both create it: creation holds this lock.
 SCHEMA_LOCK = 0x706C616E68726301  # "planhrc\x01"

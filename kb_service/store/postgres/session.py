@@ -28,6 +28,10 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 Connection = psycopg.Connection[tuple[Any, ...]]
 CONNECT_TIMEOUT_S = 10
+# Each statement planned with the sizes of now, not with a plan cached when the statement was first prepared: the
+# store's tables grow from nothing, and a plan made for an empty triple table (a sequential scan) stays cached on
+# the connection after the table holds thousands of rows (a lookup of individuals then read the whole table).
+CONNECTION_OPTIONS = "-c plan_cache_mode=force_custom_plan"
 # `Reads.revision`, which must change with every commit that wrote, by any process on the database. A transaction
 # that wrote (it has a transaction id; one that only read has none) adds one to its connection's row just before it
 # commits, so the sum changes exactly when its writes become visible: a sequence would change at `nextval`, before
@@ -45,7 +49,7 @@ def connect(db: str, password: str | None, what: str = "planhrc") -> Connection:
     the location (without its password)."""
     try:
         return psycopg.connect(db, password=password, autocommit=True, connect_timeout=CONNECT_TIMEOUT_S,
-                               application_name=what)
+                               application_name=what, options=CONNECTION_OPTIONS)
     except psycopg.OperationalError as exc:
         reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
         raise UnavailableError(f"db: cannot connect to {shown_location(db)} ({reason})") from None

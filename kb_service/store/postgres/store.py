@@ -6,8 +6,8 @@ and the RDF export (`history`), and what a reasoner inferred beside them (`infer
 
 Every public method takes the store's lock and refuses a closed store. Each write checks its input completely
 before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan is
-stored as a journal row and its triples are written behind the answer (`journal`), as in the SQLite store; every
-process reads it from its row until then.
+stored as a journal row and its triples are written when a reader of the triples needs them (`journal`), as in the
+SQLite store; every process reads it from its row until then.
 
 The TBox is read by each process from its file (an in-memory owlready2 world, for the TBox's lines of the export);
 its digest is kept in the database, and a process whose TBox differs from the one the store was written with says
@@ -42,7 +42,7 @@ from .history import abox_lines, compact_object
 from .inferred import PgInferred
 from .journal import PgJournal
 from .records import PgRecords
-from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, EventFeed
+from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, LOCK_OBJECT, EventFeed
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
 
@@ -57,6 +57,8 @@ _APPEND_EVENT = (
     "e AS (INSERT INTO planhrc_event SELECT %s, value, %s, %s, %s::json, %s FROM c RETURNING seq) "
     "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
 )
+
+COMPACT_LOCK = 0x706C616E68726302  # "planhrc\x02": held by the one process compacting the store
 
 
 class PostgresStore(StoreFacade):
@@ -78,14 +80,13 @@ class PostgresStore(StoreFacade):
             self._prepare(hashlib.sha256(self.tbox_path.read_bytes()).hexdigest())
             self._records = PgRecords(session)
             self._journal = PgJournal(session, self._records)
-            session.listen(self._records, self._journal)
+            session.listen(self._records)
             self._writes = Writes(session, self._records, self._journal)
             self._inferred = PgInferred(session)
-            self._journal.recover()  # before anything is served
+            self._journal.check()  # before anything is served
         except BaseException:
             session.close()
             raise
-        self._journal.start()
         log.info("store: PostgreSQL at %s", shown_location(db))
 
     def _prepare(self, tbox_digest: str) -> None:
@@ -116,13 +117,8 @@ class PostgresStore(StoreFacade):
 
     # -- life cycle -------------------------------------------------------------------------------------------
     def close(self) -> None:
-        self._journal.stop()  # before the lock: the writer thread may be waiting for it
-        with self._session.lock:
+        with self._session.lock:  # the journalled plans stay rows: they are the plans, in the database
             if not self._session.closed:
-                try:
-                    self._journal.settle()
-                except Exception:  # the rows stay in the journal; the next open writes them out
-                    log.exception("store: writing out journalled plans at close failed")
                 self._session.close()
 
     def __enter__(self) -> Self:
@@ -141,8 +137,7 @@ class PostgresStore(StoreFacade):
         with self._guard:
             if not self._session.depth:
                 raise KBError("internal: lock_object outside a transaction() (it would be released at once)")
-            self._session.execute("SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))",
-                                  (LOCK_NAMESPACE + object_id,))
+            self._session.execute(LOCK_OBJECT, (LOCK_NAMESPACE + object_id,))
 
     def event_feed(self) -> EventFeed:
         """A feed of the events every process commits (`replicas.EventFeed`); the caller closes it."""
@@ -231,21 +226,33 @@ class PostgresStore(StoreFacade):
             self._journal.settle()
 
     def plans_to_write(self) -> int:
-        self._session.check_open()
-        return len(self._journal)
+        with self._guard:
+            return len(self._journal)
 
     # -- retention --------------------------------------------------------------------------------------------
     def compact(self, keep_perceived: int) -> Compaction:
         keep = check_keep_perceived(keep_perceived)
         with self._guard:
-            self._journal.settle()  # a plan still in the journal is history like any other
             s = self._session
             objects = self._records.object_ids()
             shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+            roots = {oid: current_roots(s.conn, POSTGRESQL, oid) for oid in objects}
+            # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
+            self._journal.settle([name for names in roots.values() for name in names])
 
             def fill() -> Compaction:
+                # one process compacts at a time (every replica compacts on its schedule), and each object's
+                # writes wait for it as for any other write of the object (its lock, until the commit)
+                row = s.execute("SELECT pg_try_advisory_xact_lock(%s)", (COMPACT_LOCK,)).fetchone()
+                if not (row and row[0]):
+                    log.info("store: another process is compacting the store; this one leaves it to it")
+                    return Compaction(0, 0, 0)
                 individuals = triples = 0
                 for oid in objects:
+                    s.execute(LOCK_OBJECT, (LOCK_NAMESPACE + oid,))
+                    # a plan another replica adopted since the roots were read is current too: its row stays
+                    kept = {*roots[oid], *current_roots(s.conn, POSTGRESQL, oid)}
+                    individuals += self._journal.drop(oid, kept)
                     i, t = compact_object(s.conn, oid, shared[oid], keep)
                     individuals, triples = individuals + i, triples + t
                 s.pending_triples -= triples
@@ -265,7 +272,10 @@ class PostgresStore(StoreFacade):
                 ids = self._records.object_ids() if object_ids is None else list(object_ids)
                 for oid in ids:
                     self._records.info(oid)
-            self._journal.settle()  # the export reads triples: every journalled plan's are written first
+            # the export reads triples: the journalled plans it shows are written out first (each object's
+            # current plan, or with the history every one)
+            self._journal.settle(None if ids is None else
+                                 [name for oid in ids for name in current_roots(self._session.conn, POSTGRESQL, oid)])
             reader = self._session.reader()
         return self._read_lines(reader, ids)
 

@@ -1,0 +1,216 @@
+"""The CPU a re-plan costs, whole: the service's CPU per re-planning perception beside a planner's whole process.
+
+`measure_service_cpu` starts a real `planhrc serve`, posts re-planning perceptions paced as a robot's (each
+`ROBOT_PAUSE_S` after the last answer has settled) and reads the server's CPU from `/proc/<pid>/stat`: its own
+user + system time and its reaped children's (VAL's processes), over the whole run, so everything a re-plan
+costs is in it: the request, its VAL runs, the work behind the answer (the plan's later pieces under VAL, and
+anything the store writes after the commit). After each answer the bench waits until that work is done: every
+later piece of the plan has its `val_verdict` event and the store writes nothing more (`/health`'s
+`plans_to_write` holds still from one probe to the next). Those probes cost the server a little CPU of their own; it is measured on the idle service and taken off
+(`probe_ms`). What the idle service spends per second (`idle_ms_per_s`, its threads' time-outs) is measured
+apart, and the run's share of it stays in the figure: it is what the service costs while it re-plans.
+
+`measure_process_cpu` is the anchor measured in the same run: a planner's whole process (driver, translator,
+search, plan file) on a random task of the same size, its CPU read from this process's reaped children. Madagascar
+is the issue's anchor; it is used when it is configured (`PLANHRC_MADAGASCAR`), Fast Downward LAMA otherwise.
+"""
+from __future__ import annotations
+
+import os
+import random
+import resource
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Mapping
+
+import httpx
+
+from planhrc.planner.registry import available_planners, get_planner
+from planhrc.stats import percentile
+from planhrc.translator.domain import get_domain
+from planhrc.translator.problem import get_problem
+from planhrc.paths import default_tbox_path
+from planhrc.model import make_object
+
+ROBOT_PAUSE_S = 0.25  # as `grid.ROBOT_PAUSE_S`: a robot's next perception follows its action
+SETTLE_POLL_S = 0.05
+SETTLE_LIMIT_S = 60.0
+ANCHORS = ("madagascar", "fd-lama")  # the anchor planners, in order of preference
+
+
+def process_cpu_s(pid: int) -> tuple[float, float]:
+    """(own user + system, reaped children's user + system) seconds of a process (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    tick = os.sysconf("SC_CLK_TCK")
+    return (int(fields[11]) + int(fields[12])) / tick, (int(fields[13]) + int(fields[14])) / tick
+
+
+def _total(cpu: tuple[float, float]) -> float:
+    return cpu[0] + cpu[1]
+
+
+def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 12, runs: int = 20, seed: int = 7,
+                        env: Mapping[str, str] | None = None, pause_s: float = ROBOT_PAUSE_S) -> dict[str, Any]:
+    """The service's whole CPU per re-plan (see the module's note), in ms: `per_replan_ms` (own + children, the
+    settle probes taken off), `val_children_ms` (VAL's processes alone) and the answers' latency. A random
+    perception now and then lets the plan go on (`decisions`); its CPU is counted as the re-plans'."""
+    from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
+
+    rng = random.Random(seed)
+    with tempfile.TemporaryDirectory(prefix="planhrc-bench-cpu-") as tmp, \
+            running_service(Path(tmp), dict(env or {})) as server, \
+            httpx.Client(base_url=server.url, timeout=120, headers={"Authorization": f"Bearer {TOKEN}"}) as client:
+        ident = create_object(client, links, orientations, formulation, f"cpu-{formulation}")
+        set_goal(client, ident, random_angles(rng, links, orientations))
+        settle = _Settle(client, ident)
+        for _ in range(3):  # the first re-plan grounds the task and arms VAL for its domain
+            _replan(client, ident, random_angles(rng, links, orientations))
+            settle.wait()
+        time.sleep(pause_s)
+        settle.wait()
+        probe_s = _probe_cost(settle, server.pid)
+        idle_s = _idle_rate(server.pid)
+        latencies: list[float] = []
+        decisions: dict[str, int] = {}
+        before, t0, probes = process_cpu_s(server.pid), time.monotonic(), 0
+        for _ in range(runs):
+            seconds, answer = _replan(client, ident, random_angles(rng, links, orientations))
+            decisions[answer["decision"]] = decisions.get(answer["decision"], 0) + 1
+            latencies.append(seconds)
+            time.sleep(pause_s)
+            probes += settle.wait()
+        after, elapsed = process_cpu_s(server.pid), time.monotonic() - t0
+    own = after[0] - before[0] - probes * probe_s
+    children = after[1] - before[1]
+    replans = max(1, decisions.get("replan", 0))  # the few other decisions' CPU is counted as the re-plans'
+
+    return {"formulation": formulation, "links": links, "orientations": orientations, "runs": runs,
+            "pause_s": pause_s, "decisions": decisions,
+            "per_replan_ms": round((own + children) / replans * 1000, 2),
+            "own_ms": round(own / replans * 1000, 2), "val_children_ms": round(children / replans * 1000, 2),
+            "idle_ms_per_s": round(idle_s * 1000, 2), "idle_share_ms": round(idle_s * elapsed / replans * 1000, 2),
+            "probes": probes, "probe_ms": round(probe_s * 1000, 3),
+            "latency_median_ms": round(percentile(latencies, 0.5) * 1000, 2)}
+
+
+def _replan(client: httpx.Client, ident: str, angles: list[float]) -> tuple[float, dict[str, Any]]:
+    t = time.perf_counter()
+    r = client.post(f"/objects/{ident}/perceptions", json={"link_orientations_deg": angles})
+    seconds = time.perf_counter() - t
+    r.raise_for_status()
+    return seconds, dict(r.json())
+
+
+class _Settle:
+    """Waits until the work behind an object's last answer is done: every later piece of its latest plan has its
+    verdict in the object's log (read from where it stopped), and the store's count of plans still to write
+    (`/health`) stays the same from one probe to the next (its writer, if any, is done)."""
+
+    def __init__(self, client: httpx.Client, ident: str) -> None:
+        self.client = client
+        self.ident = ident
+        self.seq = 0
+        self.plan_id: str | None = None
+        self.pending = 0  # later pieces of `plan_id` without a verdict yet
+        self.to_write: int | None = None  # `plans_to_write` at the last probe
+
+    def done(self) -> bool:
+        to_write, self.to_write = self.to_write, int(self.client.get("/health").json()["plans_to_write"])
+        events = self.client.get(f"/objects/{self.ident}/events", params={"after_seq": self.seq}).json()
+        for event in events:
+            self.seq = int(event["seq"])
+            data = event.get("data") or {}
+            if event["kind"] == "val_verdict":
+                if data.get("plan_id") == self.plan_id:
+                    self.pending -= 1
+            elif data.get("plan_id") is not None and data.get("plan_id") != self.plan_id:
+                self.plan_id = data["plan_id"]
+                self.pending = len(data.get("val_pieces") or []) - len(data.get("val_accepted") or [])
+        return self.pending <= 0 and to_write == self.to_write
+
+    def wait(self) -> int:
+        """Wait until `done`; how many probes that took."""
+        self.to_write = None
+        probes, end = 1, time.monotonic() + SETTLE_LIMIT_S
+        while not self.done():
+            if time.monotonic() > end:
+                raise TimeoutError(f"the service did not settle within {SETTLE_LIMIT_S:g} s")
+            time.sleep(SETTLE_POLL_S)
+            probes += 1
+        return probes
+
+
+def _probe_cost(settle: _Settle, pid: int, count: int = 40) -> float:
+    """The server's CPU seconds for one settle probe, on the idle service."""
+    before = _total(process_cpu_s(pid))
+    for _ in range(count):
+        settle.done()
+    return max(0.0, (_total(process_cpu_s(pid)) - before) / count)
+
+
+def _idle_rate(pid: int, seconds: float = 2.0) -> float:
+    """The idle service's CPU seconds per second."""
+    before = _total(process_cpu_s(pid))
+    time.sleep(seconds)
+    return max(0.0, (_total(process_cpu_s(pid)) - before) / seconds)
+
+
+def measure_process_cpu(planner: str, formulation: str, links: int = 20, orientations: int = 12, runs: int = 5,
+                        timeout_s: float = 10.0, seed: int = 7) -> dict[str, Any]:
+    """A planner's whole process (every process it starts, reaped) on random tasks of this size: CPU ms per run,
+    median; a run that hits `timeout_s` is reported and not repeated."""
+    tbox = default_tbox_path()
+    domain = get_domain(tbox, formulation)
+    rng = random.Random(seed)
+    obj = make_object("obj1", formulation, links, orientations)
+    degs = obj.orientation_degrees
+    solver = get_planner(planner)
+    cpu_ms: list[float] = []
+    for _ in range(runs):
+        init = obj.configuration_atoms([rng.choice(degs) for _ in obj.joint_indices])
+        goal = obj.configuration_atoms([rng.choice(degs) for _ in obj.joint_indices])
+        problem = get_problem(obj, init, goal, "bench")
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        result = solver.solve(domain, problem, timeout_s)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if not result.solved:
+            return {"planner": planner, "formulation": formulation, "runs": len(cpu_ms) + 1,
+                    "status": result.status.value, "note": f"no plan within {timeout_s:g} s; not repeated",
+                    "cpu_median_ms": round(percentile(cpu_ms, 0.5) * 1000, 2) if cpu_ms else None}
+        cpu_ms.append((after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime))
+    return {"planner": planner, "formulation": formulation, "runs": len(cpu_ms), "status": "solved",
+            "cpu_median_ms": round(percentile(cpu_ms, 0.5) * 1000, 2)}
+
+
+def anchor_planner() -> str | None:
+    """The anchor measured beside the service: Madagascar where it is configured, else Fast Downward LAMA."""
+    usable = set(available_planners())
+    return next((name for name in ANCHORS if name in usable), None)
+
+
+def cpu_row(formulation: str, runs: int, anchor_runs: int = 5, anchor_timeout_s: float = 10.0) -> dict[str, Any]:
+    """The CPU column of the re-planning table for one formulation: the service's whole CPU per re-plan, the
+    anchor's whole process measured right after it in the same run, and their ratio."""
+    row: dict[str, Any] = {"service": measure_service_cpu(formulation, runs=runs)}
+    anchor = anchor_planner()
+    if anchor is not None:
+        row["anchor"] = measure_process_cpu(anchor, formulation, runs=anchor_runs, timeout_s=anchor_timeout_s)
+        base = row["anchor"].get("cpu_median_ms")
+        if base and row["anchor"]["status"] == "solved":
+            row["ratio"] = round(row["service"]["per_replan_ms"] / base, 3)
+    return row
+
+
+def cpu_text(row: dict[str, Any] | None) -> str:
+    """The table's cells: the service's CPU per re-plan (VAL's processes in it), and the anchor's whole process."""
+    if row is None:
+        return "- | - |"
+    service = row["service"]
+    text = f"{service['per_replan_ms']} (VAL {service['val_children_ms']}) | "
+    anchor = row.get("anchor")
+    if anchor is None:
+        return text + "- |"
+    if anchor["status"] != "solved":
+        return text + f"{anchor['planner']}: {anchor['note']} |"
+    return text + f"{anchor['planner']} {anchor['cpu_median_ms']}, ratio {row.get('ratio', '-')} |"
