@@ -18,10 +18,11 @@ from planhrc.geometry import Cell, ObjectGeometry, joint_points, rotated
 from planhrc.judge import Baseline, judge_motion, judge_turn, two_arms
 from planhrc.kb_service.app import create_app
 from planhrc.model import make_object, perceive
-from planhrc.ordering import Placement, feasible_alternative
+from planhrc.ordering import Move, Placement, RefusedMotion, feasible_alternative
 from planhrc.detour import find_detour, find_room, slide_feasible
 from planhrc.pipeline.order import alphabet_of
 from planhrc.settings import make_settings
+from planhrc.vocabulary import Infeasible
 
 CREATED = [0.6, 0.39]
 MEASURED = [90.4, 89.7, 90.2, 90.1, 89.8]  # straight, as a camera sees it: never exactly on the grid
@@ -112,6 +113,18 @@ def test_a_turn_the_worker_refused_is_never_planned_again_from_the_same_state_ev
         # from another state (the refusal was made where link 5 pointed at 90°) the same turn is allowed again
         other = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": GOAL}).json()
         assert other["decision"] == "goal_reached"
+
+
+def test_a_refused_turn_is_the_same_one_only_from_the_same_snapped_state_at_the_same_place_and_the_same_way():
+    refused = RefusedMotion(state_deg=(90, 90, 90, 90, 90), base_point_xy=(0.6, 0.39), turned=5, held=4,
+                            direction=-1, step_deg=45, code=Infeasible.OFF_TABLE, link=5, fact="link 5 off the table")
+    here = ObjectGeometry((0.1,) * 5, (0.605, 0.39))
+    turn = Move("rotateanticlockwise", 5, 4, 4, -45)
+    assert refused.forbids(here, MEASURED, turn)  # the camera's noise snaps to the same state
+    assert not refused.forbids(here, GOAL, turn)  # from another state
+    assert not refused.forbids(ObjectGeometry((0.1,) * 5, (0.6, 0.42)), MEASURED, turn)  # 3 cm away
+    assert not refused.forbids(here, MEASURED, Move("rotateclockwise", 5, 4, 4, 45))  # the other way round
+    assert not refused.forbids(here, MEASURED, Move("rotateanticlockwise", 4, 3, 3, -45))  # another link
 
 
 def test_a_plan_whose_steps_fit_in_no_order_goes_through_intermediate_configurations():
