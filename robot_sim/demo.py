@@ -36,7 +36,7 @@ from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.vocabulary import ActionOutcome, DecisionKind, Infeasible
 
 if TYPE_CHECKING:
-    from planhrc.robot_sim.worker import WorkerSummary
+    from planhrc.robot_sim.episode import WorkerSummary
 
 log = logging.getLogger(__name__)
 
@@ -357,7 +357,7 @@ def add_demo_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
 
 def run_demo_cli(args: argparse.Namespace, worker_link: WorkerLink | None = None) -> int:
     """The demo's command; `worker_link` is given by the ROS 2 layer for `--ros2`."""
-    from planhrc.robot_sim.worker import display_problem
+    from planhrc.robot_sim.worker_cli import display_problem
 
     if args.ros2 and worker_link is None:
         print("planhrc demo: --ros2: the ROS 2 link is made by `planhrc demo --ros2` in .venv-ros2", file=sys.stderr)
