@@ -87,7 +87,7 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
         motion = action_motion(obj, action)
         refused = (refusal_data(context, object_id, request.refusal, motion)
                    if outcome == ActionOutcome.FAILED and failure in REFUSALS else None)
-        data = {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
+        data: dict[str, Any] = {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
                 "reason": failure, "measured_deg": measured_deg, "message": message,
                 "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"],
                 **({"refusal": refused} if refused is not None else {})}
