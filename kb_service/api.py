@@ -218,7 +218,8 @@ def create_feedback(
     """Report the outcome of the dispatched action, with the failure's `reason` and the turned link's
     `measured_deg` when it did not succeed (both stored in the feedback event)."""
     request = usecases.FeedbackRequest(object_id, action_id, body.outcome, body.message, idempotency_key,
-                                       body.reason, body.measured_deg)
+                                       body.reason, body.measured_deg,
+                                       body.refusal.model_dump(mode="json") if body.refusal is not None else None)
     result = usecases.give_feedback(context, request)
     return FeedbackPublic.model_validate(result, from_attributes=True)
 
@@ -228,7 +229,8 @@ def create_feedback(
 def create_give_up(object_id: str, body: GiveUpCreate, context: Ctx) -> GiveUpPublic:
     """For workers: say that the worker stopped working on the object, and why. The service records a
     `worker_gave_up` event and leaves the execution idle with nothing dispatched; the next perception decides
-    anew."""
+    anew. A give-up is never silent: it becomes a help request (a `human_help_requested` decision in the log, and
+    in the answer) naming what the human should do to reach the goal and why the robot stopped."""
     gave_up = usecases.give_up(context, usecases.GiveUpRequest(object_id, body.reason, body.message))
     return GiveUpPublic.model_validate(gave_up, from_attributes=True)
 

@@ -19,7 +19,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 from planhrc.model import Formulation
-from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason
+from planhrc.vocabulary import ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, Infeasible, Skill
 
 # strict: a JSON number, as documented (pydantic's lax mode took `false` for 0.0 and "1.5" for 1.5)
 FiniteFloat = Annotated[float, Field(strict=True, allow_inf_nan=False)]
@@ -118,7 +118,9 @@ class ObjectCreate(BaseModel):
         json_schema_extra={"enum": list(ORIENTATION_COUNTS)},
     )
     formulation: Formulation = Field(
-        description="Planning formulation: joints carry relative angles, or absolute link orientations.",
+        description="Planning formulation: joints carry relative angles (relative), absolute link orientations "
+        "(absolute), or each link's orientation from link 1 with two grippers turning one joint at a time at the "
+        "centre, grasping and releasing the links it joins (bimanual).",
         examples=["relative"],
     )
     base_point_xy: list[TableCoordinate] | None = Field(
@@ -172,7 +174,7 @@ class ObjectPublic(BaseModel):
 
     id: str = Field(description="Identifier of the object (also the prefix of its individuals).", examples=["obj1"])
     name: str = Field(description="Human-readable name.", examples=["rod"])
-    formulation: Formulation = Field(description="relative or absolute.", examples=["relative"])
+    formulation: Formulation = Field(description="relative, absolute or bimanual.", examples=["relative"])
     orientations: int = Field(description="K, the number of allowed orientations.", examples=[4])
     step_deg: int = Field(description="360 / K: the angle of one planned rotation.", examples=[90])
     links: list[LinkPublic] = Field(description="Links l1..lN in chain order.", examples=[[{"name": "obj1_l1", "length_m": 0.155}]])
@@ -211,9 +213,9 @@ class GoalUpdate(BaseModel):
     )
     joint_angles_deg: list[FiniteFloat | None] | None = Field(
         default=None, min_length=MIN_LINKS - 1, max_length=MAX_LINKS,
-        description="One value per joint: the N-1 relative angles (relative formulation) or the N link "
-        "orientations (absolute formulation); null leaves that joint free (a partial goal), but at least one "
-        "joint has a value.",
+        description="One value per joint: the N-1 relative angles (relative formulation), the N link "
+        "orientations (absolute formulation) or the orientations of links 2..N from link 1 (bimanual); null leaves "
+        "that joint free (a partial goal), but at least one joint has a value.",
         examples=[[90, 0, 90], [90, None, 90]],
         json_schema_extra={"contains": {"type": "number"}},  # at least one joint has a value
     )
@@ -297,7 +299,8 @@ class NextActionPublic(BaseModel):
 
     id: str = Field(description="Identifier of the action (for feedback).", examples=["obj1_plan_1_a2"])
     name: str = Field(description="PDDL action name.", examples=["rotateclockwise"])
-    params: list[str] = Field(description="PDDL arguments: turned link, held link, joint, from, to.",
+    params: list[str] = Field(description="PDDL arguments: turned link, held link, joint, from, to (bimanual: "
+                              "turned link, kept link, joint, then the action's own, the grippers last).",
                               examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"]])
     step: int = Field(description="1-based position of the action in its plan.", examples=[2])
     last_step: int = Field(description="Last plan step this motion covers: consecutive steps of one joint in one "
@@ -307,8 +310,12 @@ class NextActionPublic(BaseModel):
     joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])
     turned_link_index: int = Field(description="Index of the link that turns (with every link beyond it).", examples=[2])
     held_link_index: int = Field(description="Index of the link held still (0 = the table).", examples=[1])
-    delta_deg: int = Field(description="Signed rotation of the turned link, + clockwise seen from above.", examples=[90])
+    delta_deg: int = Field(description="Signed rotation of the turned link, + clockwise seen from above; 0 for a "
+                           "bimanual step that turns nothing (grasp, release, centring).", examples=[90])
     macro_steps: int = Field(description="Number of planned steps this motion stands for.", examples=[1])
+    ends_plan: bool = Field(default=False, description="Whether this motion is the plan's last: it comes to rest in "
+                            "the goal, judged as drawn; any other keeps 1.5 cm from the table's edges at rest "
+                            "(`planhrc.judge`).", examples=[False])
 
 
 class HelpRequestPublic(BaseModel):
@@ -324,6 +331,24 @@ class HelpRequestPublic(BaseModel):
                           examples=["turn link 4 to 135°"])
 
 
+class SkillRequestPublic(BaseModel):
+    model_config = _config(
+        "A robot skill the service asks for before the plan's rotations: it changes where the object lies, not the "
+        "state of the domain; the worker does it and perceives again.",
+        {"name": "slide", "base_point_xy": [0.62, 0.05], "links": [1, 5],
+         "sentence": "slide the object 12 cm towards the table's middle"},
+    )
+
+    name: Skill = Field(description="slide: slide the whole object with both arms, holding `links`, until its base "
+                        "point lies at `base_point_xy`.", examples=["slide"])
+    base_point_xy: list[float] = Field(min_length=2, max_length=2, description="Where the object's base point p1 "
+                                       "should lie afterwards, [x, y] in metres in the robot's frame.",
+                                       examples=[[0.62, 0.05]])
+    links: list[int] = Field(description="The links the arms hold (1-based).", examples=[[1, 5]])
+    sentence: str = Field(description="The request in words, with why.",
+                          examples=["slide the object 12 cm towards the table's middle"])
+
+
 class DecisionPublic(BaseModel):
     model_config = _config(
         "What the cooperation model decided for a perception.",
@@ -337,8 +362,9 @@ class DecisionPublic(BaseModel):
         description="goal_reached, continue (next planned action), resume (from a later or earlier expected "
         "state), replan (a new plan was made), no_plan (no goal, or no plan could be found), "
         "human_help_requested (the robot cannot act: `help` says what the human should do; the execution waits "
-        "for the next perception) or incomplete_perception (some links were not seen: `unseen_links`; nothing "
-        "was stored or changed).",
+        "for the next perception), incomplete_perception (some links were not seen: `unseen_links`; nothing "
+        "was stored or changed) or robot_skill (no plan fits where the object lies, one fits where the robot can "
+        "slide it: `skill` says where; the worker does it and perceives again).",
         examples=["continue", "resume"],
     )
     plan_id: str | None = Field(description="Plan being followed after the decision.", examples=["obj1_plan_1"])
@@ -359,6 +385,34 @@ class DecisionPublic(BaseModel):
         default=None, description="incomplete_perception: the 1-based indices of the links not seen.",
         examples=[[3, 5]],
     )
+    skill: SkillRequestPublic | None = Field(
+        default=None, description="robot_skill: the skill the robot does first, then it perceives again.",
+        examples=[None],
+    )
+
+
+class RefusalFactPublic(BaseModel):
+    model_config = _config(
+        "The geometric fact behind a turn the worker refused before moving (its judge, `planhrc.judge`, from the "
+        "pose it measured): which link, against what, how far, and the pose it judged from.",
+        {"code": "off_table", "link": 4, "against": "the table's left edge", "distance_m": 0.04,
+         "from_deg": [90.4, 134.8, 90.1, 314.6, 314.5], "base_point_xy": [0.54, 0.13]},
+    )
+
+    code: Infeasible = Field(description="off_table, inside_robot, out_of_reach or overlap.", examples=["off_table"])
+    link: int = Field(ge=1, le=MAX_LINKS, description="The link concerned (1-based).", examples=[4])
+    against: str = Field(default="", max_length=200, description="What it runs against: an edge of the table, "
+                         "the robot's body, another link, the arms' reach.", examples=["the table's left edge"])
+    distance_m: FiniteFloat = Field(default=0.0, ge=0.0, le=10.0, description="How far off, in metres (0 when not a "
+                                    "distance).", examples=[0.04])
+    from_deg: list[FiniteFloat] | None = Field(
+        default=None, min_length=MIN_LINKS, max_length=MAX_LINKS,
+        description="The measured link orientations the turn was judged from (default: the latest perception's).",
+        examples=[[90.4, 134.8, 90.1, 314.6, 314.5]])
+    base_point_xy: list[TableCoordinate] | None = Field(
+        default=None, min_length=2, max_length=2,
+        description="The measured base point it was judged at (default: the latest measured one).",
+        examples=[[0.54, 0.13]])
 
 
 class FeedbackCreate(BaseModel):
@@ -387,11 +441,18 @@ class FeedbackCreate(BaseModel):
         description="The turned link's measured orientation after release (degrees clockwise), for partial, slip "
         "or stall.", examples=[95.0, None],
     )
+    refusal: RefusalFactPublic | None = Field(
+        default=None, description="For a turn refused before it moved (failed, left_table, collision or "
+        "unreachable): the geometric fact. The service never proposes the same turn from the same state again "
+        "(it remembers it in the object's log). Optional: a refusal without it is remembered from the latest "
+        "perception.", examples=[None])
 
     @model_validator(mode="after")
     def _reason_only_for_failures(self) -> "FeedbackCreate":
         if self.outcome == ActionOutcome.SUCCEEDED and self.reason is not None:
             raise ValueError(f"reason: must be null when the outcome is succeeded, got {self.reason.value!r}")
+        if self.outcome == ActionOutcome.SUCCEEDED and self.refusal is not None:
+            raise ValueError("refusal: must be null when the outcome is succeeded")
         return self
 
 
@@ -427,9 +488,24 @@ class GiveUpCreate(BaseModel):
 
 
 class GiveUpPublic(BaseModel):
-    model_config = _config("The recorded give-up.", {"event_seq": 12})
+    model_config = _config(
+        "The recorded give-up, and the help request it became.",
+        {"event_seq": 12, "decision": "human_help_requested",
+         "reason": "the robot stopped (repeated_failure: ...); the robot asks the human for help: turn link 4 to 135°",
+         "help": [{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135° (the robot stopped ...)"}]},
+    )
 
     event_seq: int = Field(description="Position of the worker_gave_up event in the object's log.", examples=[12])
+    decision: DecisionKind | None = Field(
+        default=None, description="human_help_requested: the give-up became a help request (recorded as that "
+        "decision, after the worker_gave_up event); null when no goal is left to ask for.",
+        examples=["human_help_requested"])
+    reason: str = Field(default="", description="Why, in words: the worker's reason and what is asked.",
+                        examples=["the robot stopped (repeated_failure: ...)"])
+    help: list[HelpRequestPublic] = Field(
+        default_factory=list, description="What the human should do to reach the goal, one item per link, "
+        "upstream first; empty in a help request when no perception of the whole object is stored (the reason asks "
+        "for the goal as a whole).", examples=[[{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"}]])
 
 
 # -- stored records -------------------------------------------------------------------------------------
@@ -482,7 +558,7 @@ class PlanStepPublic(BaseModel):
     eff_neg: list[str] = Field(description="Ground negative effects.", examples=[["(hasorientation deg_0 obj1_j1)"]])
     eff_pos: list[str] = Field(description="Ground positive effects.", examples=[["(hasorientation deg_90 obj1_j1)"]])
     cond_eff: list[dict[str, list[str]]] = Field(
-        description="Ground conditional effects (absolute formulation): when, eff_neg, eff_pos.",
+        description="Ground conditional effects (absolute and bimanual formulations): when, eff_neg, eff_pos.",
         examples=[[{"when": ["(hasorientation deg_0 obj1_j2)"], "eff_neg": ["(hasorientation deg_0 obj1_j2)"],
                     "eff_pos": ["(hasorientation deg_90 obj1_j2)"]}]])
     joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])

@@ -14,7 +14,7 @@ from dataclasses import replace
 from typing import Any
 
 from planhrc.cli_args import int_in, positive_float, writable_file
-from planhrc.model import ModelError
+from planhrc.model import Formulation, ModelError
 from planhrc.pipeline import PlanningConfig, config_from_settings
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS
@@ -47,10 +47,13 @@ def solve_and_store(request: SolveRequest, kb: KnowledgeBase, config: PlanningCo
 def add_solve_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = subparsers.add_parser("solve", help="solve one problem end to end through the ontology",
                               description=__doc__)
-    p.add_argument("--formulation", choices=["relative", "absolute"], required=True)
+    p.add_argument("--formulation", choices=[f.value for f in Formulation], required=True,
+                   help="bimanual: two grippers turn one joint at a time at the centre; the robot starts with both "
+                   "grippers free and the middle joint at the centre")
     p.add_argument("--orientations", type=int_in(2, 360), required=True, metavar="K",
                    help="allowed orientations (360 %% K == 0)")
-    p.add_argument("--init", required=True, help="degrees, comma separated (absolute: per link; relative: per joint)")
+    p.add_argument("--init", required=True, help="degrees, comma separated (absolute: per link; relative: per joint; "
+                   "bimanual: per joint, each link's orientation from link 1)")
     p.add_argument("--goal", required=True, help="degrees, comma separated; '*' leaves a joint unconstrained")
     p.add_argument("--planner", default=None, choices=list(PLANNERS),
                    help="planner backend (default: the settings' planner)")

@@ -63,7 +63,7 @@ def describe_state(atoms: Iterable[Atom]) -> str:
     return " and ".join(parts) if parts else "owl:Thing"
 
 
-_TYPE_CLASS = {"link": "Link", "joint": "Joint", "orientation": "Orientation"}
+_TYPE_CLASS = {"link": "Link", "joint": "Joint", "orientation": "Orientation", "gripper": "Gripper"}
 METHODS = ("unsat", "classify")
 
 

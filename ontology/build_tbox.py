@@ -6,8 +6,9 @@ what this script writes. The TBox holds
 * the paper's classes and properties (Type, Link, Joint, Orientation, Predicate and its subclasses,
   CondPredicate, Action, RotateClockwise, RotateAntiClockwise, State, Problem, Plan) with the paper's
   cardinalities;
-* the PDDL domain model of both formulations as individuals (DomainModel, ActionSchema, Variable,
-  AtomPattern, ConditionalEffectPattern), so that the translator writes the PDDL domain from the TBox alone;
+* the PDDL domain model of each formulation as individuals (DomainModel, ActionSchema, Variable,
+  AtomPattern, ConditionalEffectPattern), so that the translator writes the PDDL domain from the TBox alone:
+  relative and absolute here, and the bimanual one with the classes it adds (grippers, the centre) in `bimanual`;
 * SWRL rules that derive the chain structure (which joint turns which link, which joints lie downstream,
   hence the `Affected` facts) and relative joint angles from observed absolute link orientations.
 """
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from owlready2 import (
     AllDisjoint,
@@ -31,6 +32,9 @@ from owlready2 import (
     comment,
     label,
 )
+
+from planhrc.ontology.bimanual import build_bimanual_model, declare_bimanual
+from planhrc.ontology.patterns import Patterns
 
 IRI = "http://planhrc.org/ontology/planhrc.owl#"
 OUT = Path(__file__).resolve().parent / "planhrc.owl"
@@ -90,7 +94,7 @@ def build(path: Path = OUT) -> Path:
             range = [int]
 
         class formulation(DataProperty, FunctionalProperty):
-            comment = ["'relative' or 'absolute'."]
+            comment = ["'relative', 'absolute' or 'bimanual'."]
             range = [str]
 
         class objectName(DataProperty, FunctionalProperty):
@@ -457,7 +461,10 @@ def build(path: Path = OUT) -> Path:
             domain = [ActionSchema]
             range = [str]
 
-        _build_domain_models(onto, locals())
+        ns = locals()
+        ns.update(declare_bimanual(ns))
+        _build_domain_models(onto, ns)
+        build_bimanual_model(ns)
 
     onto.save(file=str(path), format="rdfxml")
     return path
@@ -465,25 +472,10 @@ def build(path: Path = OUT) -> Path:
 
 def _build_domain_models(onto: Ontology, ns: dict[str, Any]) -> None:
     """Individuals describing the two PDDL domains (paper figures 'relative' and 'conditional' RotateClockwise)."""
-    DomainModel, ActionSchema, Variable = ns["DomainModel"], ns["ActionSchema"], ns["Variable"]
-    AtomPattern, CondPattern = ns["AtomPattern"], ns["ConditionalEffectPattern"]
-
-    def var(prefix: str, name: str, type_name: str, pos: int) -> Thing:
-        v = Variable(f"{prefix}_var_{name}")
-        v.pddlName = [f"?{name}"]
-        v.typeName = type_name
-        v.position = pos
-        return v
-
-    def atom(prefix: str, tag: str, pos: int, pred: str, args: Sequence[Thing], negated: bool = False) -> Thing:
-        """args are given in OWL argument order (arg1, arg2, arg3)."""
-        a = AtomPattern(f"{prefix}_{tag}_{pos}")
-        a.predicateName = pred
-        a.negated = negated
-        a.position = pos
-        for i, v in enumerate(args, start=1):
-            setattr(a, f"argVar{i}", v)
-        return a
+    DomainModel, ActionSchema = ns["DomainModel"], ns["ActionSchema"]
+    CondPattern = ns["ConditionalEffectPattern"]
+    patterns = Patterns(ns)
+    var, atom = patterns.var, patterns.atom
 
     for form, requirements in (
         ("relative", ":strips :typing :equality :negative-preconditions"),

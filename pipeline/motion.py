@@ -1,11 +1,12 @@
 """What a plan step means for the robot: which link turns about which joint and by how much (`action_motion`),
-and consecutive steps of one motion merged into a macro step."""
+and consecutive steps of one motion merged into a macro step. A bimanual step that turns nothing (a grasp, a
+release, a centring) is a motion of 0 degrees at its joint, never merged with another."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Protocol, Sequence
 
-from planhrc.model import ActionSpec, ArticulatedObject, Formulation
+from planhrc.model import MACRO_DEG, ActionSpec, ArticulatedObject, Formulation
 from planhrc.ordering import Move
 from planhrc.transition import parse_step
 
@@ -28,6 +29,19 @@ def _index(name: str) -> int:
     return int(name.rsplit("_", 1)[1][1:])
 
 
+# The turn of each turning action, in steps of the orientation set or in degrees (the bimanual 45-degree macros);
+# every other action of our domains (the bimanual grasp, release and centring) turns nothing.
+_STEPS = {"rotateclockwise": 1, "rotateanticlockwise": -1}
+_DEGREES = {"rotateclockwise45": MACRO_DEG, "rotateanticlockwise45": -MACRO_DEG}
+
+
+def turn_deg(obj: ArticulatedObject, name: str) -> int:
+    """The signed turn (degrees, + clockwise seen from above) of the link a plan step of action `name` turns."""
+    if name in _STEPS:
+        return _STEPS[name] * obj.step
+    return _DEGREES.get(name, 0)
+
+
 def action_motion(obj: ArticulatedObject, action: PlanStep | ActionSpec | Sequence[str] | str) -> dict[str, int]:
     """Which link turns, which is held (0 = the table), about which joint and by how many degrees
     (+ clockwise seen from above) for one plan step."""
@@ -40,8 +54,7 @@ def action_motion(obj: ArticulatedObject, action: PlanStep | ActionSpec | Sequen
     else:
         name, params = action.spec.name, action.spec.params
     turned, held, joint = _index(params[0]), _index(params[1]), _index(params[2])
-    sign = 1 if name == "rotateclockwise" else -1
-    delta = sign * obj.step
+    delta = turn_deg(obj, name)
     if obj.formulation is Formulation.RELATIVE and turned == joint:
         # jK joins lK and lK+1 and carries lK+1 relative to lK: turning lK instead of lK+1 is the opposite turn
         delta = -delta
@@ -79,6 +92,7 @@ def merge_macro_steps(obj: ArticulatedObject, actions: Sequence[PlanStep], first
         prev = merged[-1] if merged else None
         same = (
             prev is not None
+            and prev.delta_deg != 0 and m["delta_deg"] != 0  # a step that turns nothing is a motion of its own
             and prev.joint_index == m["joint_index"]
             and prev.turned_link_index == m["turned_link_index"]
             and (prev.delta_deg > 0) == (m["delta_deg"] > 0)
@@ -115,9 +129,12 @@ def first_motion_steps(obj: ArticulatedObject, actions: Sequence[ActionSpec], me
         return 1
     first = action_motion(obj, actions[0])
     total, n = first["delta_deg"], 1
+    if total == 0:  # a bimanual step that turns nothing
+        return 1
     for action in actions[1:]:
         m = action_motion(obj, action)
         if ((m["joint_index"], m["turned_link_index"]) != (first["joint_index"], first["turned_link_index"])
+                or m["delta_deg"] == 0
                 or (m["delta_deg"] > 0) != (total > 0) or abs(total + m["delta_deg"]) >= 360):
             break
         total += m["delta_deg"]

@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-from planhrc.model import HAS_ORIENTATION, ArticulatedObject, State, format_atom
+from planhrc.control import possible_control
+from planhrc.model import CONTROL_PREDICATES, HAS_ORIENTATION, ArticulatedObject, State, format_atom
 from planhrc.planner.fast_downward import has_conditional_effects
 
 from .config import PlanOutcome
@@ -23,13 +24,14 @@ def validation_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: in
                       ) -> list[tuple[str, tuple[str, ...]]]:
     """Cut a solved outcome's plan into at most `n_pieces` consecutive pieces of nearly equal length, each a
     (problem, steps) pair for VAL: piece i starts from the expected state s^e_(c_i) and its goal is the *exact*
-    next cut state s^e_(c_(i+1)) (every hasorientation atom of it, and the negation of every other one); the
+    next cut state s^e_(c_(i+1)) (every fluent atom of it, and the negation of every other one); the
     last piece's goal is the task's own goal (the first piece starts from the task's initial state). With
     `first_steps`, the first piece is the plan's first `first_steps` steps and the rest is cut as above
     (`piece_bounds`).
 
-    Why the pieces say what one run says: hasorientation is the only predicate any action changes, and every
-    piece's problem has the task's objects and static facts. Induction over the pieces: VAL's state before
+    Why the pieces say what one run says: hasorientation (and in the bimanual formulation the robot's control
+    facts) are the only predicates any action changes, and every piece's problem has the task's objects and
+    static facts. Induction over the pieces: VAL's state before
     piece i is s^e_(c_i) (for i = 1 the task's init); VAL accepts piece i only if each of its steps is
     applicable in turn and the state it ends in satisfies the exact goal, i.e. *is* s^e_(c_(i+1)); so one run
     on the whole plan applies the same steps to the same states and ends where the last piece ends, in a state
@@ -105,13 +107,13 @@ def early_answer_first_piece(obj: ArticulatedObject, outcome: PlanOutcome, merge
 
 def _problem_text(obj: ArticulatedObject, start: State, exact_goal: State | None, task_problem: str) -> str:
     """A VAL problem with the task's objects and static facts, starting from `start`, whose goal is
-    `exact_goal` exactly (each of its hasorientation atoms, and the negation of every other one) or, when it
-    is None, the task's own goal. Written from the task's text (only the hasorientation lines of its init and
-    its goal change): the static facts are not sorted and written again for every piece."""
+    `exact_goal` exactly (each of its fluent atoms, and the negation of every other one) or, when it is None,
+    the task's own goal. Written from the task's text (only the fluent lines of its init and its goal change):
+    the static facts are not sorted and written again for every piece."""
     head, rest = task_problem.split(_INIT, 1)
     init, goal = rest.split(_GOAL, 1)
     static = "".join(line for line in init.splitlines(keepends=True)
-                     if not line.startswith(_FLUENT) and line != _CLOSE)
+                     if not line.startswith(_FLUENT_LINES) and line != _CLOSE)
     fluents = "".join(f"    {format_atom(a)}\n" for a in sorted(_fluents(start)))
     if exact_goal is None:
         goal_text = _GOAL + goal
@@ -120,13 +122,17 @@ def _problem_text(obj: ArticulatedObject, start: State, exact_goal: State | None
         goal_text = (_GOAL + "".join(f"    {format_atom(a)}\n" for a in sorted(wanted))
                      + "".join(f"    (not {format_atom((HAS_ORIENTATION, o, j))})\n" for j in obj.joints
                                for o in obj.orientation_names if (HAS_ORIENTATION, o, j) not in wanted)
+                     + "".join(f"    (not {format_atom(a)})\n" for a in sorted(possible_control(obj) - wanted))
                      + "  ))\n)\n")
     return head + _INIT + static + fluents + _CLOSE + goal_text
 
 
 # The parts of a problem written by `translator.problem.write_problem` that `_problem_text` cuts at.
-_INIT, _GOAL, _CLOSE, _FLUENT = "  (:init\n", "  (:goal (and\n", "  )\n", f"    ({HAS_ORIENTATION} "
+_INIT, _GOAL, _CLOSE = "  (:init\n", "  (:goal (and\n", "  )\n"
+_FLUENT_PREDICATES = frozenset({HAS_ORIENTATION}) | CONTROL_PREDICATES
+_FLUENT_LINES = tuple(f"    ({name} " for name in sorted(_FLUENT_PREDICATES)) + tuple(
+    f"    ({name})" for name in sorted(_FLUENT_PREDICATES))
 
 
 def _fluents(state: State) -> State:
-    return frozenset(a for a in state if a[0] == HAS_ORIENTATION)
+    return frozenset(a for a in state if a[0] in _FLUENT_PREDICATES)

@@ -115,11 +115,11 @@ def find_plan(obj: ArticulatedObject, init: State, goal: State, config: Planning
     ordering = ""
     if placement is not None:
         t = time.perf_counter()
-        ordered = order_steps(obj, model, init, result.plan, placement)
+        ordered = order_steps(obj, model, init, result.plan, placement, deadline_at)
         timings["order"] = time.perf_counter() - t
         if isinstance(ordered, Refusal):
             return PlanOutcome(PlanningStatus.UNSOLVABLE, ordered.message, result.planner, None, timings=timings,
-                               task=task, attempts=result.attempts, help=ordered.help)
+                               task=task, attempts=result.attempts, help=ordered.help, room=ordered.room)
         ordering = ordered.sentence
         result = replace(result, plan=ordered.steps)
     return Found(task, model, result, ordering, timings, t0, config)

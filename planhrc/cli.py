@@ -32,7 +32,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "compact": ("planhrc.kb_service.cli", "add_compact_parser", "drop the history the retention policy does not keep"),
     "planning-worker": ("planhrc.kb_service.cli", "add_planning_worker_parser",
                         "plan queued tasks for the services of a PostgreSQL store, on any host"),
-    "worker": ("planhrc.robot_sim.worker", "add_worker_parser", "run the simulated Baxter worker"),
+    "worker": ("planhrc.robot_sim.worker_cli", "add_worker_parser", "run the simulated Baxter worker"),
     "demo": ("planhrc.robot_sim.demo", "add_demo_parser", "KB service + Baxter worker: a scenario to the end"),
     "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser", "what the simulated cell measures"),
     "service-bench": ("planhrc.bench.service", "add_service_bench_parser",

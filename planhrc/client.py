@@ -75,6 +75,7 @@ class Decision:
     raw: dict[str, Any] = field(default_factory=dict, compare=False)
     help: list[dict[str, Any]] | None = None  # human_help_requested: [{"link", "to_deg", "sentence"}, ...]
     unseen_links: list[int] | None = None  # incomplete_perception: 1-based indices of the links not seen
+    skill: dict[str, Any] | None = None  # robot_skill: {"name", "base_point_xy", "links", "sentence"}
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> "Decision":
@@ -93,6 +94,7 @@ class Decision:
             raw=dict(data),
             help=data.get("help"),
             unseen_links=data.get("unseen_links"),
+            skill=data.get("skill"),
         )
 
 
@@ -200,9 +202,10 @@ class KBClient:
 
     def post_feedback(self, object_id: str, action_id: str, outcome: ActionOutcome | str,
                       message: str = "", reason: FailureReason | str | None = None,
-                      measured_deg: float | None = None) -> dict[str, Any]:
+                      measured_deg: float | None = None, refusal: dict[str, Any] | None = None) -> dict[str, Any]:
         """Report the outcome of the dispatched action: succeeded, failed or partial, with why it failed (`reason`)
-        and the turned link's measured orientation after release (`measured_deg`)."""
+        and the turned link's measured orientation after release (`measured_deg`); for a turn refused before it
+        moved, the geometric fact (`refusal`: code, link, against, distance_m, from_deg, base_point_xy)."""
         key = str(uuid.uuid4())
         body: dict[str, Any] = {"outcome": str(outcome)}
         if message:
@@ -211,11 +214,14 @@ class KBClient:
             body["reason"] = str(reason)
         if measured_deg is not None:
             body["measured_deg"] = float(measured_deg)
+        if refusal is not None:
+            body["refusal"] = refusal
         return self._object("POST", f"/objects/{object_id}/actions/{action_id}/feedback", body, key)
 
     def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:
         """Tell the service the worker stopped working on the object (`reason` a short code, `message` a
-        sentence); the service records it and answers `{"event_seq": ...}`."""
+        sentence); the service records it and answers `{"event_seq": ..., "decision": "human_help_requested",
+        "reason": ..., "help": [...]}`: the help request the give-up became."""
         return self._object("POST", f"/objects/{object_id}/give-up", {"reason": reason, "message": message})
 
     def list_objects(self) -> list[dict[str, Any]]:

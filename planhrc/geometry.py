@@ -144,6 +144,7 @@ class Infeasibility:
     link: int
     message: str
     distance_m: float = 0.0  # how far off (beyond the table's edge or its clearance, beyond reach); 0 when not one
+    against: str = ""  # what it runs against: which edge of the table, the robot's body, another link, the reach
 
     def __str__(self) -> str:
         return self.message
@@ -251,17 +252,20 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
             past = d - tolerance.clearance_m
             sentence = (f"link {k} leaves the table: {past:.2f} m past its edge" if past > 1e-9 else
                         f"link {k} comes within {tolerance.clearance_m - d:.2f} m of the table's edge")
-            reasons.append(Infeasibility(Infeasible.OFF_TABLE, k, sentence, d))
+            end = points[k - 1] if outside[k - 1] >= outside[k] else points[k]
+            reasons.append(Infeasibility(Infeasible.OFF_TABLE, k, sentence, d, _edge(end, (x0, x1, y0, y1))))
         if inside[k - 1]:
-            reasons.append(Infeasibility(Infeasible.INSIDE_ROBOT, k, f"link {k} lies inside the robot's body"))
+            reasons.append(Infeasibility(Infeasible.INSIDE_ROBOT, k, f"link {k} lies inside the robot's body",
+                                         against="the robot's body"))
         if k in reach and short[k - 1] > 1e-9:
             d = float(short[k - 1])
             reasons.append(Infeasibility(Infeasible.OUT_OF_REACH, k, f"link {k} unreachable: {d:.2f} m beyond reach",
-                                         d))
+                                         d, "the arms' reach"))
     folds = (np.diff(np.asarray(values)) % 360.0) if n > 1 else np.zeros(0)
     for fold in np.flatnonzero(np.abs(folds - 180.0) < min_fold_gap_deg):  # neighbours fold onto each other
         reasons.append(Infeasibility(Infeasible.OVERLAP, int(fold) + 2,
-                                     f"link {int(fold) + 2} folds back onto link {int(fold) + 1}"))
+                                     f"link {int(fold) + 2} folds back onto link {int(fold) + 1}",
+                                     against=f"link {int(fold) + 1}"))
     if n > 2:
         i, j = np.triu_indices(n, k=2)
         limit = geometry.link_width_m - tolerance.overlap_m
@@ -271,20 +275,36 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
         close = _segment_distances(a[i], b[i], a[j], b[j]) < limit if len(i) else np.zeros(0, dtype=bool)
         for pi, pj in zip(i[close], j[close]):
             reasons.append(Infeasibility(Infeasible.OVERLAP, int(pj) + 1,
-                                         f"link {int(pj) + 1} overlaps link {int(pi) + 1}"))
+                                         f"link {int(pj) + 1} overlaps link {int(pi) + 1}",
+                                         against=f"link {int(pi) + 1}"))
     return Feasibility(not reasons, tuple(reasons))
+
+
+def _edge(point: np.ndarray, bounds: tuple[float, float, float, float]) -> str:
+    """Which edge of the table a point outside `bounds` (x_min, x_max, y_min, y_max) lies furthest past: the near
+    one (towards the robot), the far one, or the robot's left or right one."""
+    x0, x1, y0, y1 = bounds
+    past = {"the table's near edge": x0 - point[0], "the table's far edge": point[0] - x1,
+            "the table's right edge": y0 - point[1], "the table's left edge": point[1] - y1}
+    return max(past, key=lambda name: past[name])
 
 
 def _reach_shortfalls(points: np.ndarray, robot: RobotBody) -> np.ndarray:
     """`reach_shortfall` of many table points at once."""
-    best = np.full(len(points), np.inf)
-    for shoulder, side in ((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0)):
+    return np.asarray(arm_shortfalls(points, robot).min(axis=1))
+
+
+def arm_shortfalls(points: np.ndarray, robot: RobotBody) -> np.ndarray:
+    """How far each table point lies beyond each arm's reach: an (n, 2) array, the left arm's then the right's
+    (0 where the arm reaches it)."""
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    out = np.empty((len(points), 2))
+    for column, (shoulder, side) in enumerate(((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0))):
         beyond = np.maximum(0.0, np.linalg.norm(points - np.asarray(shoulder), axis=1) - robot.reach_m)
         awkward = (points[:, 0] < robot.near_x_m) & (side * points[:, 1] < robot.own_side_y_m)
         across = np.minimum(robot.near_x_m - points[:, 0], robot.own_side_y_m - side * points[:, 1])
-        beyond = np.where(awkward, np.maximum(beyond, across), beyond)
-        best = np.minimum(best, beyond)
-    return best
+        out[:, column] = np.where(awkward, np.maximum(beyond, across), beyond)
+    return out
 
 
 def _segments_enter_box(a: np.ndarray, b: np.ndarray, box: tuple[float, float, float, float],

@@ -10,6 +10,10 @@ seen from above; K allowed orientations are {0, step, 2*step, ...} with step = 3
   so does every jM with M > K: Affected(jM, lK, jK). Our objects also assert the reflexive
   Affected(jK, lK, jK), which names lK as the link that turns about jK (the paper's schema ignores it in its
   conditional effect because of `(not (= ?j2 ?j1))`).
+* Bimanual formulation: links l1..lN, joints j1..j(N-1); jK joins lK and lK+1 and carries the orientation of
+  lK+1 measured from l1, (theta[K+1] - theta[1]) mod 360. Two grippers turn lK+1 about jK while they hold lK
+  still, so jK and every jM with M > K change: Affected(jM, lK+1, jK), the reflexive one included. Its states
+  also hold the robot's control facts (what the grippers hold, which joint is at the centre: `planhrc.control`).
 
 A ground atom is a PDDL-style tuple ``(predicate, arg, ...)`` with lower-case names, e.g.
 ``("hasorientation", "deg_90", "obj1_j3")``. A state is a ``frozenset`` of atoms.
@@ -32,6 +36,13 @@ CONNECTED = "connected"
 HAS_ORIENTATION = "hasorientation"
 ORIENTATION_ORD = "orientationord"
 AFFECTED = "affected"
+ORIENTATION_ORD45 = "orientationord45"  # bimanual: o2 lies 45 degrees clockwise of o1
+KEEPER = "keeper"  # bimanual: the gripper that keeps the upstream link still
+FREE, HOLDING, IN_CENTRE = "free", "holding", "incentre"  # bimanual: the robot's control facts
+CONTROL_PREDICATES = frozenset({FREE, HOLDING, IN_CENTRE})
+GRIPPERS = ("left", "right")  # Baxter's grippers, as PDDL objects of a bimanual task
+KEEPING_GRIPPER = "left"
+MACRO_DEG = 45  # the bimanual turn macro
 EQUALITY = "="  # the predicate of a literal `(= ?a ?b)`
 
 
@@ -42,6 +53,7 @@ class ModelError(PlanhrcError):
 class Formulation(str, Enum):
     RELATIVE = "relative"
     ABSOLUTE = "absolute"
+    BIMANUAL = "bimanual"
 
 
 def orientation_values(k: int) -> tuple[int, ...]:
@@ -152,6 +164,16 @@ class ArticulatedObject:
     def orientation_names(self) -> tuple[str, ...]:
         return tuple(orientation_name(d) for d in self.orientation_degrees)
 
+    @property
+    def grippers(self) -> tuple[str, ...]:
+        """The robot's grippers as objects of its tasks (bimanual formulation only)."""
+        return GRIPPERS if self.formulation is Formulation.BIMANUAL else ()
+
+    @property
+    def has_macros(self) -> bool:
+        """Whether 45 degrees is several steps of the orientation set (bimanual 45-degree turns)."""
+        return self.formulation is Formulation.BIMANUAL and MACRO_DEG % self.step == 0 and MACRO_DEG > self.step
+
     def joint_links(self, k: int) -> tuple[str, str]:
         """(upstream link, downstream link) joined by joint k."""
         if self.formulation is Formulation.ABSOLUTE:
@@ -172,15 +194,26 @@ class ArticulatedObject:
         return frozenset((ORIENTATION_ORD, names[i], names[(i + 1) % len(names)]) for i in range(len(names)))
 
     def affected_atoms(self) -> frozenset[Atom]:
-        """Affected(jM, lK, jK) for M >= K (absolute formulation only); see the module docstring."""
-        if self.formulation is not Formulation.ABSOLUTE:
+        """Affected(jM, l, jK) for M >= K, l the link that turns about jK (absolute and bimanual formulations);
+        see the module docstring."""
+        if self.formulation is Formulation.RELATIVE:
             return frozenset()
         atoms = set()
         for k in self.joint_indices:
-            turned = self.link(k)
+            turned = self.joint_links(k)[1]
             for m in self.joint_indices:
                 if m >= k:
                     atoms.add((AFFECTED, self.joint(m), turned, self.joint(k)))
+        return frozenset(atoms)
+
+    def robot_atoms(self) -> frozenset[Atom]:
+        """Bimanual: which gripper keeps the upstream link, and the 45-degree steps where K allows them."""
+        if self.formulation is not Formulation.BIMANUAL:
+            return frozenset()
+        atoms: set[Atom] = {(KEEPER, KEEPING_GRIPPER)}
+        if self.has_macros:
+            names, m = self.orientation_names, MACRO_DEG // self.step
+            atoms |= {(ORIENTATION_ORD45, names[i], names[(i + m) % len(names)]) for i in range(len(names))}
         return frozenset(atoms)
 
     def static_atoms(self) -> frozenset[Atom]:
@@ -188,7 +221,7 @@ class ArticulatedObject:
 
     @cached_property
     def _static_atoms(self) -> frozenset[Atom]:  # worked out once per object: every state and problem holds them
-        return self.connected_atoms() | self.ord_atoms() | self.affected_atoms()
+        return self.connected_atoms() | self.ord_atoms() | self.affected_atoms() | self.robot_atoms()
 
     # -- configurations --------------------------------------------------------------------------------
     def check_joint_values(self, values: Sequence[int | float], field: str = "joint_angles_deg") -> tuple[int, ...]:
@@ -234,6 +267,8 @@ class ArticulatedObject:
             )
         if self.formulation is Formulation.ABSOLUTE:
             return tuple(int(v) % 360 for v in link_orientations)
+        if self.formulation is Formulation.BIMANUAL:
+            return tuple((int(v) - int(link_orientations[0])) % 360 for v in link_orientations[1:])
         return relative_from_absolute([int(v) % 360 for v in link_orientations])
 
     def configuration_atoms(self, joint_values: Sequence[int]) -> frozenset[Atom]:
@@ -242,9 +277,20 @@ class ArticulatedObject:
             (HAS_ORIENTATION, orientation_name(v), self.joint(k)) for k, v in zip(self.joint_indices, values)
         )
 
-    def state(self, joint_values: Sequence[int]) -> State:
-        """A complete state: static facts plus one orientation per joint."""
-        return self.static_atoms() | self.configuration_atoms(joint_values)
+    def state(self, joint_values: Sequence[int], control: Iterable[Atom] | None = None) -> State:
+        """A complete state: static facts plus one orientation per joint; a bimanual one also holds the robot's
+        control facts (`control`, default: both grippers free, the middle joint at the centre)."""
+        atoms = self.static_atoms() | self.configuration_atoms(joint_values)
+        if self.formulation is not Formulation.BIMANUAL:
+            return atoms
+        return atoms | (self.initial_control() if control is None else frozenset(control))
+
+    def initial_control(self) -> frozenset[Atom]:
+        """The robot's control facts before it has done anything (bimanual): both grippers free, the middle joint
+        at the centre. `planhrc.control` follows them from there."""
+        if self.formulation is not Formulation.BIMANUAL:
+            return frozenset()
+        return frozenset({(FREE, g) for g in GRIPPERS} | {(IN_CENTRE, self.joint(max(1, self.n_links // 2)))})
 
     def joint_values_of(self, state: Iterable[Atom]) -> dict[int, int]:
         """Joint index -> degrees for every HasOrientation atom of the state (partial states give partial maps)."""
@@ -263,6 +309,8 @@ class ArticulatedObject:
         ordered = [values[k] for k in self.joint_indices]
         if self.formulation is Formulation.ABSOLUTE:
             return tuple(ordered)
+        if self.formulation is Formulation.BIMANUAL:
+            return (first_link_deg % 360,) + tuple((first_link_deg + v) % 360 for v in ordered)
         return absolute_from_relative(first_link_deg, ordered)
 
 
@@ -281,7 +329,8 @@ def make_object(
     try:
         form = Formulation(formulation)
     except ValueError as exc:
-        raise ModelError(f"formulation: must be 'relative' or 'absolute', got {formulation!r}") from exc
+        raise ModelError(f"formulation: must be one of {', '.join(f.value for f in Formulation)}, got "
+                         f"{formulation!r}") from exc
     return ArticulatedObject(ident=ident, formulation=form, link_lengths_m=lengths, orientations=orientations, name=name)
 
 
@@ -397,8 +446,9 @@ class Perception:
 
 
 def perceive(obj: ArticulatedObject, link_orientations_deg: object,
-             field: str = "link_orientations_deg") -> Perception:
-    """Validate observed link orientations (one finite number per link) and snap them to allowed values."""
+             field: str = "link_orientations_deg", control: Iterable[Atom] | None = None) -> Perception:
+    """Validate observed link orientations (one finite number per link) and snap them to allowed values; a
+    bimanual object's state takes the robot's `control` facts (`ArticulatedObject.state`)."""
     if isinstance(link_orientations_deg, (str, bytes)) or not isinstance(link_orientations_deg, Sequence):
         raise ModelError(f"{field}: expected a sequence of numbers")
     if len(link_orientations_deg) != obj.n_links:
@@ -410,4 +460,4 @@ def perceive(obj: ArticulatedObject, link_orientations_deg: object,
         raw.append(float(v))
     snapped = tuple(snap_angle(v, obj.orientations) for v in raw)
     joint_values = obj.joint_values_from_links(snapped)
-    return Perception(obj.ident, tuple(raw), snapped, joint_values, obj.state(joint_values))
+    return Perception(obj.ident, tuple(raw), snapped, joint_values, obj.state(joint_values, control))

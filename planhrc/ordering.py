@@ -33,10 +33,11 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass, field, replace
-from typing import Mapping, Sequence
+from typing import Sequence
 
 from planhrc.geometry import (PLANNING, ROOMY, STRICT, Cell, Feasibility, Infeasibility, ObjectGeometry, Tolerance,
-                              configuration_feasible, link_centres, reach_shortfall, rotated)
+                              configuration_feasible, rotated)
+from planhrc.judge import Baseline, judge_turn
 from planhrc.vocabulary import Infeasible
 
 # Step checks per search: bounds the time the ordering adds to a re-plan; a plan it cannot order within it goes to
@@ -77,6 +78,35 @@ class Placement:
     # state: the relative formulation, whose states fix the links' angles to each other, not where l1 points
     # (a human turned it, say); 0: never (the absolute formulation's goals fix every link's orientation).
     whole_turn_deg: int = 0
+    # motions the robot refused from a state before: never proposed again from that state
+    refused: frozenset["RefusedMotion"] = frozenset()
+    grid_deg: int = 1  # the orientation step: what a help request's orientations are rounded to (`link_deg` is measured)
+
+
+@dataclass(frozen=True)
+class RefusedMotion:
+    """A turn the robot refused before it moved (its judge, from the pose it measured, found a problem): from the
+    state with link orientations `state_deg` (snapped, each a multiple of `step_deg`) and the base point near
+    `base_point_xy`, turning `turned` (holding `held`) in `direction` (+1 clockwise, -1 anticlockwise); `fact` is
+    what the robot said (which link, against what, how far)."""
+
+    state_deg: tuple[int, ...]
+    base_point_xy: tuple[float, float]
+    turned: int
+    held: int
+    direction: int
+    step_deg: int
+    code: Infeasible
+    link: int
+    fact: str
+
+    def forbids(self, geometry: ObjectGeometry, angles: Sequence[float], move: "Move", near_m: float = 0.02) -> bool:
+        """Whether `move` from the pose (`geometry`, `angles`) is this refused motion from the same state."""
+        if (move.turned, move.held) != (self.turned, self.held) or (move.delta_deg > 0) != (self.direction > 0):
+            return False
+        if math.dist(geometry.base_point_xy, self.base_point_xy) > near_m:
+            return False
+        return tuple(int(round(a / self.step_deg)) * self.step_deg % 360 for a in angles) == self.state_deg
 
 
 @dataclass(frozen=True)
@@ -123,40 +153,27 @@ class _Search:
     placement: Placement
     budget: int
     checks: int = 0
-    baseline: Mapping[tuple[Tolerance, str, int], float] = field(default_factory=dict)
+    baseline: Baseline = field(default_factory=lambda: Baseline({}))
     rest: Tolerance = PLANNING  # what a configuration a step comes to rest in keeps (the plan's end: STRICT)
 
     def excused(self, reason: Infeasibility, tolerance: Tolerance = STRICT) -> bool:
         """Whether `reason` (found with `tolerance`) is a problem of the start, no worse than there."""
-        start = self.baseline.get((tolerance, reason.code, reason.link))
-        return start is not None and reason.distance_m <= start + 1e-3
+        return self.baseline.excused(reason, tolerance)
 
     def step(self, geometry: ObjectGeometry, angles: tuple[float, ...], move: Move, last: bool = False
              ) -> Feasibility:
-        """Whether `move` is feasible from this configuration (problems of the start configuration excepted): the
-        configurations it sweeps through are checked as drawn, and where it comes to rest keeps `PLANNING`'s
-        clearance (`rest`) from the table's edges, unless the move ends the plan (`last`: the goal, as drawn)."""
+        """Whether `move` is feasible from this configuration: the one judge (`planhrc.judge.judge_turn`, problems
+        of the start configuration excepted), resting with `PLANNING`'s clearance (`rest`) unless the move ends
+        the plan (`last`: the goal, as drawn); and not a motion the robot refused from the same state before."""
         self.checks += 1
         if self.checks > self.budget:
             raise _OutOfBudget
-        grasped = [k for k in (move.turned, move.held) if k >= 1]
-        centres = link_centres(geometry, angles)
-        for k in grasped:
-            short = reach_shortfall(centres[k - 1], self.placement.cell.robot)
-            if short > 1e-9 and not self.excused(Infeasibility(Infeasible.OUT_OF_REACH, k, "", float(short))):
-                return Feasibility(False, (Infeasibility(Infeasible.OUT_OF_REACH, k,
-                                                         f"link {k} unreachable: {short:.2f} m beyond reach",
-                                                         float(short)),))
-        n = max(1, int(math.ceil(abs(move.delta_deg) / 5.0)))
-        for i in (n, *range(1, n)):  # where it comes to rest first: most refused steps are refused there
-            placed, values = rotated(geometry, angles, move.turned, move.held, move.delta_deg * i / n)
-            tolerance = self.rest if i == n and not last else STRICT
-            result = configuration_feasible(placed, values, self.placement.cell, reach_links=grasped,
-                                            tolerance=tolerance)
-            new = tuple(r for r in result.reasons if not self.excused(r, tolerance))
-            if new:
-                return Feasibility(False, new)
-        return Feasibility(True)
+        for refusal in self.placement.refused:
+            if refusal.forbids(geometry, angles, move):
+                return Feasibility(False, (Infeasibility(refusal.code, refusal.link,
+                                                         f"the robot refused this turn from here: {refusal.fact}"),))
+        return judge_turn(geometry, angles, move.turned, move.held, move.delta_deg, self.placement.cell,
+                          self.baseline, rest=STRICT if last else self.rest)
 
 
 def order_moves(placement: Placement, moves: Sequence[Move], budget: int = DEFAULT_BUDGET) -> Ordering:
@@ -268,14 +285,16 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
     turn = _whole_turn(placement, end, final)
     if turn:  # the plan's end does not lie on the table where the object points now: turn it as a whole first
         turned_start = rotated(placement.geometry, placement.link_deg, 1, 0, turn)[1]
-        to = int(round(turned_start[0])) % 360
+        to = int(round(turned_start[0] / placement.grid_deg)) * placement.grid_deg % 360
         problem_there = configuration_feasible(end, final, placement.cell, reach_links=()).reasons[0].message
         first = HelpItem(1, to, f"turn link 1 to {to}° and the whole object with it, about its base point (pointing "
                                 f"as it does now, the plan's end would not lie on the table: {problem_there})")
         rest = help_for(replace(placement, link_deg=turned_start, whole_turn_deg=0), moves, problem, why)
         return (first,) + tuple(item for item in rest if item.link != 1)
     start = tuple(float(a) % 360.0 for a in placement.link_deg)
-    changed = [k for k in range(1, len(final) + 1) if round(final[k - 1]) % 360 != round(start[k - 1]) % 360]
+    grid = placement.grid_deg
+    changed = [k for k in range(1, len(final) + 1)
+               if round(final[k - 1] / grid) * grid % 360 != round(start[k - 1] / grid) * grid % 360]
     named = [k for k in (problem.links if problem is not None else ()) if k in changed]
     links = named or [m.turned for m in dict.fromkeys(moves) if m.turned in changed] or changed
     if changed and not _safe_for_a_human(placement, final, links):
@@ -283,7 +302,7 @@ def help_for(placement: Placement, moves: Sequence[Move], problem: Feasibility |
     why = f" ({why})" if why else f" ({problem.sentence()})" if problem is not None else ""
     items = []
     for k in dict.fromkeys(links):
-        to = int(round(final[k - 1])) % 360
+        to = int(round(final[k - 1] / placement.grid_deg)) * placement.grid_deg % 360
         items.append(HelpItem(k, to, f"turn link {k} to {to}°{why}"))
     return tuple(items)
 
@@ -319,12 +338,9 @@ def _safe_for_a_human(placement: Placement, final: Sequence[float], links: Seque
     return configuration_feasible(geometry, angles, placement.cell, reach_links=()).ok
 
 
-def _baseline(placement: Placement) -> dict[tuple[Tolerance, str, int], float]:
-    """The start's problems, as drawn and with the clearance a plan keeps: (tolerance, code, link) -> how far off
-    (0 when not a distance)."""
-    return {(tolerance, r.code, r.link): r.distance_m for tolerance in (STRICT, PLANNING, ROOMY)
-            for r in configuration_feasible(placement.geometry, placement.link_deg, placement.cell,
-                                            tolerance=tolerance).reasons}
+def _baseline(placement: Placement) -> Baseline:
+    """The start's problems, as drawn and with the clearance a plan keeps (`planhrc.judge.Baseline`)."""
+    return Baseline.of(placement.geometry, placement.link_deg, placement.cell)
 
 
 def _dfs(search: _Search, moves: tuple[Move, ...]) -> tuple[tuple[Move, ...] | None, bool]:

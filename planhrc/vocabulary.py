@@ -6,6 +6,7 @@ as plain JSON strings and appear as enums in the service's OpenAPI schemas.
 * `ActionOutcome`: what a worker reports about an action it executed;
 * `FailureReason`: why an action that did not succeed failed (machine-readable; the feedback's sentence says the
   rest);
+* `Skill`: a robot skill the service asks for besides the plan's rotations;
 * `Remedy`: what the cooperation model does instead of retrying a failed action identically;
 * `GiveUpReason`: why a worker tells the service it stops working on an object;
 * `StopReason`: why a worker's run ended (its summary, the demo's results);
@@ -28,6 +29,14 @@ class DecisionKind(StrEnum):
     NO_PLAN = "no_plan"
     HUMAN_HELP_REQUESTED = "human_help_requested"
     INCOMPLETE_PERCEPTION = "incomplete_perception"
+    ROBOT_SKILL = "robot_skill"  # the robot first makes room with a skill (`Skill`), then perceives again
+
+
+class Skill(StrEnum):
+    """A robot skill the service may ask for besides the plan's rotations (`DecisionKind.ROBOT_SKILL`); it does
+    not change the state of the domain, only where the object lies."""
+
+    SLIDE = "slide"  # slide the whole object with both arms, its base point to a place nearer the table's middle
 
 
 class ExecutionStatus(StrEnum):
@@ -72,6 +81,9 @@ class GiveUpReason(StrEnum):
     NO_HUMAN_HELP = "no_human_help"
     HUMAN_COULD_NOT_HELP = "human_could_not_help"
     REPEATED_FAILURE = "repeated_failure"
+    NO_PLAN = "no_plan"
+    NO_ACTION = "no_action"
+    MAX_STEPS = "max_steps"
 
 
 class StopReason(StrEnum):

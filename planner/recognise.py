@@ -18,7 +18,9 @@ The changing predicates that are not cyclic variables (grippers' ``(free ?g)``, 
 axis (`control_pre`, `control_add`, `control_del`), to be planned over by `planner.product`. An action changes
 the cyclic variables or the control, not both, and a conditional effect neither reads nor changes the control.
 Static literals over values (``(not (= ?o1 ?o2))``, a unary static predicate on a value) are evaluated for
-all K values: always true is dropped, never true removes the action, sometimes true is outside the family.
+all K values: always true is dropped, never true removes the action, sometimes true is outside the family; a
+positive literal of a static predicate the init has no fact of never holds (a 45-degree macro where the
+orientation set has no 45-degree steps).
 """
 from __future__ import annotations
 
@@ -198,6 +200,9 @@ class _Context:
         self.k = len(cycle)
         self.rotations = rotations
         self.type_objects = dict(grounded.type_objects)
+        # static predicates without a single fact: a positive literal of one never holds (a bimanual object whose
+        # orientation set has no 45-degree steps has no `orientationord45` facts, so its macros never apply)
+        self.factless = grounded.static_predicates - {atom[0] for atom in grounded.static_facts}
 
     def _fail(self, action: GroundAction, why: str) -> OutsideFamilyError:
         args = dict(action.binding)
@@ -308,6 +313,8 @@ class _Context:
                     rest.remove(lit)
                     progress = True
         for lit in rest:
+            if lit.predicate in self.factless and not lit.negated:
+                raise _Never()
             terms = [t for t in lit.args if t.startswith("?")]
             missing = [t for t in terms if t not in env]
             if missing:

@@ -36,7 +36,7 @@ from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.vocabulary import ActionOutcome, DecisionKind, Infeasible
 
 if TYPE_CHECKING:
-    from planhrc.robot_sim.worker import WorkerSummary
+    from planhrc.robot_sim.episode import WorkerSummary
 
 log = logging.getLogger(__name__)
 
@@ -195,6 +195,12 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         "human_assists": summary.human_assists,
         "human_help_requests": summary.help_requests,
         "help_requested": [sentence for s in summary.steps for sentence in s.help_requested],
+        # every help request the service recorded (a decision, or a worker's stop it turned into one), and why
+        "help_reasons": [e["reason"] for e in decisions if e["kind"] == DecisionKind.HUMAN_HELP_REQUESTED],
+        "ended_with_help_request": not summary.reached_goal and (
+            bool(summary.final_help) or (bool(decisions) and decisions[-1]["kind"] == DecisionKind.HUMAN_HELP_REQUESTED)),
+        "final_help": list(summary.final_help),
+        "robot_skills": [s.skill for s in summary.steps if s.skill],
         "human_moves_scheduled": summary.human_scheduled,
         "human_moves_performed": summary.human_performed,
         "seen_links": summary.seen_links,
@@ -228,6 +234,17 @@ def _states_off_table(summary: WorkerSummary, spec: SceneSpec) -> int:
     return count
 
 
+def _why(reason: str) -> str:
+    """A help request's reason in a word: what kept the robot from acting."""
+    for words, why in (("the robot stopped", "robot_stopped"), ("cannot reach", "out_of_reach"),
+                       ("unreachable", "out_of_reach"), ("leaves the table", "off_table"),
+                       ("inside the robot", "off_table"), ("folds back", "folded"), ("overlaps", "folded"),
+                       ("failed", "repeated_failure")):
+        if words in reason:
+            return why
+    return "other"
+
+
 def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
     """The numbers a run of episodes is judged by."""
     outcomes = Counter(o for r in results for o in r["outcomes"])
@@ -245,6 +262,16 @@ def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
         "stop_reasons": dict(Counter(r["stop_reason"] for r in results)),
         "human_assists": sum(r["human_assists"] for r in results),
         "human_help_requests": sum(r["human_help_requests"] for r in results),
+        "help_requests_recorded": sum(len(r["help_reasons"]) for r in results),
+        "help_requests_per_episode": round(sum(len(r["help_reasons"]) for r in results) / len(results), 2)
+        if results else None,
+        "help_why": dict(Counter(_why(reason) for r in results for reason in r["help_reasons"])),
+        "reached_goal_without_help": sum(r["reached_goal"] and not r["help_reasons"] and not r["human_assists"]
+                                         for r in results),
+        "short_of_goal_without_help_request": sum(not r["reached_goal"] and not r["ended_with_help_request"]
+                                                  for r in results),
+        "robot_skills": sum(len(r["robot_skills"]) for r in results),
+        "unreachable_per_action": round(reasons.get("unreachable", 0) / actions, 3) if actions else None,
         "human_moves": {"scheduled": sum(r["human_moves_scheduled"] for r in results),
                         "performed": sum(r["human_moves_performed"] for r in results)},
         "states_off_table": sum(r["states_off_table"] for r in results),
@@ -330,7 +357,7 @@ def add_demo_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
 
 def run_demo_cli(args: argparse.Namespace, worker_link: WorkerLink | None = None) -> int:
     """The demo's command; `worker_link` is given by the ROS 2 layer for `--ros2`."""
-    from planhrc.robot_sim.worker import display_problem
+    from planhrc.robot_sim.worker_cli import display_problem
 
     if args.ros2 and worker_link is None:
         print("planhrc demo: --ros2: the ROS 2 link is made by `planhrc demo --ros2` in .venv-ros2", file=sys.stderr)

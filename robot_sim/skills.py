@@ -17,18 +17,17 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence, Union
 
 import numpy as np
-import pybullet
 
 from planhrc.geometry import reach_shortfall
 from planhrc.vocabulary import ActionOutcome, FailureReason  # the words of a result, shared with the service
 from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.grip import Hands, drive_arm
 from planhrc.robot_sim.scene import (
     ARMS,
     HOME_POSE,
     Scene,
     arm_joints,
     direction,
-    drive_gripper,
     hold_arm,
     joint_between,
     rotate_point,
@@ -89,6 +88,7 @@ class ActionResult:
     message: str
     commanded_deg: float
     reached_deg: float
+    refusal: Mapping[str, Any] | None = None  # a turn not started: the geometric fact, for the service
 
     @property
     def value(self) -> str:
@@ -267,17 +267,21 @@ def _unwrap_yaw(yaw: float, previous: float | None) -> float:
     return min(candidates, key=lambda a: abs(a - previous))
 
 
-def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command | Unreachable:
-    """Plan a rotation action as a command, or say which link cannot be reached (nothing moves)."""
-    joint_between(action.turned_link, action.held_link, scene.n_links)  # refuses links that are not neighbours
-    turned_xy = scene.link_center(action.turned_link)
+def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_far: float = 0.0,
+                 near_joint: bool = False) -> Command | Unreachable:
+    """Plan a rotation action as a command, or say which link cannot be reached (nothing moves). With
+    `turned_so_far`, the command for the rest of a turn whose first `turned_so_far` degrees another command
+    does first (the turned link is planned where that leaves it); with `near_joint`, the turning gripper takes
+    the link between its centre and the joint (a shorter arc) rather than at its centre first."""
+    joint_k, _ = joint_between(action.turned_link, action.held_link, scene.n_links)  # refuses non-neighbours
+    turned_xy = rotate_point(scene.link_center(action.turned_link), scene.joint_points()[joint_k - 1], turned_so_far)
     held_xy = scene.link_center(action.held_link) if action.held_link >= 1 else None
     saved = {arm: arm_joints(scene, arm) for arm in ARMS}
     worst: Unreachable | None = None
     try:
         for holder, turner in robot.arm_assignments(held_xy, turned_xy):
             for flip in (0.0, math.pi):
-                planned = _plan_rotation(scene, robot, action, holder, turner, flip)
+                planned = _plan_rotation(scene, robot, action, holder, turner, flip, turned_so_far, near_joint)
                 if isinstance(planned, Command):
                     return planned
                 if worst is None or planned.miss_m < worst.miss_m:
@@ -285,7 +289,7 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command 
                 for arm, q in saved.items():
                     set_arm_joints(scene, arm, q)
         assert worst is not None
-        log.warning("cannot plan %s: %s", action.name or f"turning l{action.turned_link}", worst.message)
+        log.info("cannot plan %s: %s", action.name or f"turning l{action.turned_link}", worst.message)
         return worst
     finally:
         for arm, q in saved.items():
@@ -293,13 +297,14 @@ def rotate_skill(scene: Scene, robot: Robot, action: RotationAction) -> Command 
 
 
 def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: str | None, turner: str,
-                   flip: float = 0.0) -> Command | Unreachable:
+                   flip: float = 0.0, turned_so_far: float = 0.0, near_joint: bool = False) -> Command | Unreachable:
     """The command with `holder` holding and `turner` turning, the turning gripper grasping at the link's yaw
     plus `flip` (0 or pi: the wrist's range decides which way round the turn can be followed). Each gripper
     takes the first grasp point it reaches along its link (the centre, then a quarter of the link to either
     side); the holding gripper may meet its link up to `robot.hold_twist_deg` off square, either way round."""
     joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
-    theta = scene.link_orientations_deg()
+    theta = list(scene.link_orientations_deg())
+    theta[action.turned_link - 1] += turned_so_far
     pivot = scene.joint_points()[joint_k - 1]
     z_grasp = scene.link_center_z + robot.grasp_height_m
     z_above = z_grasp + robot.approach_height_m
@@ -314,8 +319,14 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
                  ) -> tuple[np.ndarray, float] | Unreachable:
         """Above the link, then down onto it: the grasp point and yaw used, or the smallest miss."""
         centre, along = scene.link_center(link), direction(theta[link - 1])
+        offsets: tuple[float, ...] = (0.0, -quarter, quarter)
+        if link == action.turned_link:
+            centre = rotate_point(centre, pivot, turned_so_far)
+            if near_joint:  # the quarter towards the joint, then half-way between it and the centre
+                toward = -1.0 if side == "downstream" else 1.0
+                offsets = (toward * quarter, toward * quarter / 2)
         best: Unreachable | None = None
-        for offset in (0.0, -quarter, quarter):
+        for offset in offsets:
             xy = centre + offset * along
             for yaw in yaws:
                 above, miss = robot.solve_ik(arm, [xy[0], xy[1], z_above], yaw, max_twist_deg=twist)
@@ -376,76 +387,6 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
 Interrupt = Callable[[int, int], bool]
 
 
-class _Hands:
-    """The grasps an execution holds: arm -> (constraint id, link, grasp point in the link's frame)."""
-
-    def __init__(self, scene: Scene, robot: Robot) -> None:
-        self.scene, self.robot = scene, robot
-        self.held: dict[str, tuple[int, int]] = {}
-
-    def grasp(self, arm: str, link: int, steps: int = 8) -> bool:
-        """Close the fingers; once a finger touches the link, fix the link to the gripper. False: it closed
-        on nothing."""
-        s, c = self.scene, self.scene.client
-        drive_gripper(s, arm, close=True)
-        target = s.object_link_index(link)
-        for _ in range(steps):
-            s.step()
-            if any(s.near(s.robot, f, s.body, target, 0.006) for f in self.robot.hand_links[arm]):
-                break
-        else:
-            return False
-        # a constraint's frames are given in each body's centre-of-mass frame
-        ee = s.arms[arm].end_effector
-        ee_state = c.getLinkState(s.robot, ee, computeForwardKinematics=True)
-        link_pos, link_quat = s.link_pose(link)
-        inv_pos, inv_quat = c.invertTransform(link_pos.tolist(), link_quat)
-        rel_pos, rel_quat = c.multiplyTransforms(inv_pos, inv_quat, ee_state[0], ee_state[1])
-        cid = c.createConstraint(s.robot, ee, s.body, target, pybullet.JOINT_PRISMATIC, [0, 0, 1],
-                                 parentFramePosition=[0, 0, 0], childFramePosition=rel_pos,
-                                 parentFrameOrientation=[0, 0, 0, 1], childFrameOrientation=rel_quat)
-        c.changeConstraint(cid, maxForce=200.0)
-        self.held[arm] = (cid, link)
-        s.gripped.add(link)
-        return True
-
-    def offset(self, arm: str) -> float:
-        """How far the grasped link has slid from the gripper (metres)."""
-        cid, link = self.held[arm]
-        c = self.scene.client
-        info = c.getConstraintInfo(cid)
-        ee_pos = np.asarray(c.getLinkState(self.scene.robot, info[1], computeForwardKinematics=True)[0])
-        link_pos, link_quat = self.scene.link_pose(link)
-        grip_pos, _ = c.multiplyTransforms(link_pos.tolist(), link_quat, info[7], info[9])
-        return float(np.linalg.norm(np.asarray(grip_pos) - ee_pos))
-
-    def release(self, arm: str) -> None:
-        if arm in self.held:
-            cid, link = self.held.pop(arm)
-            self.scene.client.removeConstraint(cid)
-            self.scene.gripped.discard(link)
-        drive_gripper(self.scene, arm, close=False)
-
-    def release_all(self) -> None:
-        for arm in tuple(self.held):
-            self.release(arm)
-
-
-def _drive(scene: Scene, robot: Robot, arm: str, target: Sequence[float], max_steps: int = 60,
-           tolerance_rad: float = 0.004) -> bool:
-    """Drive `arm`'s joint motors to `target`, stepping the physics until the arm is there (True) or
-    `max_steps` have passed (False: the arm stalls)."""
-    goal = np.asarray(target, dtype=float)
-    hold_arm(scene, arm, target)
-    for _ in range(max_steps):
-        scene.step()
-        if robot.realtime_s:
-            time.sleep(robot.realtime_s)
-        if float(np.max(np.abs(np.asarray(arm_joints(scene, arm)) - goal))) < tolerance_rad:
-            return True
-    return False
-
-
 def _follow(scene: Scene, robot: Robot, arm: str, target: Sequence[float], tolerance_rad: float = 0.03) -> bool:
     """Move `arm` smoothly to the next waypoint of an arc (the motor targets interpolated over
     `robot.arc_steps` physics steps, so the object is carried, not jerked); False when the arm lags behind."""
@@ -504,7 +445,7 @@ def execute(
         message = command.message if isinstance(command, Unreachable) else "no command"
         return ActionResult(ActionOutcome.FAILED, FailureReason.UNREACHABLE, message, 0.0, 0.0)
     robot = robot or Robot(scene)
-    hands = _Hands(scene, robot)
+    hands = Hands(scene, robot)
     total = command.rotation_steps
     done = 0
     before = _relative_deg(scene, command.turned_link, command.held_link)
@@ -515,7 +456,7 @@ def execute(
             if isinstance(primitive, MoveArm):
                 if problem is not None and primitive.joint_positions != tuple(HOME_POSE[primitive.arm]):
                     continue
-                if not _drive(scene, robot, primitive.arm, primitive.joint_positions) and problem is None:
+                if not drive_arm(scene, robot, primitive.arm, primitive.joint_positions) and problem is None:
                     problem = (FailureReason.STALL, f"the {primitive.arm} arm did not reach its pose")
             elif isinstance(primitive, Grasp):
                 if problem is not None:
@@ -551,7 +492,7 @@ def execute(
         hands.release_all()
     if problem is not None:  # the rest of the command was skipped: the arms go home with open hands
         for arm in arms_used:
-            _drive(scene, robot, arm, HOME_POSE[arm])
+            drive_arm(scene, robot, arm, HOME_POSE[arm])
     scene.step(6)
     return _judge(scene, robot, command, before, problem)
 

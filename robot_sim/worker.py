@@ -18,112 +18,33 @@ talks HTTP.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import logging
-import math
-import os
 import re
-import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from planhrc.cli_args import (SubParsers, float_tuple, http_url, non_negative_float, non_negative_int, positive_int,
-                              writable_dir)
 from planhrc.client import KBClient, ProtocolError
 from planhrc.robot_sim.human import (Human, HumanContext, RobotTurn, apply_event, assist_failed_action,
-                                     goal_differences, help_turns, safe_way)
+                                     goal_differences, help_turns)
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perceiver, Perception
-from planhrc.robot_sim.pictures import (PictureStep, actor_between, caption_frame, describe_action, detect_markers,
-                                       draw_configurations, step_caption, write_movie)
+from planhrc.robot_sim.pictures import caption_frame, detect_markers, draw_configurations, step_caption, write_movie
 from planhrc.robot_sim.scenarios import HumanEvent, Scenario, get_scenario
+from planhrc.robot_sim.episode import StepRecord, WorkerSummary, picture_steps
 from planhrc.robot_sim.errors import SimError
-from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene, turn_hazard
+from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene
 from planhrc.robot_sim.service_link import ServiceLink
-from planhrc.robot_sim.skills import ActionResult, Interrupt, Robot, RotationAction, perform_action
-from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, Infeasible, StopReason
+from planhrc.robot_sim.acting import measured_pose, perform_parts, perform_skill, way_round
+from planhrc.robot_sim.skills import Robot, RotationAction
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, StopReason
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class StepRecord:
-    step: int
-    human_before: tuple[str, ...]
-    perceived_deg: tuple[float | None, ...]
-    true_deg: tuple[float, ...]  # the simulator's measured poses, for evaluation only (never sent)
-    missing_links: tuple[int, ...]
-    decision: DecisionKind
-    reason: str
-    matched_expected_step: int | None
-    action: dict[str, Any] | None = None
-    outcome: ActionOutcome | None = None
-    outcome_reason: FailureReason | None = None
-    outcome_message: str = ""
-    reached_deg: float | None = None
-    human_during: tuple[str, ...] = ()
-    human_assist: str | None = None
-    help_requested: tuple[str, ...] = ()  # human_help_requested: the service's sentences, in order
-    measured_deg: float | None = None  # after a failed or partial action: the turned link, as perceived again
-    looks: int = 1
-    perception_s: float = 0.0
-    service_s: float = 0.0
-    action_s: float = 0.0
-
-
-@dataclass(frozen=True)
-class WorkerSummary:
-    object_id: str
-    scenario: str
-    reached_goal: bool
-    stop_reason: StopReason
-    steps: tuple[StepRecord, ...]
-    configurations: tuple[tuple[float, ...], ...]
-    base_points: tuple[tuple[float, float], ...]
-    out_dir: str
-    wall_s: float
-    perception: str = "camera"
-    stop_message: str = ""
-    human_scheduled: int = 0
-    human_performed: int = 0
-
-    @property
-    def decisions(self) -> tuple[DecisionKind, ...]:
-        return tuple(s.decision for s in self.steps)
-
-    @property
-    def outcomes(self) -> tuple[ActionOutcome, ...]:
-        return tuple(s.outcome for s in self.steps if s.outcome is not None)
-
-    @property
-    def human_assists(self) -> int:
-        return sum(1 for s in self.steps if s.human_assist)
-
-    @property
-    def help_requests(self) -> int:
-        return sum(1 for s in self.steps if s.decision is DecisionKind.HUMAN_HELP_REQUESTED)
-
-    @property
-    def seen_links(self) -> int:
-        return sum(sum(1 for v in s.perceived_deg if v is not None) for s in self.steps)
-
-    @property
-    def unseen_links(self) -> int:
-        return sum(len(s.missing_links) for s in self.steps)
-
-    @property
-    def failure_reasons(self) -> dict[str, int]:
-        out: dict[str, int] = {}
-        for s in self.steps:
-            if s.outcome_reason:
-                out[s.outcome_reason] = out.get(s.outcome_reason, 0) + 1
-        return out
 
 
 @dataclass
@@ -140,6 +61,7 @@ class _Run:
     applied: set[int] = field(default_factory=set)  # indices of scenario events already performed
     performed: int = 0  # scenario events the human actually carried out
     stop_message: str = ""
+    final_help: tuple[str, ...] = ()  # the help request the last give-up became
 
 
 def _joint_index(name: str) -> int:
@@ -256,6 +178,7 @@ def run_worker(
             stop_message=run.stop_message,
             human_scheduled=len(scenario.events),
             human_performed=run.performed,
+            final_help=run.final_help,
         )
         _save(out, summary, run, spec, goal_link_orientations_deg)
         return summary
@@ -335,7 +258,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             run.records.append(StepRecord(**base))
             if unseen_in_a_row >= max_unseen:
                 run.stop_message = f"links {list(seen.missing_links)} not seen in {max_unseen} perceptions"
-                _give_up(kb, object_id, GiveUpReason.UNSEEN_LINKS, run.stop_message)
+                _give_up(kb, object_id, GiveUpReason.UNSEEN_LINKS, run.stop_message, run)
                 return StopReason.UNSEEN_LINKS
             scene.step(30)  # a quarter of a second: whatever covers a marker may move away
             step += 1
@@ -349,15 +272,22 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             if scenario.assists_after_failures is None:
                 run.records.append(StepRecord(**base, help_requested=requests))
                 run.stop_message = f"the robot asked for help and no human helps: {decision.reason}"
-                _give_up(kb, object_id, GiveUpReason.NO_HUMAN_HELP, run.stop_message)
+                _give_up(kb, object_id, GiveUpReason.NO_HUMAN_HELP, run.stop_message, run)
                 return StopReason.NO_HUMAN_HELP
             helped = help_turns(human, [(int(item["link"]), float(item["to_deg"])) for item in decision.help or ()])
             run.records.append(StepRecord(**base, help_requested=requests, human_assist="; ".join(helped or ()) or None))
             helpless = 0 if helped else helpless + 1
             if helpless >= max_unseen:
                 run.stop_message = f"the human could not do what was asked ({'; '.join(requests)})"
-                _give_up(kb, object_id, GiveUpReason.HUMAN_COULD_NOT_HELP, run.stop_message)
+                _give_up(kb, object_id, GiveUpReason.HUMAN_COULD_NOT_HELP, run.stop_message, run)
                 return StopReason.GAVE_UP
+            step += 1
+            continue
+
+        if decision.decision is DecisionKind.ROBOT_SKILL:
+            t3 = time.perf_counter()
+            done = perform_skill(scene, robot, decision.skill or {})
+            run.records.append(StepRecord(**base, skill=done, action_s=time.perf_counter() - t3))
             step += 1
             continue
 
@@ -375,13 +305,25 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             step = step + 1 if late else max(step + 1, min(e.at_step for e in pending))
             continue
         if decision.decision is DecisionKind.NO_PLAN:
-            run.records.append(StepRecord(**base))
+            # never a silent stop: the service turns the give-up into a help request, which a human may do
             run.stop_message = decision.reason
+            asked = _give_up(kb, object_id, GiveUpReason.NO_PLAN, decision.reason, run)
+            if scenario.assists_after_failures is not None and asked and helpless + 1 < max_unseen:
+                helped = help_turns(human, [(int(item["link"]), float(item["to_deg"])) for item in asked])
+                run.records.append(StepRecord(**base, help_requested=run.final_help,
+                                              human_assist="; ".join(helped or ()) or None))
+                run.final_help, run.stop_message = (), ""
+                helpless = 0 if helped else helpless + 1
+                step += 1
+                continue
+            run.records.append(StepRecord(**base, help_requested=run.final_help))
             return StopReason.NO_PLAN
 
         data = kb.next_action(object_id)
         if data is None:
             run.records.append(StepRecord(**base))
+            run.stop_message = "the service dispatched no action"
+            _give_up(kb, object_id, GiveUpReason.NO_ACTION, run.stop_message, run)
             return StopReason.NO_ACTION
         action = RotationAction.from_api(data)
         context.busy_links = (action.turned_link, action.held_link)
@@ -405,17 +347,21 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
         t3 = time.perf_counter()
         assist = None
         previous = failed.get(signature)
+        # the one judge's pose: the one posted with the perception, from which the service judged this motion
+        pose = measured_pose(scene, values, seen.base_point_xy)
+        final = bool(data.get("ends_plan", True))  # an older service does not say: judged as drawn at rest
         if previous is None:
-            parts: tuple[RotationAction, ...] | None = (way_round(scene, action),)
+            parts: tuple[RotationAction, ...] | None = (way_round(pose, scene.spec.cell(), action, final),)
         elif action.macro_steps > 1 and not previous[1]:
-            parts = way_round(scene, action).split()  # the macro motion failed: try its single steps
+            # the macro motion failed: try its single steps
+            parts = way_round(pose, scene.spec.cell(), action, final).split()
         else:
             parts = None  # tried every way the robot knows: not again
         if parts is not None:  # a human acting meanwhile takes the robot's whole rotation into account
             context.robot_turn = RobotTurn(action.turned_link, action.held_link, sum(p.delta_deg for p in parts),
                                            base_xy, tuple(theta))
-        result = None if parts is None else _perform_parts(scene, robot, parts, interrupt,
-                                                             fault.stop_fraction if fault else None)
+        result = None if parts is None else perform_parts(scene, robot, pose, parts, final, interrupt,
+                                                            fault.stop_fraction if fault else None)
         t4 = time.perf_counter()
         while during_events:  # the robot stopped before half-way: the human acts anyway
             index, event = during_events.pop(0)
@@ -461,7 +407,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             if action.action_id is not None:
                 _feedback(kb, object_id, action.action_id, ActionOutcome.FAILED, f"worker gives up: {sentence}",
                           failed[signature][2])
-            _give_up(kb, object_id, GiveUpReason.REPEATED_FAILURE, run.stop_message)
+            _give_up(kb, object_id, GiveUpReason.REPEATED_FAILURE, run.stop_message, run)
             run.records.append(StepRecord(**base, action=dict(data), outcome=ActionOutcome.FAILED,
                                           outcome_message=run.stop_message, human_during=tuple(human_during),
                                           action_s=t4 - t3))
@@ -475,7 +421,8 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             again = perceiver.look()
             measured = again.link_orientations_deg[action.turned_link - 1]
         if action.action_id is not None:
-            _feedback(kb, object_id, action.action_id, result.outcome, message, result.reason, measured)
+            _feedback(kb, object_id, action.action_id, result.outcome, message, result.reason, measured,
+                      result.refusal)
         if result.outcome is ActionOutcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
@@ -487,69 +434,35 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
                                       human_during=tuple(human_during), human_assist=assist, action_s=t4 - t3))
         log.info("step %d: %s -> %s (%s)", step, action, result.outcome.value, result.message)
         step += 1
+    run.stop_message = f"the goal was not reached in {max_steps} steps"
+    _give_up(kb, object_id, GiveUpReason.MAX_STEPS, run.stop_message, run)
     return StopReason.MAX_STEPS
 
 
-def way_round(scene: Scene, action: RotationAction) -> RotationAction:
-    """The action, or the same turn the other way round when only that way keeps the object on the table, clear
-    of the robot and of itself all along (`scene.turn_hazard`): both end in the same orientation."""
-    delta = safe_way(scene, action.turned_link, action.held_link, action.delta_deg)
-    if delta is None or delta == action.delta_deg:
-        return action
-    step = abs(action.delta_deg) / max(1, action.macro_steps)
-    log.info("turning l%d the other way round (%+g deg instead of %+g): that way stays on the table",
-             action.turned_link, delta, action.delta_deg)
-    return replace(action, delta_deg=delta, macro_steps=max(1, round(abs(delta) / step)))
-
-
-def refuse_unsafe(scene: Scene, action: RotationAction) -> ActionResult | None:
-    """A FAILED result, nothing moved, when the turn would put the object in harm's way either way round (a
-    link past the table's edge, inside the robot, folded onto another); None when it is safe to try."""
-    hazard = turn_hazard(scene, action.turned_link, action.held_link, action.delta_deg)
-    if hazard is None:
-        return None
-    reason = FailureReason.LEFT_TABLE if hazard.code is Infeasible.OFF_TABLE else FailureReason.COLLISION
-    log.warning("not turning l%d by %+g deg: %s", action.turned_link, action.delta_deg, hazard.message)
-    return ActionResult(ActionOutcome.FAILED, reason, f"not started: turning link {action.turned_link} by "
-                        f"{action.delta_deg:+g} deg either way round would end with {hazard.message}",
-                        action.delta_deg, 0.0)
-
-
-def _perform_parts(scene: Scene, robot: Robot, parts: Sequence[RotationAction], interrupt: Interrupt,
-                   stop_fraction: float | None) -> ActionResult:
-    """Perform the single steps of an action one after the other; stop at the first that does not succeed or
-    would not be safe. The result covers them all: the turn reached is their sum."""
-    reached = 0.0
-    result = None
-    for part in parts:
-        result = refuse_unsafe(scene, part) or perform_action(scene, robot, part, interrupt=interrupt,
-                                                              stop_fraction=stop_fraction)
-        reached += result.reached_deg
-        if result.outcome is not ActionOutcome.SUCCEEDED:
-            break
-    assert result is not None
-    if len(parts) == 1:
-        return result
-    total = sum(p.delta_deg for p in parts)
-    outcome = result.outcome
-    if outcome is ActionOutcome.FAILED and abs(reached) > 1.0:
-        outcome = ActionOutcome.PARTIAL
-    return ActionResult(outcome, result.reason, f"in single steps: {result.message}", total, reached)
-
-
 def _feedback(kb: ServiceLink, object_id: str, action_id: str, outcome: ActionOutcome, message: str,
-              reason: FailureReason | None = None, measured_deg: float | None = None) -> None:
+              reason: FailureReason | None = None, measured_deg: float | None = None,
+              refusal: Mapping[str, Any] | None = None) -> None:
     """Post an action's outcome with its sentence and, for a failed or partial one, its reason and the turned
-    link's measured orientation."""
+    link's measured orientation; for a turn not started, the geometric fact (`refusal`)."""
     if outcome is ActionOutcome.SUCCEEDED:
-        reason, measured_deg = None, None
-    kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
+        reason, measured_deg, refusal = None, None, None
+    if refusal is not None:
+        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg,
+                         refusal=dict(refusal))
+    else:
+        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
 
 
-def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str) -> None:
-    """Tell the service the worker stops (it records the reason and dispatches nothing until a perception)."""
+def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str, run: _Run) -> list[dict[str, Any]]:
+    """Tell the service the worker stops (it records the reason and dispatches nothing until a perception); the
+    service answers with the help request the stop became, kept in the run's record (`final_help`)."""
     log.warning("giving up on %s: %s", object_id, message)
-    kb.give_up(object_id, reason, message[:500])
+    answer = kb.give_up(object_id, reason, message[:500])
+    asked = list(answer.get("help") or [])
+    run.final_help = tuple(str(item.get("sentence")) for item in asked)
+    if not asked and answer.get("decision") == DecisionKind.HUMAN_HELP_REQUESTED:
+        run.final_help = (str(answer.get("reason")),)  # nothing seen to name links by: the object as a whole
+    return asked
 
 
 # -- records ---------------------------------------------------------------------------------------------
@@ -588,114 +501,3 @@ def _save(out: Path, summary: WorkerSummary, run: _Run, spec: SceneSpec,
     if steps:
         draw_configurations(out / "configurations.png", steps, spec.link_length_m, goal_deg,
                             title=f"{summary.object_id}, scenario {summary.scenario}: {summary.stop_reason}")
-
-
-def picture_steps(records: Sequence[StepRecord], configurations: Sequence[Sequence[float]],
-                  base_points: Sequence[Sequence[float]]) -> list[PictureStep]:
-    """The pictures' view of each decision: who changed the object since the previous one and what followed."""
-    out = []
-    previous: StepRecord | None = None
-    for record, theta, base in zip(records, configurations, base_points):
-        human = list(record.human_before)
-        if previous is not None:
-            human = list(previous.human_during) + ([previous.human_assist] if previous.human_assist else []) + human
-        actor = "start" if previous is None and not human else actor_between(
-            previous.outcome if previous else None, human)
-        out.append(PictureStep(
-            step=record.step, decision=record.decision, configuration_deg=tuple(theta),
-            base_xy=(float(base[0]), float(base[1])), actor=actor, action=describe_action(record.action),
-            outcome=record.outcome, human=tuple(human)))
-        previous = record
-    return out
-
-
-# -- command line ----------------------------------------------------------------------------------------
-def display_problem() -> str | None:
-    """Why PyBullet's GUI cannot open here, or None. On Linux it needs an X display, and without one it ends the
-    whole process from native code (no cleanup), so the display is tried first, as PyBullet will."""
-    if not sys.platform.startswith("linux"):
-        return None
-    display = os.environ.get("DISPLAY")
-    if not display:
-        return "no display (DISPLAY is not set); run without --gui"
-    import ctypes
-    import ctypes.util
-
-    name = ctypes.util.find_library("X11")
-    if name is None:
-        return "libX11 is not installed; run without --gui"
-    xlib = ctypes.CDLL(name)
-    xlib.XOpenDisplay.restype = ctypes.c_void_p
-    xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    handle = xlib.XOpenDisplay(display.encode())
-    if not handle:
-        return f"cannot connect to the X display {display!r}; run without --gui"
-    xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
-    xlib.XCloseDisplay(handle)
-    return None
-
-
-def add_worker_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
-    p = subparsers.add_parser("worker", help="run the simulated Baxter worker against the KB service",
-                              description="Perceive, ask the KB service for actions and execute them in PyBullet.")
-    p.add_argument("--kb", type=http_url, default=None,
-                   help="base URL of the KB service, e.g. http://127.0.0.1:8000 (required unless --ros2)")
-    p.add_argument("--ros2", action="store_true",
-                   help="talk to the service over ROS 2, through the topics of a running `planhrc ros2-bridge`")
-    p.add_argument("--object", required=True, dest="object_id", help="object id in the KB service")
-    p.add_argument("--gui", action="store_true", help="show the PyBullet GUI")
-    p.add_argument("--token", default=None, help="bearer token for the service's writes")
-    p.add_argument("--perception", choices=("camera", "fallback"), default="camera")
-    p.add_argument("--scenario", default="none", help="human scenario: none, fig13, fig14 or random:SEED:N")
-    p.add_argument("--out", type=writable_dir, default="worker-out", help="folder for frames, GIF, configurations.png, summary.json")
-    p.add_argument("--max-steps", type=positive_int, default=30)
-    p.add_argument("--initial", type=float_tuple, default=None,
-                   help="initial link orientations, e.g. 90,90,90,90,90")
-    p.add_argument("--base", type=float_tuple, default=None, help="base point x,y of the object on the table (m)")
-    p.add_argument("--goal", type=float_tuple, default=None, help="goal link orientations to PUT before starting")
-    p.add_argument("--sigma", type=non_negative_float, default=1.0, help="noise (deg) of the fallback perception")
-    p.add_argument("--seed", type=non_negative_int, default=0)
-    p.set_defaults(func=run_worker_cli)
-    return p
-
-
-def run_worker_cli(args: argparse.Namespace, link: ServiceLink | None = None) -> int:
-    """The worker's command; `link` is given by the ROS 2 layer for `--ros2`."""
-    if args.kb is None and not args.ros2:
-        print("planhrc worker: --kb: required (or --ros2, through a running ROS 2 bridge)", file=sys.stderr)
-        return 2
-    if args.ros2 and link is None:
-        print("planhrc worker: --ros2: the ROS 2 link is made by `planhrc worker --ros2` in .venv-ros2", file=sys.stderr)
-        return 2
-    if args.gui and (problem := display_problem()):
-        print(f"planhrc worker: --gui: {problem}", file=sys.stderr)
-        return 2
-    if args.base is not None and len(args.base) != 2:
-        print(f"planhrc worker: --base: expected x,y, got {len(args.base)} numbers", file=sys.stderr)
-        return 2
-    spec = None
-    try:
-        if args.initial is not None or args.base is not None:
-            if link is not None:
-                obj = link.read_object(args.object_id)
-            else:
-                with KBClient(args.kb, token=args.token) as kb:
-                    obj = kb.read_object(args.object_id)
-            links = obj["links"]
-            kwargs: dict[str, Any] = {"n_links": len(links), "link_length_m": float(links[0]["length_m"])}
-            if args.initial is not None:
-                kwargs["initial_orientations_deg"] = args.initial
-            if args.base is not None:
-                kwargs["base_point_xy"] = tuple(args.base)
-            spec = SceneSpec(**kwargs)
-        summary = run_worker(args.kb or "", args.object_id, spec, args.scenario, args.out, args.gui, args.max_steps,
-                             args.token, args.perception, args.goal, args.sigma, args.seed, kb=link)
-    except (ProtocolError, SimError) as exc:
-        print(f"planhrc worker: {exc}", file=sys.stderr)
-        return 1
-    print(json.dumps({"reached_goal": summary.reached_goal, "stop_reason": summary.stop_reason,
-                      "reason": summary.stop_message, "failure_reasons": summary.failure_reasons,
-                      "unseen_links": summary.unseen_links,
-                      "decisions": list(summary.decisions), "outcomes": list(summary.outcomes),
-                      "steps": len(summary.steps), "wall_s": round(summary.wall_s, 2), "out_dir": summary.out_dir}))
-    return 0 if summary.reached_goal else 1

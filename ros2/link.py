@@ -196,7 +196,8 @@ class Ros2Link:
         return dict(action)
 
     def post_feedback(self, object_id: str, action_id: str, outcome: ActionOutcome | str, message: str = "",
-                      reason: FailureReason | str | None = None, measured_deg: float | None = None) -> dict[str, Any]:
+                      reason: FailureReason | str | None = None, measured_deg: float | None = None,
+                      refusal: dict[str, Any] | None = None) -> dict[str, Any]:
         self._check(object_id)
         request_id = str(uuid.uuid4())
         body: dict[str, Any] = {"action_id": action_id, "outcome": str(outcome), "message": message,
@@ -205,6 +206,8 @@ class Ros2Link:
             body["reason"] = str(reason)
         if measured_deg is not None and math.isfinite(measured_deg):
             body["measured_deg"] = float(measured_deg)
+        # `refusal` does not cross the bridge (its feedback message has no such field): the service remembers a
+        # refused turn from the latest perception instead
         key = ("feedback", request_id)
         self._send(self.pub["feedback"], String(data=json.dumps(body)), lambda: key in self.answers, "feedback")
         execution: dict[str, Any] = self._answer(*key)["object"]["execution"]

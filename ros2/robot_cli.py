@@ -13,8 +13,8 @@ from typing import Any, Iterator
 from planhrc.cli_args import SubParsers
 from planhrc.robot_sim.demo import add_demo_parser as add_robot_demo
 from planhrc.robot_sim.demo import run_demo_cli as run_robot_demo
-from planhrc.robot_sim.worker import add_worker_parser as add_robot_worker
-from planhrc.robot_sim.worker import run_worker_cli as run_robot_worker
+from planhrc.robot_sim.worker_cli import add_worker_parser as add_robot_worker
+from planhrc.robot_sim.worker_cli import run_worker_cli as run_robot_worker
 
 from .cli import rclpy_problem, running_bridge
 

@@ -3,12 +3,12 @@ import re
 from pathlib import Path
 
 from planhrc.model import make_object, natural_key, relative_from_absolute, snap_angle
-from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, GiveUpReason, Infeasible,
-                                PlanStatus, Remedy, StopReason)
+from planhrc.vocabulary import (ActionOutcome, DecisionKind, ExecutionStatus, FailureReason, GiveUpReason,
+                                Infeasible, PlanStatus, Remedy, Skill, StopReason)
 
 TEXT = (Path(__file__).resolve().parents[1] / "CONVENTIONS.md").read_text()
-ENUMS = (DecisionKind, ExecutionStatus, ActionOutcome, FailureReason, Remedy, GiveUpReason, StopReason, Infeasible,
-         PlanStatus)
+ENUMS = (DecisionKind, Skill, ExecutionStatus, ActionOutcome, FailureReason, Remedy, GiveUpReason, StopReason,
+         Infeasible, PlanStatus)
 
 
 def test_a_perceived_angle_snaps_to_the_nearest_allowed_value_ties_to_the_smaller():

@@ -23,7 +23,8 @@ from tests.test_service_api import move
 
 PLACED = {"name": "rod", "links": 5, "orientations": 8, "base_point_xy": [0.6, 0.39]}
 STRAIGHT = [90, 90, 90, 90, 90]
-OUT_OF_REACH = [90, 45, 135, 135, 180]  # feasible on the table, but link 5 ends beyond the robot's reach
+FAR = [0.88, 0.5]  # the object's base point at the table's far edge: links 1 and 2 lie beyond the arms' reach
+FAR_GOAL = [90, 135, 135, 135, 135]  # link 2 turned (holding link 1): nothing the robot can do
 
 
 @pytest.fixture
@@ -65,14 +66,16 @@ def test_out_of_reach_goes_to_the_human_at_once_and_other_failures_are_retried()
 
 
 # -- through the service ----------------------------------------------------------------------------------------
-def test_a_goal_out_of_reach_ends_in_human_help_requested_naming_the_link(client):
-    oid = placed(client, "absolute")
-    goal = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": OUT_OF_REACH}).json()
-    assert goal["warnings"] == [f"goal: link 5 unreachable: {0.01:.2f} m beyond reach"]
+def test_a_plan_out_of_reach_ends_in_human_help_requested_naming_the_link(client):
+    # lying at the far edge, links 1 and 2 beyond the arms' reach: turning link 2 (holding link 1) cannot be done,
+    # nor any detour (every turn grasps one of them), nor a slide (the arms hold no two links there)
+    oid = client.post("/objects", json={**PLACED, "formulation": "absolute", "base_point_xy": FAR}).json()["id"]
+    goal = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": FAR_GOAL}).json()
+    assert goal["warnings"] == [f"goal: link 1 unreachable: {0.05:.2f} m beyond reach"]
     decision = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
     assert decision["decision"] == "human_help_requested" and decision["next_action"] is None
-    assert [(h["link"], h["to_deg"]) for h in decision["help"]] == [(5, 180)]
-    assert decision["help"][0]["sentence"].startswith("turn link 5 to 180°")
+    assert [(h["link"], h["to_deg"]) for h in decision["help"]] == [(2, 135)]
+    assert decision["help"][0]["sentence"].startswith("turn link 2 to 135° (link 2 unreachable")
     assert client.post(f"/objects/{oid}/actions/next").json() is None  # the execution waits
     event = client.get(f"/objects/{oid}/events").json()[-1]
     assert event["kind"] == "human_help_requested" and event["data"]["help"] == decision["help"]
@@ -153,9 +156,13 @@ def test_a_worker_that_gives_up_is_recorded_and_nothing_stays_dispatched(client)
     answer = client.post(f"/objects/{oid}/give-up", json={"reason": "repeated_failure",
                                                           "message": "a_1 failed three times"})
     assert answer.status_code == 200
-    event = client.get(f"/objects/{oid}/events").json()[-1]
+    event, asked = client.get(f"/objects/{oid}/events").json()[-2:]
     assert event["seq"] == answer.json()["event_seq"] and event["kind"] == "worker_gave_up"
     assert event["data"]["reason"] == "repeated_failure" and event["data"]["dropped_action_id"] == action["id"]
+    # never a silent stop: the give-up became a help request naming what to do and why the robot stopped
+    assert answer.json()["decision"] == asked["kind"] == "human_help_requested"
+    assert [(h["link"], h["to_deg"]) for h in answer.json()["help"]] == [(5, 45)]
+    assert asked["data"]["help"] == answer.json()["help"] and "a_1 failed three times" in asked["reason"]
     execution = client.get(f"/objects/{oid}").json()["execution"]
     assert execution["status"] == "idle" and execution["dispatched_action_id"] is None
     assert client.post(f"/objects/{oid}/actions/next").json() is None
@@ -163,6 +170,25 @@ def test_a_worker_that_gives_up_is_recorded_and_nothing_stays_dispatched(client)
     assert late.status_code == 409  # the dropped action takes no feedback
     again = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
     assert again["decision"] in ("continue", "resume") and again["next_action"]["id"] == action["id"]
+
+
+def test_a_give_up_before_the_whole_object_was_seen_still_asks_the_human_for_the_goal(client):
+    idle = placed(client)  # no goal: nothing to ask for, the give-up alone is recorded
+    answer = client.post(f"/objects/{idle}/give-up", json={"reason": "unseen_links", "message": "nothing seen"}).json()
+    assert answer["decision"] is None and "no goal is left" in answer["reason"]
+    assert client.get(f"/objects/{idle}/events").json()[-1]["kind"] == "worker_gave_up"
+
+    oid = placed(client)
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [90, 90, 90, 90, 45]})
+    unseen = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [90, None, 90, 90, 90]})
+    assert unseen.json()["decision"] == "incomplete_perception"  # stores no state: nothing to plan from
+    answer = client.post(f"/objects/{oid}/give-up",
+                         json={"reason": "unseen_links", "message": "links [2] not seen in 3 perceptions"}).json()
+    gave_up, asked = client.get(f"/objects/{oid}/events").json()[-2:]
+    assert gave_up["kind"] == "worker_gave_up" and asked["kind"] == answer["decision"] == "human_help_requested"
+    assert answer["help"] == [] and asked["data"]["help"] == []  # no link named from nothing seen
+    assert "bring the object to its goal" in answer["reason"] and "links [2] not seen" in answer["reason"]
+    assert asked["reason"] == answer["reason"]
 
 
 @pytest.mark.parametrize("path, body, field", [
@@ -176,6 +202,15 @@ def test_a_worker_that_gives_up_is_recorded_and_nothing_stays_dispatched(client)
     ("{obj}/actions/{act}/feedback", {"outcome": "succeeded", "reason": "stall"}, "reason"),
     ("{obj}/actions/{act}/feedback", {"outcome": "partial", "measured_deg": "far"}, "measured_deg"),
     ("{obj}/actions/{act}/feedback", {"outcome": "partial", "measured_deg": 1e9}, "measured_deg"),
+    ("{obj}/actions/{act}/feedback", {"outcome": "failed", "refusal": {"code": "melted", "link": 4}},
+     "refusal.code"),
+    ("{obj}/actions/{act}/feedback", {"outcome": "failed", "refusal": {"code": "off_table", "link": 0}},
+     "refusal.link"),
+    ("{obj}/actions/{act}/feedback",
+     {"outcome": "failed", "refusal": {"code": "off_table", "link": 4, "base_point_xy": [0.5]}},
+     "refusal.base_point_xy"),
+    ("{obj}/actions/{act}/feedback", {"outcome": "succeeded", "refusal": {"code": "off_table", "link": 4}},
+     "refusal"),
     ("{obj}/give-up", {"message": "stopped"}, "reason"),
     ("{obj}/give-up", {"reason": "Gave Up!", "message": "stopped"}, "reason"),
     ("{obj}/give-up", {"reason": "stuck", "message": "x" * 2001}, "message"),
@@ -213,12 +248,13 @@ def test_the_client_reaches_all_of_it_over_http(tmp_path):
     with serving(tmp_path / "kb.sqlite3") as base, KBClient(base) as kb:
         oid = kb.create_object("rod", 5, 8, "absolute", base_point_xy=(0.6, 0.39))["id"]
         assert kb.read_object(oid)["base_point_xy"] == [0.6, 0.39]
-        assert kb.set_goal(oid, OUT_OF_REACH)["warnings"]
-        unseen = kb.post_perception(oid, [90, None, 90, 90, 90])
+        far = kb.create_object("rod", 5, 8, "absolute", base_point_xy=FAR)["id"]
+        assert kb.set_goal(far, FAR_GOAL)["warnings"]
+        unseen = kb.post_perception(far, [90, None, 90, 90, 90])
         assert unseen.decision == DecisionKind.INCOMPLETE_PERCEPTION and unseen.unseen_links == [2]
-        asked = kb.post_perception(oid, STRAIGHT)
+        asked = kb.post_perception(far, STRAIGHT)
         assert asked.decision == DecisionKind.HUMAN_HELP_REQUESTED
-        assert asked.help is not None and asked.help[0]["link"] == 5
+        assert asked.help is not None and asked.help[0]["link"] == 2
         kb.set_goal(oid, [90, 90, 90, 90, 45])
         decision = kb.post_perception(oid, STRAIGHT)
         action = kb.next_action(oid)

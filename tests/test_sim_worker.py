@@ -206,17 +206,20 @@ def test_a_failure_is_not_retried_the_same_way_and_the_worker_gives_up_out_loud(
     spec = SceneSpec(link_length_m=0.06, base_point_xy=(0.87, 0.62))
     summary = run_worker(kb.url, "o1", spec, "none", tmp_path, max_steps=10)
     assert summary.stop_reason == "gave_up" and not summary.reached_goal
-    assert summary.stop_message.startswith("gave up on rotate: link ") and "beyond reach" in summary.stop_message
+    assert summary.stop_message.startswith("gave up on rotate: not started: ") and "beyond reach" in summary.stop_message
     feedback = [b for m, path, _, b in kb.log if path.endswith("/feedback")]
     assert [b["outcome"] for b in feedback] == ["failed", "failed"]
-    assert feedback[0]["message"].startswith("unreachable: link ")
-    assert feedback[1]["message"].startswith("worker gives up: link ")
+    # the one judge refuses it before the arms try (the service, judging from the same pose, would not send it)
+    assert feedback[0]["message"].startswith("unreachable: not started: turning link ")
+    assert feedback[0]["refusal"]["code"] == "out_of_reach" and feedback[0]["refusal"]["distance_m"] > 0
+    assert feedback[1]["message"].startswith("worker gives up: not started: ")
     assert summary.failure_reasons == {"unreachable": 1}  # the robot tried once, not again the same way
 
 
 def test_when_the_human_cannot_do_a_failed_turn_safely_either_the_service_is_told_and_asked_again(tmp_path):
-    # short links along the table's far edge; the next turn swings links 4-5 past it: neither the robot nor the
-    # human does it; the worker reports that and perceives again (the service decides), twice, then gives up
+    # short links along the table's far edge, beyond the arms' reach; the next turn swings links 4-5 past the edge:
+    # neither the robot nor the human does it; the worker reports that and perceives again (the service decides),
+    # twice, then gives up
     kb = GreedyKB([90, 90, 90, 45, 135])
     spec = SceneSpec(link_length_m=0.06, base_point_xy=(0.86, 0.3))
     try:
@@ -225,8 +228,8 @@ def test_when_the_human_cannot_do_a_failed_turn_safely_either_the_service_is_tol
     finally:
         kb.close()
     feedback = [b for m, path, _, b in kb.log if path.endswith("/feedback")]
-    assert [b["outcome"] for b in feedback] == ["failed"] * 4 and {b["reason"] for b in feedback} == {"left_table"}
-    assert feedback[0]["message"].startswith("left_table: not started")
+    assert [b["outcome"] for b in feedback] == ["failed"] * 4 and {b["reason"] for b in feedback} == {"unreachable"}
+    assert feedback[0]["message"].startswith("unreachable: not started")
     for again in feedback[1:3]:
         assert again["message"].startswith("robot did not retry (") and "could not do it safely" in again["message"]
     assert feedback[3]["message"].startswith("worker gives up: ")
@@ -238,18 +241,19 @@ def test_a_turn_goes_the_other_way_round_when_only_that_way_stays_clear():
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
+    from planhrc.robot_sim.acting import measured_pose, way_round
     from planhrc.robot_sim.scene import build_scene
     from planhrc.robot_sim.skills import RotationAction
-    from planhrc.robot_sim.worker import way_round
 
     client = BulletClient(connection_mode=pybullet.DIRECT)
     scene = build_scene(client, SceneSpec(load_robot=False, initial_orientations_deg=(90, 90, 90, 90, 0)))
     try:
         # turning l5 clockwise by 180 folds it back over l4 half-way; anticlockwise it swings clear
+        pose, cell = measured_pose(scene, scene.link_orientations_deg(), scene.base_point()), scene.spec.cell()
         action = RotationAction(turned_link=5, held_link=4, delta_deg=-180, macro_steps=4)
-        assert way_round(scene, action) == RotationAction(5, 4, 180, macro_steps=4)
+        assert way_round(pose, cell, action, final=True) == RotationAction(5, 4, 180, macro_steps=4)
         clear = RotationAction(turned_link=5, held_link=4, delta_deg=90, macro_steps=2)
-        assert way_round(scene, clear) is clear
+        assert way_round(pose, cell, clear, final=True) is clear
     finally:
         scene.close()
         client.disconnect()
@@ -261,10 +265,13 @@ def test_a_turn_that_would_leave_the_object_hanging_over_the_edge_is_not_started
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
+    from dataclasses import replace
+
+    from planhrc.geometry import RobotBody
+    from planhrc.robot_sim.acting import judge, measured_pose
     from planhrc.robot_sim.scene import build_scene
     from planhrc.robot_sim.skills import RotationAction
     from planhrc.vocabulary import ActionOutcome
-    from planhrc.robot_sim.worker import refuse_unsafe
     from planhrc.vocabulary import FailureReason
 
     client = BulletClient(connection_mode=pybullet.DIRECT)
@@ -272,10 +279,18 @@ def test_a_turn_that_would_leave_the_object_hanging_over_the_edge_is_not_started
     scene = build_scene(client, SceneSpec(load_robot=False, base_point_xy=(0.74, 0.39)))
     try:
         before = scene.configuration()
-        refused = refuse_unsafe(scene, RotationAction(turned_link=5, held_link=4, delta_deg=-90))
+        # arms that reach the far end of the chain: here the judge is asked about the table's edge alone
+        cell = replace(scene.spec.cell(), robot=RobotBody(reach_m=1.0))
+        pose = measured_pose(scene, scene.link_orientations_deg(), scene.base_point())
+        refused = judge(pose, cell, RotationAction(turned_link=5, held_link=4, delta_deg=-90), final=True)
         assert refused is not None and refused.outcome is ActionOutcome.FAILED, refused
         assert refused.reason is FailureReason.LEFT_TABLE and "link 5 leaves the table" in refused.message
-        assert refuse_unsafe(scene, RotationAction(turned_link=5, held_link=4, delta_deg=-45)) is None  # stays on
+        # the fact the service remembers: which link, against which edge, how far, from which pose
+        assert refused.refusal is not None and refused.refusal["code"] == "off_table"
+        assert refused.refusal["link"] == 5 and refused.refusal["against"] == "the table's far edge"
+        assert refused.refusal["distance_m"] > 0 and refused.refusal["base_point_xy"] == [0.74, 0.39]
+        stays = RotationAction(turned_link=5, held_link=4, delta_deg=-45)
+        assert judge(pose, cell, stays, final=True) is None  # stays on the table
         assert scene.configuration() == before  # nothing moved
     finally:
         scene.close()

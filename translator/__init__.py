@@ -1,4 +1,5 @@
-"""Translator: TBox -> PDDL domain, object and states -> PDDL problem (relative and absolute formulations).
+"""Translator: TBox -> PDDL domain, object and states -> PDDL problem (relative, absolute and bimanual
+formulations).
 
 A pure function of values: `translate(obj, init, goal, read_domain_model(tbox, formulation), name)` returns the
 PDDL texts; nothing here reads or writes the knowledge base.

@@ -198,9 +198,10 @@ def get_domain(tbox_path: Path | str, formulation: str, paper_exact: bool = Fals
 
 @lru_cache(maxsize=16)
 def domain_text(model: DomainModelSpec, paper_exact: bool = False, absolute: bool = False) -> str:
-    """The PDDL domain of a domain model; `paper_exact` drops the guard the paper's figures lack, and names the
-    absolute domain `…-paper`. Pure, so each model's text is written once."""
+    """The PDDL domain of a domain model; `paper_exact` drops the guard the paper's absolute figures lack, and
+    names the absolute domain `…-paper` (the other formulations have no such figure: their domain is the same).
+    Pure, so each model's text is written once."""
     buf = io.StringIO()
     name = f"{model.name}-paper" if paper_exact and absolute else None
-    write_domain(buf, model, name=name, drop_guard=paper_exact)
+    write_domain(buf, model, name=name, drop_guard=paper_exact and absolute)
     return buf.getvalue()

@@ -12,7 +12,8 @@ from planhrc.model import HAS_ORIENTATION, ArticulatedObject, Atom, Formulation,
 
 from .errors import TranslationError
 
-DOMAIN_NAMES = {Formulation.RELATIVE: "planhrc-relative", Formulation.ABSOLUTE: "planhrc-absolute"}
+DOMAIN_NAMES = {Formulation.RELATIVE: "planhrc-relative", Formulation.ABSOLUTE: "planhrc-absolute",
+                Formulation.BIMANUAL: "planhrc-bimanual"}
 
 
 def write_problem(
@@ -27,7 +28,8 @@ def write_problem(
     goal_atoms = sorted(frozenset(goal))
     if not goal_atoms:
         raise TranslationError("goal: the goal state asserts no predicate")
-    objects = {"link": obj.all_links, "joint": obj.joints, "orientation": obj.orientation_names}
+    objects = {"link": obj.all_links, "joint": obj.joints, "orientation": obj.orientation_names,
+               "gripper": obj.grippers}
     known = {name for names in objects.values() for name in names}
     every = init_atoms | frozenset(goal_atoms)
     if not {arg for atom in every for arg in atom[1:]} <= known:  # name the first such atom, in a fixed order
@@ -42,8 +44,10 @@ def write_problem(
     out.write(f"(define (problem {problem_name.lower()})\n")
     out.write(f"  (:domain {domain_name or DOMAIN_NAMES[obj.formulation]})\n")
     out.write("  (:objects\n")
-    for type_name in ("link", "joint", "orientation"):
+    for type_name in ("link", "joint", "orientation", "gripper"):
         names = sorted(objects[type_name], key=natural_key)
+        if not names:  # no gripper but in the bimanual formulation
+            continue
         out.write(f"    {' '.join(names)} - {type_name}\n")
     out.write("  )\n")
     out.write("  (:init\n")

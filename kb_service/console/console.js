@@ -55,8 +55,9 @@ function setService(up) {
 const norm = (a) => ((a % 360) + 360) % 360;
 
 // Orientation of every link from a stored state, in degrees clockwise seen from above.
-// Relative: joints carry θ(k+1) − θk and l1 is not tracked (it is taken from `reference`); absolute: jK carries θK.
-// A joint the state leaves free (a partial goal) keeps the reference's value.
+// Relative: joints carry θ(k+1) − θk and l1 is not tracked (it is taken from `reference`); absolute: jK carries θK;
+// bimanual: jK carries θ(K+1) − θ1 (l1 from `reference` again). A joint the state leaves free (a partial goal) keeps
+// the reference's value.
 function linkAngles(obj, state, reference) {
   if (!obj || !state) return null;
   if (state.link_orientations_deg) return state.link_orientations_deg.slice();
@@ -68,6 +69,12 @@ function linkAngles(obj, state, reference) {
     for (let k = 0; k < n; k++) {
       const v = values[obj.joints[k]];
       out[k] = v === undefined ? ref[k] : v;
+    }
+  } else if (obj.formulation === "bimanual") {
+    out[0] = ref[0];
+    for (let k = 1; k < n; k++) {
+      const v = values[obj.joints[k - 1]];
+      out[k] = v === undefined ? ref[k] : ref[0] + v;
     }
   } else {
     out[0] = ref[0];

@@ -11,6 +11,7 @@ import time
 from functools import cached_property
 from typing import Any
 
+from planhrc.control import check_control, possible_control
 from planhrc.model import (
     HAS_ORIENTATION,
     ArticulatedObject,
@@ -29,9 +30,9 @@ from .records import STATE_KINDS, ActionSpec, CheckedPlan, CondEffect
 
 
 class ObjectInfo:
-    """An object and the lookups the checks need (names -> PDDL type, static facts, its orientation atoms), each
-    built when a check first asks for it: listing or reading objects needs none of them (building them all took
-    most of a first `GET /objects` on a store of many objects)."""
+    """An object and the lookups the checks need (names -> PDDL type, static facts, its orientation atoms and, for a
+    bimanual object, its control atoms), each built when a check first asks for it: listing or reading objects
+    needs none of them (building them all took most of a first `GET /objects` on a store of many objects)."""
 
     def __init__(self, obj: ArticulatedObject) -> None:
         self.obj = obj
@@ -46,6 +47,8 @@ class ObjectInfo:
             types[name] = "joint"
         for name in self.obj.orientation_names:
             types[name] = "orientation"
+        for name in self.obj.grippers:
+            types[name] = "gripper"
         return types
 
     @cached_property
@@ -66,6 +69,18 @@ class ObjectInfo:
     @cached_property
     def orientation_atoms(self) -> frozenset[Atom]:
         return frozenset(self.orientation_atom_name)
+
+    @cached_property
+    def control_atoms(self) -> frozenset[Atom]:
+        """A bimanual object's control atoms (what the grippers hold, the centre): individuals its states share."""
+        return possible_control(self.obj)
+
+    @cached_property
+    def shared_atom_name(self) -> dict[Atom, str]:
+        """The atoms every state of the object shares as one individual each (orientations, control), named."""
+        obj = self.obj
+        return {**self.orientation_atom_name,
+                **{atom: atom_fragment(obj, obj.ident, atom) for atom in sorted(self.control_atoms)}}
 
 
 def check_kind(kind: Any) -> str:
@@ -105,10 +120,18 @@ def check_state_atoms(info: ObjectInfo, kind: str, atoms: Any, field: str) -> di
     if not atoms:
         raise ValidationError(f"{field}: a state needs at least one atom")
     static = info.static
+    # A bimanual object's control atoms: in a complete state, a whole control part (one joint at the centre, each
+    # gripper free or holding one link)
+    control = frozenset(atoms) & info.control_atoms
+    if info.control_atoms and kind in COMPLETE_KINDS:
+        try:
+            check_control(info.obj, control, field)
+        except ModelError as exc:
+            raise ValidationError(str(exc)) from None
     # The common case in a few set operations: every atom is a static fact or a well-formed hasorientation
     # atom of the object, one per joint (a complete state: every joint). Anything else takes the path below,
     # which finds the first error in a fixed order.
-    rest_set = frozenset(atoms) - static
+    rest_set = frozenset(atoms) - static - control
     if rest_set <= info.orientation_atoms:
         by_joint = {atom[2]: atom for atom in rest_set}
         if len(by_joint) == len(rest_set) and (kind not in COMPLETE_KINDS or len(by_joint) == len(info.joints)):
@@ -117,7 +140,7 @@ def check_state_atoms(info: ObjectInfo, kind: str, atoms: Any, field: str) -> di
     # Static facts of the object are valid by construction; only the rest needs checking. Sorting the rest
     # makes the first error reported the same on every run.
     well_formed = info.orientation_atom_name
-    rest = [atom for atom in atoms if atom not in static]
+    rest = [atom for atom in atoms if atom not in static and atom not in control]
     try:
         rest.sort()
     except TypeError:
@@ -177,7 +200,7 @@ def _check_atoms(info: ObjectInfo, atoms: set[Any] | frozenset[Any], field: str)
     """`check_atom` on each atom that is not one of the object's known facts (its static facts and its
     well-formed hasorientation atoms, valid by construction), in a fixed order (the first error is the same on
     every run)."""
-    rest = [a for a in atoms if a not in info.static and a not in info.orientation_atom_name]
+    rest = [a for a in atoms if a not in info.static and a not in info.shared_atom_name]
     for atom in sorted(rest, key=repr):
         check_atom(info, atom, field)
 

@@ -176,7 +176,7 @@ class SqliteStore(StoreFacade):
         with self._guard:
             abox = self._abox
             objects = self._records.object_ids()
-            shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+            shared = {oid: sorted(self._records.info(oid).shared_atom_name.values()) for oid in objects}
             roots = {oid: current_roots(abox.q.db, SQLITE, oid) for oid in objects}
             # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
             self._backlog.settle(name for names in roots.values() for name in names)

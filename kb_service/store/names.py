@@ -12,7 +12,8 @@ so the RDF export and the reasoners read the same ontology from any of them.
 """
 from __future__ import annotations
 
-from planhrc.model import AFFECTED, CONNECTED, HAS_ORIENTATION, ORIENTATION_ORD, ArticulatedObject, Atom
+from planhrc.model import (AFFECTED, CONNECTED, FREE, HAS_ORIENTATION, HOLDING, IN_CENTRE, KEEPER, ORIENTATION_ORD,
+                           ORIENTATION_ORD45, ArticulatedObject, Atom)
 
 TBOX_IRI = "http://planhrc.org/ontology/planhrc.owl#"
 ABOX_IRI = "http://planhrc.org/abox#"
@@ -25,7 +26,10 @@ STATE_CLASSES = {
 }
 # States that give every joint its orientation (a goal may be partial).
 COMPLETE_KINDS = frozenset({"perceived", "expected", "initial"})
-ACTION_CLASSES = {"rotateclockwise": "RotateClockwise", "rotateanticlockwise": "RotateAntiClockwise"}
+ACTION_CLASSES = {"rotateclockwise": "RotateClockwise", "rotateanticlockwise": "RotateAntiClockwise",
+                  # the bimanual formulation's
+                  "movetocentre": "MoveToCentre", "grasplinks": "GraspLinks", "releaselinks": "ReleaseLinks",
+                  "rotateclockwise45": "RotateClockwise45", "rotateanticlockwise45": "RotateAntiClockwise45"}
 
 # PDDL predicate -> (OWL class, PDDL argument types, OWL property of each PDDL argument, IRI tag).
 # The property order matches the TBox annotation pddlArgumentOrder (a test checks it).
@@ -34,6 +38,12 @@ PREDICATES: dict[str, tuple[str, tuple[str, ...], tuple[str, ...], str]] = {
     HAS_ORIENTATION: ("HasOrientation", ("orientation", "joint"), ("arg2", "arg1"), "ho"),
     ORIENTATION_ORD: ("OrientationOrd", ("orientation", "orientation"), ("arg1", "arg2"), "ord"),
     AFFECTED: ("Affected", ("joint", "link", "joint"), ("arg1", "arg2", "arg3"), "affected"),
+    # the bimanual formulation's: the robot's control facts, and its static facts
+    FREE: ("Free", ("gripper",), ("arg1",), "free"),
+    HOLDING: ("Holding", ("gripper", "link"), ("arg1", "arg2"), "holding"),
+    IN_CENTRE: ("InCentre", ("joint",), ("arg1",), "centre"),
+    KEEPER: ("Keeper", ("gripper",), ("arg1",), "keeper"),
+    ORIENTATION_ORD45: ("OrientationOrd45", ("orientation", "orientation"), ("arg1", "arg2"), "ord45"),
 }
 PREDICATE_OF_CLASS = {v[0]: k for k, v in PREDICATES.items()}
 
@@ -44,14 +54,19 @@ TBOX_TERMS = (
     "Problem Plan degrees lengthM chainIndex formulation objectName isVirtual hasLink hasJoint allowedOrientation "
     "nextLink arg1 arg2 arg3 forall when effNeg_a effPos_a params pre effNeg effPos condEff stepIndex paramList "
     "nextAction madeof observes stateOf aboutObject observedDegrees createdAt init goal solves expectedState "
-    "plannerName position staticFactOf includesStaticFacts"
+    "plannerName position staticFactOf includesStaticFacts "
+    "Gripper Free Holding InCentre Keeper OrientationOrd45 MoveToCentre GraspLinks ReleaseLinks RotateClockwise45 "
+    "RotateAntiClockwise45"
 ).split()
 
 
 def _short(obj: ArticulatedObject, name: str) -> str:
-    """Short form of an argument inside an IRI fragment: `obj1_j3` -> `j3`, `deg_90` -> `90`."""
+    """Short form of an argument inside an IRI fragment: `obj1_j3` -> `j3`, `deg_90` -> `90`; the robot's grippers
+    (`left`, `right`) as they are."""
     if name.startswith("deg_"):
         return name[4:]
+    if name in obj.grippers:
+        return name
     return name[len(obj.ident) + 1:]
 
 

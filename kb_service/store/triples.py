@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from planhrc.model import HAS_ORIENTATION, Atom, Perception, orientation_name
+from planhrc.model import Atom, Perception, orientation_name
 
 from .checks import ObjectInfo
 from .journal import JournalEntry
@@ -29,7 +29,7 @@ def state_order(info: ObjectInfo, atoms: frozenset[Atom]) -> StateOrder:
     # A state with all of its object's static facts lists only the rest: the static facts are linked to the
     # object once (staticFactOf) and the TBox's SWRL rule derives the state's madeof links to them.
     compact = info.static <= atoms
-    return compact, tuple(sorted(a for a in atoms if a[0] == HAS_ORIENTATION or not compact))
+    return compact, tuple(sorted(a for a in atoms if a in info.shared_atom_name or not compact))
 
 
 def action_order(spec: ActionSpec) -> ActionOrder:
@@ -50,8 +50,9 @@ def add_predicate(b: TripleBatch, name: str, atom: Atom) -> str:
 
 
 def shared_predicate(abox: AboxNames, b: TripleBatch, info: ObjectInfo, atom: Atom) -> str:
-    """The object's individual for a HasOrientation atom, created in this batch on first use."""
-    name = info.orientation_atom_name[atom]
+    """The object's individual for a HasOrientation atom (or a bimanual object's control atom), created in this
+    batch on first use."""
+    name = info.shared_atom_name[atom]
     if name in b.shared or abox.existing([name]):
         return name
     b.shared.add(name)
@@ -90,6 +91,9 @@ def object_triples(abox: AboxNames, b: TripleBatch, info: ObjectInfo) -> None:
             b.individual(name, "Orientation")
             b.data(name, "degrees", deg)
         b.rel(o, "allowedOrientation", name)
+    for gripper in obj.grippers:  # the robot's, shared by every bimanual object like the orientations
+        if not abox.has_class(gripper, "Gripper"):
+            b.individual(gripper, "Gripper")
     for atom in sorted(info.static):
         name = add_predicate(b, info.static_fragment[atom], atom)
         b.rel(name, "staticFactOf", obj.ident)
@@ -112,7 +116,7 @@ def state_triples(
     if compact:
         b.data(s, "includesStaticFacts", True)
     for atom in linked:
-        if atom[0] == HAS_ORIENTATION:
+        if atom in info.shared_atom_name:
             pred = shared_predicate(abox, b, info, atom)
         else:
             pred = info.static_fragment[atom]
@@ -139,7 +143,7 @@ def action_triples(abox: AboxNames, b: TripleBatch, info: ObjectInfo, aid: str, 
 
     def pred(atom: Atom) -> str:
         name = info.static_fragment.get(atom) or made.get(atom)
-        if name is None and atom[0] == HAS_ORIENTATION:
+        if name is None and atom in info.shared_atom_name:
             name = made[atom] = shared_predicate(abox, b, info, atom)
         if name is None:
             name = made[atom] = add_predicate(b, atom_fragment(info.obj, aid, atom), atom)

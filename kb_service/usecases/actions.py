@@ -28,7 +28,8 @@ def next_action(merge: bool, obj: ArticulatedObject, plan: StoredPlan, action: S
         merged = merge_macro_steps(obj, [a for a in plan.actions if action.step <= a.step <= last], True)[0]
         delta, macro = merged.delta_deg, last - action.step + 1
     return NextAction(action.id, action.spec.name, tuple(action.spec.params), action.step, last, plan.id,
-                      motion["joint_index"], motion["turned_link_index"], motion["held_link_index"], delta, macro)
+                      motion["joint_index"], motion["turned_link_index"], motion["held_link_index"], delta, macro,
+                      last >= len(plan.actions))
 
 
 def merges(merge_macro_steps: bool, split_plans: frozenset[str], plan_id: str) -> bool:

@@ -8,17 +8,19 @@ a decision and returns it, or a better one, for the object as it lies now.
 """
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 from planhrc.cooperation import Decision, FailureHistory, escalate as escalate_failure
-from planhrc.geometry import ObjectGeometry, link_centres, reach_shortfall
+from planhrc.geometry import Cell, ObjectGeometry, link_centres, reach_shortfall
+from planhrc.judge import judge_motion
 from planhrc.model import ArticulatedObject, Formulation, Perception, State
-from planhrc.ordering import Move, Placement, leaves_the_table
+from planhrc.ordering import Move, Placement, RefusedMotion, leaves_the_table
 from planhrc.pipeline import ReplanRequest, action_motion, move_of
 from planhrc.vocabulary import ActionOutcome, DecisionKind, Remedy
 
 from ..store import StoredPlan
-from .actions import last_step, merges
+from .actions import last_step, merges, next_action
 from .context import Context
 from .gate import val_gate
 from .memory import ObjectMemo
@@ -27,16 +29,32 @@ Base = tuple[float, float] | None  # where a placed object's base point lies (No
 DISPATCHING = (DecisionKind.CONTINUE, DecisionKind.RESUME)
 
 
-def recheck_at(obj: ArticulatedObject, base: Base, plan: StoredPlan | None, perception: Perception,
-               decision: Decision) -> Decision:
-    """A decision to go on with the current plan, checked where the object lies now: when the rest of the plan
-    would put a link past the table's edge or inside the robot with the base point at `base` (as measured;
-    the plan was checked where the base point was then), the plan is not dispatched as is: re-plan."""
+def recheck_at(context: Context, obj: ArticulatedObject, base: Base, plan: StoredPlan | None,
+               perception: Perception, decision: Decision, memo: ObjectMemo) -> Decision:
+    """A decision to go on with the current plan, checked where the object lies now, as measured: the motion it
+    would dispatch is judged as the worker will judge it (`planhrc.judge.judge_motion`, from the measured pose)
+    and must not be one the robot refused from this state before; the rest of the plan must not put a link past
+    the table's edge or inside the robot with the base point at `base` (the plan was checked where the base point
+    was then). Otherwise the plan is not dispatched as is: re-plan."""
     if base is None or plan is None or decision.next_step is None or decision.kind not in DISPATCHING:
         return decision
+    if not 1 <= decision.next_step <= len(plan.actions):
+        return decision
+    geometry, pose = ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.raw_deg)
+    merge = merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
+    motion = next_action(merge, obj, plan, plan.actions[decision.next_step - 1])
+    move = Move(motion.name, motion.turned_link_index, motion.held_link_index, motion.joint_index, motion.delta_deg)
+    refused = next((r for r in memo.refused if r.forbids(geometry, pose, move)), None)
+    verdict = judge_motion(geometry, pose, move.turned, move.held, move.delta_deg, Cell(), motion.ends_plan)
+    if refused is not None or not verdict.ok:
+        why = (f"the robot refused that turn from this state before ({refused.fact})" if refused is not None
+               else verdict.sentence())
+        return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
+                        f"{decision.reason}; but with the base point measured at ({base[0]:.3f}, {base[1]:.3f}) "
+                        f"and the links as measured, turning link {move.turned} by {move.delta_deg:+d}° "
+                        f"({motion.id}) would end with {why}: re-plan")
     rest = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.next_step]
-    step, problem = leaves_the_table(Placement(ObjectGeometry.of(obj, base),
-                                               tuple(float(v) for v in perception.snapped_deg)), rest)
+    step, problem = leaves_the_table(Placement(geometry, pose), rest)
     if step is None or problem is None:
         return decision
     where = f"({base[0]:.3f}, {base[1]:.3f})"
@@ -90,28 +108,46 @@ def replan_request(obj: ArticulatedObject, perception: Perception, goal: State, 
         rest = [a for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.matched_expected_step]
         turned = other_way(obj, [move_of(obj, a.spec) for a in rest], memo.failure)
         moves = tuple(turned) if turned is not None else None
-    return ReplanRequest(obj, perception.atoms, goal, deadline_at, placement(obj, perception.snapped_deg, base),
-                         moves)
+    return ReplanRequest(obj, perception.atoms, goal, deadline_at,
+                         placement(obj, perception.raw_deg, base, memo.refused), moves)
 
 
-def placement(obj: ArticulatedObject, link_deg: Sequence[float], base: Base) -> Placement | None:
-    """Where a placed object lies with its links at `link_deg` and its base point at `base` (None for an abstract
-    one: no geometric checks)."""
+# Slides asked for per goal: room is made once or twice; a plan that still does not fit goes to the human.
+MAX_SLIDES = 2
+
+
+def may_slide(memo: ObjectMemo, base: Base) -> bool:
+    """Whether the robot may be asked to slide the object (`DecisionKind.ROBOT_SKILL`): not more than `MAX_SLIDES`
+    times per goal, and not again right after a slide that left the base point where it was (it did not work)."""
+    if base is None or memo.slides >= MAX_SLIDES:
+        return False
+    if memo.last_decision == DecisionKind.ROBOT_SKILL and memo.slide_from_xy is not None:
+        return math.dist(base, memo.slide_from_xy) > 0.02
+    return True
+
+
+def placement(obj: ArticulatedObject, link_deg: Sequence[float], base: Base,
+              refused: Sequence[RefusedMotion] = ()) -> Placement | None:
+    """Where a placed object lies with its links at `link_deg` (as measured: the one judge's pose) and its base
+    point at `base`, with the turns the robot refused before (None for an abstract one: no geometric checks)."""
     if base is None:
         return None
     return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in link_deg),
-                     whole_turn_deg=whole_turn_deg(obj))
+                     whole_turn_deg=whole_turn_deg(obj), refused=frozenset(refused), grid_deg=obj.step)
 
 
 def whole_turn_deg(obj: ArticulatedObject) -> int:
-    """The step by which a human may turn the whole object without changing its state (`Placement`): relative
-    objects only, whose states do not say where l1 points."""
-    return obj.step if obj.formulation is Formulation.RELATIVE else 0
+    """The step by which a human may turn the whole object without changing its state (`Placement`): relative and
+    bimanual objects, whose states do not say where l1 points."""
+    return 0 if obj.formulation is Formulation.ABSOLUTE else obj.step
 
 
 def other_way(obj: ArticulatedObject, moves: Sequence[Move], failure: FailureHistory) -> list[Move] | None:
     """`moves` with the failing joint's steps replaced by the other way round (360° - delta), or None when that
-    joint has nothing left to turn in them."""
+    joint has nothing left to turn in them, or the plan's turns lie between grasps and releases (bimanual: the
+    planner makes the new plan)."""
+    if obj.grippers:
+        return None
     group = [m for m in moves if (m.joint, m.turned) == (failure.joint, failure.turned)]
     total = sum(m.delta_deg for m in group)
     if not group or total % 360 == 0:

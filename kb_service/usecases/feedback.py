@@ -1,14 +1,18 @@
 """A worker's feedback on the dispatched action: with `succeeded` the execution moves past the motion's last step
 and the next perception checks the expected state there; otherwise the next perception decides whether to retry,
-resume or re-plan. Feedback on an action a perception already moved past is recorded as *late* and moves nothing."""
+resume or re-plan. Feedback on an action a perception already moved past is recorded as *late* and moves nothing.
+For a bimanual object the feedback event also keeps the robot's control facts after it (`planhrc.control`): what
+the next perceived states hold beside the perceived orientations."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any, Mapping
 
+from planhrc.control import control_after
 from planhrc.pipeline import action_motion
-from planhrc.vocabulary import ActionOutcome, ExecutionStatus
+from planhrc.vocabulary import ActionOutcome, ExecutionStatus, FailureReason
 
-from ..store import ConflictError, Execution
+from ..store import ConflictError, Execution, StoredAction
 from .actions import last_step, merges
 from .context import Context
 from .idempotency import fingerprint, recall, remember
@@ -30,6 +34,7 @@ class FeedbackRequest:
     idempotency_key: str | None = None
     reason: str | None = None
     measured_deg: float | None = None
+    refusal: Mapping[str, Any] | None = None  # a turn refused before it moved: the geometric fact (schemas)
 
 
 def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
@@ -47,7 +52,9 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
         mark = read_mark(context, object_id)  # before the remembered answer and the execution are read
         print_ = fingerprint({"feedback": [action_id, outcome, message]}
                              if failure is None and measured_deg is None else
-                             {"feedback": [action_id, outcome, message, failure, measured_deg]})
+                             {"feedback": [action_id, outcome, message, failure, measured_deg]}
+                             if request.refusal is None else
+                             {"feedback": [action_id, outcome, message, failure, measured_deg, dict(request.refusal)]})
         recalled = recall(store, object_id, request.idempotency_key, print_)
         if recalled is not None:
             return feedback_of(recalled)
@@ -57,12 +64,15 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
             current = execution.dispatched_action_id or "none"
             raise ConflictError(
                 f"action_id: {action_id} is not the current dispatched action of {object_id} (current: {current})")
+        memo = context.memory.of(store, object_id)
+        done: tuple[StoredAction, ...] = (action,)  # the motion's actions: feedback on a merged one covers each step
         if execution.status == ExecutionStatus.DISPATCHED:
             accepted = Accepted.CURRENT
             plan, _ = context.views.get(store, execution.plan_id)
-            split_plans = context.memory.of(store, object_id).split_plans
+            split_plans = memo.split_plans
             last = (last_step(merges(context.settings.merge_macro_steps, split_plans, plan.id), obj, plan, action)
                     if plan else action.step)
+            done = tuple(a for a in plan.actions if action.step <= a.step <= last) if plan else done
             next_step = last + 1 if outcome == ActionOutcome.SUCCEEDED else action.step
             new = Execution(execution.plan_id, next_step, ExecutionStatus.READY, None)
             text = f"a_{action.step} {outcome}" + (
@@ -75,11 +85,41 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
         result = FeedbackResult(action_id, accepted, new)
         why = f" [{failure}]" if failure is not None else ""
         motion = action_motion(obj, action)
+        refused = (refusal_data(context, object_id, request.refusal, motion)
+                   if outcome == ActionOutcome.FAILED and failure in REFUSALS else None)
+        data: dict[str, Any] = {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
+                "reason": failure, "measured_deg": measured_deg, "message": message,
+                "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"],
+                **({"refusal": refused} if refused is not None else {})}
+        if obj.grippers:  # bimanual: what the robot's grippers hold and where the centre is now (`planhrc.control`)
+            control = control_after(memo.control or obj.initial_control(), [a.spec for a in done],
+                                    outcome == ActionOutcome.SUCCEEDED)
+            data["control"] = [list(atom) for atom in sorted(control)]
         with object_write(context, object_id, mark):
             store.set_execution(object_id, new)
-            store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""),
-                            {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
-                             "reason": failure, "measured_deg": measured_deg, "message": message,
-                             "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"]})
+            store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""), data)
             remember(store, object_id, request.idempotency_key, print_, feedback_record(result))
         return result
+
+
+# A failed turn for one of these reasons did not start (the worker's judge or its arms refused it): the same turn
+# from the same state is not proposed again (`memory.ObjectMemo.refused`).
+REFUSALS = frozenset({FailureReason.LEFT_TABLE, FailureReason.COLLISION, FailureReason.UNREACHABLE})
+
+
+def refusal_data(context: Context, object_id: str, fact: Mapping[str, Any] | None, motion: Mapping[str, int]
+                 ) -> dict[str, Any] | None:
+    """What the feedback event keeps of a refused turn: the turn (link turned and held, direction), the pose it was
+    refused from (the worker's, else the latest perception's and measured base point) and the fact; None when there
+    is no pose to remember it by."""
+    fact = dict(fact or {})
+    memo = context.memory.of(context.store, object_id)
+    pose = fact.get("from_deg")
+    if pose is None and memo.perceived_state_id is not None:
+        pose = context.store.get_state(memo.perceived_state_id).link_orientations_deg
+    base = fact.get("base_point_xy") or memo.where
+    if not pose or base is None:
+        return None
+    return {**fact, "from_deg": [float(v) for v in pose], "base_point_xy": [float(v) for v in base],
+            "turned": motion["turned_link_index"], "held": motion["held_link_index"],
+            "direction": 1 if motion["delta_deg"] > 0 else -1}

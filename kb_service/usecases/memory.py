@@ -12,8 +12,10 @@ from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
 from planhrc.cooperation import FailureHistory, PlanView
+from planhrc.model import Atom
 from planhrc.pipeline import PieceRecord
-from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Remedy
+from planhrc.ordering import RefusedMotion
+from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Infeasible, Remedy
 
 from ..store import StoredEvent, StoredPlan
 from .log import EventKind, piece_record_of, verdict_of
@@ -21,6 +23,7 @@ from ..store import KnowledgeStore
 from .values import Accepted
 
 DECISIONS = frozenset(DecisionKind)
+MAX_REFUSED = 200  # refused turns remembered per object: the latest
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,11 @@ class ObjectMemo:
     split_plans: frozenset[str] = frozenset()  # plans whose macro steps are dispatched step by step
     last_decision: str | None = None  # the kind of the last decision logged
     val: PieceRecord | None = None  # the latest plan adopted with only its first motion validated, and its verdicts
+    refused: tuple[RefusedMotion, ...] = ()  # turns the robot refused, each from a state: never proposed again
+    slides: int = 0  # robot skills (slides) asked for since the goal was set
+    slide_from_xy: tuple[float, float] | None = None  # where the object's base point was when the last was asked
+    step_deg: int = 0  # the object's orientation step (from its creation)
+    control: frozenset[Atom] | None = None  # bimanual: the robot's control facts after the last feedback (None: none)
 
     @property
     def where(self) -> tuple[float, float] | None:
@@ -74,15 +82,21 @@ def _read(memo: ObjectMemo, event: StoredEvent) -> ObjectMemo:
     """The memo after one more event."""
     data = event.data
     if event.kind == EventKind.OBJECT_CREATED:
-        return replace(memo, base_point_xy=base_of(data))
+        return replace(memo, base_point_xy=base_of(data), step_deg=step_of(data))
     if event.kind == EventKind.GOAL_SET:
-        return replace(memo, goal_state_id=data.get("goal_state_id"), failure=None)
+        return replace(memo, goal_state_id=data.get("goal_state_id"), failure=None, slides=0, slide_from_xy=None)
     if event.kind == DecisionKind.INCOMPLETE_PERCEPTION:
         return memo  # it stored no state and decided nothing: the last feedback still informs the next decision
     if event.kind == EventKind.FEEDBACK:
         outcome = data.get("outcome")
+        control = data.get("control")
+        refused = memo.refused
+        if data.get("refusal"):
+            refused = (refused + (refused_motion(data["refusal"], memo.step_deg, data.get("message") or ""),)
+                       )[-MAX_REFUSED:]
         return replace(memo, last_outcome=ActionOutcome(outcome) if outcome else None,
-                       failure=next_failure(memo.failure, data))
+                       failure=next_failure(memo.failure, data), refused=refused,
+                       control=frozenset(tuple(a) for a in control) if control is not None else memo.control)
     if event.kind == EventKind.VAL_VERDICT:
         if memo.val is not None and memo.val.plan_id == data.get("plan_id"):
             return replace(memo, val=memo.val.with_verdict(int(data["piece"]), verdict_of(data)))
@@ -90,6 +104,8 @@ def _read(memo: ObjectMemo, event: StoredEvent) -> ObjectMemo:
     if event.kind in DECISIONS:
         remedy, plan_id = data.get("remedy"), data.get("plan_id")
         failure = memo.failure
+        if event.kind == DecisionKind.ROBOT_SKILL:
+            memo = replace(memo, slides=memo.slides + 1, slide_from_xy=base_of(data) or memo.where)
         if remedy and failure is not None:
             failure = replace(failure, tried=failure.tried + (Remedy(remedy),))
         return replace(
@@ -113,6 +129,23 @@ def next_failure(failure: FailureHistory | None, data: Mapping[str, Any]) -> Fai
     if failure is not None and (failure.joint, failure.turned) == (joint, turned):
         return replace(failure, reason=FailureReason(reason), failures=failure.failures + 1)
     return FailureHistory(int(joint), int(turned), FailureReason(reason))
+
+
+def refused_motion(data: Mapping[str, Any], step_deg: int, message: str) -> RefusedMotion:
+    """A refused turn as the feedback event keeps it (`feedback.refusal_data`)."""
+    step = step_deg or 1
+    state = tuple(int(round(float(v) / step)) * step % 360 for v in data["from_deg"])
+    code = data.get("code")
+    return RefusedMotion(state, (float(data["base_point_xy"][0]), float(data["base_point_xy"][1])),
+                         int(data["turned"]), int(data["held"]), int(data["direction"]), step,
+                         Infeasible(code) if code else Infeasible.OUT_OF_REACH, int(data.get("link") or data["turned"]),
+                         message or "refused")
+
+
+def step_of(data: Mapping[str, Any]) -> int:
+    """The orientation step an object_created event names (0 when it does not)."""
+    orientations = data.get("orientations")
+    return 360 // int(orientations) if orientations else 0
 
 
 def base_of(data: Mapping[str, Any]) -> tuple[float, float] | None:

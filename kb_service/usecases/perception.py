@@ -98,13 +98,13 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
             return turn_of(recalled)
         if any(v is None for v in links):
             return _incomplete(context, obj, request, print_, measured, mark)
-        try:
-            perception = snap(obj, links)  # validated and snapped once, here
-        except ModelError as exc:
-            raise ValidationError(str(exc)) from None
 
         # where the object's cooperation stands
         memo = context.memory.of(store, obj.ident)
+        try:  # validated and snapped once, here; a bimanual state takes the robot's control facts (`planhrc.control`)
+            perception = snap(obj, links, control=memo.control)
+        except ModelError as exc:
+            raise ValidationError(str(exc)) from None
         execution = store.get_execution(obj.ident)
         goal = store.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
         plan, view = context.views.get(store, execution.plan_id)
@@ -115,7 +115,7 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
 
         # decide
         decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
-        decision = refine.recheck_at(obj, base, plan, perception, decision)
+        decision = refine.recheck_at(context, obj, base, plan, perception, decision, memo)
         decision = refine.escalate(context, obj, plan, perception, decision, memo, base)
         decision = refine.gate_decision(context, obj, plan, decision, deadline_at)
         seen = replace(seen, decision=decision)
@@ -179,7 +179,8 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
         elif planned is None or outcome is None:
             written = follow(context, obj, perceived, seen.execution, seen.plan, decision, seen.memo, seen.base)
         else:
-            written = adopt(context, obj, perceived, goal, decision, outcome, checked, planned.verdict.early_answer())
+            written = adopt(context, obj, perceived, goal, decision, outcome, checked, planned.verdict.early_answer(),
+                            refine.may_slide(seen.memo, seen.base))
         turn = written.turn
         data = decision_data(written, goal.id if goal is not None else None,
                              decision.remedy if decision is not None else None, seen.measured)

@@ -12,7 +12,7 @@ from planhrc.geometry import ObjectGeometry
 from planhrc.model import ArticulatedObject, snap_angle
 from planhrc.ordering import HelpItem, Placement, help_for
 from planhrc.pipeline import EarlyAnswer, PlanOutcome, move_of
-from planhrc.vocabulary import DecisionKind, ExecutionStatus, PlanningStatus, Remedy
+from planhrc.vocabulary import DecisionKind, ExecutionStatus, PlanningStatus, Remedy, Skill
 
 from ..store import Execution, StoredPlan, StoredState
 from ..store import CheckedPlan
@@ -20,7 +20,7 @@ from .actions import last_step, merges, next_action
 from .context import Context
 from .decide import Base, whole_turn_deg
 from .memory import ObjectMemo
-from .values import Turn
+from .values import SkillRequest, Turn, skill_record
 
 IDLE, READY, DISPATCHED = ExecutionStatus.IDLE, ExecutionStatus.READY, ExecutionStatus.DISPATCHED
 
@@ -73,7 +73,8 @@ def follow(context: Context, obj: ArticulatedObject, perceived: StoredState, exe
 
 
 def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
-          outcome: PlanOutcome, checked: CheckedPlan | None, early: EarlyAnswer | None) -> Written:
+          outcome: PlanOutcome, checked: CheckedPlan | None, early: EarlyAnswer | None,
+          may_slide: bool = True) -> Written:
     """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL: the whole plan, or
     with the early answer its first motion), its plan with expected states; move the execution. With the early
     answer the decision's event names the plan's pieces and those accepted (`decision_data`): the record the
@@ -99,6 +100,13 @@ def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal
     if outcome.solved:  # the perceived state already satisfies the goal
         store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
         return written(Turn(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message))
+    if outcome.room is not None and may_slide:  # the plan fits nearer the table's middle: the robot slides it there
+        store.set_execution(obj.ident, Execution(None, None, IDLE, None))
+        room = outcome.room
+        reason = f"{decision.reason}; {outcome.message}; the robot makes room first: {room.sentence}"
+        skill = SkillRequest(Skill.SLIDE, room.to_xy, room.links, room.sentence)
+        return written(Turn(DecisionKind.ROBOT_SKILL, None, perceived.id, None, decision.matched_expected_step,
+                            reason, skill=skill))
     if outcome.help:  # a plan exists but the robot cannot carry it out on this table: ask the human
         store.set_execution(obj.ident, Execution(None, None, IDLE, None))
         reason = f"{decision.reason}; {outcome.message}; the robot asks the human for help"
@@ -137,6 +145,8 @@ def decision_data(written: Written, goal_state_id: str | None, remedy: Remedy | 
         data["ordering"] = written.ordering
     if turn.help is not None:
         data["help"] = help_data(turn.help)
+    if turn.skill is not None:
+        data["skill"] = skill_record(turn.skill)
     return data
 
 

@@ -7,7 +7,7 @@ from enum import StrEnum
 from typing import Any, Mapping
 
 from planhrc.ordering import HelpItem
-from planhrc.vocabulary import DecisionKind, ExecutionStatus
+from planhrc.vocabulary import DecisionKind, ExecutionStatus, Skill
 
 from ..store import Execution
 
@@ -35,6 +35,7 @@ class NextAction:
     held_link_index: int
     delta_deg: int
     macro_steps: int
+    ends_plan: bool = False  # the plan's last motion: it comes to rest in the goal (judged as drawn)
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,18 @@ class Turn:
     reason: str
     help: tuple[HelpItem, ...] | None = None
     unseen_links: tuple[int, ...] | None = None
+    skill: SkillRequest | None = None
+
+
+@dataclass(frozen=True)
+class SkillRequest:
+    """A robot skill asked for (`DecisionKind.ROBOT_SKILL`): slide the object, its base point to `base_point_xy`,
+    holding links `links`; why in words."""
+
+    name: Skill
+    base_point_xy: tuple[float, float]
+    links: tuple[int, ...]
+    sentence: str
 
 
 @dataclass(frozen=True)
@@ -69,7 +82,13 @@ class FeedbackResult:
 
 @dataclass(frozen=True)
 class GaveUp:
+    """A recorded give-up, and the help request it became (`decision` human_help_requested; None without a goal
+    left to ask for)."""
+
     event_seq: int
+    decision: DecisionKind | None = None
+    reason: str = ""
+    help: tuple[HelpItem, ...] = ()
 
 
 # -- reads -------------------------------------------------------------------------------------------------------
@@ -158,16 +177,26 @@ def turn_record(turn: Turn) -> dict[str, Any]:
             "next_action": {**vars(action), "params": list(action.params)} if action is not None else None,
             "matched_expected_step": turn.matched_expected_step, "reason": turn.reason,
             "help": [dict(vars(h)) for h in turn.help] if turn.help is not None else None,
-            "unseen_links": list(turn.unseen_links) if turn.unseen_links is not None else None}
+            "unseen_links": list(turn.unseen_links) if turn.unseen_links is not None else None,
+            "skill": skill_record(turn.skill) if turn.skill is not None else None}
+
+
+def skill_record(skill: SkillRequest) -> dict[str, Any]:
+    return {"name": skill.name, "base_point_xy": list(skill.base_point_xy), "links": list(skill.links),
+            "sentence": skill.sentence}
 
 
 def turn_of(record: Mapping[str, Any]) -> Turn:
     action, help_items, unseen = record["next_action"], record.get("help"), record.get("unseen_links")
+    skill = record.get("skill")
     return Turn(DecisionKind(record["decision"]), record["plan_id"], record["perceived_state_id"],
                 NextAction(**{**action, "params": tuple(action["params"])}) if action is not None else None,
                 record["matched_expected_step"], record["reason"],
                 tuple(HelpItem(**h) for h in help_items) if help_items is not None else None,
-                tuple(unseen) if unseen is not None else None)
+                tuple(unseen) if unseen is not None else None,
+                SkillRequest(Skill(skill["name"]), (float(skill["base_point_xy"][0]), float(skill["base_point_xy"][1])),
+                             tuple(int(k) for k in skill["links"]), str(skill["sentence"]))
+                if skill is not None else None)
 
 
 def execution_record(execution: Execution) -> dict[str, Any]:

@@ -117,7 +117,7 @@ class PgRecords:
             info = self.info(object_id)
             known = self._atom_of[object_id] = {
                 **{name: atom for atom, name in info.static_fragment.items()},
-                **{name: atom for atom, name in info.orientation_atom_name.items()}}
+                **{name: atom for atom, name in info.shared_atom_name.items()}}
         out = {name: known[name] for name in names if name in known}
         for name, ind in self.describe([n for n in names if n not in out]).items():
             pddl = next((PREDICATE_OF_CLASS[c] for c in ind.types if c in PREDICATE_OF_CLASS), None)

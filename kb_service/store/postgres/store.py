@@ -240,7 +240,7 @@ class PostgresStore(StoreFacade):
         with self._guard:
             s = self._session
             objects = self._records.object_ids()
-            shared = {oid: sorted(self._records.info(oid).orientation_atom_name.values()) for oid in objects}
+            shared = {oid: sorted(self._records.info(oid).shared_atom_name.values()) for oid in objects}
             roots = {oid: current_roots(s.conn, POSTGRESQL, oid) for oid in objects}
             # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
             self._journal.settle([name for names in roots.values() for name in names])
