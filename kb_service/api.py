@@ -26,26 +26,21 @@ from . import usecases
 from .auth import AuthError, check_bearer
 from .events import stream_events
 from .store import MAX_EVENTS_PAGE, ConflictError, DeadlineError, NotFoundError, UnavailableError, ValidationError
+from .record_schemas import ErrorPublic, EventPublic, HealthPublic, PlanPublic, ProblemPublic, StatePublic
 from .schemas import (
     DecisionPublic,
-    ErrorPublic,
-    EventPublic,
     FeedbackCreate,
     FeedbackPublic,
     GiveUpCreate,
     GiveUpPublic,
     GoalPublic,
     GoalUpdate,
-    HealthPublic,
     NextActionPublic,
     ObjectCreate,
     ObjectPublic,
     PerceptionCreate,
     SQLITE_MAX_INT,
     QUERY_INTEGRAL,
-    PlanPublic,
-    ProblemPublic,
-    StatePublic,
 )
 
 log = logging.getLogger(__name__)

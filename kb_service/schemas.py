@@ -1,4 +1,4 @@
-"""Request and response bodies of the service. Every schema and every field has a description and examples.
+"""Request bodies of the service and the decisions it answers with (the stored records' bodies: `record_schemas`).
 
 A request schema states every rule about the request itself, so that a body the schema accepts is accepted and
 one it refuses is refused (the contract test checks both): counts of orientations that divide 360, the two forms
@@ -81,7 +81,7 @@ def _orientation_count(k: int) -> int:
     return k
 
 
-def _config(description: str, example: dict[str, Any], rules: dict[str, Any] | None = None) -> ConfigDict:
+def schema_config(description: str, example: dict[str, Any], rules: dict[str, Any] | None = None) -> ConfigDict:
     """A model's description, example and `rules`: JSON Schema keywords over several fields (`oneOf`, `if`...)
     that the model's own validator enforces."""
     return ConfigDict(json_schema_extra={"description": description, "examples": [example], **(rules or {})},
@@ -90,7 +90,7 @@ def _config(description: str, example: dict[str, Any], rules: dict[str, Any] | N
 
 # -- objects ------------------------------------------------------------------------------------------------
 class LinkSpec(BaseModel):
-    model_config = _config("One link of an articulated object.", {"name": "l1", "length_m": 0.155})
+    model_config = schema_config("One link of an articulated object.", {"name": "l1", "length_m": 0.155})
 
     name: PrintableName = Field(min_length=1, max_length=64, description="Name of the link (informative).",
                                 examples=["l1"])
@@ -98,7 +98,7 @@ class LinkSpec(BaseModel):
 
 
 class ObjectCreate(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "An articulated object to create: a chain of links, its orientation set and its formulation.",
         {"name": "rod", "links": 4, "orientations": 4, "formulation": "relative"},
     )
@@ -139,14 +139,14 @@ class ObjectCreate(BaseModel):
 
 
 class LinkPublic(BaseModel):
-    model_config = _config("A link as stored: its PDDL name and length.", {"name": "obj1_l1", "length_m": 0.155})
+    model_config = schema_config("A link as stored: its PDDL name and length.", {"name": "obj1_l1", "length_m": 0.155})
 
     name: str = Field(description="Name of the link in the ontology and in PDDL.", examples=["obj1_l1"])
     length_m: float = Field(description="Length of the link in metres.", examples=[0.155])
 
 
 class ExecutionPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "Where the cooperation model stands for one object.",
         {"plan_id": "obj1_plan_1", "next_step": 2, "status": "dispatched", "dispatched_action_id": "obj1_plan_1_a2"},
     )
@@ -162,7 +162,7 @@ class ExecutionPublic(BaseModel):
 
 
 class ObjectPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "An articulated object as stored in the knowledge base.",
         {
             "id": "obj1", "name": "rod", "formulation": "relative", "orientations": 4, "step_deg": 90,
@@ -196,7 +196,7 @@ def _only(given: str, absent: str) -> dict[str, Any]:
 
 
 class GoalUpdate(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "A goal configuration: either every link's orientation, or one angle per joint (null = any). Exactly "
         "one of the two is given (the other is left out or null).",
         {"link_orientations_deg": [0, 90, 90, 180]},
@@ -234,7 +234,7 @@ class GoalUpdate(BaseModel):
 
 
 class GoalPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "The stored goal and, when a perceived state already exists, the problem from it to the goal.",
         {"goal_state_id": "obj1_state_1", "problem_id": "obj1_problem_1"},
     )
@@ -254,7 +254,7 @@ class GoalPublic(BaseModel):
 
 
 class PerceptionCreate(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "A perceived configuration: the measured orientation of every link, noisy real values; null for a link "
         "the camera did not see.",
         {"link_orientations_deg": [1.7, 88.9, 91.2, 179.4]},
@@ -288,7 +288,7 @@ class PerceptionCreate(BaseModel):
 
 
 class NextActionPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "The action to execute next and the motion it means.",
         {
             "id": "obj1_plan_1_a2", "name": "rotateclockwise", "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_90", "deg_180"],
@@ -319,7 +319,7 @@ class NextActionPublic(BaseModel):
 
 
 class HelpRequestPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "What the robot asks the human to do: bring one link to an absolute orientation.",
         {"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"},
     )
@@ -332,7 +332,7 @@ class HelpRequestPublic(BaseModel):
 
 
 class SkillRequestPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "A robot skill the service asks for before the plan's rotations: it changes where the object lies, not the "
         "state of the domain; the worker does it and perceives again.",
         {"name": "slide", "base_point_xy": [0.62, 0.05], "links": [1, 5],
@@ -350,7 +350,7 @@ class SkillRequestPublic(BaseModel):
 
 
 class DecisionPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "What the cooperation model decided for a perception.",
         {
             "decision": "continue", "plan_id": "obj1_plan_1", "perceived_state_id": "obj1_state_2", "next_action": None,
@@ -392,7 +392,7 @@ class DecisionPublic(BaseModel):
 
 
 class RefusalFactPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "The geometric fact behind a turn the worker refused before moving (its judge, `planhrc.judge`, from the "
         "pose it measured): which link, against what, how far, and the pose it judged from.",
         {"code": "off_table", "link": 4, "against": "the table's left edge", "distance_m": 0.04,
@@ -416,7 +416,7 @@ class RefusalFactPublic(BaseModel):
 
 
 class FeedbackCreate(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "A worker's report on a dispatched action. A reason is given only for an action that did not succeed.",
         {"outcome": "succeeded"},
         {"if": {"properties": {"outcome": {"const": ActionOutcome.SUCCEEDED.value}}},
@@ -457,7 +457,7 @@ class FeedbackCreate(BaseModel):
 
 
 class FeedbackPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "The execution after a feedback.",
         {"action_id": "obj1_plan_1_a2", "accepted": "current",
          "execution": {"plan_id": "obj1_plan_1", "next_step": 3, "status": "ready", "dispatched_action_id": None}},
@@ -475,7 +475,7 @@ class FeedbackPublic(BaseModel):
 
 
 class GiveUpCreate(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "A worker stops working on an object and says why.",
         {"reason": "repeated_failure", "message": "a_3 failed three times: link 4 stalls at 95°"},
     )
@@ -488,7 +488,7 @@ class GiveUpCreate(BaseModel):
 
 
 class GiveUpPublic(BaseModel):
-    model_config = _config(
+    model_config = schema_config(
         "The recorded give-up, and the help request it became.",
         {"event_seq": 12, "decision": "human_help_requested",
          "reason": "the robot stopped (repeated_failure: ...); the robot asks the human for help: turn link 4 to 135°",
@@ -506,129 +506,3 @@ class GiveUpPublic(BaseModel):
         default_factory=list, description="What the human should do to reach the goal, one item per link, "
         "upstream first; empty in a help request when no perception of the whole object is stored (the reason asks "
         "for the goal as a whole).", examples=[[{"link": 4, "to_deg": 135, "sentence": "turn link 4 to 135°"}]])
-
-
-# -- stored records -------------------------------------------------------------------------------------
-class StatePublic(BaseModel):
-    model_config = _config(
-        "A stored State: its ground atoms (PDDL syntax) and, for perceived states, the raw observation.",
-        {"id": "obj1_state_2", "object_id": "obj1", "kind": "perceived", "atoms": ["(hasorientation deg_90 obj1_j1)"],
-         "joint_values_deg": {"obj1_j1": 90}, "link_orientations_deg": [1.7, 88.9], "created_at": 1.7e9},
-    )
-
-    id: str = Field(description="Identifier of the state.", examples=["obj1_state_2"])
-    object_id: str = Field(description="Object the state describes.", examples=["obj1"])
-    kind: str = Field(description="perceived, expected, goal or initial.", examples=["perceived"])
-    atoms: list[str] = Field(description="Ground atoms, sorted.", examples=[["(hasorientation deg_90 obj1_j1)"]])
-    joint_values_deg: dict[str, int] = Field(description="Orientation carried by each joint the state mentions.",
-                                             examples=[{"obj1_j1": 90}])
-    link_orientations_deg: list[float] | None = Field(description="Raw observed link orientations (perceived).",
-                                                      examples=[[1.7, 88.9]])
-    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
-
-
-class ProblemPublic(BaseModel):
-    model_config = _config(
-        "A stored Problem: from an initial state to a goal state.",
-        {"id": "obj1_problem_1", "object_id": "obj1", "init_state_id": "obj1_state_2", "goal_state_id": "obj1_state_1", "created_at": 1.7e9},
-    )
-
-    id: str = Field(description="Identifier of the problem.", examples=["obj1_problem_1"])
-    object_id: str = Field(description="Object of the problem.", examples=["obj1"])
-    init_state_id: str = Field(description="Initial State.", examples=["obj1_state_2"])
-    goal_state_id: str = Field(description="Goal State.", examples=["obj1_state_1"])
-    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
-
-
-class PlanStepPublic(BaseModel):
-    model_config = _config(
-        "One action of a plan with its ground preconditions and effects.",
-        {"id": "obj1_plan_1_a1", "step": 1, "name": "rotateclockwise",
-         "params": ["obj1_l2", "obj1_l1", "obj1_j1", "deg_0", "deg_90"],
-         "pre": ["(hasorientation deg_0 obj1_j1)"], "eff_neg": ["(hasorientation deg_0 obj1_j1)"],
-         "eff_pos": ["(hasorientation deg_90 obj1_j1)"], "cond_eff": [], "joint_index": 1, "turned_link_index": 2,
-         "held_link_index": 1, "delta_deg": 90},
-    )
-
-    id: str = Field(description="Identifier of the action.", examples=["obj1_plan_1_a1"])
-    step: int = Field(description="1-based position in the plan.", examples=[1])
-    name: str = Field(description="PDDL action name.", examples=["rotateclockwise"])
-    params: list[str] = Field(description="PDDL arguments.", examples=[["obj1_l2", "obj1_l1", "obj1_j1", "deg_0", "deg_90"]])
-    pre: list[str] = Field(description="Ground preconditions.", examples=[["(hasorientation deg_0 obj1_j1)"]])
-    eff_neg: list[str] = Field(description="Ground negative effects.", examples=[["(hasorientation deg_0 obj1_j1)"]])
-    eff_pos: list[str] = Field(description="Ground positive effects.", examples=[["(hasorientation deg_90 obj1_j1)"]])
-    cond_eff: list[dict[str, list[str]]] = Field(
-        description="Ground conditional effects (absolute and bimanual formulations): when, eff_neg, eff_pos.",
-        examples=[[{"when": ["(hasorientation deg_0 obj1_j2)"], "eff_neg": ["(hasorientation deg_0 obj1_j2)"],
-                    "eff_pos": ["(hasorientation deg_90 obj1_j2)"]}]])
-    joint_index: int = Field(description="K of the joint jK rotated about.", examples=[1])
-    turned_link_index: int = Field(description="Index of the link that turns (with every link beyond it).", examples=[2])
-    held_link_index: int = Field(description="Index of the link held still (0 = the table).", examples=[1])
-    delta_deg: int = Field(description="Signed rotation of the turned link, + clockwise seen from above.", examples=[90])
-
-
-class PlanPublic(BaseModel):
-    model_config = _config(
-        "A stored plan: its actions a_1..a_N and expected states s^e_1..s^e_{N+1}.",
-        {"id": "obj1_plan_1", "object_id": "obj1", "problem_id": "obj1_problem_1", "planner": "inproc", "steps": [],
-         "expected_state_ids": ["obj1_state_3"], "expected_states": [], "created_at": 1.7e9},
-    )
-
-    id: str = Field(description="Identifier of the plan.", examples=["obj1_plan_1"])
-    object_id: str = Field(description="Object of the plan.", examples=["obj1"])
-    problem_id: str = Field(description="Problem the plan solves.", examples=["obj1_problem_1"])
-    planner: str = Field(description="Planner that found it.", examples=["inproc"])
-    steps: list[PlanStepPublic] = Field(description="Actions in order.", examples=[[]])
-    expected_state_ids: list[str] = Field(description="Ids of s^e_1..s^e_{N+1}.", examples=[["obj1_state_3", "obj1_state_4"]])
-    expected_states: list[StatePublic] = Field(description="The expected states themselves.", examples=[[]])
-    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
-
-
-class EventPublic(BaseModel):
-    model_config = _config(
-        "One entry of an object's log: a decision with its reason, a goal, a dispatch or a feedback.",
-        {"seq": 4, "object_id": "obj1", "kind": "continue", "reason": "the perceived state is subsumed by s^e_2",
-         "data": {"perceived_state_id": "obj1_state_2", "next_step": 2}, "created_at": 1.7e9},
-    )
-
-    seq: int = Field(description="Position in the log (increasing).", examples=[4])
-    object_id: str = Field(description="Object the event is about.", examples=["obj1"])
-    kind: str = Field(description="A decision kind (goal_reached, continue, resume, replan, no_plan, "
-                      "human_help_requested, incomplete_perception), or goal_set, dispatched, feedback, "
-                      "worker_gave_up, object_created, val_verdict (VAL's verdict on a piece of a plan checked "
-                      "after the answer), dispatch_withheld (a step not dispatched: VAL refused or has not decided "
-                      "on its piece).",
-                      examples=["continue"])
-    reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by s^e_2"])
-    data: dict[str, Any] = Field(description="Ids and numbers of the event.", examples=[{"next_step": 2}])
-    created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
-
-
-class HealthPublic(BaseModel):
-    model_config = _config(
-        "Liveness of the service and size of its knowledge base.",
-        {"status": "ok", "version": "0.1.0", "objects": 2, "triples": 1520, "plans_to_write": 0, "auth": False},
-    )
-
-    status: Literal["ok"] = Field(description="Always ok when the service answers.", examples=["ok"])
-    version: str = Field(description="planhrc version.", examples=["0.1.0"])
-    objects: int = Field(description="Number of stored objects.", examples=[2])
-    triples: int = Field(description="Number of triples in the ABox (written ones: see plans_to_write).",
-                         examples=[1520])
-    plans_to_write: int = Field(
-        description="Plans stored as their journal rows whose triples are not written yet: they are written when "
-        "something reads the triples (the RDF export, SPARQL, a reasoner, compaction), and compaction drops those "
-        "of plans it does not keep unwritten. The service answers for them from their rows; their triples are not "
-        "in `triples` until then.", examples=[0])
-    auth: bool = Field(description="Whether writes need a bearer token.", examples=[False])
-
-
-class ErrorPublic(BaseModel):
-    model_config = _config(
-        "Every error the service sends (400, 401, 404, 409, 410, 413, 422), as JSON whatever the route's own media "
-        "type: one message that names the offending field.",
-        {"detail": "link_orientations_deg: expected 4 values (one per link), got 3"},
-    )
-
-    detail: str = Field(description="What was wrong, naming the field.",
-                        examples=["link_orientations_deg: expected 4 values (one per link), got 3"])
