@@ -45,8 +45,34 @@ class StoreFacade:
         """The newest record of a kind of the object (its counter), or None: the backend's."""
         raise NotImplementedError
 
+    def _roots(self, object_id: str) -> list[str]:
+        """`roots.current_roots` of the object on the backend's connection, the guard held: the backend's."""
+        raise NotImplementedError
+
     def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
         raise NotImplementedError
+
+    def current_roots(self, object_id: str) -> tuple[str, ...]:
+        with self._guard:
+            self._records.info(object_id)
+            return tuple(self._roots(object_id))
+
+    def _current_names(self, object_ids: Sequence[str]) -> list[str]:
+        """The roots of these objects' current ABoxes, one list (the plans an export of them shows among them)."""
+        with self._guard:
+            return [name for oid in object_ids for name in self._roots(oid)]
+
+    def _export_ids(self, history: str, object_ids: Sequence[str] | None) -> list[str] | None:
+        """The export's arguments checked; the objects a current export shows (each known), None for the whole
+        history."""
+        check_export(history, object_ids)
+        if history != "current":
+            return None
+        with self._guard:
+            ids = self._records.object_ids() if object_ids is None else list(object_ids)
+            for oid in ids:
+                self._records.info(oid)
+        return ids
 
     # -- writes -----------------------------------------------------------------------------------------------
     def new_object_id(self) -> str:

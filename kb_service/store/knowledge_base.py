@@ -20,7 +20,7 @@ from typing import Any, Iterator, Self, Sequence
 
 from .abox import Abox
 from .backlog import PlanBacklog
-from .checks import check_events_page, check_export, check_keep_perceived
+from .checks import check_events_page, check_keep_perceived
 from .errors import KBError
 from .events import EventLog
 from .execution import ExecutionCursor
@@ -177,7 +177,7 @@ class SqliteStore(StoreFacade):
             abox = self._abox
             objects = self._records.object_ids()
             shared = {oid: sorted(self._records.info(oid).shared_atom_name.values()) for oid in objects}
-            roots = {oid: current_roots(abox.q.db, SQLITE, oid) for oid in objects}
+            roots = {oid: self._roots(oid) for oid in objects}
             # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
             self._backlog.settle(name for names in roots.values() for name in names)
 
@@ -197,13 +197,7 @@ class SqliteStore(StoreFacade):
     # -- export -----------------------------------------------------------------------------------------------
     def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
         """A file store is read on a connection of the export's own, without the store's lock."""
-        check_export(history, object_ids)
-        ids = None
-        with self._guard:
-            if history == "current":
-                ids = self._records.object_ids() if object_ids is None else list(object_ids)
-                for oid in ids:
-                    self._records.info(oid)
+        ids = self._export_ids(history, object_ids)
         # the export reads triples: the journalled plans it shows are written out first (each object's current
         # plan, or with the history every one)
         self._backlog.settle(None if ids is None else self._current_names(ids))
@@ -227,14 +221,8 @@ class SqliteStore(StoreFacade):
         self._abox.check_open()
         return self._abox.revision
 
-    def _current_names(self, object_ids: Sequence[str]) -> list[str]:
-        with self._guard:
-            return [name for oid in object_ids for name in current_roots(self._abox.q.db, SQLITE, oid)]
-
-    def current_roots(self, object_id: str) -> tuple[str, ...]:
-        with self._guard:
-            self._records.info(object_id)
-            return tuple(current_roots(self._abox.q.db, SQLITE, object_id))
+    def _roots(self, object_id: str) -> list[str]:
+        return current_roots(self._abox.q.db, SQLITE, object_id)
 
     # -- inferences -------------------------------------------------------------------------------------------
     def replace_inferred(self, scope: str, lines: Sequence[str]) -> int:

@@ -23,10 +23,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Self, Sequence
 
-from planhrc.model import ArticulatedObject
 from planhrc.vocabulary import ExecutionStatus
 
-from ..checks import check_events_page, check_export, check_keep_perceived
+from ..checks import check_events_page, check_keep_perceived
 from ..errors import DamagedStoreError, KBError, UnavailableError
 from ..events import EventLog
 from ..facade import StoreFacade
@@ -241,7 +240,7 @@ class PostgresStore(StoreFacade):
             s = self._session
             objects = self._records.object_ids()
             shared = {oid: sorted(self._records.info(oid).shared_atom_name.values()) for oid in objects}
-            roots = {oid: current_roots(s.conn, POSTGRESQL, oid) for oid in objects}
+            roots = {oid: self._roots(oid) for oid in objects}
             # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
             self._journal.settle([name for names in roots.values() for name in names])
 
@@ -256,7 +255,7 @@ class PostgresStore(StoreFacade):
                 for oid in objects:
                     s.execute(LOCK_OBJECT, (LOCK_NAMESPACE + oid,))
                     # a plan another replica adopted since the roots were read is current too: its row stays
-                    kept = {*roots[oid], *current_roots(s.conn, POSTGRESQL, oid)}
+                    kept = {*roots[oid], *self._roots(oid)}
                     individuals += self._journal.drop(oid, kept)
                     i, t = compact_object(s.conn, oid, shared[oid], keep)
                     individuals, triples = individuals + i, triples + t
@@ -270,17 +269,11 @@ class PostgresStore(StoreFacade):
     # -- export -----------------------------------------------------------------------------------------------
     def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
         """Read on a connection of the export's own, in one snapshot, without the store's lock."""
-        check_export(history, object_ids)
-        ids = None
+        ids = self._export_ids(history, object_ids)
         with self._guard:
-            if history == "current":
-                ids = self._records.object_ids() if object_ids is None else list(object_ids)
-                for oid in ids:
-                    self._records.info(oid)
             # the export reads triples: the journalled plans it shows are written out first (each object's
             # current plan, or with the history every one)
-            self._journal.settle(None if ids is None else
-                                 [name for oid in ids for name in current_roots(self._session.conn, POSTGRESQL, oid)])
+            self._journal.settle(None if ids is None else self._current_names(ids))
             reader = self._session.reader()
         return self._read_lines(reader, ids)
 
@@ -291,10 +284,8 @@ class PostgresStore(StoreFacade):
         finally:
             reader.close()
 
-    def current_roots(self, object_id: str) -> tuple[str, ...]:
-        with self._guard:
-            self._records.info(object_id)
-            return tuple(current_roots(self._session.conn, POSTGRESQL, object_id))
+    def _roots(self, object_id: str) -> list[str]:
+        return current_roots(self._session.conn, POSTGRESQL, object_id)
 
     # -- inferences -------------------------------------------------------------------------------------------
     def replace_inferred(self, scope: str, lines: Sequence[str]) -> int:
