@@ -26,6 +26,8 @@ from typing import Any
 
 import httpx
 
+from planhrc.service_process import settled_health
+
 from .service import (_client, cpu_seconds, create_object, perceive, random_angles, running_service, set_goal,
                       summary_ms)
 
@@ -138,7 +140,7 @@ def bench_knowledge(perceptions: int, samples: int, links: int, orientations: in
             set_goal(client, oid, random_angles(rng, links, orientations))
             for _ in range(perceptions):
                 perceive(client, oid, random_angles(rng, links, orientations))
-            _settled(client)  # nothing written behind any more: the second service opens the store as it stays
+            settled_health(client, 120)  # nothing written behind any more: the next service opens the store as is
             # the earlier engine's service on the same store, read-only: both asked in turn
             old = stack.enter_context(running_service(work, {**env, "PLANHRC_SPARQL_ENGINE": "rdflib"}))
             old_client = stack.enter_context(_client(old, 300))
@@ -183,23 +185,6 @@ def bench_knowledge(perceptions: int, samples: int, links: int, orientations: in
             "sparql_after_a_perception": {name: summary_ms(after[name]) for name in ENGINES},
             "subsumption": summary_ms(subsumption), "health": summary_ms(health),
             "reasoning_20_links": reasoning, "java": java}
-
-
-def _settled(client: httpx.Client, timeout_s: float = 120) -> None:
-    """Until nothing is written behind the answers: the store's counts hold still from one probe to the next (a plan
-    stays its journal row until a reader of its triples needs it, so rows may remain)."""
-    until = time.monotonic() + timeout_s
-    last = None
-    while (now := _counts(client)) != last:
-        if time.monotonic() > until:
-            raise RuntimeError(f"the service was still writing behind its answers after {timeout_s} s")
-        last = now
-        time.sleep(0.2)
-
-
-def _counts(client: httpx.Client) -> tuple[int, int]:
-    health = client.get("/health").json()
-    return int(health["triples"]), int(health["plans_to_write"])
 
 
 def _after_perceptions(client: httpx.Client, oid: str, samples: int, rng: random.Random, links: int,

@@ -15,7 +15,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Iterator, Mapping, Sequence
+from typing import IO, Any, Iterator, Mapping, Sequence
 
 import httpx
 
@@ -24,6 +24,10 @@ from planhrc.errors import PlanhrcError
 
 class ServiceStartError(PlanhrcError):
     """The child service exited before it answered, or did not answer in time; the message says where its log is."""
+
+
+class StillWritingError(PlanhrcError):
+    """The service still changed its store's counts behind its answers when the wait ended."""
 
 
 @dataclass(frozen=True)
@@ -117,3 +121,20 @@ def running_service(db: str | Path, *, port: int | None = None, args: Sequence[s
     finally:
         if log_file is not None:
             log_file.close()
+
+
+def settled_health(client: httpx.Client, timeout_s: float = 10) -> dict[str, Any]:
+    """`GET /health` once nothing the service does behind its answers changes its counts any more (two answers in a
+    row agree on the triples and the plans still to write), so that they can be compared. The store writes nothing
+    behind an answer (a plan stays its journal row until a reader of its triples needs it), so the first two agree
+    unless a reader is writing plans out."""
+    deadline = time.monotonic() + timeout_s
+    health: dict[str, Any] = client.get("/health").json()
+    while True:
+        again: dict[str, Any] = client.get("/health").json()
+        if (again["triples"], again["plans_to_write"]) == (health["triples"], health["plans_to_write"]):
+            return again
+        if time.monotonic() > deadline:
+            raise StillWritingError(f"the service's store still changed behind its answers after {timeout_s:g} s")
+        health = again
+        time.sleep(0.02)

@@ -12,7 +12,8 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import httpx
 import pytest
 
-from planhrc.service_process import RunningService, free_port, running_service, wait_until_serving  # noqa: F401
+from planhrc.service_process import (RunningService, free_port, running_service, settled_health,  # noqa: F401
+                                     wait_until_serving)
 from planhrc.service_process import serve_command as _serve_command
 
 REPO = Path(__file__).resolve().parent.parent
@@ -67,22 +68,6 @@ def token_client(server: RunningService | str, timeout: float = 60, token: str =
     """An HTTP client of a served service sending `token` as its bearer token."""
     url = server if isinstance(server, str) else server.url
     return httpx.Client(base_url=url, timeout=timeout, headers={"Authorization": f"Bearer {token}"})
-
-
-def settled_health(client: Any, timeout_s: float = 10) -> dict[str, Any]:
-    """`GET /health` once nothing the service does behind its answers changes the triple count any more (two
-    answers in a row agree), so that the count can be compared. The store writes nothing behind an answer (a plan
-    stays its journal row until a reader of the triples needs them), so the first two agree at once."""
-    deadline = time.monotonic() + timeout_s
-    health = client.get("/health").json()
-    while True:
-        again = client.get("/health").json()
-        if (again["triples"], again["plans_to_write"]) == (health["triples"], health["plans_to_write"]):
-            return again
-        if time.monotonic() > deadline:
-            raise AssertionError(f"the triple count still changed after {timeout_s:g} s")
-        health = again
-        time.sleep(0.02)
 
 
 def timed_beside(slow_call: Callable[[], Any], started: threading.Event,
