@@ -172,7 +172,10 @@ class Validator:
         """The early answer: the first motion (its first `first` steps) in `val_pieces` pieces checked at once
         (VAL's cost grows with the steps of such a domain, so pieces at once answer sooner than one run), the
         rest of the plan left to `LaterPieces`."""
-        pieces = early_pieces(obj, outcome, self.config.val_pieces, first, max(1, self.config.val_pieces))
+        # the later pieces as short as MIN_PIECE_STEPS lets them be: each is checked on a problem narrowed to the
+        # joints its steps reach (`piece_of`), and the shorter a piece, the fewer joints it reaches
+        pieces = early_pieces(obj, outcome, self.config.val_pieces, first, max(1, self.config.val_pieces),
+                              rest_pieces=len(outcome.steps))
         before = tuple(p for p in pieces if p.last <= first)
         later = LaterPieces(task.validation_domain, pieces[len(before):], self.config.deadline_s,
                             accepted=tuple((p.first, p.last) for p in before))
@@ -225,7 +228,8 @@ class Validator:
         actions in plan order and its expected states. PlannerError when VAL does not answer by `deadline_at`."""
         task = translate(obj, init, goal, read_domain_model(self.config.tbox_path, obj.formulation.value),
                          problem_name(obj))
-        piece = piece_of(obj, task.problem, tuple(step_text(a) for a in actions), expected_states, first, last)
+        piece = piece_of(obj, task.problem, tuple(step_text(a) for a in actions), expected_states, first, last,
+                         task.validation_domain)
         left = time_left(deadline_at)
         if left <= 0:
             raise PlannerError("no time left for VAL")
