@@ -281,7 +281,7 @@ class Grounder:
         absent = frozenset(instantiate(lit, binding) for lit in schema.precondition
                            if lit.negated and lit.predicate != EQUALITY and lit.predicate in fluent)
         static_index = self._index_of(statics)
-        candidates = []
+        candidates: list[tuple[frozenset[Atom], frozenset[Atom], CondEffect]] = []
         for ce in schema.conditional_effects:
             variables = [v for v, _ in ce.variables]
             static_lits = [lit for lit in ce.when if lit.predicate == EQUALITY or lit.predicate not in fluent]
