@@ -160,7 +160,12 @@ def ground_action(domain: DomainModelSpec, step: str, state: State, index: State
 def _cond_order(ce: CondEffect) -> tuple[list[Atom], list[Atom], list[Atom]]:
     """The order of an action's conditional effects: by what they add, then delete, then need (total: the same
     action is the same value however its bindings were enumerated)."""
-    return sorted(ce.eff_pos), sorted(ce.eff_neg), sorted(ce.when)
+    return _in_order(ce.eff_pos), _in_order(ce.eff_neg), _in_order(ce.when)
+
+
+def _in_order(atoms: frozenset[Atom]) -> list[Atom]:
+    """`sorted(atoms)`, without sorting a single atom (a large absolute step has hundreds of such effects)."""
+    return sorted(atoms) if len(atoms) > 1 else list(atoms)
 
 
 def apply(state: State, action: ActionSpec) -> State:
