@@ -73,6 +73,12 @@ DEMO_SCENARIOS: dict[str, DemoScenario] = {
         "the last link",
         base_point_xy=(0.43, 0.3875),  # the plan's first action swings links 2-5 towards the far edge
     ),
+    "bimanual": DemoScenario(
+        "bimanual", "bimanual", 8, (90.0,) * 4, (90.0, 90.0, 135.0, 135.0), "bimanual",
+        "the bimanual formulation: Baxter's hands grasp the links either side of a joint, turn, release, move to "
+        "another joint; while they hold two links the human turns the last one, which then needs a turn of its own",
+        base_point_xy=(0.7, 0.31),
+    ),
 }
 
 

@@ -259,7 +259,7 @@ class Robot:
         return pairs if left_holds <= right_holds else pairs[::-1]
 
 
-def _unwrap_yaw(yaw: float, previous: float | None) -> float:
+def unwrap_yaw(yaw: float, previous: float | None) -> float:
     """The gripper is symmetric under a half turn: pick yaw or yaw + pi, whichever is nearer `previous`."""
     if previous is None:
         return yaw
@@ -361,7 +361,7 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
     for i in range(1, n + 1):
         angle = action.delta_deg * i / n
         xy = rotate_point(grasp_xy, pivot, angle)
-        yaw = _unwrap_yaw(turned_yaw - math.radians(angle), yaw)
+        yaw = unwrap_yaw(turned_yaw - math.radians(angle), yaw)
         q, miss = robot.solve_ik(turner, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=robot.turn_twist_deg)
         if q is None:
             return unreachable(turner, action.turned_link, xy, miss, f"turning, {angle:+.0f} deg")
@@ -433,19 +433,22 @@ def execute(
     robot: Robot | None = None,
     interrupt: Interrupt | None = None,
     stop_fraction: float | None = None,
+    hands: Hands | None = None,
 ) -> ActionResult:
     """Play `command` physically and judge the outcome from the world.
 
     `interrupt(done, total)` is called before each waypoint of the turn (the human may start acting then; it
     acts on the physics clock) and stops the turn by returning True; `stop_fraction` makes the turning gripper
     lose its grasp once that share of the turn is done (a scripted fault). After a stop both grippers open and
-    the arms go home.
+    the arms go home. `hands` are grasps made before the command (a bimanual plan's): they stay held after it
+    unless it stopped.
     """
     if command is None or isinstance(command, Unreachable):
         message = command.message if isinstance(command, Unreachable) else "no command"
         return ActionResult(ActionOutcome.FAILED, FailureReason.UNREACHABLE, message, 0.0, 0.0)
     robot = robot or Robot(scene)
-    hands = Hands(scene, robot)
+    own_hands = hands is None
+    hands = hands if hands is not None else Hands(scene, robot)
     total = command.rotation_steps
     done = 0
     before = _relative_deg(scene, command.turned_link, command.held_link)
@@ -489,7 +492,8 @@ def execute(
                 if problem is not None:
                     hands.release_all()
     finally:
-        hands.release_all()
+        if own_hands or problem is not None:
+            hands.release_all()
     if problem is not None:  # the rest of the command was skipped: the arms go home with open hands
         for arm in arms_used:
             drive_arm(scene, robot, arm, HOME_POSE[arm])
