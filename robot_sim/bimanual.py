@@ -47,6 +47,12 @@ log = logging.getLogger(__name__)
 
 MOVE_TO_CENTRE, GRASP_LINKS, RELEASE_LINKS = "movetocentre", "grasplinks", "releaselinks"
 HAND_STEPS = (MOVE_TO_CENTRE, GRASP_LINKS, RELEASE_LINKS)  # the bimanual domain's steps that turn nothing
+STEP_KINDS = {MOVE_TO_CENTRE: "centre", GRASP_LINKS: "grasp", RELEASE_LINKS: "release"}
+
+
+def step_kind(name: str) -> str:
+    """What a plan action does, in a word: `centre`, `grasp`, `release`, or `turn` (every other action turns)."""
+    return STEP_KINDS.get(name, "turn")
 
 
 @dataclass(frozen=True)
