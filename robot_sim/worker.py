@@ -10,6 +10,8 @@ simulator's truth is recorded only for evaluation (`true_deg`). A failed action 
 a macro step is split into single steps; a single step that failed again is handed to the human when the
 scenario has one who helps (when the human finds no safe way either, the failure is reported and the service
 decides anew, at most three times in a row), else the worker gives up and says so in the action's feedback.
+A bimanual object's plan is carried out step by step by Baxter's two arms (`robot_sim.bimanual`: the hands move to
+the centred joint, grasp, turn, release, and their grasps stay between steps).
 
 Everything is recorded in `out_dir`: `summary.json` (decisions, actions, outcomes, timings), one camera frame
 per perception (`frame_NNN.png`), `run.gif`, and `configurations.png` (top views of each successive
