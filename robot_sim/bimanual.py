@@ -34,13 +34,11 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from planhrc.geometry import Cell
-from planhrc.robot_sim.acting import Pose, judge
+from planhrc.robot_sim.acting import Pose, perform_parts
 from planhrc.robot_sim.grip import Hands, drive_arm
-from planhrc.robot_sim.scene import (ARMS, HOME_POSE, Scene, arm_joints, direction, joint_between, rotate_point,
-                                    set_arm_joints)
-from planhrc.robot_sim.skills import (ActionResult, Command, Interrupt, Primitive, Robot, RotationAction, Turn,
-                                      Unreachable, execute, unwrap_yaw)
+from planhrc.robot_sim.scene import ARMS, HOME_POSE, Scene, arm_joints, direction, joint_between, set_arm_joints
+from planhrc.robot_sim.skills import (ActionResult, ArcMiss, Command, Interrupt, Robot, RotationAction, Unreachable,
+                                      arc_turns, execute)
 from planhrc.vocabulary import ActionOutcome, FailureReason
 
 log = logging.getLogger(__name__)
@@ -169,26 +167,10 @@ class BothHands:
     # -- the turns ----------------------------------------------------------------------------------------------
     def _turn_parts(self, parts: Sequence[RotationAction], pose: Pose, final: bool, interrupt: Interrupt,
                     stop_fraction: float | None) -> ActionResult:
-        """Each part judged from the pose the ones before leave, then turned with the links held; the result
-        covers them all (as `acting.perform_parts`)."""
-        cell: Cell = self.scene.spec.cell()
-        reached, result = 0.0, None
-        for i, part in enumerate(parts):
-            result = judge(pose, cell, part, final and i == len(parts) - 1) or self._turn(
-                part, interrupt, stop_fraction)
-            reached += result.reached_deg
-            if result.outcome is not ActionOutcome.SUCCEEDED:
-                break
-            pose = pose.after(part)
-        assert result is not None
-        if len(parts) == 1:
-            return result
-        outcome = result.outcome
-        if outcome is ActionOutcome.FAILED and abs(reached) > 1.0:
-            outcome = ActionOutcome.PARTIAL
-        return ActionResult(outcome, result.reason, f"in single steps: {result.message}",
-                            sum(p.delta_deg for p in parts), reached,
-                            result.refusal if outcome is ActionOutcome.FAILED else None)
+        """Each part judged from the pose the ones before leave, then turned with the links held
+        (`acting.perform_parts`)."""
+        return perform_parts(self.scene, self.robot, pose, parts, final, interrupt, stop_fraction,
+                             turn=lambda part: self._turn(part, interrupt, stop_fraction))
 
     def _turn(self, action: RotationAction, interrupt: Interrupt, stop_fraction: float | None) -> ActionResult:
         by_link = {link: arm for arm, (_, link) in self.hands.held.items()}
@@ -296,26 +278,17 @@ def plan_turn(scene: Scene, robot: Robot, action: RotationAction, turner: str) -
     joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
     pivot = scene.joint_points()[joint_k - 1]
     position, _ = robot.end_effector_pose(turner)
-    grasp_xy, z = np.asarray(position[:2], dtype=float), float(position[2])
-    start_yaw = _gripper_yaw(scene, robot, turner)
     saved = {arm: arm_joints(scene, arm) for arm in ARMS}
-    primitives: list[Primitive] = []
     try:
-        n = max(1, math.ceil(abs(action.delta_deg) / robot.step_deg))
-        yaw = start_yaw
-        for i in range(1, n + 1):
-            angle = action.delta_deg * i / n
-            xy = rotate_point(grasp_xy, pivot, angle)
-            yaw = unwrap_yaw(start_yaw - math.radians(angle), yaw)
-            q, miss = robot.solve_ik(turner, [xy[0], xy[1], z], yaw, max_twist_deg=robot.turn_twist_deg)
-            if q is None:
-                return Unreachable(action.turned_link, miss, f"{turner} arm turning, {angle:+.0f} deg at "
-                                   f"x={xy[0]:.2f} m, y={xy[1]:.2f} m")
-            primitives.append(Turn(turner, q, angle))
+        arc = arc_turns(robot, turner, np.asarray(position[:2], dtype=float), float(position[2]), pivot,
+                        action.delta_deg, _gripper_yaw(scene, robot, turner))
     finally:
-        for arm, q0 in saved.items():
-            set_arm_joints(scene, arm, q0)
-    return Command(tuple(primitives), joint_k, side, float(action.delta_deg), action.turned_link, action.held_link)
+        for arm, q in saved.items():
+            set_arm_joints(scene, arm, q)
+    if isinstance(arc, ArcMiss):
+        return Unreachable(action.turned_link, arc.miss_m, f"{turner} arm turning, {arc.angle_deg:+.0f} deg at "
+                           f"x={arc.xy[0]:.2f} m, y={arc.xy[1]:.2f} m")
+    return Command(arc[0], joint_k, side, float(action.delta_deg), action.turned_link, action.held_link)
 
 
 def single_steps(action: RotationAction) -> tuple[RotationAction, ...]:

@@ -267,6 +267,34 @@ def unwrap_yaw(yaw: float, previous: float | None) -> float:
     return min(candidates, key=lambda a: abs(a - previous))
 
 
+@dataclass(frozen=True)
+class ArcMiss:
+    """Where along an arc the turning arm finds no pose: the gripper's point, the miss, the turn done by then."""
+
+    xy: np.ndarray
+    miss_m: float
+    angle_deg: float
+
+
+def arc_turns(robot: Robot, arm: str, grasp_xy: np.ndarray, z: float, pivot: np.ndarray, delta_deg: float,
+              start_yaw: float) -> tuple[tuple[Turn, ...], float] | ArcMiss:
+    """The waypoints of `arm` carrying a link it holds at `grasp_xy` (height `z`, gripper yaw `start_yaw`) by
+    `delta_deg` about `pivot`, the gripper turning with the link, and its yaw at the end; or where it misses.
+    Leaves the arm at the last pose solved (planning replays poses in order)."""
+    n = max(1, math.ceil(abs(delta_deg) / robot.step_deg))
+    yaw = start_yaw
+    turns = []
+    for i in range(1, n + 1):
+        angle = delta_deg * i / n
+        xy = rotate_point(grasp_xy, pivot, angle)
+        yaw = unwrap_yaw(start_yaw - math.radians(angle), yaw)
+        q, miss = robot.solve_ik(arm, [xy[0], xy[1], z], yaw, max_twist_deg=robot.turn_twist_deg)
+        if q is None:
+            return ArcMiss(xy, miss, angle)
+        turns.append(Turn(arm, q, angle))
+    return tuple(turns), yaw
+
+
 def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_far: float = 0.0,
                  near_joint: bool = False) -> Command | Unreachable:
     """Plan a rotation action as a command, or say which link cannot be reached (nothing moves). With
@@ -356,16 +384,11 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
     grasp_xy, turned_yaw = reached
     primitives.append(Grasp(turner, action.turned_link))
 
-    n = max(1, math.ceil(abs(action.delta_deg) / robot.step_deg))
-    yaw = turned_yaw
-    for i in range(1, n + 1):
-        angle = action.delta_deg * i / n
-        xy = rotate_point(grasp_xy, pivot, angle)
-        yaw = unwrap_yaw(turned_yaw - math.radians(angle), yaw)
-        q, miss = robot.solve_ik(turner, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=robot.turn_twist_deg)
-        if q is None:
-            return unreachable(turner, action.turned_link, xy, miss, f"turning, {angle:+.0f} deg")
-        primitives.append(Turn(turner, q, angle))
+    arc = arc_turns(robot, turner, grasp_xy, z_grasp, pivot, action.delta_deg, turned_yaw)
+    if isinstance(arc, ArcMiss):
+        return unreachable(turner, action.turned_link, arc.xy, arc.miss_m, f"turning, {arc.angle_deg:+.0f} deg")
+    turns, yaw = arc
+    primitives.extend(turns)
     primitives.append(Release(turner))
     if holder is not None:
         primitives.append(Release(holder))
