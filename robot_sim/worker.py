@@ -89,7 +89,8 @@ def _read_goal_differences(kb: ServiceLink, obj: dict[str, Any]) -> dict[int, fl
 
 
 def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int, float] | None:
-    """(turned, held, delta) of the plan's action after `action`, or None."""
+    """(turned, held, delta) of the plan's action after `action`, or None (also when that action turns nothing: a
+    bimanual plan's centring, grasp or release is no move for a human)."""
     plan_id, step = action.get("plan_id"), action.get("step")
     if not plan_id or step is None:
         return None
@@ -101,6 +102,8 @@ def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int
     last = int(action.get("last_step") or step)
     for entry in plan.get("steps", []):
         if entry.get("step") == last + 1:
+            if not float(entry["delta_deg"]):
+                return None
             return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
     return None
 
@@ -395,6 +398,9 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
         if result is None:
             # the same single step failed before: do not try it the same way again
             sentence = failed[signature][0]
+            if both is not None:  # whatever follows is a failed feedback: the service then counts on open hands
+                both.let_go()
+                context.busy_links = ()
             if scenario.assists_after_failures is not None and not hand_step:
                 # the paper: when the robot cannot do an action, the human does it on the robot's behalf
                 assist = assist_failed_action(human, action.turned_link, action.held_link, action.delta_deg)

@@ -123,3 +123,31 @@ def test_a_turn_whose_grip_gives_way_is_partial_and_leaves_both_hands_open(cell)
     # a turn dispatched with nothing held is not started: the grasp comes first
     again = _do(scene, both, "rotateclockwise", 3, 2, 45.0)
     assert again.outcome is ActionOutcome.FAILED and "not held" in again.message
+
+
+@pytest.mark.sim
+@pytest.mark.integration
+def test_against_the_service_a_slipping_turn_is_grasped_again_and_then_left_to_the_human(tmp_path):
+    """The service counts on open hands after a partial turn (it resumes at the grasp); the worker grasps again,
+    does not retry the same turn, lets go, and the human turns the link instead."""
+    import secrets
+
+    from planhrc.client import KBClient
+    from planhrc.robot_sim.demo import kb_service
+    from planhrc.robot_sim.scenarios import RobotFault, Scenario
+    from planhrc.robot_sim.worker import run_worker
+
+    token = secrets.token_urlsafe(8)
+    spec = SceneSpec(n_links=4, base_point_xy=(0.7, 0.31))
+    scenario = Scenario("slip", faults=(RobotFault(at_step=2, stop_fraction=0.25),), assists_after_failures=2)
+    with kb_service(tmp_path, token) as url, KBClient(url, token=token) as kb:
+        obj = kb.create_object("rod", 4, 8, "bimanual", base_point_xy=spec.base_xy)
+        summary = run_worker(url, obj["id"], spec, scenario, tmp_path / "worker", kb=kb, record_frames=False,
+                             goal_link_orientations_deg=(90, 90, 135, 135))
+    steps = summary.steps
+    names = [(s.action or {}).get("name") for s in steps]
+    assert names[:4] == ["grasplinks", "rotateclockwise", "grasplinks", "rotateclockwise"], names
+    assert steps[1].outcome is ActionOutcome.PARTIAL and steps[1].outcome_reason is FailureReason.GRASP_LOST
+    assert steps[2].decision == "resume"  # the state before the grasp: the hands were open, as reported
+    assert steps[3].outcome is ActionOutcome.FAILED and steps[3].human_assist  # not retried: the human turned it
+    assert summary.reached_goal and steps[-1].decision == "goal_reached"
