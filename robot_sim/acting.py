@@ -85,16 +85,19 @@ def way_round(pose: Pose, cell: Cell, action: RotationAction, final: bool) -> Ro
 
 
 def perform_parts(scene: Scene, robot: Robot, pose: Pose, parts: Sequence[RotationAction], final: bool,
-                  interrupt: Interrupt, stop_fraction: float | None) -> ActionResult:
+                  interrupt: Interrupt, stop_fraction: float | None,
+                  turn: Callable[[RotationAction], ActionResult] | None = None) -> ActionResult:
     """Perform an action's parts (the whole motion, or its single steps) one after the other, each judged from
     the pose the ones before it leave (as commanded); stop at the first that is refused or does not succeed. The
-    result covers them all: the turn reached is their sum."""
+    result covers them all: the turn reached is their sum. `turn` performs one part (default: grasp, turn and let
+    go, re-grasping where the arm cannot follow; a bimanual object's held links: `robot_sim.bimanual`)."""
     reached = 0.0
     result = None
     cell = scene.spec.cell()
     for i, part in enumerate(parts):
-        result = judge(pose, cell, part, final and i == len(parts) - 1) or perform_with_regrasp(
-            scene, robot, part, interrupt=interrupt, stop_fraction=stop_fraction)
+        result = judge(pose, cell, part, final and i == len(parts) - 1) or (
+            turn(part) if turn is not None
+            else perform_with_regrasp(scene, robot, part, interrupt=interrupt, stop_fraction=stop_fraction))
         if result.reason is FailureReason.UNREACHABLE and result.refusal is None and result.reached_deg == 0.0:
             result = replace(result, refusal=refusal_of(pose, Infeasibility(
                 Infeasible.OUT_OF_REACH, part.turned_link, result.message, 0.0, "the arms' reach")))

@@ -30,6 +30,7 @@ from planhrc.cli_args import SubParsers, http_url, non_negative_int, positive_in
 from planhrc.client import KBClient, ProtocolError
 from planhrc.service_process import ServiceStartError, running_service
 from planhrc.geometry import configuration_feasible
+from planhrc.robot_sim.bimanual import step_kind
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import SceneSpec, is_feasible, random_orientations
 from planhrc.robot_sim.service_link import ServiceLink
@@ -72,6 +73,12 @@ DEMO_SCENARIOS: dict[str, DemoScenario] = {
         "Fig 14: the robot's gripper lets go half-way through a rotation; the human completes it and also turns "
         "the last link",
         base_point_xy=(0.43, 0.3875),  # the plan's first action swings links 2-5 towards the far edge
+    ),
+    "bimanual": DemoScenario(
+        "bimanual", "bimanual", 8, (90.0,) * 4, (90.0, 90.0, 135.0, 135.0), "bimanual",
+        "the bimanual formulation: Baxter's hands grasp the links either side of a joint, turn, release, move to "
+        "another joint; while they hold two links the human turns the last one, which then needs a turn of its own",
+        base_point_xy=(0.7, 0.31),
     ),
 }
 
@@ -169,7 +176,8 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         events = kb.read_events(obj["id"])
     decisions = [e for e in events if e["kind"] in {str(kind) for kind in DecisionKind}]
     counts = Counter(e["kind"] for e in decisions)
-    actions = [s.action for s in summary.steps if s.action is not None]
+    acted = [s for s in summary.steps if s.action is not None]
+    actions = [s.action for s in acted if s.action is not None]
     return {
         "scenario": scenario.name,
         "description": scenario.description,
@@ -190,6 +198,11 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
                      "held_link_index": a.get("held_link_index"), "delta_deg": a.get("delta_deg")}
                     for a in actions],
         "outcomes": list(summary.outcomes),
+        # every dispatched action by what it does (a bimanual plan's centre, grasp, release; any turn), and those
+        # the worker reported succeeded
+        "action_kinds": dict(Counter(step_kind(str(a.get("name"))) for a in actions)),
+        "action_kinds_succeeded": dict(Counter(step_kind(str(s.action.get("name"))) for s in acted
+                                               if s.action is not None and s.outcome == ActionOutcome.SUCCEEDED)),
         "failure_reasons": summary.failure_reasons,
         "stop_message": summary.stop_message,
         "human_assists": summary.human_assists,
@@ -248,6 +261,9 @@ def _why(reason: str) -> str:
 def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
     """The numbers a run of episodes is judged by."""
     outcomes = Counter(o for r in results for o in r["outcomes"])
+    kinds: Counter[str] = Counter()
+    for r in results:
+        kinds.update(r["action_kinds"])
     reasons: Counter[str] = Counter()
     for r in results:
         reasons.update(r["failure_reasons"])
@@ -258,6 +274,7 @@ def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
         "actions": actions,
         "action_success_rate": round(outcomes.get(ActionOutcome.SUCCEEDED, 0) / actions, 3) if actions else None,
         "outcomes": dict(outcomes),
+        "action_kinds": dict(kinds),
         "failure_reasons": dict(reasons),
         "stop_reasons": dict(Counter(r["stop_reason"] for r in results)),
         "human_assists": sum(r["human_assists"] for r in results),
@@ -301,7 +318,8 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
             result = run_episode(url, tok, sc, folder, gui, perception, max_steps, seed + i, worker_link)
             results.append(result)
             print(f"[demo] {sc.name}: {'goal reached' if result['reached_goal'] else result['stop_reason']} "
-                  f"in {result['time_to_goal_s']:.1f} s, {len(result['actions'])} actions, "
+                  f"in {result['time_to_goal_s']:.1f} s, {len(result['actions'])} actions "
+                  f"({', '.join(f'{kind} {n}' for kind, n in sorted(result['action_kinds'].items())) or 'none'}), "
                   f"{result['replans']} re-plans, {result['resumes']} resumes", flush=True)
 
     def summarize() -> dict[str, Any]:

@@ -55,7 +55,8 @@ class HumanContext:
 def goal_differences(formulation: str, joint_values: Mapping[int, float | None]) -> dict[int, float]:
     """Link K -> wanted theta_K - theta_(K-1) (theta_0 = 0, the table) from the goal's joint values.
 
-    Absolute: joint jK carries theta_K. Relative: jK carries theta_(K+1) - theta_K. None = free joint.
+    Absolute: joint jK carries theta_K. Bimanual: jK carries theta_(K+1) - theta_1 (l1 itself is free). Relative:
+    jK carries theta_(K+1) - theta_K. None = free joint.
     """
     out: dict[int, float] = {}
     if formulation == "absolute":
@@ -63,6 +64,11 @@ def goal_differences(formulation: str, joint_values: Mapping[int, float | None])
             prev = 0.0 if k == 1 else joint_values.get(k - 1)
             if v is not None and prev is not None:
                 out[k] = (float(v) - float(prev)) % 360.0
+    elif formulation == "bimanual":
+        for k, v in joint_values.items():
+            prev = 0.0 if k == 1 else joint_values.get(k - 1)  # l1 measured from itself
+            if v is not None and prev is not None:
+                out[k + 1] = (float(v) - float(prev)) % 360.0
     else:
         for k, v in joint_values.items():
             if v is not None:

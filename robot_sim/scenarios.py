@@ -110,6 +110,15 @@ def scenario_fig14() -> Scenario:
     )
 
 
+def scenario_bimanual() -> Scenario:
+    """Once the robot holds two links (after its first step, a grasp), the human turns the last link, beyond them,
+    one step clockwise: the robot's turn still applies, and the last joint needs a turn of its own afterwards."""
+    return Scenario(
+        "bimanual", assists_after_failures=2,
+        events=(HumanEvent(at_step=2, when="before", kind="rotate", link=-1, delta_deg=None, direction=1),),
+    )
+
+
 def scenario_random(seed: int = 0, n: int = 3, max_step: int = 6, n_links: int = 5) -> Scenario:
     """`n` random interventions: any link of the chain turned by one step either way, before or during a
     random step (a considerate human: only moves that keep the object feasible, see `planhrc.geometry`)."""
@@ -138,11 +147,12 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "none": scenario_none,
     "fig13": scenario_fig13,
     "fig14": scenario_fig14,
+    "bimanual": scenario_bimanual,
 }
 
 
 def get_scenario(name: str, n_links: int = 5) -> Scenario:
-    """`none`, `fig13`, `fig14` or `random:SEED:N` (also `random`, = random:0:3)."""
+    """`none`, `fig13`, `fig14`, `bimanual` or `random:SEED:N` (also `random`, = random:0:3)."""
     if name in SCENARIOS:
         return SCENARIOS[name]()
     if name == "random" or name.startswith("random:"):

@@ -259,12 +259,40 @@ class Robot:
         return pairs if left_holds <= right_holds else pairs[::-1]
 
 
-def _unwrap_yaw(yaw: float, previous: float | None) -> float:
+def unwrap_yaw(yaw: float, previous: float | None) -> float:
     """The gripper is symmetric under a half turn: pick yaw or yaw + pi, whichever is nearer `previous`."""
     if previous is None:
         return yaw
     candidates = [yaw + k * math.pi for k in range(-3, 4)]
     return min(candidates, key=lambda a: abs(a - previous))
+
+
+@dataclass(frozen=True)
+class ArcMiss:
+    """Where along an arc the turning arm finds no pose: the gripper's point, the miss, the turn done by then."""
+
+    xy: np.ndarray
+    miss_m: float
+    angle_deg: float
+
+
+def arc_turns(robot: Robot, arm: str, grasp_xy: np.ndarray, z: float, pivot: np.ndarray, delta_deg: float,
+              start_yaw: float) -> tuple[tuple[Turn, ...], float] | ArcMiss:
+    """The waypoints of `arm` carrying a link it holds at `grasp_xy` (height `z`, gripper yaw `start_yaw`) by
+    `delta_deg` about `pivot`, the gripper turning with the link, and its yaw at the end; or where it misses.
+    Leaves the arm at the last pose solved (planning replays poses in order)."""
+    n = max(1, math.ceil(abs(delta_deg) / robot.step_deg))
+    yaw = start_yaw
+    turns = []
+    for i in range(1, n + 1):
+        angle = delta_deg * i / n
+        xy = rotate_point(grasp_xy, pivot, angle)
+        yaw = unwrap_yaw(start_yaw - math.radians(angle), yaw)
+        q, miss = robot.solve_ik(arm, [xy[0], xy[1], z], yaw, max_twist_deg=robot.turn_twist_deg)
+        if q is None:
+            return ArcMiss(xy, miss, angle)
+        turns.append(Turn(arm, q, angle))
+    return tuple(turns), yaw
 
 
 def rotate_skill(scene: Scene, robot: Robot, action: RotationAction, turned_so_far: float = 0.0,
@@ -356,16 +384,11 @@ def _plan_rotation(scene: Scene, robot: Robot, action: RotationAction, holder: s
     grasp_xy, turned_yaw = reached
     primitives.append(Grasp(turner, action.turned_link))
 
-    n = max(1, math.ceil(abs(action.delta_deg) / robot.step_deg))
-    yaw = turned_yaw
-    for i in range(1, n + 1):
-        angle = action.delta_deg * i / n
-        xy = rotate_point(grasp_xy, pivot, angle)
-        yaw = _unwrap_yaw(turned_yaw - math.radians(angle), yaw)
-        q, miss = robot.solve_ik(turner, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=robot.turn_twist_deg)
-        if q is None:
-            return unreachable(turner, action.turned_link, xy, miss, f"turning, {angle:+.0f} deg")
-        primitives.append(Turn(turner, q, angle))
+    arc = arc_turns(robot, turner, grasp_xy, z_grasp, pivot, action.delta_deg, turned_yaw)
+    if isinstance(arc, ArcMiss):
+        return unreachable(turner, action.turned_link, arc.xy, arc.miss_m, f"turning, {arc.angle_deg:+.0f} deg")
+    turns, yaw = arc
+    primitives.extend(turns)
     primitives.append(Release(turner))
     if holder is not None:
         primitives.append(Release(holder))
@@ -433,19 +456,22 @@ def execute(
     robot: Robot | None = None,
     interrupt: Interrupt | None = None,
     stop_fraction: float | None = None,
+    hands: Hands | None = None,
 ) -> ActionResult:
     """Play `command` physically and judge the outcome from the world.
 
     `interrupt(done, total)` is called before each waypoint of the turn (the human may start acting then; it
     acts on the physics clock) and stops the turn by returning True; `stop_fraction` makes the turning gripper
     lose its grasp once that share of the turn is done (a scripted fault). After a stop both grippers open and
-    the arms go home.
+    the arms go home. `hands` are grasps made before the command (a bimanual plan's): they stay held after it
+    unless it stopped.
     """
     if command is None or isinstance(command, Unreachable):
         message = command.message if isinstance(command, Unreachable) else "no command"
         return ActionResult(ActionOutcome.FAILED, FailureReason.UNREACHABLE, message, 0.0, 0.0)
     robot = robot or Robot(scene)
-    hands = Hands(scene, robot)
+    own_hands = hands is None
+    hands = hands if hands is not None else Hands(scene, robot)
     total = command.rotation_steps
     done = 0
     before = _relative_deg(scene, command.turned_link, command.held_link)
@@ -489,7 +515,8 @@ def execute(
                 if problem is not None:
                     hands.release_all()
     finally:
-        hands.release_all()
+        if own_hands or problem is not None:
+            hands.release_all()
     if problem is not None:  # the rest of the command was skipped: the arms go home with open hands
         for arm in arms_used:
             drive_arm(scene, robot, arm, HOME_POSE[arm])

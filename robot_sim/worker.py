@@ -10,6 +10,8 @@ simulator's truth is recorded only for evaluation (`true_deg`). A failed action 
 a macro step is split into single steps; a single step that failed again is handed to the human when the
 scenario has one who helps (when the human finds no safe way either, the failure is reported and the service
 decides anew, at most three times in a row), else the worker gives up and says so in the action's feedback.
+A bimanual object's plan is carried out step by step by Baxter's two arms (`robot_sim.bimanual`: the hands move to
+the centred joint, grasp, turn, release, and their grasps stay between steps).
 
 Everything is recorded in `out_dir`: `summary.json` (decisions, actions, outcomes, timings), one camera frame
 per perception (`frame_NNN.png`), `run.gif`, and `configurations.png` (top views of each successive
@@ -41,6 +43,7 @@ from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene
 from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.robot_sim.acting import measured_pose, perform_parts, perform_skill, way_round
+from planhrc.robot_sim.bimanual import HAND_STEPS, BothHands, single_steps
 from planhrc.robot_sim.skills import Robot, RotationAction
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, StopReason
 
@@ -86,7 +89,8 @@ def _read_goal_differences(kb: ServiceLink, obj: dict[str, Any]) -> dict[int, fl
 
 
 def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int, float] | None:
-    """(turned, held, delta) of the plan's action after `action`, or None."""
+    """(turned, held, delta) of the plan's action after `action`, or None (also when that action turns nothing: a
+    bimanual plan's centring, grasp or release is no move for a human)."""
     plan_id, step = action.get("plan_id"), action.get("step")
     if not plan_id or step is None:
         return None
@@ -98,6 +102,8 @@ def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int
     last = int(action.get("last_step") or step)
     for entry in plan.get("steps", []):
         if entry.get("step") == last + 1:
+            if not float(entry["delta_deg"]):
+                return None
             return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
     return None
 
@@ -157,12 +163,14 @@ def run_worker(
         camera = CameraPerception(client, scene)
         perceiver = camera if perception == "camera" else FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed)
         human = Human(scene)
+        # a bimanual plan's grasps stay across its steps: the worker's hands remember them
+        both = BothHands(scene, robot) if obj.get("formulation") == "bimanual" else None
         context = HumanContext(step_deg=float(obj.get("step_deg") or 360 / int(obj["orientations"])),
                                goal_differences=_read_goal_differences(kb, obj))
         run = _Run()
         summary_reason = _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, context,
                                max_steps, run, record_motion=record_motion and record_frames,
-                               record_frames=record_frames)
+                               record_frames=record_frames, both=both)
         reached = summary_reason is StopReason.GOAL_REACHED
         summary = WorkerSummary(
             object_id=object_id,
@@ -202,26 +210,29 @@ def _act(human: Human, run: _Run, index: int, event: HumanEvent, context: HumanC
     return done
 
 
-def _signature(action: RotationAction) -> tuple[int, int, float, int]:
-    return action.turned_link, action.held_link, round(action.delta_deg, 3), action.macro_steps
+def _signature(action: RotationAction) -> tuple[int, int, float, int, str]:
+    return action.turned_link, action.held_link, round(action.delta_deg, 3), action.macro_steps, action.name
 
 
 def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: CameraPerception, perceiver: Perceiver,
           human: Human, scenario: Scenario, context: HumanContext, max_steps: int, run: _Run,
-          record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3) -> StopReason:
+          record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3,
+          both: BothHands | None = None) -> StopReason:
     """Perceive -> decide -> act until the goal; returns why it stopped.
 
     A failed action is not tried again the same way: a macro step that failed is split into its single steps;
     a single step that failed and comes again is done by the human when the scenario says the human helps (when
     the human cannot do it safely either, the failure is reported and the next perception decides; the third
     time in a row the worker gives up), else the worker gives up, and says so to the service in the feedback of
-    that action."""
+    that action. A bimanual object's steps go to `both` (its hands hold across steps); a step that turns nothing
+    (centre, grasp, release) is planned anew from where the links lie, so it is tried once more before it counts
+    as tried every way, and no human does it for the robot's hands."""
     step = 1
     unseen_in_a_row = 0
     helpless = 0  # help requests (or failed actions) in a row the human could do nothing about
     carried: list[str] = []  # human moves made while the robot idled at the goal, reported with the next step
     # signature of a failed action -> (its sentence, whether it was also tried in single steps)
-    failed: dict[tuple[int, int, float, int], tuple[str, bool, FailureReason | None]] = {}
+    failed: dict[tuple[int, int, float, int, str], tuple[str, bool, FailureReason | None]] = {}
     while step <= max_steps:
         human_before, carried = carried, []
         for index, event in _events(scenario, run, step, "before"):
@@ -260,6 +271,8 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
                 run.stop_message = f"links {list(seen.missing_links)} not seen in {max_unseen} perceptions"
                 _give_up(kb, object_id, GiveUpReason.UNSEEN_LINKS, run.stop_message, run)
                 return StopReason.UNSEEN_LINKS
+            if both is not None and both.step_back():
+                log.info("step %d: the open hands step back out of the camera's view", step)
             scene.step(30)  # a quarter of a second: whatever covers a marker may move away
             step += 1
             continue
@@ -350,29 +363,45 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
         # the one judge's pose: the one posted with the perception, from which the service judged this motion
         pose = measured_pose(scene, values, seen.base_point_xy)
         final = bool(data.get("ends_plan", True))  # an older service does not say: judged as drawn at rest
+        hand_step = both is not None and action.name in HAND_STEPS
         if previous is None:
-            parts: tuple[RotationAction, ...] | None = (way_round(pose, scene.spec.cell(), action, final),)
+            # held links turn only the planned way: the planner, not the worker, answers a refused turn
+            parts: tuple[RotationAction, ...] | None = (
+                (action,) if both is not None else (way_round(pose, scene.spec.cell(), action, final),))
+        elif hand_step and not previous[1]:
+            parts = (action,)  # planned anew from where the links lie now: not the same way
         elif action.macro_steps > 1 and not previous[1]:
             # the macro motion failed: try its single steps
-            parts = way_round(pose, scene.spec.cell(), action, final).split()
+            parts = single_steps(action) if both is not None else way_round(pose, scene.spec.cell(), action,
+                                                                            final).split()
         else:
             parts = None  # tried every way the robot knows: not again
-        if parts is not None:  # a human acting meanwhile takes the robot's whole rotation into account
+        if parts is not None and not hand_step:
+            # a human acting meanwhile takes the robot's whole rotation into account
             context.robot_turn = RobotTurn(action.turned_link, action.held_link, sum(p.delta_deg for p in parts),
                                            base_xy, tuple(theta))
-        result = None if parts is None else perform_parts(scene, robot, pose, parts, final, interrupt,
-                                                            fault.stop_fraction if fault else None)
+        stop_fraction = fault.stop_fraction if fault else None
+        if parts is None:
+            result = None
+        elif both is not None:
+            result = both.perform(parts, data, pose, final, interrupt, stop_fraction)
+        else:
+            result = perform_parts(scene, robot, pose, parts, final, interrupt, stop_fraction)
         t4 = time.perf_counter()
         while during_events:  # the robot stopped before half-way: the human acts anyway
             index, event = during_events.pop(0)
             if (what := _act(human, run, index, event, context)) is not None:
                 human_during.append(what)
         human.finish()
-        context.busy_links, context.robot_turn = (), None
+        # the links still held stay the robot's: a human leaves them alone
+        context.busy_links, context.robot_turn = (both.held_links() if both is not None else ()), None
         if result is None:
             # the same single step failed before: do not try it the same way again
             sentence = failed[signature][0]
-            if scenario.assists_after_failures is not None:
+            if both is not None:  # whatever follows is a failed feedback: the service then counts on open hands
+                both.let_go()
+                context.busy_links = ()
+            if scenario.assists_after_failures is not None and not hand_step:
                 # the paper: when the robot cannot do an action, the human does it on the robot's behalf
                 assist = assist_failed_action(human, action.turned_link, action.held_link, action.delta_deg)
                 if assist is None:
@@ -426,7 +455,8 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
         if result.outcome is ActionOutcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
-            failed[signature] = (result.message, len(parts or ()) > 1 or action.macro_steps <= 1, result.reason)
+            tried_all = previous is not None if hand_step else len(parts or ()) > 1 or action.macro_steps <= 1
+            failed[signature] = (result.message, tried_all, result.reason)
         run.records.append(StepRecord(**base, action=dict(data), outcome=result.outcome,
                                       outcome_reason=result.reason,
                                       measured_deg=None if measured is None else round(measured, 2),

@@ -228,7 +228,8 @@ def read_give_up(text: str, topic: str = "give_up") -> GiveUpRequest:
 def goal_orientations(formulation: str, joint_values_deg: Mapping[str, float], n_links: int,
                       first_deg: float | None) -> tuple[float, ...] | None:
     """Each link's orientation in a goal state (None when the goal leaves a joint free). Absolute: jK carries
-    theta_K. Relative: jK carries theta_(K+1) - theta_K, and l1 stays where it is (`first_deg`, perceived)."""
+    theta_K. Bimanual: jK carries theta_(K+1) - theta_1. Relative: jK carries theta_(K+1) - theta_K. In the last
+    two l1 stays where it is (`first_deg`, perceived)."""
     by_index: dict[int, float] = {}
     for name, value in joint_values_deg.items():
         match = JOINT_INDEX.search(name)
@@ -237,6 +238,12 @@ def goal_orientations(formulation: str, joint_values_deg: Mapping[str, float], n
     if formulation == "absolute":
         values = [by_index.get(k) for k in range(1, n_links + 1)]
         return None if any(v is None for v in values) else tuple(float(v) % 360.0 for v in values if v is not None)
+    if formulation == "bimanual":
+        from_first = [by_index.get(k) for k in range(1, n_links)]
+        if first_deg is None or any(v is None for v in from_first):
+            return None
+        first = float(round(first_deg)) % 360.0
+        return (first,) + tuple((first + float(v)) % 360.0 for v in from_first if v is not None)
     relative = [by_index.get(k) for k in range(1, n_links)]
     if first_deg is None or any(v is None for v in relative):
         return None

@@ -140,6 +140,16 @@ def test_goal_orientations_of_both_formulations():
     assert goal_orientations("relative", relative, 3, None) is None
 
 
+def test_a_bimanual_goal_is_link_orientations_measured_from_link_one():
+    # jK carries l(K+1)'s orientation from l1 (not its angle from lK, as a relative goal would)
+    from_first = {"o_j1": 90, "o_j2": 90, "o_j3": 180}
+    assert goal_orientations("bimanual", from_first, 4, 0.3) == (0.0, 90.0, 90.0, 180.0)
+    assert goal_orientations("relative", from_first, 4, 0.3) == (0.0, 90.0, 180.0, 0.0)  # the reading it is not
+    assert goal_orientations("bimanual", from_first, 4, 89.8) == (90.0, 180.0, 180.0, 270.0)
+    assert goal_orientations("bimanual", {"o_j1": 90, "o_j3": 180}, 4, 0.0) is None  # a partial goal is not drawn
+    assert goal_orientations("bimanual", from_first, 4, None) is None  # l1 unseen: nowhere to draw it from
+
+
 def test_markers_draw_the_perceived_chain_the_goal_and_the_turn_to_come():
     lengths, base = (0.2, 0.2, 0.2), (0.6, 0.1)
     shapes = {s.namespace: s for s in object_shapes(lengths, base, (0.0, 0.0, 0.0), (0.0, 90.0, 90.0), (2, 1, 90.0),

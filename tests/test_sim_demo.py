@@ -31,6 +31,21 @@ def test_paper_scenarios_reach_the_goal(name, tmp_path):
         assert kinds.count("goal_reached") == 2 and "replan" in kinds[kinds.index("goal_reached"):]
     if name == "fig14":  # the robot's gripper let go half-way: reported as partial, with its reason
         assert "partial" in result["outcomes"] and result["failure_reasons"].get("grasp_lost") == 1
+    if name == "bimanual":
+        # grasps and releases are steps of their own, each with its own feedback; every kind was done
+        names = [a["name"] for a in result["actions"]]
+        assert names[0] == "grasplinks" and "releaselinks" in names and "movetocentre" in names
+        kinds = result["action_kinds"]
+        assert set(kinds) == {"centre", "grasp", "turn", "release"} and sum(kinds.values()) == len(names)
+        assert result["action_kinds_succeeded"] == kinds  # every step succeeded
+        grasp = names.index("grasplinks")
+        assert names[grasp + 1].startswith("rotate")  # the turn came after the grasp, as a step of its own
+        assert all(a["delta_deg"] == 0 for a in result["actions"] if not a["name"].startswith("rotate"))
+        # the human turned the last link while the robot held two: the service planned anew from that state
+        assert result["human_moves_performed"] == 1
+        assert any("human" in h for s in worker["steps"] for h in s["human_before"])
+        assert {"replan", "continue", "goal_reached"} <= {d["kind"] for d in result["decisions"]}
+        assert result["replans"] >= 2  # the first plan, and the one after the human's move
 
 
 def test_unknown_scenario_is_refused(tmp_path):
