@@ -49,6 +49,7 @@ PAGE_SIZE = 4096
 WAL_RESTART_PAGES = 16_384
 CATCH_UP_COMMITS = 64  # ... and at least every this many commits
 COALESCE_S = 0.02  # the thread copies the log this long after a commit woke it
+RETRY_S = 1.0  # a checkpoint that could not copy the whole log (a reader held it) is tried again this long after
 WAL_FILE_LIMIT = 64 * 1024 * 1024
 STORE_COUNTER = "current_resource"  # column of the one-row table `store`: the last storid handed out
 # owlready2's indexes on subject and on object. Queries that ask for the rows of a few individuals of the ABox
@@ -72,7 +73,12 @@ class Checkpointer:
     between them. Under writes with no gap the thread is always a commit behind and the log grows: past
     `WAL_RESTART_PAGES` pages, or `CATCH_UP_COMMITS` commits, the writer copies what is left itself
     (`QuadStore.commit`; the thread has done most of it), so its next write finds the log copied and restarts
-    it."""
+    it.
+
+    The thread sleeps until a commit wakes it: an idle service copies nothing, so it does not wake to do nothing
+    (each wake-up of a service's thread costs its process some CPU, at a robot's pace a visible part of a
+    re-plan's). Only a checkpoint that could not copy the whole log (a reader held frames) is tried again
+    `RETRY_S` later, commit or not, so that a log left behind by a reader is still copied while nothing is written."""
 
     def __init__(self, path: str) -> None:
         self._conn = sqlite3.connect(path, isolation_level=None, check_same_thread=False, timeout=10)
@@ -81,6 +87,8 @@ class Checkpointer:
         self._one = threading.Lock()
         self.log_pages = 0  # the log's length at the last checkpoint (pages)
         self.commits = 0  # commits since the writer last copied the log itself
+        self.checkpoints = 0  # checkpoints the thread has run
+        self.left_behind = False  # the last one could not copy the whole log: tried again after RETRY_S
         self._thread = threading.Thread(target=self._run, name="planhrc-checkpoint", daemon=True)
         self._thread.start()
 
@@ -96,14 +104,17 @@ class Checkpointer:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            self._wake.wait(1.0)
+            self._wake.wait(RETRY_S if self.left_behind else None)  # None: until a commit wakes the thread
             if self._stop.wait(COALESCE_S):  # let a few commits gather: one copy of a page they share
                 return
             self._wake.clear()
             try:
-                _, self.log_pages, _ = self.checkpoint()
-            except sqlite3.Error as exc:  # the next commit tries again; the log is only longer meanwhile
+                busy, self.log_pages, copied = self.checkpoint()
+                self.checkpoints += 1
+                self.left_behind = bool(busy) or copied < self.log_pages
+            except sqlite3.Error as exc:  # tried again later; the log is only longer meanwhile
                 log.warning("store: checkpoint of the WAL failed: %s", exc)
+                self.left_behind = True
 
     def close(self) -> None:
         self._stop.set()
