@@ -203,9 +203,10 @@ def _wait_for(condition, timeout_s: float = 10.0) -> bool:
 
 
 def test_the_checkpoint_thread_wakes_for_commits_only(tmp_path, monkeypatch):
-    """The log is copied after a commit; an idle store's thread sleeps (no checkpoint while nothing is written),
-    except that a checkpoint a reader kept from copying the whole log is tried again `RETRY_S` later, and the
-    log is copied once the reader is gone, with no further commit."""
+    """The log is copied after a commit (`GATHER_S` after a lone one; `GATHER_COMMITS` commits in a row are copied
+    at once); an idle store's thread sleeps (no checkpoint while nothing is written), except that a checkpoint a
+    reader kept from copying the whole log is tried again `RETRY_S` later, and the log is copied once the reader
+    is gone, with no further commit."""
     import time
 
     monkeypatch.setattr(owl, "RETRY_S", 0.2)
@@ -229,6 +230,15 @@ def test_the_checkpoint_thread_wakes_for_commits_only(tmp_path, monkeypatch):
     assert ckpt.checkpoints == done  # idle: nothing copied, nothing tried
     write("second")
     assert _wait_for(lambda: ckpt.checkpoints > done)
+    time.sleep(0.3)
+    done = ckpt.checkpoints
+    for k in range(owl.GATHER_COMMITS):
+        write(f"burst{k}")
+    assert _wait_for(lambda: ckpt.checkpoints > done)
+    time.sleep(owl.GATHER_S + 0.3)
+    assert ckpt.checkpoints == done + 1  # the burst was copied once
+    busy, pages, copied = ckpt.checkpoint()
+    assert not busy and copied == pages
 
     reader = sqlite3.connect(str(path))
     reader.execute("BEGIN")
