@@ -1,4 +1,4 @@
-"""`planhrc bench --bimanual`: the bimanual family on a grid, the chain beside packaged planners, in one run.
+"""`planhrc bench --bimanual[-only]`: the bimanual family on a grid, the chain beside packaged planners, in one run.
 
 Instances are random tasks of `bench.bimanual_tasks` (both variants: ``basic`` and ``macros``), seeded per cell,
 on links x orientations (default 3-8 x 8, 12, 24). For every instance and planner: status, planning time, plan
@@ -235,6 +235,8 @@ def add_bimanual_arguments(parser: argparse.ArgumentParser) -> None:
     from planhrc.cli_args import int_list, name_list, positive_float, positive_int
 
     parser.add_argument("--bimanual", action="store_true",
+                        help="also the bimanual grid, after the paper's grid and in the same run")
+    parser.add_argument("--bimanual-only", action="store_true",
                         help="only the bimanual grid (the chain beside packaged planners; bimanual.json/.csv/.md)")
     parser.add_argument("--bimanual-planners", type=name_list([CHAIN, *REGISTRY]), default=",".join(PLANNERS),
                         help="'chain' (the fallback chain) and registry planner names")
@@ -248,18 +250,20 @@ def add_bimanual_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run VAL only where it expands at most N conditional-effect instances (its memory)")
 
 
-def run_bimanual(args: argparse.Namespace) -> int:
+def unavailable_planners(args: argparse.Namespace) -> list[str]:
+    """The `--bimanual-planners` this machine cannot run (checked before a run starts anything)."""
     from planhrc.planner.registry import available_planners
 
     usable = set(available_planners()) | {CHAIN}
-    missing = [p for p in args.bimanual_planners if p not in usable]
-    if missing:
-        print(f"planhrc bench: --bimanual-planners: not available here: {', '.join(missing)}", file=sys.stderr)
-        return 2
+    return [p for p in args.bimanual_planners if p not in usable]
+
+
+def run_bimanual(args: argparse.Namespace, run: dict[str, Any]) -> int:
+    """The bimanual grid of `args`, its files written with the `run` they belong to (`bench.tables`)."""
     report = bimanual_report(args.bimanual_planners, args.bimanual_links, args.bimanual_orientations,
                              args.bimanual_instances, args.timeout, not args.no_validate, args.bimanual_val_timeout,
                              (4, 24), not args.no_progress, args.bimanual_variants, args.bimanual_val_limit)
-    paths = write_report(report, Path(args.out))
+    paths = write_report({**report, "run": run}, Path(args.out))
     print(markdown(report))
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0 if all(s["invalid"] == 0 for s in report["summary"]) else 1

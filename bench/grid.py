@@ -1,4 +1,4 @@
-"""`planhrc bench`: the paper's planning grid and the re-planning latency.
+"""The paper's planning grid and the re-planning measurements of `planhrc bench` (`bench.command` runs them).
 
 Grid: links 4..20, orientations {4, 6, 8, 10, 12}, 2 random instances each (fixed seeds) = 170 instances
 per formulation. An instance is a random initial and goal configuration of the links (absolute
@@ -13,23 +13,6 @@ difference, so the optimum is the sum over K of the cyclic distance of the chang
 relative formulation does not track where l1 lies on the table, so the same change of configuration costs
 the absolute formulation the relative optimum plus the cyclic distance of l1's rotation; the report gives
 both.
-
-`--replan-only` (or `--replan` after the grid) measures re-planning on 20 links x 12 orientations, in one
-run: the in-process stages on PDDL text (grounding once, planning, VAL, the whole in-process loop), the
-library pipeline with the knowledge base (new perceived state -> translation -> planning -> VAL -> expected
-states stored), Fast Downward's whole process (bounded by `--fd-timeout` and `--fd-runs`; a timeout is
-reported as such and not repeated) and a re-planning `POST /objects/{id}/perceptions` to a real
-`planhrc serve` process; medians and p90. Beside them, the CPU a re-plan costs, whole (`planhrc.bench.cpu`): the
-service's process, its reaped VAL children and the work behind each answer, per re-plan over paced re-plans, and
-the anchor planner's whole process on tasks of the same size measured right after it in the same run.
-
-`--bimanual` runs only the bimanual grid (`planhrc.bench.bimanual`): the chain beside packaged planners on random
-tasks with two hands, a centre, grasp and release.
-
-`--scale` measures how grounding, planning, VAL and the in-process loop grow with links (20..200) and
-orientations (12..72); a table and a plot go to `--out`.
-
-An interrupted bench (Ctrl-C or SIGTERM) kills the process group of every planner and validator it started.
 """
 from __future__ import annotations
 
@@ -39,7 +22,6 @@ import json
 import logging
 import platform
 import random
-import signal
 import statistics
 import sys
 import time
@@ -47,16 +29,14 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
-from planhrc.cli_args import SubParsers, int_list, name_list, positive_float, positive_int, writable_dir
-from planhrc.model import ArticulatedObject, Formulation, make_object, relative_from_absolute
+from planhrc.cli_args import int_list
+from planhrc.model import ArticulatedObject, make_object, relative_from_absolute
 from planhrc.paths import default_tbox_path
 from planhrc.bench.cpu import cpu_row, cpu_text
-from planhrc.bench.bimanual import add_bimanual_arguments, run_bimanual
 from planhrc.bench.errors import BenchError
-from planhrc.bench.scale import SCALE_LINKS, SCALE_ORIENTATIONS, scale_plot, scale_report, scale_table
 from planhrc.bench.plots import plot_times
 from planhrc.planner.errors import PlannerError
-from planhrc.planner.registry import PLANNERS, available_planners, get_planner
+from planhrc.planner.registry import available_planners, get_planner
 from planhrc.planner.result import PlanStatus
 from planhrc.planner.validate import validate_plan
 from planhrc.translator.domain import get_domain
@@ -479,36 +459,6 @@ def replan_table(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def add_bench_parser(subparsers: SubParsers) -> None:
-    p = subparsers.add_parser("bench", help="the paper's planning grid, re-planning latency and scale",
-                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--planners", type=name_list(list(PLANNERS)), default="inproc,fd-lama",
-                   help="comma separated planner names")
-    p.add_argument("--formulations", type=name_list([f.value for f in Formulation]), default="relative,absolute")
-    p.add_argument("--links", type=int_list(2), default="4-20", help="range A-B or list")
-    p.add_argument("--orientations", type=orientation_list, default="4,6,8,10,12", help="range A-B or list")
-    p.add_argument("--instances", type=positive_int, default=INSTANCES, help="random instances per cell")
-    p.add_argument("--timeout", type=positive_float, default=10.0, metavar="S", help="per planner call")
-    p.add_argument("--no-validate", action="store_true")
-    p.add_argument("--replan", action="store_true", help="also measure re-planning on 20 x 12")
-    p.add_argument("--replan-only", action="store_true", help="only measure re-planning on 20 x 12")
-    p.add_argument("--replan-runs", type=positive_int, default=20, help="re-plans measured per formulation and stage")
-    p.add_argument("--fd-runs", type=positive_int, default=3, help="Fast Downward runs in the re-planning comparison")
-    p.add_argument("--fd-timeout", type=positive_float, default=10.0, metavar="S",
-                   help="Fast Downward's limit in the re-planning comparison (a timeout is not repeated)")
-    p.add_argument("--no-http", action="store_true", help="skip the planhrc serve measurement")
-    p.add_argument("--scale", action="store_true", help="only measure how the in-process stages grow")
-    p.add_argument("--scale-links", type=int_list(2), default=",".join(map(str, SCALE_LINKS)))
-    p.add_argument("--scale-orientations", type=orientation_list, default=",".join(map(str, SCALE_ORIENTATIONS)))
-    p.add_argument("--scale-runs", type=positive_int, default=5, help="re-plans per cell")
-    p.add_argument("--val-timeout", type=positive_float, default=20.0, metavar="S",
-                   help="VAL's limit per plan in --scale")
-    add_bimanual_arguments(p)
-    p.add_argument("--out", type=writable_dir, default="bench-results", help="output folder")
-    p.add_argument("--no-progress", action="store_true")
-    p.set_defaults(func=run_bench)
-
-
 def orientation_list(text: str) -> list[int]:
     """Orientation counts K: each divides 360 and is at least 2."""
     values = int_list(2, 360)(text)
@@ -516,67 +466,3 @@ def orientation_list(text: str) -> list[int]:
     if bad:
         raise argparse.ArgumentTypeError(f"360 must be divisible by each K, not by {', '.join(map(str, bad))}")
     return values
-
-
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt(f"signal {signum}")
-
-
-def run_bench(args: argparse.Namespace) -> int:
-    """SIGTERM is turned into KeyboardInterrupt while the bench runs, so every planner process group and the
-    service process are killed on the way out, as on Ctrl-C."""
-    previous = signal.signal(signal.SIGTERM, _interrupt)
-    try:
-        return _run_bench(args)
-    except KeyboardInterrupt:
-        print("planhrc bench: interrupted; planner processes stopped", file=sys.stderr)
-        return 130
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-def _run_bench(args: argparse.Namespace) -> int:
-    out_dir = Path(args.out)
-    formulations, planners = args.formulations, args.planners
-    if args.bimanual:
-        return run_bimanual(args)
-    if args.scale:
-        report = scale_report(formulations, args.scale_links, args.scale_orientations, args.scale_runs,
-                              args.val_timeout)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "scale.json").write_text(json.dumps(report, indent=2))
-        table = scale_table(report)
-        (out_dir / "scale.md").write_text(table + "\n")
-        print(table)
-        print(f"wrote {out_dir / 'scale.json'}, {out_dir / 'scale.md'}, {scale_plot(report, out_dir / 'scale.png')}")
-        return 0
-    usable = set(available_planners())
-    missing = [p for p in planners if p not in usable]
-    if missing and not args.replan_only:
-        print(f"planhrc bench: --planners: not available here: {', '.join(missing)}", file=sys.stderr)
-        return 2
-    extra: dict[str, Any] = {}
-    if args.replan or args.replan_only:
-        extra["replan"] = replan_report(formulations, args.replan_runs, args.fd_runs, args.fd_timeout,
-                                        http=not args.no_http)
-        table = replan_table(extra["replan"])
-        print(table)
-    if args.replan or args.replan_only:  # its own files too: docs/results.md's re-planning table is read from them
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "replan.json").write_text(json.dumps(extra["replan"], indent=2))
-        (out_dir / "replan.md").write_text(table + "\n")
-        print(f"wrote {out_dir / 'replan.json'}, {out_dir / 'replan.md'}")
-    if args.replan_only:
-        return 0
-    instances = make_instances(args.links, args.orientations, args.instances)
-    rows = run_grid(planners, formulations, instances, args.timeout, not args.no_validate, not args.no_progress)
-    summary = summarise(rows)
-    paths = write_results(rows, summary, out_dir, extra)
-    print(f"{'formulation':<10} {'planner':<10} {'solved':>8} {'<=1s':>6} {'optimal':>8} {'median s':>10} {'max s':>9}")
-    for s in summary:
-        med = f"{s['median_s']:.4f}" if s["median_s"] is not None else "-"
-        mx = f"{s['max_s']:.4f}" if s["max_s"] is not None else "-"
-        print(f"{s['formulation']:<10} {s['planner']:<10} {s['solved_valid']:>4}/{s['instances']:<3} "
-              f"{s['within_1s']:>6} {s['optimal_length_plans']:>8} {med:>10} {mx:>9}")
-    print("wrote " + ", ".join(str(p) for p in paths))
-    return 0 if all(s["invalid"] == 0 for s in summary) else 1

@@ -1,4 +1,4 @@
-"""`planhrc bench --bimanual` on a small slice: the chain beside a packaged planner, VAL on every plan, the files."""
+"""`planhrc bench --bimanual-only` on a small slice: the chain beside a packaged planner, VAL on every plan, the files."""
 import csv
 import json
 
@@ -36,7 +36,7 @@ def test_a_slice_of_the_grid_with_the_whole_command(tmp_path):
 
 
 def test_bench_refuses_an_unknown_bimanual_planner(tmp_path, capsys):
-    code = main(["bench", "--bimanual", "--bimanual-planners", "chain,nosuch", "--out", str(tmp_path)])
+    code = main(["bench", "--bimanual-only", "--bimanual-planners", "chain,nosuch", "--out", str(tmp_path)])
     assert code == 2 and "nosuch" in capsys.readouterr().err
 
 
