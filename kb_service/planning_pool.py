@@ -19,6 +19,13 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   facts): a worker sends the first state once and, for each state, the atoms it lacks and adds against it; the
   service builds each state as one set operation on the first. The outcome travels in several frames (header,
   actions, states in chunks) so that no single unpickling holds the service's interpreter for long.
+* **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small
+  objects (ground conditional effects, atoms), and every few thousand allocations start a collection pass; the
+  full passes walk every expected state made so far (each holds all the object's static facts), so on the
+  absolute 200 x 12 task those passes, not the work, took most of the replay's and the unpacking's time. None of
+  those objects forms a reference cycle, so the passes free nothing: a worker runs a job with the collector off
+  and collects once the outcome is sent (before it takes the next job); the service pauses it only while it
+  unpacks an outcome that has arrived (`_CollectorPause`), not while it waits for one.
 * **Priority.** A worker runs at nice 10: on a machine whose cores are all busy, the service's requests come
   first and the large task gets what is left (`planhrc service-bench --parts contention` compares the slowest
   /health and the other object's slowest perception with the workers at the service's priority).
@@ -29,6 +36,8 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
 """
 from __future__ import annotations
 
+import gc
+import itertools
 import logging
 import os
 import pickle
@@ -40,7 +49,7 @@ import threading
 import time
 from dataclasses import replace
 from multiprocessing.connection import Connection
-from typing import Iterator
+from typing import Callable, Iterator
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
@@ -168,6 +177,7 @@ class PlanningPool:
         self._cond = threading.Condition()
         self._closed = False
         self._sizes: dict[str, int] = {}  # object id -> state_size (objects never change)
+        self._pause = _CollectorPause()
 
     def close(self) -> None:
         """Stop every worker (a job still running ends `error`)."""
@@ -213,7 +223,9 @@ class PlanningPool:
         try:
             worker.conn.send(job)
             frames = self._frames(worker, job.deadline_at + self.grace_s)
-            outcome = unpack_outcome(frames)
+            header = next(frames)  # the worker's answer has come: the rest follows at once
+            with self._pause:
+                outcome = unpack_outcome(itertools.chain((header,), frames))
             healthy = True
             return outcome
         except _Overrun:
@@ -270,6 +282,30 @@ class PlanningPool:
         threading.Thread(target=worker.stop, name="planhrc-pool-stop", daemon=True).start()
 
 
+class _CollectorPause:
+    """The cyclic garbage collector off while any thread of the service is inside (see the module's note), on
+    again when the last one leaves (if it was on when the first came in). `gc` has one switch per process: the
+    count keeps one thread's leaving from turning it on under another still unpacking."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._inside = 0
+        self._was_enabled = False
+
+    def __enter__(self) -> None:
+        with self._lock:
+            if self._inside == 0:
+                self._was_enabled = gc.isenabled()
+                gc.disable()
+            self._inside += 1
+
+    def __exit__(self, *exc: object) -> None:
+        with self._lock:
+            self._inside -= 1
+            if self._inside == 0 and self._was_enabled:
+                gc.enable()
+
+
 class _Overrun(Exception):
     """A worker did not answer by the job's deadline and its grace."""
 
@@ -296,17 +332,29 @@ def run_worker() -> None:
             job = conn.recv()
         except (EOFError, OSError):
             return
+        gc.disable()  # see the module's note; collected below, after the answer
         try:
-            outcome = pipeline.plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
-                                    deadline_at=job.deadline_at)
-        except Exception as exc:  # the service gets an outcome whatever happens
-            log.exception("planning failed for %s", job.obj.ident)
-            outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)
-        try:
-            for frame in pack_outcome(outcome):
-                conn.send_bytes(frame)
-        except OSError:
+            sent = _answer(conn, job, pipeline.plan)
+        finally:
+            gc.enable()
+        gc.collect()
+        if not sent:
             return
+
+
+def _answer(conn: Connection, job: PlanningJob, plan: Callable[..., PlanOutcome]) -> bool:
+    """Plan the job and send its outcome; False when the service's end of the connection is gone."""
+    try:
+        outcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement, deadline_at=job.deadline_at)
+    except Exception as exc:  # the service gets an outcome whatever happens
+        log.exception("planning failed for %s", job.obj.ident)
+        outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)
+    try:
+        for frame in pack_outcome(outcome):
+            conn.send_bytes(frame)
+    except OSError:
+        return False
+    return True
 
 
 def _stop(signum: int, frame: object) -> None:
