@@ -111,8 +111,10 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         yield pickle.dumps(part, pickle.HIGHEST_PROTOCOL)
 
 
-def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
-    """The outcome `pack_outcome` sent, each state one set operation on the first."""
+def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOutcome:
+    """The outcome `pack_outcome` sent, each state one set operation on the first. With `init` (the job's initial
+    state, which the first expected state equals), the states are made on it: their static facts are then the
+    service's own atoms, which the store's checks of those states find by identity instead of comparing copies."""
     header: tuple[PlanOutcome, int, bool, int, int] = pickle.loads(next(frames))
     bare, n_actions, has_states, n_base, n_states = header
     actions: list[ActionSpec] = []
@@ -122,6 +124,8 @@ def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
     for _ in range(n_base):
         base_atoms.extend(pickle.loads(next(frames)))
     states: list[State] = [frozenset(base_atoms)] if has_states else []
+    if states and init is not None and states[0] == init:
+        states[0] = init if isinstance(init, frozenset) else frozenset(init)
     for _ in range(n_states):
         changes: list[tuple[State, State]] = pickle.loads(next(frames))
         for missing, added in changes:
@@ -225,7 +229,7 @@ class PlanningPool:
             frames = self._frames(worker, job.deadline_at + self.grace_s)
             header = next(frames)  # the worker's answer has come: the rest follows at once
             with self._pause:
-                outcome = unpack_outcome(itertools.chain((header,), frames))
+                outcome = unpack_outcome(itertools.chain((header,), frames), job.init)
             healthy = True
             return outcome
         except _Overrun:
