@@ -16,9 +16,10 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   (SIGTERM, then SIGKILL) and replaced, and the job ends `timeout`. A worker that dies ends its job `error` and is
   replaced too. A job waits for a free worker (or one starting) only until its deadline.
 * **What comes back.** The outcome's expected states share most atoms (every state carries the object's static
-  facts): a worker sends the first state once and, for each state, the atoms it lacks and adds against it; the
-  service builds each state as one set operation on the first. The outcome travels in several frames (header,
-  actions, states in chunks) so that no single unpickling holds the service's interpreter for long.
+  facts): a worker sends the first state once and, for each further state, the atoms it lacks and adds against
+  the one before it; the service builds each state as one set operation on the one before. The outcome travels
+  in several frames (header, actions, states in chunks) so that no single unpickling holds the service's
+  interpreter for long.
 * **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small
   objects (ground conditional effects, atoms), and every few thousand allocations start a collection pass; the
   full passes walk every expected state made so far (each holds all the object's static facts), so on the
@@ -54,6 +55,7 @@ from typing import Callable, Iterator
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
 from planhrc.pipeline.replan import PlanningJob
+from planhrc.transition import change_of
 from planhrc.vocabulary import PlanningStatus
 
 __all__ = ["ATOMS_PER_FRAME", "PlanningJob", "PlanningPool", "pack_outcome", "state_size", "unpack_outcome"]
@@ -77,7 +79,10 @@ def state_size(obj: ArticulatedObject) -> int:
 def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
     """The outcome as frames: a header (the outcome without actions and states, and how many frames follow),
     the actions in chunks, the first expected state, then each further state as (missing, added) atoms against
-    the first, in chunks of about `ATOMS_PER_FRAME` atoms."""
+    the one before it, in chunks of about `ATOMS_PER_FRAME` atoms. A solved outcome's states are its actions'
+    replay (`PlanOutcome`), so each difference is what the state's action changes (`transition.change_of`: a few
+    hundred atoms looked at, where comparing two states whole looks at all their static facts); an outcome
+    without one action per step, or whose sizes do not add up, has its states compared whole."""
     states, actions = outcome.expected_states, outcome.actions
     action_chunks: list[list[ActionSpec]] = []
     weight = EFFECTS_PER_FRAME
@@ -93,8 +98,8 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         base = states[0]
         chunk: list[tuple[frozenset[Atom], frozenset[Atom]]] = []
         size = 0
-        for state in states[1:]:
-            diff = (base - state, state - base)
+        for before, state, action in zip(states, states[1:], _actions_between(actions, len(states))):
+            diff = _difference(before, state, action)
             chunk.append(diff)
             size += len(diff[0]) + len(diff[1]) + 1
             if size >= ATOMS_PER_FRAME:
@@ -111,8 +116,22 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         yield pickle.dumps(part, pickle.HIGHEST_PROTOCOL)
 
 
+def _actions_between(actions: tuple[ActionSpec, ...], n_states: int) -> tuple[ActionSpec | None, ...]:
+    """The action leading to each state after the first, when there is one per state (else none is used)."""
+    return actions if len(actions) == n_states - 1 else (None,) * (n_states - 1)
+
+
+def _difference(before: State, state: State, action: ActionSpec | None) -> tuple[frozenset[Atom], frozenset[Atom]]:
+    """(missing, added): `state` is `(before - missing) | added`."""
+    if action is not None:
+        missing, added = change_of(before, action)
+        if len(before) - len(missing) + len(added) == len(state) and missing.isdisjoint(state) and added <= state:
+            return missing, added
+    return before - state, state - before
+
+
 def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOutcome:
-    """The outcome `pack_outcome` sent, each state one set operation on the first. With `init` (the job's initial
+    """The outcome `pack_outcome` sent, each state one set operation on the one before. With `init` (the job's initial
     state, which the first expected state equals), the states are made on it: their static facts are then the
     service's own atoms, which the store's checks of those states find by identity instead of comparing copies."""
     header: tuple[PlanOutcome, int, bool, int, int] = pickle.loads(next(frames))
@@ -129,7 +148,7 @@ def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOu
     for _ in range(n_states):
         changes: list[tuple[State, State]] = pickle.loads(next(frames))
         for missing, added in changes:
-            states.append((states[0] - missing) | added)
+            states.append((states[-1] - missing) | added)
     return replace(bare, actions=tuple(actions), expected_states=tuple(states))
 
 
