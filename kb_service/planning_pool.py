@@ -23,10 +23,11 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
 * **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small
   objects (ground conditional effects, atoms), and every few thousand allocations start a collection pass; the
   full passes walk every expected state made so far (each holds all the object's static facts), so on the
-  absolute 200 x 12 task those passes, not the work, took most of the replay's and the unpacking's time. None of
-  those objects forms a reference cycle, so the passes free nothing: a worker runs a job with the collector off
-  and collects once the outcome is sent (before it takes the next job); the service pauses it only while it
-  unpacks an outcome that has arrived (`_CollectorPause`), not while it waits for one.
+  absolute 200 x 12 task those passes, not the work, took most of the replay's and the unpacking's time. The
+  unpacking makes no reference cycle, and a whole pipeline run only a few thousand objects' worth (whatever the
+  task's size): a worker runs a job with the collector off and collects once the outcome is sent (before it takes
+  the next job); the service pauses it only while it unpacks an outcome that has arrived (`_CollectorPause`), not
+  while it waits for one.
 * **Priority.** A worker runs at nice 10: on a machine whose cores are all busy, the service's requests come
   first and the large task gets what is left (`planhrc service-bench --parts contention` compares the slowest
   /health and the other object's slowest perception with the workers at the service's priority).
