@@ -2,8 +2,9 @@
 
 `measure_service_cpu` starts a real `planhrc serve`, posts re-planning perceptions paced as a robot's (each
 `ROBOT_PAUSE_S` after the last answer has settled) and reads the server's CPU from `/proc/<pid>/stat`: its own
-user + system time and its reaped children's (VAL's processes), over the whole run, so everything a re-plan
-costs is in it: the request, its VAL runs, the work behind the answer (the plan's later pieces under VAL, and
+user + system time, its reaped children's (VAL's processes) and its live descendants' (the planning pool's workers,
+where an absolute task is planned and replayed, and the VAL processes armed for the next plan: they are not
+reaped while the service runs), over the whole run, so everything a re-plan costs is in it: the request, its VAL runs, the work behind the answer (the plan's later pieces under VAL, and
 anything the store writes after the commit). After each answer the bench waits until that work is done: every
 later piece of the plan has its `val_verdict` event and the store writes nothing more (`/health`'s
 `plans_to_write` holds still from one probe to the next). Those probes cost the server a little CPU of their own; it is measured on the idle service and taken off
@@ -50,10 +51,37 @@ def _total(cpu: tuple[float, float]) -> float:
     return cpu[0] + cpu[1]
 
 
+def live_descendants_cpu_s(pid: int) -> float:
+    """User + system seconds (with their reaped children's) of a process's descendants still running (Linux /proc);
+    one that ends while it is read is left out."""
+    total = 0.0
+    for child in _children(pid):
+        try:
+            total += _total(process_cpu_s(child)) + live_descendants_cpu_s(child)
+        except (OSError, IndexError, ValueError):  # gone meanwhile
+            continue
+    return total
+
+
+def _children(pid: int) -> list[int]:
+    found: list[int] = []
+    try:
+        tasks = list(Path(f"/proc/{pid}/task").iterdir())
+    except OSError:
+        return found
+    for task in tasks:
+        try:
+            found.extend(int(c) for c in (task / "children").read_text().split())
+        except OSError:
+            continue
+    return found
+
+
 def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 12, runs: int = 20, seed: int = 7,
                         env: Mapping[str, str] | None = None, pause_s: float = ROBOT_PAUSE_S) -> dict[str, Any]:
-    """The service's whole CPU per re-plan (see the module's note), in ms: `per_replan_ms` (own + children, the
-    settle probes taken off), `val_children_ms` (VAL's processes alone) and the answers' latency. A random
+    """The service's whole CPU per re-plan (see the module's note), in ms: `per_replan_ms` (own + children + live
+    descendants, the settle probes taken off), `val_children_ms` (VAL's processes that ended), `descendants_ms`
+    (the planning workers and armed VAL processes still running) and the answers' latency. A random
     perception now and then lets the plan go on (`decisions`); its CPU is counted as the re-plans'."""
     from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
 
@@ -74,6 +102,7 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
         latencies: list[float] = []
         decisions: dict[str, int] = {}
         before, t0, probes = process_cpu_s(server.pid), time.monotonic(), 0
+        live_before = live_descendants_cpu_s(server.pid)
         for _ in range(runs):
             seconds, answer = _replan(client, ident, random_angles(rng, links, orientations))
             decisions[answer["decision"]] = decisions.get(answer["decision"], 0) + 1
@@ -81,14 +110,16 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
             time.sleep(pause_s)
             probes += settle.wait()
         after, elapsed = process_cpu_s(server.pid), time.monotonic() - t0
+        live = live_descendants_cpu_s(server.pid) - live_before
     own = after[0] - before[0] - probes * probe_s
     children = after[1] - before[1]
     replans = max(1, decisions.get("replan", 0))  # the few other decisions' CPU is counted as the re-plans'
 
     return {"formulation": formulation, "links": links, "orientations": orientations, "runs": runs,
             "pause_s": pause_s, "decisions": decisions,
-            "per_replan_ms": round((own + children) / replans * 1000, 2),
+            "per_replan_ms": round((own + children + live) / replans * 1000, 2),
             "own_ms": round(own / replans * 1000, 2), "val_children_ms": round(children / replans * 1000, 2),
+            "descendants_ms": round(live / replans * 1000, 2),
             "idle_ms_per_s": round(idle_s * 1000, 2), "idle_share_ms": round(idle_s * elapsed / replans * 1000, 2),
             "probes": probes, "probe_ms": round(probe_s * 1000, 3),
             "latency_median_ms": round(percentile(latencies, 0.5) * 1000, 2)}

@@ -32,13 +32,16 @@ Recorder = Callable[[PieceVerdict], None]
 class LaterPieces:
     """VAL on a plan's later pieces, one process at a time, in a background thread; each verdict is handed to
     the recorder once there is one (`attach`, after the plan is stored), and `wait` returns once it is recorded.
-    The pieces are numbered after the `accepted` ones (the first motion's, accepted before the answer)."""
+    The pieces are given by their step ranges (`pieces`, 1-based, inclusive) and made by `build` in that thread,
+    just before VAL checks them (their problems are not written on the answer's path). They are numbered after the
+    `accepted` ones (the first motion's, accepted before the answer)."""
 
-    def __init__(self, domain: str, pieces: Sequence[ValPiece], timeout_s: float,
-                 accepted: Sequence[tuple[int, int]], nice: int = BACKGROUND_NICE,
+    def __init__(self, domain: str, pieces: Sequence[tuple[int, int]], build: Callable[[int, int], ValPiece],
+                 timeout_s: float, accepted: Sequence[tuple[int, int]], nice: int = BACKGROUND_NICE,
                  check: Callable[..., ValidationResult] | None = None) -> None:
         self.domain = domain
         self.pieces = tuple(pieces)
+        self._build = build
         self.accepted = tuple(accepted)  # the step ranges of the pieces VAL accepted before the answer
         self.timeout_s = timeout_s
         self.nice = nice
@@ -77,7 +80,8 @@ class LaterPieces:
 
     def _run(self, index: int) -> None:
         try:
-            result = self._check(self.domain, self.pieces[index], self.timeout_s, self.nice, self._group)
+            result = self._check(self.domain, self._build(*self.pieces[index]), self.timeout_s, self.nice,
+                                 self._group)
         except Exception as exc:  # a verdict must come whatever happens: no verdict means "refused"
             log.exception("VAL on a later piece failed")
             result = ValidationResult(False, f"VAL could not run: {type(exc).__name__}: {exc}", 0.0)
@@ -110,10 +114,10 @@ class LaterPieces:
                 return
             self._claimed.add(index)
             recorder, result = self._recorder, self._results[index]
-        piece = self.pieces[index]
+        first, last = self.pieces[index]
         verdict = Verdict(result.valid, "Plan valid" if result.valid else result.reason)
         try:
-            recorder(PieceVerdict(self.number(index), piece.first, piece.last, verdict, result.seconds))
+            recorder(PieceVerdict(self.number(index), first, last, verdict, result.seconds))
         except Exception:  # the gate finds no verdict in the log and asks VAL again
             log.exception("recording the verdict of a later piece failed")
         with self._cond:
@@ -122,7 +126,7 @@ class LaterPieces:
 
     def wait(self, first_step: int, timeout_s: float) -> bool:
         """Wait until the verdict of the piece starting at `first_step` is recorded (True), or `timeout_s`."""
-        index = next((i for i, p in enumerate(self.pieces) if p.first == first_step), None)
+        index = next((i for i, (first, _) in enumerate(self.pieces) if first == first_step), None)
         if index is None:
             return True
         with self._cond:

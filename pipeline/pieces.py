@@ -8,6 +8,7 @@ from typing import Sequence
 from planhrc.control import possible_control
 from planhrc.model import CONTROL_PREDICATES, HAS_ORIENTATION, ArticulatedObject, State, format_atom
 from planhrc.planner.fast_downward import has_conditional_effects
+from planhrc.planner.scope import narrow_problem
 
 from .config import PlanOutcome
 from .motion import first_motion_steps
@@ -31,7 +32,8 @@ def validation_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: in
 
     Why the pieces say what one run says: hasorientation (and in the bimanual formulation the robot's control
     facts) are the only predicates any action changes, and every piece's problem has the task's objects and
-    static facts. Induction over the pieces: VAL's state before
+    static facts (less the objects its steps cannot reach, which changes no answer of VAL's: `planner.scope`).
+    Induction over the pieces: VAL's state before
     piece i is s^e_(c_i) (for i = 1 the task's init); VAL accepts piece i only if each of its steps is
     applicable in turn and the state it ends in satisfies the exact goal, i.e. *is* s^e_(c_(i+1)); so one run
     on the whole plan applies the same steps to the same states and ends where the last piece ends, in a state
@@ -52,15 +54,15 @@ class ValPiece:
     steps: tuple[str, ...]
 
 
-def piece_bounds(n_steps: int, n_pieces: int, first_steps: int | None = None, first_parts: int = 1
-                 ) -> list[tuple[int, int]]:
+def piece_bounds(n_steps: int, n_pieces: int, first_steps: int | None = None, first_parts: int = 1,
+                 rest_pieces: int | None = None) -> list[tuple[int, int]]:
     """The pieces of a plan of `n_steps` steps as 0-based half-open (start, end) step ranges: `n_pieces` of
     nearly equal length, none shorter than MIN_PIECE_STEPS unless the plan is; with `first_steps`, the first
     `first_steps` steps as `first_parts` pieces of nearly equal length (at least one step each: they are checked
     at once before an answer, where VAL's cost per step matters more than its fixed cost), then the rest cut the
-    same way."""
+    same way into `rest_pieces` (default `n_pieces`)."""
     if first_steps is not None and 0 < first_steps < n_steps:
-        rest = piece_bounds(n_steps - first_steps, n_pieces)
+        rest = piece_bounds(n_steps - first_steps, n_pieces if rest_pieces is None else rest_pieces)
         parts = max(1, min(first_parts, first_steps))
         cuts = [round(i * first_steps / parts) for i in range(parts + 1)]
         return ([(cuts[i], cuts[i + 1]) for i in range(parts)]
@@ -71,25 +73,28 @@ def piece_bounds(n_steps: int, n_pieces: int, first_steps: int | None = None, fi
 
 
 def early_pieces(obj: ArticulatedObject, outcome: PlanOutcome, n_pieces: int, first_steps: int | None = None,
-                 first_parts: int = 1) -> tuple[ValPiece, ...]:
-    """The pieces of `validation_pieces` (the first `first_steps` in `first_parts` pieces), with their step
-    ranges."""
+                 first_parts: int = 1, rest_pieces: int | None = None) -> tuple[ValPiece, ...]:
+    """The pieces of `validation_pieces` (the first `first_steps` in `first_parts` pieces, the rest in
+    `rest_pieces`), with their step ranges."""
     assert outcome.task is not None
-    bounds = piece_bounds(len(outcome.steps), n_pieces, first_steps, first_parts)
-    return tuple(piece_of(obj, outcome.task.problem, outcome.steps, outcome.expected_states, a + 1, b)
-                 for a, b in bounds)
+    bounds = piece_bounds(len(outcome.steps), n_pieces, first_steps, first_parts, rest_pieces)
+    return tuple(piece_of(obj, outcome.task.problem, outcome.steps, outcome.expected_states, a + 1, b,
+                          outcome.task.validation_domain) for a, b in bounds)
 
 
 def piece_of(obj: ArticulatedObject, task_problem: str, steps: Sequence[str], states: Sequence[State],
-             first: int, last: int) -> ValPiece:
+             first: int, last: int, domain: str | None = None) -> ValPiece:
     """The piece of a plan (`steps`, expected states `states`, task problem text) holding steps a_first .. a_last:
     from s^e_first (the task's own init for the first piece) to exactly s^e_(last+1), or to the task's goal for
-    the last piece."""
+    the last piece. With the validation `domain`, the problem leaves out the objects the piece's steps cannot reach
+    (`planner.scope.narrow_problem`: VAL's answer is the same, and a piece late in a plan costs VAL much less)."""
     a, b = first - 1, last
     if b == len(steps):
         problem = task_problem if a == 0 else _problem_text(obj, states[a], None, task_problem)
     else:
         problem = _problem_text(obj, states[a], states[b], task_problem)
+    if domain is not None:
+        problem = narrow_problem(domain, problem, steps[a:b])
     return ValPiece(first, last, problem, tuple(steps[a:b]))
 
 

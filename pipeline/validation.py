@@ -36,9 +36,13 @@ from .config import PlanningConfig, PlanOutcome, problem_name, time_left
 from .gate import PieceVerdict, Verdict
 from .later import LaterPieces, Recorder
 from .motion import step_text
-from .pieces import early_answer_first_piece, early_pieces, piece_of
+from .pieces import MIN_PIECE_STEPS, ValPiece, early_answer_first_piece, piece_bounds, piece_of
 
 log = logging.getLogger(__name__)
+
+# How long a later piece is, at least: cut shorter, the pieces reach fewer joints each (VAL's cost) but the extra VAL
+# processes and verdict writes cost more than that saves (absolute 20 x 12, `planhrc bench --replan-only`).
+LATER_PIECE_STEPS = 2 * MIN_PIECE_STEPS
 
 
 @dataclass(frozen=True)
@@ -96,7 +100,7 @@ class VerdictHandle:
         if later is None or final is None or not (final.solved and final.actions and not final.validated):
             return None
         first = later.accepted or ((1, final.validated_steps),)
-        return EarlyAnswer(first + tuple((p.first, p.last) for p in later.pieces), max(1, len(later.accepted)))
+        return EarlyAnswer(first + later.pieces, max(1, len(later.accepted)))
 
     def cancel(self) -> None:
         """Stop every VAL run of this plan (the plan is not adopted, or the request failed)."""
@@ -172,10 +176,19 @@ class Validator:
         """The early answer: the first motion (its first `first` steps) in `val_pieces` pieces checked at once
         (VAL's cost grows with the steps of such a domain, so pieces at once answer sooner than one run), the
         rest of the plan left to `LaterPieces`."""
-        pieces = early_pieces(obj, outcome, self.config.val_pieces, first, max(1, self.config.val_pieces))
-        before = tuple(p for p in pieces if p.last <= first)
-        later = LaterPieces(task.validation_domain, pieces[len(before):], self.config.deadline_s,
-                            accepted=tuple((p.first, p.last) for p in before))
+        # the later pieces are checked on problems narrowed to the joints their steps reach (`piece_of`): the
+        # shorter a piece, the fewer joints it reaches, but each costs a VAL process and a verdict's write
+        rest = len(outcome.steps) - first
+        bounds = piece_bounds(len(outcome.steps), self.config.val_pieces, first, max(1, self.config.val_pieces),
+                              max(self.config.val_pieces, rest // LATER_PIECE_STEPS))
+        before = tuple(piece_of(obj, task.problem, outcome.steps, outcome.expected_states, a + 1, b,
+                                task.validation_domain) for a, b in bounds if b <= first)
+
+        def build(a: int, b: int) -> ValPiece:
+            return piece_of(obj, task.problem, outcome.steps, outcome.expected_states, a, b, task.validation_domain)
+
+        later = LaterPieces(task.validation_domain, tuple((a + 1, b) for a, b in bounds[len(before):]), build,
+                            self.config.deadline_s, accepted=tuple((p.first, p.last) for p in before))
         try:
             checks = val_runs.start_runs(task, [(p.problem, p.steps) for p in before], self.armed)
         except BaseException:
@@ -225,7 +238,8 @@ class Validator:
         actions in plan order and its expected states. PlannerError when VAL does not answer by `deadline_at`."""
         task = translate(obj, init, goal, read_domain_model(self.config.tbox_path, obj.formulation.value),
                          problem_name(obj))
-        piece = piece_of(obj, task.problem, tuple(step_text(a) for a in actions), expected_states, first, last)
+        piece = piece_of(obj, task.problem, tuple(step_text(a) for a in actions), expected_states, first, last,
+                         task.validation_domain)
         left = time_left(deadline_at)
         if left <= 0:
             raise PlannerError("no time left for VAL")

@@ -50,11 +50,13 @@ class StateIndex:
         for pos, value in enumerate(atom[1:]):
             self._by_arg.get((atom[0], pos, value), set()).discard(atom)
 
-    def moved(self, state: State) -> "StateIndex":
-        """This index, changed in place to describe `state` (which differs from the old one by few atoms)."""
-        for atom in self.state - state:
+    def moved(self, state: State, change: "Change | None" = None) -> "StateIndex":
+        """This index, changed in place to describe `state` (which differs from the old one by few atoms);
+        `change` (from `apply_change`) says by which, instead of comparing two whole states."""
+        removed, added = (self.state - state, state - self.state) if change is None else change
+        for atom in removed:
             self._discard(atom)
-        for atom in state - self.state:
+        for atom in added:
             self._add(atom)
         self.state = state
         return self
@@ -86,11 +88,12 @@ def _bindings(
     checked. This enumerates exactly the satisfying bindings of a `when` condition, each once: a binding of
     every literal's variables determines the atoms its positive literals match."""
     positives = [lit for lit in literals if not lit.negated and lit.predicate != EQUALITY]
+    others = [lit for lit in literals if lit.negated or lit.predicate == EQUALITY]
     state = index.state
 
     def extend(todo: tuple[int, ...], current: dict[str, str]) -> Iterator[dict[str, str]]:
-        if not todo:
-            if all(v in current for v in variables) and all(holds(lit, current, state) for lit in literals):
+        if not todo:  # the positive literals hold: each was matched against an atom of the state
+            if all(v in current for v in variables) and all(holds(lit, current, state) for lit in others):
                 yield dict(current)
             return
         pick, atoms = min(((i, index.candidates(positives[i], current)) for i in todo), key=lambda c: len(c[1]))
@@ -157,18 +160,34 @@ def ground_action(domain: DomainModelSpec, step: str, state: State, index: State
 def _cond_order(ce: CondEffect) -> tuple[list[Atom], list[Atom], list[Atom]]:
     """The order of an action's conditional effects: by what they add, then delete, then need (total: the same
     action is the same value however its bindings were enumerated)."""
-    return sorted(ce.eff_pos), sorted(ce.eff_neg), sorted(ce.when)
+    return _in_order(ce.eff_pos), _in_order(ce.eff_neg), _in_order(ce.when)
+
+
+def _in_order(atoms: frozenset[Atom]) -> list[Atom]:
+    """`sorted(atoms)`, without sorting a single atom (a large absolute step has hundreds of such effects)."""
+    return sorted(atoms) if len(atoms) > 1 else list(atoms)
 
 
 def apply(state: State, action: ActionSpec) -> State:
     """s' = (s \\ (eff- ∪ C-)) ∪ (eff+ ∪ C+), with C± the effects of the conditional effects that fired."""
+    return apply_change(state, action)[0]
+
+
+Change = tuple[frozenset[Atom], frozenset[Atom]]  # the atoms one action removed from a state and added to it
+
+
+def apply_change(state: State, action: ActionSpec) -> tuple[State, Change]:
+    """`apply`, and what it changed: for a state of many static facts, the change is a handful of atoms that a
+    `StateIndex` follows without comparing the two states whole."""
     neg = set(action.eff_neg)
     pos = set(action.eff_pos)
     for ce in action.cond_eff:
         if ce.when <= state:
             neg |= ce.eff_neg
             pos |= ce.eff_pos
-    return frozenset((state - neg) | pos)
+    removed = frozenset(a for a in neg if a in state and a not in pos)
+    added = frozenset(a for a in pos if a not in state)
+    return frozenset((state - removed) | added), (removed, added)
 
 
 @dataclass(frozen=True)
@@ -195,9 +214,16 @@ class Grounder:
     the absolute 20 x 12 task a step's one `when` ranges over 20 joints x 12 x 12 orientations). Either way the
     action is the one `ground_action` gives; a step whose precondition fails takes `ground_action`'s path (for its
     message), and so does a conditional effect whose variables the static facts do not all bind. Get one per
-    domain from `grounder(domain)`; it holds at most `LIMIT` steps."""
+    domain from `grounder(domain)`; it holds at most `LIMIT` steps.
+
+    Keeping the bindings pays only while they are few: their number grows with joints x orientations, while the
+    bindings `ground_action` enumerates in a state (a join over the state's atoms) grow with the joints alone. A step
+    whose static bindings exceed `MAX_CANDIDATES` (the absolute 50 x 36 or 200 x 12 tasks) is not kept: building
+    them cost tens of times what grounding the step in its state costs, and a re-plan of such a task met its
+    deadline in the replay instead of answering."""
 
     LIMIT = 50_000
+    MAX_CANDIDATES = 512
 
     def __init__(self, domain: DomainModelSpec) -> None:
         self.domain = domain
@@ -207,6 +233,7 @@ class Grounder:
             for lit in s.effects + tuple(e for ce in s.conditional_effects for e in ce.effects))
         self._seen: dict[str, tuple[ActionSpec, frozenset[Atom], frozenset[Atom]]] = {}
         self._conditional: dict[str, _Conditional | None] = {}  # None: not cacheable, always `ground_action`
+        self._static_index: StateIndex | None = None
 
     def statics(self, state: State) -> frozenset[Atom]:
         """The atoms of `state` no action of the domain changes (the same along a plan)."""
@@ -258,13 +285,21 @@ class Grounder:
                             if not lit.negated and lit.predicate != EQUALITY and lit.predicate in fluent)
         absent = frozenset(instantiate(lit, binding) for lit in schema.precondition
                            if lit.negated and lit.predicate != EQUALITY and lit.predicate in fluent)
-        static_index = StateIndex(statics)
-        candidates = []
+        static_index = self._index_of(statics)
+        candidates: list[tuple[frozenset[Atom], frozenset[Atom], CondEffect]] = []
         for ce in schema.conditional_effects:
             variables = [v for v, _ in ce.variables]
             static_lits = [lit for lit in ce.when if lit.predicate == EQUALITY or lit.predicate not in fluent]
             bound = {a for lit in static_lits if not lit.negated and lit.predicate != EQUALITY for a in lit.args}
             if any(v not in bound and v not in binding for v in variables):
+                return None
+            # every binding is one choice of an atom per positive static literal: their product bounds how many
+            # there are, known before any is built
+            most = 1
+            for lit in static_lits:
+                if not lit.negated and lit.predicate != EQUALITY:
+                    most *= len(static_index.candidates(lit, binding))
+            if len(candidates) + most > self.MAX_CANDIDATES:
                 return None
             for b in _bindings(static_lits, variables, binding, static_index):
                 when = frozenset(instantiate(lit, b) for lit in ce.when
@@ -279,6 +314,13 @@ class Grounder:
                                eff_pos=frozenset(instantiate(lit, b) for lit in ce.effects if not lit.negated))))
         candidates.sort(key=lambda c: _cond_order(c[2]))
         return _Conditional(statics, replace(action, cond_eff=()), present, absent, tuple(candidates))
+
+    def _index_of(self, statics: frozenset[Atom]) -> StateIndex:
+        """The index of the static facts (one problem's, the same for every step of its plans), kept."""
+        kept = self._static_index
+        if kept is None or (kept.state is not statics and kept.state != statics):
+            kept = self._static_index = StateIndex(statics)
+        return kept
 
     def _remember(self, step: str, action: ActionSpec) -> None:
         schema = find_schema(self.domain, action.name)
@@ -313,7 +355,8 @@ def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_a
             raise DeadlineExceeded(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
         action = g.ground(step, states[-1], index, statics)
         actions.append(action)
-        states.append(apply(states[-1], action))
+        state, change = apply_change(states[-1], action)
+        states.append(state)
         if index is not None:
-            index.moved(states[-1])
+            index.moved(state, change)
     return tuple(actions), tuple(states)

@@ -62,3 +62,34 @@ def test_a_plan_check_past_its_deadline_stops_with_a_deadline_error(kb):
     with pytest.raises(DeadlineError, match="expected state 1 of 3"):
         kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() - 1.0)
     assert kb.check_plan("obj1", actions, states, deadline_at=time.monotonic() + 60.0).expected_states == tuple(states)
+
+
+def test_actions_checked_once_are_valid_for_their_object_only(kb):
+    """`check_plan` keeps the actions it found valid per object (`ObjectInfo.valid_actions`): the same actions are
+    still refused for another object, an action refused is refused again (never kept), and a new object under a
+    known name (its lookups built afresh) checks them again."""
+    from dataclasses import replace
+
+    from planhrc.kb_service.store.checks import ObjectInfo, check_plan
+
+    a, b = make_object("obj1", "absolute", 3, 4), make_object("obj2", "absolute", 3, 4)
+    kb.create_object(a)
+    kb.create_object(b)
+    init = kb.add_state("obj1", "perceived", a.state([0, 90, 180]))
+    actions, states = plan_for(a, init.atoms, [(1, True), (2, False)])
+    kb.check_plan("obj1", actions, states)
+    kb.check_plan("obj1", actions, states)  # from what was kept
+    with pytest.raises(ValidationError, match="obj1"):
+        kb.check_plan("obj2", actions, states)  # valid for obj1 is not valid for obj2
+    foreign = replace(actions[0], params=("obj9_l1",) + tuple(actions[0].params[1:]))
+    for _ in range(2):
+        with pytest.raises(ValidationError, match=r"actions\[0\]\.params\[0\]"):
+            kb.check_plan("obj1", (foreign,) + tuple(actions[1:]), states)
+
+    info = ObjectInfo(a)
+    check_plan(info, actions, states)
+    assert set(actions) <= info.valid_actions
+    bigger = ObjectInfo(make_object("obj1", "absolute", 2, 4))  # the name again, another object: checked afresh
+    assert not bigger.valid_actions
+    with pytest.raises(ValidationError):
+        check_plan(bigger, actions, states)

@@ -189,3 +189,70 @@ def test_the_log_is_copied_beside_the_writes_and_stays_short(tmp_path, monkeypat
     check = sqlite3.connect(str(path))
     assert check.execute("SELECT COUNT(*) FROM objs").fetchone()[0] >= 400 * 99
     check.close()
+
+
+def _wait_for(condition, timeout_s: float = 10.0) -> bool:
+    import time
+
+    end = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def test_the_checkpoint_thread_wakes_for_commits_only(tmp_path, monkeypatch):
+    """The log is copied after a commit (`GATHER_S` after a lone one; `GATHER_COMMITS` commits in a row are copied
+    at once); an idle store's thread sleeps (no checkpoint while nothing is written), except that a checkpoint a
+    reader kept from copying the whole log is tried again `RETRY_S` later, and the log is copied once the reader
+    is gone, with no further commit."""
+    import time
+
+    monkeypatch.setattr(owl, "RETRY_S", 0.2)
+    path = tmp_path / "q.sqlite3"
+    store = owl.QuadStore(str(path))
+    store.use_wal()
+    ckpt = store._checkpointer
+    assert ckpt is not None
+    iri = "http://planhrc.org/probe#"
+    c = store.context(iri)
+
+    def write(name: str) -> None:
+        sid = store.allocate([iri + name])[0]
+        store.insert_objs(c, [(sid, sid, sid)])
+        store.commit()
+
+    write("first")
+    assert _wait_for(lambda: ckpt.checkpoints >= 1)
+    done = ckpt.checkpoints
+    time.sleep(1.5)  # longer than the thread used to sleep between wake-ups
+    assert ckpt.checkpoints == done  # idle: nothing copied, nothing tried
+    write("second")
+    assert _wait_for(lambda: ckpt.checkpoints > done)
+    time.sleep(0.3)
+    done = ckpt.checkpoints
+    for k in range(owl.GATHER_COMMITS):
+        write(f"burst{k}")
+    assert _wait_for(lambda: ckpt.checkpoints > done)
+    time.sleep(owl.GATHER_S + 0.3)
+    assert ckpt.checkpoints == done + 1  # the burst was copied once
+    busy, pages, copied = ckpt.checkpoint()
+    assert not busy and copied == pages
+
+    reader = sqlite3.connect(str(path))
+    reader.execute("BEGIN")
+    reader.execute("SELECT COUNT(*) FROM objs").fetchone()  # holds a snapshot: frames after it stay in the log
+    write("late")
+    tried = ckpt.checkpoints
+    assert _wait_for(lambda: ckpt.checkpoints >= tried + 2)  # tried again without a commit, while it is held
+    assert ckpt.left_behind
+    reader.execute("COMMIT")
+    reader.close()
+    assert _wait_for(lambda: not ckpt.left_behind)  # a retry copied the rest, with no commit
+    busy, pages, copied = ckpt.checkpoint()
+    assert not busy and copied == pages
+    done = ckpt.checkpoints
+    time.sleep(0.6)
+    assert ckpt.checkpoints == done  # and the thread sleeps again
+    store.close()

@@ -193,3 +193,40 @@ def test_a_step_with_conditional_effects_grounds_as_a_fresh_one_in_every_state_a
             state = apply(state, fresh)
         with pytest.raises(TransitionError, match="precondition"):
             grounder.ground(step, state, statics=statics)  # the last step again: its joint has moved on
+
+
+def test_a_step_of_a_large_absolute_object_grounds_in_its_state_as_a_fresh_one():
+    """Past `Grounder.MAX_CANDIDATES` static bindings (40 joints x 18 orientations) a conditional step is ground in
+    its state each time instead of kept: still the action `ground_action` gives, refused where it does not apply,
+    and the replay's index (moved by each step's change, not by comparing states) ends as a fresh one."""
+    from planhrc.transition import Grounder, apply_change, ground_action
+
+    links, k = 40, 18
+    obj = make_object("o", "absolute", links, k)
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    grounder = Grounder(domain)
+    rng = random.Random(4)
+    step_deg = 360 // k
+    state = obj.state([rng.choice(obj.orientation_degrees) for _ in obj.joint_indices])
+    index = StateIndex(state)
+    steps = []
+    for _ in range(25):
+        j = rng.randrange(1, links + 1)
+        now = obj.joint_values_of(state)[j]
+        clockwise = rng.random() < 0.5
+        then = (now + (step_deg if clockwise else -step_deg)) % 360
+        name = "rotateclockwise" if clockwise else "rotateanticlockwise"
+        step = f"({name} o_l{j} o_l{j - 1} o_j{j} deg_{now} deg_{then})"
+        fresh = ground_action(domain, step, state)
+        assert len(fresh.cond_eff) == links - j  # every joint downstream of j moves with it
+        assert grounder.ground(step, state) == grounder.ground(step, state, index) == fresh
+        after, (removed, added) = apply_change(state, fresh)
+        assert after == apply(state, fresh) and removed == state - after and added == after - state
+        index.moved(after, (removed, added))
+        state = after
+        steps.append(step)
+    with pytest.raises(TransitionError, match="precondition"):
+        grounder.ground(steps[-1], state)  # the last step again: its joint has moved on
+    fresh_index = StateIndex(state)
+    for mine, theirs in ((index._by_pred, fresh_index._by_pred), (index._by_arg, fresh_index._by_arg)):
+        assert {key: v for key, v in mine.items() if v} == theirs

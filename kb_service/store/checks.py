@@ -28,6 +28,8 @@ from .interface import FORMATS, HISTORY, MAX_SEQ
 from .names import ACTION_CLASSES, COMPLETE_KINDS, PREDICATES, atom_fragment
 from .records import STATE_KINDS, ActionSpec, CheckedPlan, CondEffect
 
+MAX_VALID_ACTIONS = 20_000  # actions kept as checked per object (`ObjectInfo.valid_actions`)
+
 
 class ObjectInfo:
     """An object and the lookups the checks need (names -> PDDL type, static facts, its orientation atoms and, for a
@@ -74,6 +76,13 @@ class ObjectInfo:
     def control_atoms(self) -> frozenset[Atom]:
         """A bimanual object's control atoms (what the grippers hold, the centre): individuals its states share."""
         return possible_control(self.obj)
+
+    @cached_property
+    def valid_actions(self) -> set[ActionSpec]:
+        """The actions `check_plan` found valid for this object: a check reads only the action and this object's
+        lookups, which never change, and a re-planning object's plans are made of the same few ground actions,
+        so each is checked once per object (at most `MAX_VALID_ACTIONS` kept)."""
+        return set()
 
     @cached_property
     def shared_atom_name(self) -> dict[Atom, str]:
@@ -243,8 +252,18 @@ def check_plan(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_state
             f"expected_states: a plan of {len(actions)} actions needs {len(actions) + 1} expected states "
             f"(s^e_1 .. s^e_N+1), got {len(expected_states)}"
         )
+    valid = info.valid_actions
     for i, spec in enumerate(actions):
+        try:
+            if spec in valid:
+                continue
+        except TypeError:  # not hashable (sets where frozensets belong): checked, never kept
+            check_action(info, i, spec)
+            continue
         check_action(info, i, spec)
+        if len(valid) >= MAX_VALID_ACTIONS:
+            valid.clear()
+        valid.add(spec)
     for i, atoms in enumerate(expected_states):
         if deadline_at is not None and time.monotonic() > deadline_at:
             raise DeadlineError(f"planning: the deadline passed while the store checked expected state {i + 1} of "

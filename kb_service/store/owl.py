@@ -48,7 +48,11 @@ PAGE_SIZE = 4096
 # WAL_FILE_LIMIT is cut back when it restarts.
 WAL_RESTART_PAGES = 16_384
 CATCH_UP_COMMITS = 64  # ... and at least every this many commits
-COALESCE_S = 0.02  # the thread copies the log this long after a commit woke it
+# The thread copies the log once this many commits have gathered since its last copy, or GATHER_S after the first
+# of them, whichever comes first: one copy of the pages they share, and fewer wake-ups of the thread.
+GATHER_COMMITS = 4
+GATHER_S = 1.0
+RETRY_S = 1.0  # a checkpoint that could not copy the whole log (a reader held it) is tried again this long after
 WAL_FILE_LIMIT = 64 * 1024 * 1024
 STORE_COUNTER = "current_resource"  # column of the one-row table `store`: the last storid handed out
 # owlready2's indexes on subject and on object. Queries that ask for the rows of a few individuals of the ABox
@@ -65,14 +69,23 @@ class OwlInternalsError(KBError):
 
 
 class Checkpointer:
-    """Copies a WAL store's log into its file from a connection and thread of its own, woken by each commit.
+    """Copies a WAL store's log into its file from a connection and thread of its own, woken by the commits.
 
     A passive checkpoint never blocks the writer or the readers, and once it has copied every frame before the
     next write begins, that write restarts the log from its start, so the log stays short while writes leave gaps
     between them. Under writes with no gap the thread is always a commit behind and the log grows: past
     `WAL_RESTART_PAGES` pages, or `CATCH_UP_COMMITS` commits, the writer copies what is left itself
     (`QuadStore.commit`; the thread has done most of it), so its next write finds the log copied and restarts
-    it."""
+    it.
+
+    The thread sleeps until a commit wakes it, then lets `GATHER_COMMITS` commits gather (or `GATHER_S` pass) and
+    copies them at once: a page several commits dirtied (the last page of an index group a perception adds to,
+    usually the same from one perception to the next) is copied once, and the thread wakes twice per gathering
+    instead of for every commit. Each wake-up of a service's thread costs its process some CPU whatever it then
+    does (more after a pause than back to back), at a robot's pace a visible part of a re-plan's; an idle service
+    copies nothing and its thread does not wake. Only a checkpoint that could not copy the whole log (a reader held
+    frames) is tried again `RETRY_S` later, commit or not, so that a log a reader held is still copied while
+    nothing is written."""
 
     def __init__(self, path: str) -> None:
         self._conn = sqlite3.connect(path, isolation_level=None, check_same_thread=False, timeout=10)
@@ -81,11 +94,18 @@ class Checkpointer:
         self._one = threading.Lock()
         self.log_pages = 0  # the log's length at the last checkpoint (pages)
         self.commits = 0  # commits since the writer last copied the log itself
+        self.checkpoints = 0  # checkpoints the thread has run
+        self.gathered = 0  # commits since the thread's last copy (a lost count only makes a copy come earlier)
+        self.left_behind = False  # the last one could not copy the whole log: tried again after RETRY_S
         self._thread = threading.Thread(target=self._run, name="planhrc-checkpoint", daemon=True)
         self._thread.start()
 
     def poke(self) -> None:
-        self._wake.set()
+        """A commit: the first one after a copy wakes the thread (it starts gathering), the `GATHER_COMMITS`th makes
+        it copy."""
+        self.gathered += 1
+        if self.gathered == 1 or self.gathered >= GATHER_COMMITS:
+            self._wake.set()
 
     def checkpoint(self, conn: sqlite3.Connection | None = None) -> tuple[int, int, int]:
         """One passive checkpoint, on the thread's connection or the writer's: (busy, pages in the log, pages
@@ -96,14 +116,21 @@ class Checkpointer:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            self._wake.wait(1.0)
-            if self._stop.wait(COALESCE_S):  # let a few commits gather: one copy of a page they share
-                return
+            self._wake.wait(RETRY_S if self.left_behind else None)  # None: until a commit wakes the thread
             self._wake.clear()
+            if 0 < self.gathered < GATHER_COMMITS:
+                self._wake.wait(GATHER_S)  # the last commit to gather, the time limit, or close()
+                self._wake.clear()
+            if self._stop.is_set():
+                return
+            self.gathered = 0
             try:
-                _, self.log_pages, _ = self.checkpoint()
-            except sqlite3.Error as exc:  # the next commit tries again; the log is only longer meanwhile
+                busy, self.log_pages, copied = self.checkpoint()
+                self.checkpoints += 1
+                self.left_behind = bool(busy) or copied < self.log_pages
+            except sqlite3.Error as exc:  # tried again later; the log is only longer meanwhile
                 log.warning("store: checkpoint of the WAL failed: %s", exc)
+                self.left_behind = True
 
     def close(self) -> None:
         self._stop.set()

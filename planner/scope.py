@@ -1,0 +1,163 @@
+"""A VAL problem for some steps without the objects those steps cannot reach (`narrow_problem`): VAL answers it as it
+answers the problem it came from, and costs less.
+
+Why: VAL instantiates a quantified effect for every object of the quantified types at every step. The absolute
+domain's `(forall (?j2 - joint ?o3 ?o4 - orientation) (when (and (affected ?j2 ?l1 ?j1) ...) ...))` costs VAL
+joints x orientations² instances per step, whatever the step: on a piece of a plan that turns only the last few
+joints, most of them are joints the step cannot move. A plan turns the joints roughly in chain order, so the later a
+piece of it, the fewer joints its steps can reach.
+
+What is dropped, and why VAL's answer stays the same. Read from the domain as VAL reads it (`planner.pddl`): every
+quantified variable of every conditional effect must be bound by a positive literal of its condition on a static
+predicate (no effect changes it) whose other arguments are the action's parameters (`affected ?j2 ?l1 ?j1`); else
+nothing is dropped. The objects a step *reaches* are its arguments and, per quantified variable, the values the
+problem's static facts give that literal under the step's arguments. An object of a quantified type that no step
+reaches is dropped, with every fact and goal literal naming it, provided that every goal literal naming it holds in
+the initial state (else the problem is kept whole: VAL must refuse it as the whole one would). Then, step by step:
+
+* an instance of a conditional effect whose quantified variable is a dropped object needs a static fact the problem
+  does not have (that object is not reached), so it never fires: no fact naming a dropped object ever changes;
+* every precondition and every condition of the other instances names only the step's arguments and kept objects,
+  whose facts are the same in both problems: each step applies in one exactly when it applies in the other, with
+  the same effects;
+* the goal literals naming dropped objects held initially and their facts never change, so they hold at the end;
+  the others are the narrowed problem's goal.
+
+So VAL accepts the steps on the narrowed problem exactly when it accepts them on the whole one. The problem text is
+read line by line as `translator.problem.write_problem` writes it (the objects of a type on one line, one fact per
+line); a text of another shape is kept whole.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Sequence
+
+from planhrc.model import EQUALITY
+
+from .errors import PlannerError
+from .operators import normalise_domain
+from .pddl import parse_domain
+
+_OBJECTS, _INIT, _GOAL, _CLOSE = "  (:objects\n", "  (:init\n", "  (:goal (and\n", "  )\n"
+
+
+@dataclass(frozen=True)
+class _Reach:
+    """How a step of one action reaches objects of a quantified type: its parameters of that type (positions), and
+    per quantified variable a static literal binding it: (predicate, the variable's position in it, for every other
+    position the action parameter it holds)."""
+
+    parameters: tuple[int, ...]
+    literals: tuple[tuple[str, int, tuple[tuple[int, int], ...]], ...]
+
+
+@dataclass(frozen=True)
+class _Scope:
+    types: frozenset[str]  # the quantified types: objects of these may be dropped
+    reach: dict[str, dict[str, _Reach]]  # action -> type -> how a step reaches its objects
+    predicates: frozenset[str]  # the static predicates the reach reads
+
+
+def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
+    """`problem` without the objects of quantified types that `steps` cannot reach, or `problem` itself when
+    nothing can be dropped or the domain, the text or a step does not allow it (see the module's note)."""
+    scope = _scope_of(domain)
+    if scope is None or not steps:
+        return problem
+    try:
+        head, rest = problem.split(_OBJECTS, 1)
+        objects_text, rest = rest.split(_CLOSE, 1)
+        between, rest = rest.split(_INIT, 1)
+        init_text, rest = rest.split(_CLOSE, 1)
+        middle, goal_and_tail = rest.split(_GOAL, 1)
+    except ValueError:
+        return problem
+    objects: dict[str, list[str]] = {}
+    for line in objects_text.splitlines():
+        names, dash, kind = line.rpartition(" - ")
+        if dash:
+            objects[kind.strip()] = names.split()
+    init = {_atom(line) for line in init_text.splitlines() if line.strip()}
+    statics: dict[tuple[str, int, tuple[str, ...]], set[str]] = {}
+    for atom in init:
+        if atom and atom[0] in scope.predicates:
+            for pos in range(1, len(atom)):
+                statics.setdefault((atom[0], pos, atom[1:pos] + atom[pos + 1:]), set()).add(atom[pos])
+    reached: dict[str, set[str]] = {kind: set() for kind in scope.types}
+    for step in steps:
+        name, *args = step.strip().strip("()").lower().split()
+        by_type = scope.reach.get(name)
+        if by_type is None:
+            return problem  # not an action of the domain: VAL says so on the whole problem
+        for kind, reach in by_type.items():
+            try:
+                reached[kind].update(args[i] for i in reach.parameters)
+                for predicate, pos, others in reach.literals:
+                    fixed = [""] * (len(others) + 1)
+                    for at, param in others:
+                        fixed[at - 1] = args[param]
+                    key = tuple(fixed[:pos - 1] + fixed[pos:])
+                    reached[kind].update(statics.get((predicate, pos, key), ()))
+            except IndexError:
+                return problem  # too few arguments: VAL says so on the whole problem
+    dropped = {name for kind in scope.types for name in objects.get(kind, ()) if name not in reached[kind]}
+    if not dropped:
+        return problem
+    goal_lines = goal_and_tail.splitlines(keepends=True)
+    for line in goal_lines:
+        text = line.strip()
+        negated = text.startswith("(not ")
+        atom = _atom(text[5:-1] if negated else text)
+        if dropped.intersection(atom[1:]) and (atom in init) == negated:
+            return problem  # a goal on a dropped object that does not hold initially: VAL must refuse it
+    kept_objects = "".join(
+        f"    {' '.join(n for n in names if n not in dropped)} - {kind}\n" for kind, names in objects.items()
+        if any(n not in dropped for n in names))
+    kept_init = "".join(line for line in init_text.splitlines(keepends=True)
+                        if dropped.isdisjoint(_atom(line)[1:]))
+    kept_goal = "".join(line for line in goal_lines if not line.startswith("    (")
+                        or dropped.isdisjoint(_atom(line.strip().removeprefix("(not ").removesuffix(")"))[1:]))
+    return (head + _OBJECTS + kept_objects + _CLOSE + between + _INIT + kept_init + _CLOSE + middle + _GOAL
+            + kept_goal)
+
+
+def _atom(text: str) -> tuple[str, ...]:
+    """`(pred a b)` -> ('pred', 'a', 'b'): a fact or goal line as `write_problem` writes it."""
+    return tuple(text.strip().strip("()").split())
+
+
+@lru_cache(maxsize=8)
+def _scope_of(domain: str) -> _Scope | None:
+    """What `narrow_problem` needs of a domain, or None when its quantified effects are not all bound by static
+    literals on the action's parameters (nothing is then dropped)."""
+    try:
+        parsed = parse_domain(domain)
+        operators = normalise_domain(parsed)
+    except PlannerError:
+        return None
+    fluent = {atom[0] for op in operators for block in op.effects for atom in block.add + block.delete}
+    types = {kind for op in operators for block in op.effects for _, kind in block.variables}
+    if not types or any(parent in types for _, parent in parsed.types):
+        return None  # no quantified effect, or a subtype a quantifier also ranges over
+    literals: dict[tuple[str, str], list[tuple[str, int, tuple[tuple[int, int], ...]]]] = {}
+    for op in operators:
+        names = [var for var, _ in op.parameters]
+        for block in op.effects:
+            for var, kind in block.variables:
+                bound = next((lit for lit in block.condition if not lit.negated and lit.predicate != EQUALITY
+                              and lit.predicate not in fluent and lit.args.count(var) == 1
+                              and all(a == var or a in names for a in lit.args)), None)
+                if bound is None:  # (orientations: `orientationord ?o3 ?o4` binds one by another) none dropped
+                    types.discard(kind)
+                    continue
+                pos = bound.args.index(var) + 1
+                others = tuple((at, names.index(a)) for at, a in enumerate(bound.args, start=1) if a != var)
+                literals.setdefault((op.name, kind), []).append((bound.predicate, pos, others))
+    if not types:
+        return None
+    reach = {op.name: {kind: _Reach(tuple(i for i, (_, t) in enumerate(op.parameters) if t == kind),
+                                    tuple(literals.get((op.name, kind), ()))) for kind in types}
+             for op in operators}
+    predicates = frozenset(lit[0] for (_, kind), found in literals.items() if kind in types for lit in found)
+    return _Scope(frozenset(types), reach, predicates)
