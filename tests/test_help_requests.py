@@ -346,6 +346,31 @@ def test_a_give_up_after_an_unseen_link_asks_for_the_goal_even_when_the_plan_no_
 
 
 
+def test_a_give_up_after_a_turn_no_whole_perception_saw_asks_for_the_goal():
+    # the robot's turn succeeded, but every look since missed link 3: what was seen is the state before the turn
+    # while the execution is past it, so the plan's rest from what was seen would stop short of the goal
+    goal = [90, 90, 135, 225]
+    with TestClient(create_app(make_settings(db_path=None, token=None, merge_macro_steps=False))) as client:
+        oid = client.post("/objects", json={**PLACED, "links": 4, "orientations": 8, "base_point_xy": [0.62, 0.39],
+                                            "formulation": "bimanual"}).json()["id"]
+        client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal})
+        links = [90.0] * 4
+        answer = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).json()
+        while answer["next_action"]["delta_deg"] == 0:
+            links, _ = act_and_see(client, oid, links)
+            answer = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": links}).json()
+        links, turn = act_and_see(client, oid, links)
+        assert turn["delta_deg"] != 0
+        unseen = client.post(f"/objects/{oid}/perceptions",
+                             json={"link_orientations_deg": [v if k != 3 else None for k, v in enumerate(links, 1)]})
+        assert unseen.json()["decision"] == "incomplete_perception"
+        gave_up = client.post(f"/objects/{oid}/give-up", json={"reason": "unseen_links", "message": "link 3"}).json()
+    asked = [(h["link"], h["to_deg"]) for h in gave_up["help"]]
+    assert gave_up["decision"] == "human_help_requested" and asked, gave_up
+    assert all(to == goal[k - 1] for k, to in asked), (asked, links)
+    assert 4 in {k for k, _ in asked}  # link 4 is still short of the goal
+
+
 def act_and_see(client, oid: str, links: list[float]) -> tuple[list[float], dict]:
     """The worker takes the next action and carries it out (the links turn as it says)."""
     action = client.post(f"/objects/{oid}/actions/next").json()
