@@ -25,7 +25,7 @@ from tests.servers import serving, store_location
 from tests.test_service_api import move, new_object, noisy, perceive
 
 GOAL = [0, 90, 90, 180]  # link orientations: j1..j3 carry 90, 90, 180 from l1
-TURNS = ("rotateclockwise", "rotatecounterclockwise")
+TURNS = ("rotateclockwise", "rotateanticlockwise", "rotateclockwise45", "rotateanticlockwise45")  # the TBox's turns
 
 
 @pytest.fixture

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from planhrc.geometry import ObjectGeometry
 from planhrc.model import ArticulatedObject, Formulation, ModelError, State, snap_angle
-from planhrc.ordering import HelpItem, Placement, help_for
+from planhrc.ordering import HelpItem, Placement, final_configuration, help_for
 from planhrc.pipeline import move_of
 from planhrc.vocabulary import DecisionKind, ExecutionStatus
 
@@ -71,7 +71,10 @@ def _give_up(context: Context, request: GiveUpRequest) -> GaveUp:
 def help_after(store: KnowledgeStore, obj: ArticulatedObject, execution: Execution, memo: ObjectMemo,
                why: str) -> tuple[HelpItem, ...]:
     """What to ask the human when the robot stops short of the goal: the rest of the plan from the latest perceived
-    state (`ordering.help_for`), else each link the goal still changes; nothing without a goal or a perception."""
+    state (`ordering.help_for`) when it still ends at the goal, else each link the goal still changes; nothing
+    without a goal or a perception. The rest may no longer end at the goal: a plan goes on after a human's move
+    its next action does not mind (its preconditions hold), and steps carried out since the latest whole
+    perception are not in what was seen."""
     if memo.goal_state_id is None or memo.perceived_state_id is None:
         return ()
     perceived = store.get_state(memo.perceived_state_id)
@@ -86,7 +89,8 @@ def help_after(store: KnowledgeStore, obj: ArticulatedObject, execution: Executi
         moves = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
                  if a.step >= execution.next_step]
         placed = Placement(ObjectGeometry.of(obj, base), seen, whole_turn_deg=whole_turn_deg(obj))
-        items = help_for(placed, moves, None, why=why)
+        end = tuple(float(snap_angle(v, obj.orientations)) for v in final_configuration(placed, moves)[1])
+        items = help_for(placed, moves, None, why=why) if not goal_help(obj, end, goal.atoms, why) else ()
         if items:
             return items
     return goal_help(obj, seen, goal.atoms, why)
