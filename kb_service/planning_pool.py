@@ -99,8 +99,8 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         base = states[0]
         chunk: list[tuple[frozenset[Atom], frozenset[Atom]]] = []
         size = 0
-        for before, state, action in zip(states, states[1:], _actions_between(actions, len(states))):
-            diff = _difference(before, state, action)
+        for before, state, cause in zip(states, states[1:], _actions_between(actions, len(states))):
+            diff = _difference(before, state, cause)
             chunk.append(diff)
             size += len(diff[0]) + len(diff[1]) + 1
             if size >= ATOMS_PER_FRAME:
