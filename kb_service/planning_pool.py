@@ -16,9 +16,18 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   (SIGTERM, then SIGKILL) and replaced, and the job ends `timeout`. A worker that dies ends its job `error` and is
   replaced too. A job waits for a free worker (or one starting) only until its deadline.
 * **What comes back.** The outcome's expected states share most atoms (every state carries the object's static
-  facts): a worker sends the first state once and, for each state, the atoms it lacks and adds against it; the
-  service builds each state as one set operation on the first. The outcome travels in several frames (header,
-  actions, states in chunks) so that no single unpickling holds the service's interpreter for long.
+  facts): a worker sends the first state once and, for each further state, the atoms it lacks and adds against
+  the one before it; the service builds each state as one set operation on the one before. The outcome travels
+  in several frames (header, actions, states in chunks) so that no single unpickling holds the service's
+  interpreter for long.
+* **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small
+  objects (ground conditional effects, atoms), and every few thousand allocations start a collection pass; the
+  full passes walk every expected state made so far (each holds all the object's static facts), so on the
+  absolute 200 x 12 task those passes, not the work, took most of the replay's and the unpacking's time. The
+  unpacking makes no reference cycle, and a whole pipeline run (absolute 60 x 12) about 1,500 cyclic objects:
+  a worker runs a job with the collector off and collects once the outcome is sent (before it takes
+  the next job); the service pauses it only while it unpacks an outcome that has arrived (`_CollectorPause`), not
+  while it waits for one.
 * **Priority.** A worker runs at nice 10: on a machine whose cores are all busy, the service's requests come
   first and the large task gets what is left (`planhrc service-bench --parts contention` compares the slowest
   /health and the other object's slowest perception with the workers at the service's priority).
@@ -29,6 +38,8 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
 """
 from __future__ import annotations
 
+import gc
+import itertools
 import logging
 import os
 import pickle
@@ -40,11 +51,12 @@ import threading
 import time
 from dataclasses import replace
 from multiprocessing.connection import Connection
-from typing import Iterator
+from typing import Callable, Iterator
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
 from planhrc.pipeline.replan import PlanningJob
+from planhrc.transition import change_of
 from planhrc.vocabulary import PlanningStatus
 
 __all__ = ["ATOMS_PER_FRAME", "PlanningJob", "PlanningPool", "pack_outcome", "state_size", "unpack_outcome"]
@@ -68,7 +80,10 @@ def state_size(obj: ArticulatedObject) -> int:
 def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
     """The outcome as frames: a header (the outcome without actions and states, and how many frames follow),
     the actions in chunks, the first expected state, then each further state as (missing, added) atoms against
-    the first, in chunks of about `ATOMS_PER_FRAME` atoms."""
+    the one before it, in chunks of about `ATOMS_PER_FRAME` atoms. A solved outcome's states are its actions'
+    replay (`PlanOutcome`), so each difference is what the state's action changes (`transition.change_of`: a few
+    hundred atoms looked at, where comparing two states whole looks at all their static facts); an outcome
+    without one action per step, or whose sizes do not add up, has its states compared whole."""
     states, actions = outcome.expected_states, outcome.actions
     action_chunks: list[list[ActionSpec]] = []
     weight = EFFECTS_PER_FRAME
@@ -84,8 +99,8 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         base = states[0]
         chunk: list[tuple[frozenset[Atom], frozenset[Atom]]] = []
         size = 0
-        for state in states[1:]:
-            diff = (base - state, state - base)
+        for before, state, cause in zip(states, states[1:], _actions_between(actions, len(states))):
+            diff = _difference(before, state, cause)
             chunk.append(diff)
             size += len(diff[0]) + len(diff[1]) + 1
             if size >= ATOMS_PER_FRAME:
@@ -102,8 +117,24 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         yield pickle.dumps(part, pickle.HIGHEST_PROTOCOL)
 
 
-def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
-    """The outcome `pack_outcome` sent, each state one set operation on the first."""
+def _actions_between(actions: tuple[ActionSpec, ...], n_states: int) -> tuple[ActionSpec | None, ...]:
+    """The action leading to each state after the first, when there is one per state (else none is used)."""
+    return actions if len(actions) == n_states - 1 else (None,) * (n_states - 1)
+
+
+def _difference(before: State, state: State, action: ActionSpec | None) -> tuple[frozenset[Atom], frozenset[Atom]]:
+    """(missing, added): `state` is `(before - missing) | added`."""
+    if action is not None:
+        missing, added = change_of(before, action)
+        if len(before) - len(missing) + len(added) == len(state) and missing.isdisjoint(state) and added <= state:
+            return missing, added
+    return before - state, state - before
+
+
+def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOutcome:
+    """The outcome `pack_outcome` sent, each state one set operation on the one before. With `init` (the job's initial
+    state, which the first expected state equals), the states are made on it: their static facts are then the
+    service's own atoms, which the store's checks of those states find by identity instead of comparing copies."""
     header: tuple[PlanOutcome, int, bool, int, int] = pickle.loads(next(frames))
     bare, n_actions, has_states, n_base, n_states = header
     actions: list[ActionSpec] = []
@@ -113,10 +144,12 @@ def unpack_outcome(frames: Iterator[bytes]) -> PlanOutcome:
     for _ in range(n_base):
         base_atoms.extend(pickle.loads(next(frames)))
     states: list[State] = [frozenset(base_atoms)] if has_states else []
+    if states and init is not None and states[0] == init:
+        states[0] = init if isinstance(init, frozenset) else frozenset(init)
     for _ in range(n_states):
         changes: list[tuple[State, State]] = pickle.loads(next(frames))
         for missing, added in changes:
-            states.append((states[0] - missing) | added)
+            states.append((states[-1] - missing) | added)
     return replace(bare, actions=tuple(actions), expected_states=tuple(states))
 
 
@@ -168,6 +201,7 @@ class PlanningPool:
         self._cond = threading.Condition()
         self._closed = False
         self._sizes: dict[str, int] = {}  # object id -> state_size (objects never change)
+        self._pause = _CollectorPause()
 
     def close(self) -> None:
         """Stop every worker (a job still running ends `error`)."""
@@ -213,7 +247,9 @@ class PlanningPool:
         try:
             worker.conn.send(job)
             frames = self._frames(worker, job.deadline_at + self.grace_s)
-            outcome = unpack_outcome(frames)
+            header = next(frames)  # the worker's answer has come: the rest follows at once
+            with self._pause:
+                outcome = unpack_outcome(itertools.chain((header,), frames), job.init)
             healthy = True
             return outcome
         except _Overrun:
@@ -270,6 +306,30 @@ class PlanningPool:
         threading.Thread(target=worker.stop, name="planhrc-pool-stop", daemon=True).start()
 
 
+class _CollectorPause:
+    """The cyclic garbage collector off while any thread of the service is inside (see the module's note), on
+    again when the last one leaves (if it was on when the first came in). `gc` has one switch per process: the
+    count keeps one thread's leaving from turning it on under another still unpacking."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._inside = 0
+        self._was_enabled = False
+
+    def __enter__(self) -> None:
+        with self._lock:
+            if self._inside == 0:
+                self._was_enabled = gc.isenabled()
+                gc.disable()
+            self._inside += 1
+
+    def __exit__(self, *exc: object) -> None:
+        with self._lock:
+            self._inside -= 1
+            if self._inside == 0 and self._was_enabled:
+                gc.enable()
+
+
 class _Overrun(Exception):
     """A worker did not answer by the job's deadline and its grace."""
 
@@ -296,17 +356,29 @@ def run_worker() -> None:
             job = conn.recv()
         except (EOFError, OSError):
             return
+        gc.disable()  # see the module's note; collected below, after the answer
         try:
-            outcome = pipeline.plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
-                                    deadline_at=job.deadline_at)
-        except Exception as exc:  # the service gets an outcome whatever happens
-            log.exception("planning failed for %s", job.obj.ident)
-            outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)
-        try:
-            for frame in pack_outcome(outcome):
-                conn.send_bytes(frame)
-        except OSError:
+            sent = _answer(conn, job, pipeline.plan)
+        finally:
+            gc.enable()
+        gc.collect()
+        if not sent:
             return
+
+
+def _answer(conn: Connection, job: PlanningJob, plan: Callable[..., PlanOutcome]) -> bool:
+    """Plan the job and send its outcome; False when the service's end of the connection is gone."""
+    try:
+        outcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement, deadline_at=job.deadline_at)
+    except Exception as exc:  # the service gets an outcome whatever happens
+        log.exception("planning failed for %s", job.obj.ident)
+        outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)
+    try:
+        for frame in pack_outcome(outcome):
+            conn.send_bytes(frame)
+    except OSError:
+        return False
+    return True
 
 
 def _stop(signum: int, frame: object) -> None:

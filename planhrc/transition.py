@@ -179,15 +179,20 @@ Change = tuple[frozenset[Atom], frozenset[Atom]]  # the atoms one action removed
 def apply_change(state: State, action: ActionSpec) -> tuple[State, Change]:
     """`apply`, and what it changed: for a state of many static facts, the change is a handful of atoms that a
     `StateIndex` follows without comparing the two states whole."""
+    removed, added = change_of(state, action)
+    return frozenset((state - removed) | added), (removed, added)
+
+
+def change_of(state: State, action: ActionSpec) -> Change:
+    """What `apply(state, action)` removes from `state` and adds to it, without making the new state (for a
+    state of many static facts, a copy of them all)."""
     neg = set(action.eff_neg)
     pos = set(action.eff_pos)
     for ce in action.cond_eff:
         if ce.when <= state:
             neg |= ce.eff_neg
             pos |= ce.eff_pos
-    removed = frozenset(a for a in neg if a in state and a not in pos)
-    added = frozenset(a for a in pos if a not in state)
-    return frozenset((state - removed) | added), (removed, added)
+    return frozenset(a for a in neg if a in state and a not in pos), frozenset(a for a in pos if a not in state)
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from planhrc.kb_service.usecases import GoalRequest, NewObject
 from planhrc.pipeline import MIN_PIECE_STEPS, later, val_runs, validation
 from planhrc.model import make_object
 from planhrc.settings import make_settings
+from tests.servers import TOKEN, serving, token_client
 from tests.test_val_gate import adoption, kinds, perceived, service
 
 
@@ -111,3 +112,33 @@ def test_a_50_by_36_absolute_object_gets_a_validated_first_action(tmp_path):
     assert accepted and accepted[0][0] == 1 and accepted[-1][1] >= answer.next_action.last_step
     assert len(plan.steps) > 300 and event["val_pieces"][-1][1] == len(plan.steps)
     assert "are checked before they are dispatched" in answer.reason and seconds < deadline_s
+
+
+@pytest.mark.slow
+def test_a_200_by_12_absolute_object_gets_a_validated_first_action_over_http(tmp_path):
+    """200 links x 12 orientations on `planhrc serve` (a real process on a loopback port, its planning pool on):
+    the perception answers 200 within the planning deadline with the plan's first motion accepted by VAL and the
+    rest of its hundreds of steps checked behind the answer (a worker's replay and the service's unpacking of the
+    expected states used to take past the deadline: a 503)."""
+    links, k = 200, 12
+    rng = random.Random(7)
+    obj = make_object("probe", "absolute", links, k)
+    with serving(tmp_path / "kb.sqlite3", env={"PLANHRC_TOKEN": TOKEN}) as url, token_client(url) as client:
+        r = client.post("/objects", json={"name": "big", "links": links, "orientations": k, "formulation": "absolute"})
+        assert r.status_code == 201, r.text
+        oid = r.json()["id"]
+        goal = [float(rng.choice(obj.orientation_degrees)) for _ in range(links)]
+        assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal}).status_code == 200
+        perceived_deg = [float(rng.choice(obj.orientation_degrees)) for _ in range(links)]
+        t = time.monotonic()
+        r = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": perceived_deg})
+        seconds = time.monotonic() - t
+        assert r.status_code == 200, r.text
+        answer = r.json()
+        assert answer["decision"] == "replan" and answer["next_action"]["step"] == 1
+        assert seconds < make_settings().planning_deadline_s, seconds
+        event = next(e for e in client.get(f"/objects/{oid}/events").json()
+                     if e["kind"] == "replan" and e["data"].get("plan_id") == answer["plan_id"])["data"]
+        accepted = [event["val_pieces"][i - 1] for i in event["val_accepted"]]
+        assert accepted and accepted[0][0] == 1 and accepted[-1][1] >= answer["next_action"]["last_step"]
+        assert event["val_pieces"][-1][1] > 300  # the plan's hundreds of steps, the later ones behind the answer

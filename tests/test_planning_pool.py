@@ -10,6 +10,8 @@ import time
 from dataclasses import replace
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from planhrc import pipeline
 from planhrc.kb_service.planning_pool import (ATOMS_PER_FRAME, PlanningJob, PlanningPool, pack_outcome, state_size,
@@ -59,6 +61,27 @@ def test_states_travel_as_the_first_and_differences_in_small_frames(config):
     states_only = list(pack_outcome(replace(outcome, actions=())))
     assert sum(map(len, states_only)) < 0.5 * len(pickle.dumps(outcome.expected_states))
     assert len(frames) > 10 and max(map(len, frames)) < 100 * ATOMS_PER_FRAME  # no frame unpickles for long
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(formulation=st.sampled_from(["relative", "absolute", "bimanual"]), links=st.integers(3, 6),
+       k=st.sampled_from([4, 8, 12]), data=st.data())
+def test_the_outcome_comes_back_equal_with_its_states_made_on_the_initial_state(config, formulation, links, k,
+                                                                                   data):
+    """Any small object of each formulation: the unpacked outcome equals the packed one (actions, expected states),
+    its first state is the initial state given to `unpack_outcome` (not a copy), and states sent without their
+    actions (compared whole) come back equal too."""
+    obj = make_object("o", formulation, links, k)
+    angles = st.lists(st.sampled_from(obj.orientation_degrees), min_size=obj.n_joints, max_size=obj.n_joints)
+    init, goal = obj.state(data.draw(angles)), obj.configuration_atoms(data.draw(angles))
+    outcome = pipeline.plan(obj, init, goal, config, defer_validation=True)
+    assert outcome.solved, outcome.message
+    back = unpack_outcome(pack_outcome(outcome), init)
+    assert (back.actions, back.expected_states, back.steps) == (outcome.actions, outcome.expected_states,
+                                                              outcome.steps)
+    assert not outcome.expected_states or back.expected_states[0] is init
+    bare = replace(outcome, actions=())
+    assert unpack_outcome(pack_outcome(bare)).expected_states == outcome.expected_states
 
 
 def test_the_pool_survives_a_worker_that_dies_mid_plan(config):
