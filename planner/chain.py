@@ -104,18 +104,21 @@ def judged(result: PlanResult, domain: str, problem: str, remaining_s: float) ->
         log.warning("VAL ended without a verdict on the plan of %s: %s", result.planner, check.reason)
         return replace(result, status=PlanStatus.ERROR, plan=(), optimal=None, seconds=seconds,
                        message=f"VAL ended without a verdict on its plan of {len(result.plan)} step(s) "
-                               f"({check.reason}: killed, e.g. when memory ran out)")
+                               f"({' '.join(check.reason.split())}: out of memory or killed)")
     log.warning("VAL rejected the plan of %s: %s", result.planner, check.reason)
     return replace(result, status=PlanStatus.INVALID, plan=(), optimal=None, seconds=seconds,
                    message=f"VAL rejected its plan of {len(result.plan)} step(s): {check.reason}")
 
 
 def val_crashed(reason: str) -> bool:
-    """Whether VAL's "reason" is only that SIGKILL ended it (`planner.validate` says "VAL exit code -9" when VAL
-    printed no reason): killed from outside, as by the kernel when memory runs out, so no verdict. (VAL's
-    expansion of a conditional effect over four angles needs gigabytes at K = 24.) Other signals count as a
-    refusal: this VAL build, for one, ends a "Bad plan description!" with a segmentation fault."""
-    return reason.strip() == f"VAL exit code -{signal.SIGKILL.value}"
+    """Whether VAL's "reason" says it could not check the plan rather than that the plan is wrong: SIGKILL ended it
+    (`planner.validate` says "VAL exit code -9" when VAL printed no reason: killed from outside, as by the kernel
+    when memory runs out), or it ran out of memory itself (`std::bad_alloc` under the address space its runs get,
+    `planner.validate.VAL_ADDRESS_SPACE_BYTES`). No verdict either way. (VAL's expansion of a conditional effect over
+    four angles needs gigabytes at K = 24.) Other signals count as a refusal: this VAL build, for one, ends a "Bad
+    plan description!" with a segmentation fault."""
+    text = reason.strip()
+    return text == f"VAL exit code -{signal.SIGKILL.value}" or "std::bad_alloc" in text.splitlines()[-1:]
 
 
 def reading_warnings(domain: str) -> tuple[str, ...]:

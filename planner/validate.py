@@ -266,6 +266,7 @@ def scratch_dir() -> str | None:
 
 
 SHM = "/dev/shm"
+VAL_EXCEPTION = "Error occurred in validation attempt"  # how VAL reports an exception it caught
 
 
 def extract_reason(output: str) -> str:
@@ -289,6 +290,11 @@ def extract_reason(output: str) -> str:
             keep.append(text)
             if i + 1 < len(lines) and lines[i + 1].strip().startswith("("):
                 keep.append(lines[i + 1].strip())
+        elif text.startswith(VAL_EXCEPTION):  # VAL caught an exception; its message is on the next line
+            keep.append(text)
+            following = next((ln.strip() for ln in lines[i + 1:] if ln.strip()), "")
+            if following and not following.startswith(("Queries", "Failed plans", "Successful plans")):
+                keep.append(following)
         elif text in ("Goal not satisfied", "Plan failed to execute", "Plan invalid") or (
                 text and any(text.startswith(m) for m in ("Bad plan", "Error"))):
             keep.append(text)

@@ -165,9 +165,30 @@ def test_val_judges_against_the_domain_the_caller_answers_for():
     assert not refused.solved and refused.attempts[0].status is PlanStatus.INVALID
 
 
-def test_only_a_kill_is_no_verdict():
+def test_a_kill_or_vals_own_lack_of_memory_is_no_verdict():
     from planhrc.planner.chain import val_crashed
 
     assert val_crashed("VAL exit code -9")
+    assert val_crashed("Error occurred in validation attempt:\nstd::bad_alloc")
     assert not val_crashed("VAL exit code -11")  # how this VAL build ends a bad plan description
     assert not val_crashed("Goal not satisfied")
+    assert not val_crashed("Error occurred in validation attempt:\nstd::bad_alloc\nGoal not satisfied")
+
+
+def test_val_out_of_memory_is_no_verdict_not_a_refusal(monkeypatch):
+    """A real VAL given too little address space for the shortest plan of a 3-link x 24 macros task (VAL accepts such
+    plans with its usual space: tests/test_planner_bimanual.py) reports `std::bad_alloc`, and the chain says it has no
+    verdict: an error, never "VAL rejected" and never solved."""
+    from planhrc.bench.bimanual_tasks import domain_text, make_instances, problem_text
+    from planhrc.planner import validate
+    from planhrc.planner.chain import judged, val_crashed
+    from planhrc.planner.inproc import InprocPlanner
+
+    domain, problem = domain_text("macros"), problem_text(make_instances([3], [24], 1, "macros")[0])
+    result = InprocPlanner().solve(domain, problem, timeout_s=30.0)
+    assert result.solved and result.optimal
+    monkeypatch.setattr(validate, "VAL_ADDRESS_SPACE_BYTES", 40 * 2 ** 20)
+    check = validate.validate_plan(domain, problem, result.plan)
+    assert not check.valid and "std::bad_alloc" in check.reason and val_crashed(check.reason)
+    answer = judged(result, domain, problem, 60.0)
+    assert answer.status is PlanStatus.ERROR and not answer.plan and "without a verdict" in answer.message
