@@ -91,7 +91,7 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
             httpx.Client(base_url=server.url, timeout=120, headers={"Authorization": f"Bearer {TOKEN}"}) as client:
         ident = create_object(client, links, orientations, formulation, f"cpu-{formulation}")
         set_goal(client, ident, random_angles(rng, links, orientations))
-        settle = _Settle(client, ident)
+        settle = Settle(client, ident)
         for _ in range(3):  # the first re-plan grounds the task and arms VAL for its domain
             _replan(client, ident, random_angles(rng, links, orientations))
             settle.wait()
@@ -133,7 +133,7 @@ def _replan(client: httpx.Client, ident: str, angles: list[float]) -> tuple[floa
     return seconds, dict(r.json())
 
 
-class _Settle:
+class Settle:
     """Waits until the work behind an object's last answer is done: every later piece of its latest plan has its
     verdict in the object's log (read from where it stopped), and the store's count of plans still to write
     (`/health`) stays the same from one probe to the next (its writer, if any, is done)."""
@@ -160,19 +160,19 @@ class _Settle:
                 self.pending = len(data.get("val_pieces") or []) - len(data.get("val_accepted") or [])
         return self.pending <= 0 and to_write == self.to_write
 
-    def wait(self) -> int:
+    def wait(self, limit_s: float = SETTLE_LIMIT_S) -> int:
         """Wait until `done`; how many probes that took."""
         self.to_write = None
-        probes, end = 1, time.monotonic() + SETTLE_LIMIT_S
+        probes, end = 1, time.monotonic() + limit_s
         while not self.done():
             if time.monotonic() > end:
-                raise TimeoutError(f"the service did not settle within {SETTLE_LIMIT_S:g} s")
+                raise TimeoutError(f"the service did not settle within {limit_s:g} s")
             time.sleep(SETTLE_POLL_S)
             probes += 1
         return probes
 
 
-def _probe_cost(settle: _Settle, pid: int, count: int = 40) -> float:
+def _probe_cost(settle: Settle, pid: int, count: int = 40) -> float:
     """The server's CPU seconds for one settle probe, on the idle service."""
     before = _total(process_cpu_s(pid))
     for _ in range(count):

@@ -1,0 +1,114 @@
+"""`python -m planhrc.bench.large`: re-planning perceptions of large objects over HTTP, within the planning deadline?
+
+For each size (default 50 links x 36 and 200 x 12, absolute), a fresh `planhrc serve` (its planning pool on, the
+settings' deadline) gets one object with a random goal and `--runs` perceptions at random configurations, one
+after the other once the last plan's later VAL pieces have their verdicts. Per perception: the HTTP status, the
+wall time to the answer, the plan's length and how many of its steps VAL had accepted before the answer (the first
+motion, or the whole plan when it was checked in one piece) against how many it checked behind it. A 503 is the deadline passing; it is reported, never retried.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import httpx
+
+from planhrc.bench.cpu import Settle
+from planhrc.bench.grid import machine_info
+from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
+from planhrc.settings import make_settings
+
+SIZES = ((50, 36), (200, 12))
+
+
+def _size(text: str) -> tuple[int, int]:
+    links, sep, k = text.partition("x")
+    if not sep or not links.isdigit() or not k.isdigit() or 360 % int(k):
+        raise argparse.ArgumentTypeError(f"expected LINKSxK with K dividing 360, got {text!r}")
+    return int(links), int(k)
+
+
+def measure_size(links: int, orientations: int, formulation: str, runs: int, seed: int) -> dict[str, Any]:
+    rng = random.Random(seed)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="planhrc-bench-large-") as tmp, running_service(Path(tmp)) as server, \
+            httpx.Client(base_url=server.url, timeout=120, headers={"Authorization": f"Bearer {TOKEN}"}) as client:
+        ident = create_object(client, links, orientations, formulation, f"large-{links}x{orientations}")
+        set_goal(client, ident, random_angles(rng, links, orientations))
+        settle = Settle(client, ident)
+        for _ in range(runs):
+            t = time.perf_counter()
+            r = client.post(f"/objects/{ident}/perceptions",
+                            json={"link_orientations_deg": random_angles(rng, links, orientations)})
+            row: dict[str, Any] = {"status": r.status_code, "seconds": round(time.perf_counter() - t, 3)}
+            if r.status_code == 200:
+                answer = r.json()
+                row["decision"] = answer["decision"]
+                events = client.get(f"/objects/{ident}/events").json()
+                data = next((e["data"] for e in reversed(events) if e["kind"] == "replan"
+                             and e["data"].get("plan_id") == answer.get("plan_id")), {})
+                pieces = data.get("val_pieces") or []
+                accepted = [pieces[i - 1] for i in data.get("val_accepted") or []]
+                if pieces:  # answered once VAL accepted the first pieces, the rest checked behind the answer
+                    row["plan_steps"] = pieces[-1][1]
+                    row["accepted_before_answer"] = accepted[-1][1] if accepted else 0
+                else:  # a plan without pieces was checked whole before the answer
+                    steps = len(client.get(f"/objects/{ident}/plan").json()["steps"])
+                    row["plan_steps"] = row["accepted_before_answer"] = steps
+                row["first_action_last_step"] = (answer.get("next_action") or {}).get("last_step")
+            else:
+                row["detail"] = str(r.json().get("detail", ""))[:160]
+            rows.append(row)
+            settle.wait(limit_s=600.0)
+    return {"links": links, "orientations": orientations, "formulation": formulation, "rows": rows}
+
+
+def markdown(report: dict[str, Any]) -> str:
+    m = report["machine"]
+    lines = [f"machine: {m['cpu']}, {m['cores']} cores; planning deadline {report['deadline_s']} s; "
+             f"load average {report['load_at_start']} at the start", "",
+             "| object | perception | HTTP | seconds | decision | plan steps | VAL-accepted before the answer |",
+             "|---|---|---|---|---|---|---|"]
+    for size in report["sizes"]:
+        for i, row in enumerate(size["rows"], start=1):
+            lines.append(f"| {size['links']} x {size['orientations']} {size['formulation']} | {i} | {row['status']} | "
+                         f"{row['seconds']} | {row.get('decision', row.get('detail', '-'))} | "
+                         f"{row.get('plan_steps', '-')} | {row.get('accepted_before_answer', '-')} |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    import os
+
+    from planhrc.cli_args import OneLineParser, positive_int, writable_dir
+
+    parser = OneLineParser(prog="python -m planhrc.bench.large", description=__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sizes", type=lambda t: [_size(s) for s in t.split(",")],
+                        default=[SIZES[0], SIZES[1]], help="LINKSxK,… (default 50x36,200x12)")
+    parser.add_argument("--formulation", choices=["relative", "absolute"], default="absolute")
+    parser.add_argument("--runs", type=positive_int, default=3, help="perceptions per size")
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--out", type=writable_dir, default=None, help="folder for large.json and large.md")
+    args = parser.parse_args(argv)
+    report = {"machine": machine_info(), "deadline_s": make_settings().planning_deadline_s,
+              "load_at_start": round(os.getloadavg()[0], 2),
+              "sizes": [measure_size(links, k, args.formulation, args.runs, args.seed) for links, k in args.sizes]}
+    table = markdown(report)
+    print(table)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "large.json").write_text(json.dumps(report, indent=2))
+        (out / "large.md").write_text(table + "\n")
+    return 0 if all(r["status"] == 200 for s in report["sizes"] for r in s["rows"]) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

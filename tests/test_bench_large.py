@@ -1,0 +1,24 @@
+"""`python -m planhrc.bench.large`: its refusals, and one small object through a real `planhrc serve`."""
+import json
+
+import pytest
+
+from planhrc.bench.large import main
+
+
+def test_a_size_that_is_not_links_x_k_is_refused_in_one_line(capsys, tmp_path):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--sizes", "20x7", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert exit_info.value.code == 2 and len(err.splitlines()) == 1 and "20x7" in err
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
+@pytest.mark.integration
+def test_a_small_absolute_object_is_answered_with_its_validated_first_motion(tmp_path):
+    assert main(["--sizes", "6x8", "--runs", "2", "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "large.json").read_text())
+    rows = report["sizes"][0]["rows"]
+    assert [r["status"] for r in rows] == [200, 200] and rows[0]["decision"] == "replan"
+    assert 1 <= rows[0]["accepted_before_answer"] <= rows[0]["plan_steps"]
+    assert "| 6 x 8 absolute | 1 | 200 |" in (tmp_path / "large.md").read_text()
