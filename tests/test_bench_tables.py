@@ -58,3 +58,13 @@ def test_files_of_two_runs_are_refused(one_run, tmp_path, capsys):
 def test_a_readme_without_its_markers_is_refused():
     with pytest.raises(BenchError, match="bench:begin"):
         replace_block("no markers here", "table")
+
+
+def test_the_readme_holds_the_tables_of_the_committed_run():
+    """The README's planning, re-planning and bimanual tables are those `bench.tables` writes from the one run's files
+    in docs/results/one-run, and those files come from one run."""
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    assert tables_main(["--results", str(repo / "docs/results/one-run"), "--readme", str(repo / "README.md"),
+                        "--check"]) == 0
