@@ -15,14 +15,13 @@ Markdown table (with `--out`, field.json and field.md too).
 from __future__ import annotations
 
 import argparse
-import json
 import random
 import statistics
 import sys
 from pathlib import Path
 from typing import Any, Sequence
 
-from planhrc.bench.grid import Instance, instance_pddl, machine_info, make_instances
+from planhrc.bench.grid import Instance, instance_pddl, machine_info, make_instances, write_json_and_table
 from planhrc.paths import default_tbox_path
 from planhrc.planner.chain import plan_with_fallback
 from planhrc.planner.result import PlanStatus
@@ -125,10 +124,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     table = markdown(report)
     print(table)
     if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "field.json").write_text(json.dumps(report, indent=2))
-        (out / "field.md").write_text(table + "\n")
+        write_json_and_table(Path(args.out), "field", report, table)
     return 0 if all(s["val_valid_in_process"] == s["files"] for s in report["summary"]) else 1
 
 

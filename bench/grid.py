@@ -200,6 +200,15 @@ def write_results(rows: Sequence[Row], summary: list[dict[str, Any]], out_dir: P
     return written
 
 
+def write_json_and_table(out_dir: Path, stem: str, report: dict[str, Any], table: str) -> list[Path]:
+    """`report` as `<stem>.json` and its markdown `table` as `<stem>.md` in `out_dir` (made when missing)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [out_dir / f"{stem}.json", out_dir / f"{stem}.md"]
+    paths[0].write_text(json.dumps(report, indent=2))
+    paths[1].write_text(table + "\n")
+    return paths
+
+
 def machine_info() -> dict[str, Any]:
     import os
 

@@ -9,7 +9,6 @@ motion, or the whole plan when it was checked in one piece) against how many it 
 from __future__ import annotations
 
 import argparse
-import json
 import random
 import sys
 import tempfile
@@ -20,7 +19,7 @@ from typing import Any, Sequence
 import httpx
 
 from planhrc.bench.cpu import Settle
-from planhrc.bench.grid import machine_info
+from planhrc.bench.grid import machine_info, write_json_and_table
 from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
 from planhrc.settings import make_settings
 
@@ -51,8 +50,8 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 answer = r.json()
                 row["decision"] = answer["decision"]
                 events = client.get(f"/objects/{ident}/events").json()
-                data = next((e["data"] for e in reversed(events) if e["kind"] == "replan"
-                             and e["data"].get("plan_id") == answer.get("plan_id")), {})
+                data: dict[str, Any] = next((e["data"] for e in reversed(events) if e["kind"] == "replan"
+                                             and e["data"].get("plan_id") == answer.get("plan_id")), {})
                 pieces = data.get("val_pieces") or []
                 accepted = [pieces[i - 1] for i in data.get("val_accepted") or []]
                 if pieces:  # answered once VAL accepted the first pieces, the rest checked behind the answer
@@ -97,16 +96,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--out", type=writable_dir, default=None, help="folder for large.json and large.md")
     args = parser.parse_args(argv)
-    report = {"machine": machine_info(), "deadline_s": make_settings().planning_deadline_s,
+    report: dict[str, Any] = {"machine": machine_info(), "deadline_s": make_settings().planning_deadline_s,
               "load_at_start": round(os.getloadavg()[0], 2),
               "sizes": [measure_size(links, k, args.formulation, args.runs, args.seed) for links, k in args.sizes]}
     table = markdown(report)
     print(table)
     if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "large.json").write_text(json.dumps(report, indent=2))
-        (out / "large.md").write_text(table + "\n")
+        write_json_and_table(Path(args.out), "large", report, table)
     return 0 if all(r["status"] == 200 for s in report["sizes"] for r in s["rows"]) else 1
 
 

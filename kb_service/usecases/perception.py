@@ -194,7 +194,12 @@ def _check_plan(context: Context, obj: ArticulatedObject, outcome: PlanOutcome, 
     """The store's checks of a new plan (outside the store's lock), while VAL checks it in its own processes."""
     if not (outcome.solved and outcome.actions):
         return None
-    return context.store.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at)
+    try:
+        return context.store.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at)
+    except DeadlineError as exc:  # said as every other stage says it: with the deadline the settings give
+        where = str(exc).removeprefix("planning: the deadline passed")
+        raise DeadlineError(f"planning: planning deadline of {context.planning.deadline_s:g} s exceeded{where}") \
+            from None
 
 
 def _incomplete(context: Context, obj: ArticulatedObject, request: PerceptionRequest, print_: str,
