@@ -1,15 +1,20 @@
-"""The CPU a re-plan costs, whole: the service's CPU per re-planning perception beside a planner's whole process.
+"""The CPU a re-plan costs, whole: the service's CPU per re-plan beside a planner's whole process.
 
 `measure_service_cpu` starts a real `planhrc serve`, posts re-planning perceptions paced as a robot's (each
-`ROBOT_PAUSE_S` after the last answer has settled) and reads the server's CPU from `/proc/<pid>/stat`: its own
-user + system time, its reaped children's (VAL's processes) and its live descendants' (the planning pool's workers,
-where an absolute task is planned and replayed, and the VAL processes armed for the next plan: they are not
-reaped while the service runs), over the whole run, so everything a re-plan costs is in it: the request, its VAL runs, the work behind the answer (the plan's later pieces under VAL, and
-anything the store writes after the commit). After each answer the bench waits until that work is done: every
-later piece of the plan has its `val_verdict` event and the store writes nothing more (`/health`'s
-`plans_to_write` holds still from one probe to the next). Those probes cost the server a little CPU of their own; it is measured on the idle service and taken off
-(`probe_ms`). What the idle service spends per second (`idle_ms_per_s`, its threads' time-outs) is measured
-apart, and the run's share of it stays in the figure: it is what the service costs while it re-plans.
+`ROBOT_PAUSE_S` after the last answer has settled) and reads the server's CPU around each perception and the work
+behind its answer: its threads' run time to the nanosecond (`/proc/<pid>/task/*/schedstat`; /proc's own count, in
+clock ticks, for a window in which a thread ended), its reaped children's (VAL's processes) and its live
+descendants' (the planning pool's workers, where an absolute task is planned and replayed, and the VAL processes
+armed for the next plan: they are not reaped while the service runs). So everything a re-plan costs is in its
+window: the request, its VAL runs, the work behind the answer (the plan's later pieces under VAL, the next VAL
+armed, anything the store writes after the commit). After each answer the bench waits until that work is done:
+every later piece of the plan has its `val_verdict` event and the store writes nothing more (`/health`'s
+`plans_to_write` holds still from one probe to the next). Those probes cost the server CPU of their own; it is
+measured on the idle service with the probes spaced as the wait spaces them (a request after a pause costs the
+server about twice one right after another) and taken off (`probe_ms`). A random perception now and then lets the
+plan go on instead (the cooperation model's `continue`): its window is reported apart (`other_ms`), not shared
+out among the re-plans. What the idle service spends per second (`idle_ms_per_s`, its threads' time-outs) is
+measured apart too, and stays in the figures: it is what the service costs while it re-plans.
 
 `measure_process_cpu` is the anchor measured in the same run: a planner's whole process (driver, translator,
 search, plan file) on a random task of the same size, its CPU read from this process's reaped children. Madagascar
@@ -79,10 +84,12 @@ def _children(pid: int) -> list[int]:
 
 def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 12, runs: int = 20, seed: int = 7,
                         env: Mapping[str, str] | None = None, pause_s: float = ROBOT_PAUSE_S) -> dict[str, Any]:
-    """The service's whole CPU per re-plan (see the module's note), in ms: `per_replan_ms` (own + children + live
-    descendants, the settle probes taken off), `val_children_ms` (VAL's processes that ended), `descendants_ms`
-    (the planning workers and armed VAL processes still running) and the answers' latency. A random
-    perception now and then lets the plan go on (`decisions`); its CPU is counted as the re-plans'."""
+    """The service's whole CPU per re-plan (see the module's note), in ms, read around each perception and the work
+    behind its answer: `per_replan_ms` (own + children + live descendants, the settle probes taken off, averaged
+    over the perceptions that re-planned), `own_ms`, `val_children_ms` (VAL's processes that ended) and
+    `descendants_ms` (the planning workers and armed VAL processes still running) of those, and the answers'
+    latency. A random perception now and then lets the plan go on (`decisions`): its CPU is reported apart
+    (`other_ms`), and `per_perception_ms` averages every perception."""
     from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
 
     rng = random.Random(seed)
@@ -101,28 +108,55 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
         idle_s = _idle_rate(server.pid)
         latencies: list[float] = []
         decisions: dict[str, int] = {}
-        before, t0, probes = process_cpu_s(server.pid), time.monotonic(), 0
-        live_before = live_descendants_cpu_s(server.pid)
+        spent: dict[str, list[tuple[float, float, float]]] = {}  # decision -> (own, children, live) per perception
+        probes = 0
+        mark = _Reading(server.pid)
         for _ in range(runs):
             seconds, answer = _replan(client, ident, random_angles(rng, links, orientations))
             decisions[answer["decision"]] = decisions.get(answer["decision"], 0) + 1
             latencies.append(seconds)
             time.sleep(pause_s)
-            probes += settle.wait()
-        after, elapsed = process_cpu_s(server.pid), time.monotonic() - t0
-        live = live_descendants_cpu_s(server.pid) - live_before
-    own = after[0] - before[0] - probes * probe_s
-    children = after[1] - before[1]
-    replans = max(1, decisions.get("replan", 0))  # the few other decisions' CPU is counted as the re-plans'
+            count = settle.wait()
+            probes += count
+            now = _Reading(server.pid)
+            own, children, live = now.since(mark)
+            spent.setdefault(answer["decision"], []).append((own - count * probe_s, children, live))
+            mark = now
+    replans = spent.get("replan") or [(0.0, 0.0, 0.0)]
+    others = [row for kind, rows in spent.items() if kind != "replan" for row in rows]
+    everything = [row for rows in spent.values() for row in rows]
+
+    def mean_ms(rows: list[tuple[float, float, float]], *parts: int) -> float:
+        return round(sum(sum(row[i] for i in parts) for row in rows) / max(1, len(rows)) * 1000, 2)
 
     return {"formulation": formulation, "links": links, "orientations": orientations, "runs": runs,
             "pause_s": pause_s, "decisions": decisions,
-            "per_replan_ms": round((own + children + live) / replans * 1000, 2),
-            "own_ms": round(own / replans * 1000, 2), "val_children_ms": round(children / replans * 1000, 2),
-            "descendants_ms": round(live / replans * 1000, 2),
-            "idle_ms_per_s": round(idle_s * 1000, 2), "idle_share_ms": round(idle_s * elapsed / replans * 1000, 2),
+            "per_replan_ms": mean_ms(replans, 0, 1, 2), "own_ms": mean_ms(replans, 0),
+            "val_children_ms": mean_ms(replans, 1), "descendants_ms": mean_ms(replans, 2),
+            "other_ms": mean_ms(others, 0, 1, 2) if others else None,
+            "per_perception_ms": mean_ms(everything, 0, 1, 2),
+            "idle_ms_per_s": round(idle_s * 1000, 2), "idle_share_ms": round(idle_s * (pause_s + SETTLE_POLL_S) * 1000, 2),
             "probes": probes, "probe_ms": round(probe_s * 1000, 3),
             "latency_median_ms": round(percentile(latencies, 0.5) * 1000, 2)}
+
+
+class _Reading:
+    """A process's CPU at one moment: its threads' to the nanosecond, its own as /proc counts it (in clock ticks,
+    with the threads that ended), its reaped children's and its live descendants' seconds."""
+
+    def __init__(self, pid: int) -> None:
+        self.threads = _threads_ns(pid)
+        self.own, self.children = process_cpu_s(pid)
+        self.live = live_descendants_cpu_s(pid)
+
+    def since(self, before: _Reading) -> tuple[float, float, float]:
+        """(own, children, live descendants) seconds from `before` to this reading; the own part from the threads'
+        times while every thread of `before` still runs, else (a thread ended) as /proc counts it."""
+        if set(before.threads) <= set(self.threads):
+            own = sum(self.threads.values()) / 1e9 - sum(before.threads.values()) / 1e9
+        else:
+            own = self.own - before.own
+        return own, self.children - before.children, self.live - before.live
 
 
 def _replan(client: httpx.Client, ident: str, angles: list[float]) -> tuple[float, dict[str, Any]]:
@@ -172,12 +206,32 @@ class Settle:
         return probes
 
 
-def _probe_cost(settle: Settle, pid: int, count: int = 40) -> float:
-    """The server's CPU seconds for one settle probe, on the idle service."""
-    before = _total(process_cpu_s(pid))
+def _probe_cost(settle: Settle, pid: int, count: int = 60) -> float:
+    """The server's CPU seconds for one settle probe, on the idle service, the probes spaced as `Settle.wait` spaces
+    them (a request after a pause costs the server more than one right after another), the CPU read to the
+    nanosecond from its threads' scheduler statistics."""
+    before = threads_cpu_s(pid)
     for _ in range(count):
+        time.sleep(SETTLE_POLL_S)
         settle.done()
-    return max(0.0, (_total(process_cpu_s(pid)) - before) / count)
+    return max(0.0, (threads_cpu_s(pid) - before) / count)
+
+
+def threads_cpu_s(pid: int) -> float:
+    """The CPU seconds a process's threads have run (Linux `/proc/<pid>/task/*/schedstat`, nanoseconds; a thread
+    that ended is no longer counted, so only differences over a time when its threads stay are meaningful)."""
+    return sum(_threads_ns(pid).values()) / 1e9
+
+
+def _threads_ns(pid: int) -> dict[str, int]:
+    """Each live thread's run time in nanoseconds, by thread id."""
+    found: dict[str, int] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            found[task.name] = int((task / "schedstat").read_text().split()[0])
+        except (OSError, IndexError, ValueError):
+            continue
+    return found
 
 
 def _idle_rate(pid: int, seconds: float = 2.0) -> float:
