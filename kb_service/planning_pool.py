@@ -56,7 +56,7 @@ from typing import Callable, Iterator
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
 from planhrc.pipeline.replan import PlanningJob
-from planhrc.transition import change_of
+from planhrc.transition import changes_along
 from planhrc.vocabulary import PlanningStatus
 
 __all__ = ["ATOMS_PER_FRAME", "PlanningJob", "PlanningPool", "pack_outcome", "state_size", "unpack_outcome"]
@@ -81,7 +81,7 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
     """The outcome as frames: a header (the outcome without actions and states, and how many frames follow),
     the actions in chunks, the first expected state, then each further state as (missing, added) atoms against
     the one before it, in chunks of about `ATOMS_PER_FRAME` atoms. A solved outcome's states are its actions'
-    replay (`PlanOutcome`), so each difference is what the state's action changes (`transition.change_of`: a few
+    replay (`PlanOutcome`), so each difference is what the state's action changes (`transition.changes_along`: a few
     hundred atoms looked at, where comparing two states whole looks at all their static facts); an outcome
     without one action per step, or whose sizes do not add up, has its states compared whole."""
     states, actions = outcome.expected_states, outcome.actions
@@ -99,8 +99,7 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         base = states[0]
         chunk: list[tuple[frozenset[Atom], frozenset[Atom]]] = []
         size = 0
-        for before, state, cause in zip(states, states[1:], _actions_between(actions, len(states))):
-            diff = _difference(before, state, cause)
+        for diff in changes_along(states, actions):
             chunk.append(diff)
             size += len(diff[0]) + len(diff[1]) + 1
             if size >= ATOMS_PER_FRAME:
@@ -115,20 +114,6 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
     yield pickle.dumps(header, pickle.HIGHEST_PROTOCOL)
     for part in (*action_chunks, *base_frames, *state_chunks):
         yield pickle.dumps(part, pickle.HIGHEST_PROTOCOL)
-
-
-def _actions_between(actions: tuple[ActionSpec, ...], n_states: int) -> tuple[ActionSpec | None, ...]:
-    """The action leading to each state after the first, when there is one per state (else none is used)."""
-    return actions if len(actions) == n_states - 1 else (None,) * (n_states - 1)
-
-
-def _difference(before: State, state: State, action: ActionSpec | None) -> tuple[frozenset[Atom], frozenset[Atom]]:
-    """(missing, added): `state` is `(before - missing) | added`."""
-    if action is not None:
-        missing, added = change_of(before, action)
-        if len(before) - len(missing) + len(added) == len(state) and missing.isdisjoint(state) and added <= state:
-            return missing, added
-    return before - state, state - before
 
 
 def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOutcome:

@@ -195,6 +195,26 @@ def change_of(state: State, action: ActionSpec) -> Change:
     return frozenset(a for a in neg if a in state and a not in pos), frozenset(a for a in pos if a not in state)
 
 
+def change_between(before: State, after: State, action: ActionSpec | None = None) -> Change:
+    """(removed, added) such that `after` is `(before - removed) | added`, for states a plan's replay made (`after`
+    is `apply(before, action)`): what `action` changes, a few atoms looked at where comparing two states whole looks
+    at all their static facts. The change is checked against the states' sizes and the changed atoms only, not
+    every atom; when it does not fit, or without an action, the two states are compared whole."""
+    if action is not None:
+        removed, added = change_of(before, action)
+        if (len(before) - len(removed) + len(added) == len(after) and removed.isdisjoint(after)
+                and added <= after):
+            return removed, added
+    return before - after, after - before
+
+
+def changes_along(states: Sequence[State], actions: Sequence[ActionSpec]) -> tuple[Change, ...]:
+    """`change_between` each state and the next; the actions are used as the steps between them when there is one
+    per step (a plan's replay), else the states are compared whole."""
+    steps: Sequence[ActionSpec | None] = actions if len(actions) == len(states) - 1 else (None,) * (len(states) - 1)
+    return tuple(change_between(before, after, step) for before, after, step in zip(states, states[1:], steps))
+
+
 @dataclass(frozen=True)
 class _Conditional:
     """A step of a schema with conditional effects, ground once for the static facts it was ground with: its

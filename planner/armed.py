@@ -32,6 +32,7 @@ log = logging.getLogger(__name__)
 ARM_DELAY_S = 0.05  # a new process is armed this long after one was used: after the answer, not during the request
 MAX_DOMAINS = 4  # domains kept armed at once (the least recently used one is dropped)
 READY_WAIT_S = 2.0  # how long the arming thread watches a new process reach its problem
+FIRST_LOOK_S = 0.004  # the arming thread's first look at a new process, a little after VAL has read a short domain
 
 
 class _Armed:
@@ -54,15 +55,19 @@ class _Armed:
             raise
 
     def wait_ready(self, timeout_s: float) -> bool:
-        """Wait (polling) until VAL has the FIFO open, up to `timeout_s`: done by the arming thread, so that a check
-        finds it `confirmed` and feeds it without looking again."""
+        """Wait until VAL has the FIFO open, up to `timeout_s`: done by the arming thread, so that a check finds it
+        `confirmed` and feeds it without looking again. Each look reads the process's descriptors in /proc, so the
+        looks are spaced out more and more (`FIRST_LOOK_S`, doubling): VAL usually gets there before the first."""
         end = time.monotonic() + timeout_s
-        while not self.ready():
-            if self.proc.poll() is not None or time.monotonic() > end:
+        pause = FIRST_LOOK_S
+        while True:
+            time.sleep(min(pause, max(0.0, end - time.monotonic())))
+            if self.ready():
+                self.confirmed = True
+                return True
+            if self.proc.poll() is not None or time.monotonic() >= end:
                 return False
-            time.sleep(0.001)
-        self.confirmed = True
-        return True
+            pause *= 2
 
     def ready(self) -> bool:
         """VAL runs and has the FIFO open (it has parsed the domain and waits for the problem)."""

@@ -210,6 +210,7 @@ def test_the_checkpoint_thread_wakes_for_commits_only(tmp_path, monkeypatch):
     import time
 
     monkeypatch.setattr(owl, "RETRY_S", 0.2)
+    monkeypatch.setattr(owl, "GATHER_S", 1.0)  # a lone commit's wait, shortened for the test
     path = tmp_path / "q.sqlite3"
     store = owl.QuadStore(str(path))
     store.use_wal()

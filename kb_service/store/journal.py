@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from planhrc.model import Atom
+from planhrc.transition import changes_along
 
 from .errors import DamagedStoreError
 from .names import action_name, record_name
@@ -82,7 +83,7 @@ def encode(entry: JournalEntry) -> bytes:
                      tuple((c.when, c.eff_neg, c.eff_pos) for c in a.cond_eff)) for a in entry.actions)
     states = entry.expected_states
     first = frozenset(states[0]) if states else frozenset()
-    changes = tuple((before - after, after - before) for before, after in zip(states, states[1:]))
+    changes = changes_along(states, entry.actions)  # a plan's states are its actions' replay
     return pickle.dumps((FORMAT, entry.plan_id, entry.object_id, entry.problem_id, entry.planner,
                          float(entry.created_at), int(entry.first_state), actions, (len(states), first, changes)),
                         protocol=5)

@@ -50,8 +50,8 @@ WAL_RESTART_PAGES = 16_384
 CATCH_UP_COMMITS = 64  # ... and at least every this many commits
 # The thread copies the log once this many commits have gathered since its last copy, or GATHER_S after the first
 # of them, whichever comes first: one copy of the pages they share, and fewer wake-ups of the thread.
-GATHER_COMMITS = 4
-GATHER_S = 1.0
+GATHER_COMMITS = 16
+GATHER_S = 4.0
 RETRY_S = 1.0  # a checkpoint that could not copy the whole log (a reader held it) is tried again this long after
 WAL_FILE_LIMIT = 64 * 1024 * 1024
 STORE_COUNTER = "current_resource"  # column of the one-row table `store`: the last storid handed out
