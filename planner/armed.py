@@ -8,8 +8,9 @@ path that does not exist yet. VAL reads its arguments in order, so it parses the
 blocks reading it. A check then writes the plan file and the problem into the FIFO, and the process is an
 ordinary `ValRun` from there: the same binary, the same three inputs, the same verdict as a cold run.
 
-This process holds the FIFO open for reading and writing from the start, so VAL's `open` does not wait and, if
-this process dies (even by SIGKILL), VAL reads end-of-file instead of a problem and exits: an armed VAL never
+This process holds the FIFO open for reading and writing from the start, and VAL opens it through that descriptor
+(`/proc/<this process>/fd/<n>`), so VAL's `open` does not wait; if this process dies (even by SIGKILL), VAL either
+reads end-of-file instead of a problem or, not at the FIFO yet, finds the path gone, and exits: an armed VAL never
 outlives its service. After one is used, another is armed for that domain by a background thread `ARM_DELAY_S`
 later, off the request's path; a check that finds none armed (back-to-back re-plans, a new domain) starts a
 cold run. Linux only (named pipes and /proc); elsewhere every run is cold.
@@ -49,7 +50,11 @@ class _Armed:
             os.mkfifo(self.files[1], 0o600)
             # read and write: VAL's open does not wait for a writer, and VAL sees end-of-file if this process dies
             self.fifo_fd = os.open(self.files[1], os.O_RDWR)
-            self.proc = spawn_val(self.files, folder)
+            # VAL opens the FIFO through this process's descriptor: should this process die before VAL gets there
+            # (VAL still reading the domain), the path is gone and VAL stops, where opening the FIFO itself would
+            # wait for a writer for ever
+            held = f"/proc/{os.getpid()}/fd/{self.fifo_fd}"
+            self.proc = spawn_val((self.files[0], held, self.files[2]), folder)
         except BaseException:
             self.discard()
             raise

@@ -179,6 +179,36 @@ def test_an_armed_process_does_not_outlive_its_owner_killed_with_sigkill(tmp_pat
     assert not any(_alive(p) for p in pids), "an armed VAL process outlived its owner"
 
 
+def test_an_armed_process_does_not_outlive_an_owner_killed_before_it_reached_the_fifo(tmp_path):
+    """An owner killed while its VAL still reads the domain: VAL, opening the FIFO afterwards through the owner's
+    descriptor, finds it gone and exits (opening the FIFO by its name, it would wait for a writer for ever)."""
+    head, _, actions = DOMAIN.partition("  (:action ")
+    body = "  (:action " + actions.rstrip()[:-1]  # the actions, without the domain's closing parenthesis
+    copies = "".join(body.replace("(:action rotate", f"(:action r{i}-rotate") + "\n" for i in range(3000))
+    big = tmp_path / "big-domain.pddl"
+    big.write_text(head + copies + ")\n")  # VAL takes a tenth of a second or so to read it
+    script = textwrap.dedent(f"""
+        import os, signal, tempfile
+        from pathlib import Path
+        from planhrc.planner.armed import _Armed
+        armed = _Armed(Path({str(big)!r}).read_text(), tempfile.mkdtemp(dir={str(tmp_path)!r}), "a")
+        print(armed.proc.pid, flush=True)
+        os.kill(os.getpid(), signal.SIGKILL)  # before VAL has read the domain
+    """)
+    owner = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        pid = int(owner.stdout.readline())
+    finally:
+        owner.wait()
+    assert owner.returncode == -signal.SIGKILL
+    deadline = time.monotonic() + 10
+    while _alive(pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if _alive(pid):
+        os.kill(pid, signal.SIGKILL)
+        raise AssertionError("an armed VAL process outlived an owner killed before VAL opened the FIFO")
+
+
 def test_a_val_process_cannot_take_the_hosts_memory():
     """VAL grounds quantified effects instance by instance: its address space is capped, so a check too large for
     the cap ends without a verdict instead of exhausting the machine."""
