@@ -58,7 +58,8 @@ def add_bench_parser(subparsers: SubParsers) -> None:
     p.add_argument("--no-validate", action="store_true")
     p.add_argument("--replan", action="store_true", help="also measure re-planning on 20 x 12")
     p.add_argument("--replan-only", action="store_true", help="only measure re-planning on 20 x 12")
-    p.add_argument("--replan-runs", type=positive_int, default=20, help="re-plans measured per formulation and stage")
+    p.add_argument("--replan-runs", type=positive_int, default=60,
+                   help="re-plans measured per formulation and stage (the CPU column wants some 60 to settle)")
     p.add_argument("--fd-runs", type=positive_int, default=3, help="Fast Downward runs in the re-planning comparison")
     p.add_argument("--fd-timeout", type=positive_float, default=10.0, metavar="S",
                    help="Fast Downward's limit in the re-planning comparison (a timeout is not repeated)")
