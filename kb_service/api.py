@@ -100,9 +100,9 @@ async def require_writer(request: Request, authorization: Annotated[str | None, 
 
 
 Ctx = Annotated[usecases.Context, Depends(get_context)]
-# The robot's loop (perceive, take the next action, report its outcome) is `async def` and hands its use case to the
-# thread pool itself: FastAPI runs a plain `def` handler there and then validates its answer on the pool too, a second
-# trip on every call; these answers are small, validated on the event loop in microseconds.
+# The robot's loop (perceive, take the next action, report its outcome) and /health are `async def` and hand their
+# use case to the thread pool themselves: FastAPI runs a plain `def` handler there and then validates its answer on
+# the pool too, a second trip on every call; these answers are small, validated on the event loop in microseconds.
 Writer = [Depends(require_writer)]
 WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for status in (400, 401, 409, 413)}
 
@@ -333,8 +333,8 @@ def stream_object_events(
 
 
 @router.get("/health", response_model=HealthPublic, tags=["service"])
-def read_health(context: Ctx) -> HealthPublic:
-    health = usecases.read_health(context)
+async def read_health(context: Ctx) -> HealthPublic:
+    health = await run_in_threadpool(usecases.read_health, context)  # one trip to the pool: see `Ctx`
     return HealthPublic(status="ok", version=planhrc.__version__, objects=health.objects, triples=health.triples,
                         plans_to_write=health.plans_to_write, auth=bool(context.settings.token))
 
