@@ -16,6 +16,7 @@ from fastapi import APIRouter, Depends, FastAPI, Header, Query, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, PlainTextResponse, Response, StreamingResponse
+from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match, Route
 
@@ -99,6 +100,9 @@ async def require_writer(request: Request, authorization: Annotated[str | None, 
 
 
 Ctx = Annotated[usecases.Context, Depends(get_context)]
+# The robot's loop (perceive, take the next action, report its outcome) and /health are `async def` and hand their
+# use case to the thread pool themselves: FastAPI runs a plain `def` handler there and then validates its answer on
+# the pool too, a second trip on every call; these answers are small, validated on the event loop in microseconds.
 Writer = [Depends(require_writer)]
 WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for status in (400, 401, 409, 413)}
 
@@ -161,7 +165,7 @@ def update_goal(object_id: str, body: GoalUpdate, context: Ctx) -> GoalPublic:
                  "read_plan": ("/plans/{plan_id}", "get", {"plan_id": "$response.body#/plan_id"}),
                  "read_state": ("/states/{state_id}", "get", {"state_id": "$response.body#/perceived_state_id"})})},
              tags=["cooperation"])
-def create_perception(
+async def create_perception(
     object_id: str,
     body: PerceptionCreate,
     context: Ctx,
@@ -175,7 +179,7 @@ def create_perception(
     created."""
     base = tuple(body.base_point_xy) if body.base_point_xy is not None else None
     request = usecases.PerceptionRequest(object_id, tuple(body.link_orientations_deg), idempotency_key, base)
-    turn = usecases.perceive(context, request)
+    turn = await run_in_threadpool(usecases.perceive, context, request)
     return DecisionPublic.model_validate(turn, from_attributes=True)
 
 
@@ -184,14 +188,14 @@ def create_perception(
                  f"{OBJECT}/actions/{{action_id}}/feedback", "post",
                  {**SAME_OBJECT, "action_id": "$response.body#/id"})})},
              tags=["cooperation"])
-def take_next_action(object_id: str, context: Ctx) -> NextActionPublic | None:
+async def take_next_action(object_id: str, context: Ctx) -> NextActionPublic | None:
     """For workers: take the action to execute now, which is marked dispatched (taking it again returns the same
     action); null when there is none (no plan, goal reached, or the last action is done and a perception is due).
     It changes the execution, so it is a POST and needs the bearer token when one is configured.
 
     It replaces `GET /objects/{object_id}/next-action` (a GET must not change state), which is no longer an
     operation: it answers 410 Gone with an ErrorPublic body naming this route."""
-    action = usecases.take_next_action(context, object_id)
+    action = await run_in_threadpool(usecases.take_next_action, context, object_id)
     return NextActionPublic.model_validate(action, from_attributes=True) if action is not None else None
 
 
@@ -203,7 +207,7 @@ def read_next_action_gone(object_id: str) -> JSONResponse:
 
 @router.post("/objects/{object_id}/actions/{action_id}/feedback", response_model=FeedbackPublic,
              dependencies=Writer, responses=WRITE_ERRORS, tags=["cooperation"])
-def create_feedback(
+async def create_feedback(
     object_id: str,
     action_id: str,
     body: FeedbackCreate,
@@ -215,7 +219,7 @@ def create_feedback(
     request = usecases.FeedbackRequest(object_id, action_id, body.outcome, body.message, idempotency_key,
                                        body.reason, body.measured_deg,
                                        body.refusal.model_dump(mode="json") if body.refusal is not None else None)
-    result = usecases.give_feedback(context, request)
+    result = await run_in_threadpool(usecases.give_feedback, context, request)
     return FeedbackPublic.model_validate(result, from_attributes=True)
 
 
@@ -329,8 +333,8 @@ def stream_object_events(
 
 
 @router.get("/health", response_model=HealthPublic, tags=["service"])
-def read_health(context: Ctx) -> HealthPublic:
-    health = usecases.read_health(context)
+async def read_health(context: Ctx) -> HealthPublic:
+    health = await run_in_threadpool(usecases.read_health, context)  # one trip to the pool: see `Ctx`
     return HealthPublic(status="ok", version=planhrc.__version__, objects=health.objects, triples=health.triples,
                         plans_to_write=health.plans_to_write, auth=bool(context.settings.token))
 

@@ -75,12 +75,23 @@ class Problem:
 # -- s-expressions ---------------------------------------------------------------------------------------
 def tokenize(text: str) -> list[str]:
     """Parentheses and names, comments dropped; ``-joint`` is two tokens, '-' and 'joint' (`split_dash`)."""
-    tokens: list[str] = []
-    for line in text.splitlines():
-        line = line.split(";", 1)[0]
-        for token in line.replace("(", " ( ").replace(")", " ) ").split():
-            tokens.extend(split_dash(token))
-    return tokens
+    if ";" in text:
+        text = "\n".join(line.split(";", 1)[0] for line in text.splitlines())
+    tokens = text.replace("(", " ( ").replace(")", " ) ").split()
+    if not _starts_a_token_with_a_dash(text):  # the usual text: every dash stands apart or inside a name
+        return tokens
+    return [part for token in tokens for part in split_dash(token)]
+
+
+def _starts_a_token_with_a_dash(text: str) -> bool:
+    """Whether a token of `text` starts with '-' and goes on (`-joint`, `-5`): only those may need `split_dash`."""
+    i = text.find("-")
+    while i != -1:
+        if (i == 0 or text[i - 1].isspace() or text[i - 1] in "()") and i + 1 < len(text) \
+                and not (text[i + 1].isspace() or text[i + 1] in "()"):
+            return True
+        i = text.find("-", i + 1)
+    return False
 
 
 def split_dash(token: str) -> tuple[str, ...]:
@@ -92,23 +103,25 @@ def split_dash(token: str) -> tuple[str, ...]:
 
 def parse_sexpr(text: str, what: str = "PDDL") -> SExpr:
     """Parse exactly one s-expression; names are lower-cased (PDDL is case-insensitive)."""
-    tokens = tokenize(text)
+    tokens = tokenize(text.lower())
     if not tokens:
         raise PlannerError(f"{what}: the text is empty")
     stack: list[list[SExpr]] = [[]]
+    top = stack[0]
     for tok in tokens:
         if tok == "(":
-            stack.append([])
+            top = []
+            stack.append(top)
         elif tok == ")":
             if len(stack) == 1:
                 raise PlannerError(f"{what}: unbalanced ')'")
             done = tuple(stack.pop())
-            stack[-1].append(done)
+            top = stack[-1]
+            top.append(done)
         else:
-            stack[-1].append(tok.lower())
+            top.append(tok)
     if len(stack) != 1:
         raise PlannerError(f"{what}: {len(stack) - 1} unclosed '('")
-    top = stack[0]
     if len(top) != 1 or not isinstance(top[0], tuple):
         raise PlannerError(f"{what}: expected one parenthesised (define ...) form, got {len(top)} top-level items")
     return top[0]

@@ -36,6 +36,30 @@ def test_a_dash_touching_a_name_is_a_dash_and_a_name(token, parts):
     assert split_dash(token) == parts
 
 
+def _tokens_line_by_line(text: str) -> list[str]:
+    """The reading `tokenize` must give, spelled out slowly: each line without its comment, parentheses apart, split at
+    blanks, each token through `split_dash`."""
+    tokens: list[str] = []
+    for line in text.splitlines():
+        for token in line.split(";", 1)[0].replace("(", " ( ").replace(")", " ) ").split():
+            tokens.extend(split_dash(token))
+    return tokens
+
+
+def test_tokenize_reads_every_text_as_the_line_by_line_reading_does():
+    """`tokenize` splits the whole text at once and looks for dashes against names only where a token starts with
+    one: the same tokens as the slow reading, on the repository's PDDL files and on random texts of awkward pieces."""
+    import random
+
+    texts = [path.read_text() for path in sorted(DATA.rglob("*.pddl"))]
+    pieces = ["(", ")", " ", "\n", "\t", "\r\n", "-", "-a", "-_b", "-5", "--x", "a-b", "?j", "?j-joint", "?j -joint",
+              "; c ( x\n", "İx", "-é", "-²", "x\u00a0y", "\x1c", "\u2028", "A", "define", "Q;"]
+    rng = random.Random(5)
+    texts += ["".join(rng.choice(pieces) for _ in range(rng.randint(0, 40))) for _ in range(3000)]
+    for text in texts:
+        assert tokenize(text) == _tokens_line_by_line(text), text
+
+
 def test_typed_lists_with_dash_tokens_read_as_val_reads_them():
     domain = parse_domain(ORIENTED)
     assert dict(domain.predicates)["connected"] == (("?j", "joint"), ("?l", "link"))
