@@ -24,6 +24,7 @@ from owlready2 import World
 from owlready2.rule import BuiltinAtom
 
 from planhrc.model import AFFECTED, Atom
+from planhrc.planner.process import die_with_parent
 
 from .store import ABOX_IRI, TBOX_IRI, KnowledgeBase, KnowledgeStore
 from .store.errors import ReasonerError
@@ -125,6 +126,7 @@ def reason_in_place(world: World, name: str, timeout_s: float,
     kwargs = reasoner_subprocess_kwargs()
     with _RUN_LOCK:
         kwargs["timeout"] = float(timeout_s)
+        kwargs["preexec_fn"] = die_with_parent  # the JVM ends with the service, even one killed with SIGKILL
         if java_options:
             kwargs["env"] = {**os.environ, "JAVA_TOOL_OPTIONS": " ".join(java_options)}
         t0 = time.perf_counter()
@@ -141,6 +143,7 @@ def reason_in_place(world: World, name: str, timeout_s: float,
             raise ReasonerError(f"{name}: cannot start Java: {exc}") from None
         finally:
             kwargs.pop("timeout", None)
+            kwargs.pop("preexec_fn", None)
             kwargs.pop("env", None)
         return consistent, time.perf_counter() - t0
 

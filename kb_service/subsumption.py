@@ -28,6 +28,7 @@ from owlready2 import AllDifferent, And, Not, OneOf, Thing, World
 
 from planhrc.model import HAS_ORIENTATION, Atom, State, is_subsumed, make_object
 from planhrc.paths import default_tbox_path
+from planhrc.planner.process import die_with_parent
 
 from .reasoner import _configure_java, drop_builtin_rules, reason_in_place
 from .store import ABOX_IRI, PREDICATES, TBOX_IRI
@@ -191,7 +192,8 @@ def _pellet_unsatisfiable(world: World, timeout_s: float) -> set[str]:
         command = pellet_command(owlready2.JAVA_EXE) + ["unsat", "-v", "--loader", "OWLAPIv3", "--ignore-imports",
                                                         str(path)]
         try:
-            proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
+            proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s,
+                                  preexec_fn=die_with_parent)
         except subprocess.TimeoutExpired:
             raise ReasonerError(f"pellet: no answer within {timeout_s} s") from None
         except OSError as exc:

@@ -20,6 +20,7 @@ from typing import IO, Any, Iterator, Mapping, Sequence
 import httpx
 
 from planhrc.errors import PlanhrcError
+from planhrc.planner.process import die_with_parent
 
 
 class ServiceStartError(PlanhrcError):
@@ -70,15 +71,6 @@ def wait_until_serving(proc: subprocess.Popen[bytes], base: str, timeout_s: floa
             where = f"; see {log_path}" if log_path else ""
             raise ServiceStartError(f"planhrc serve did not answer /health within {timeout_s:g} s{where}")
         time.sleep(0.05)
-
-
-def die_with_parent() -> None:
-    """In a child before exec (Linux): receive SIGTERM when the parent dies. Elsewhere nothing."""
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        pr_set_pdeathsig = 1
-        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGTERM)
 
 
 def stop_process_group(proc: subprocess.Popen[bytes], grace_s: float = 15.0) -> None:

@@ -179,3 +179,68 @@ def test_dl_subsumption_by_classification_agrees(name):
     fast = [subsumes_fast(a, b) for a, b in pairs]
     assert 0 < sum(fast) < len(fast)
     assert dl_subsumption(pairs, name, method="classify") == fast
+
+
+
+def test_a_child_started_with_die_with_parent_ends_with_its_parent_killed_with_sigkill():
+    """The mechanism: a child that would sleep for a minute gets SIGTERM when its parent is killed (nothing of the
+    parent runs any more) while it waits for the child."""
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    script = textwrap.dedent("""
+        import os, signal, subprocess, sys, threading, time
+        from pathlib import Path
+        from planhrc.planner.process import die_with_parent
+
+        def watch():  # the child's pid once it runs, then this process is killed
+            while True:
+                for task in Path("/proc/self/task").iterdir():
+                    children = (task / "children").read_text().split()
+                    if children:
+                        print(children[0], flush=True)
+                        time.sleep(0.2)
+                        os.kill(os.getpid(), signal.SIGKILL)
+                time.sleep(0.01)
+
+        threading.Thread(target=watch, daemon=True).start()
+        subprocess.run([sys.executable, "-c", "import time; time.sleep(60)"], preexec_fn=die_with_parent)
+    """)
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        child = int(parent.stdout.readline())
+    finally:
+        parent.wait()
+    assert parent.returncode == -9
+    deadline = time.monotonic() + 10
+    while _alive(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if _alive(child):
+        subprocess.run(["kill", "-9", str(child)])
+        raise AssertionError("a child started with die_with_parent outlived its parent")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.parametrize("name", sorted(REASONERS))
+def test_the_reasoners_jvm_is_started_to_end_with_the_service(name, monkeypatch):
+    """owlready2 starts the reasoner's JVM with the keyword arguments it keeps for `subprocess`: during a call they
+    carry `die_with_parent` (a service killed while Pellet reasons on a large store left the JVM reasoning on its
+    own for half an hour), and after the call nothing of it is left there."""
+    from planhrc.kb_service.reasoner import reason_in_place
+    from planhrc.kb_service.store.owl import reasoner_subprocess_kwargs
+    from planhrc.planner.process import die_with_parent
+
+    seen: dict[str, object] = {}
+    monkeypatch.setitem(REASONERS, name, lambda world: seen.update(reasoner_subprocess_kwargs()))
+    reason_in_place(World(), name, 5.0)
+    assert seen.get("preexec_fn") is die_with_parent and seen.get("timeout") == 5.0
+    assert "preexec_fn" not in reasoner_subprocess_kwargs()

@@ -18,6 +18,8 @@ import subprocess
 from pathlib import Path
 from typing import Sequence
 
+from planhrc.planner.process import die_with_parent
+
 log = logging.getLogger(__name__)
 
 SHORT_RUN = ("-XX:TieredStopAtLevel=1", "-XX:+UseSerialGC")
@@ -63,7 +65,7 @@ def make_cache(cache: Path, command: Sequence[str], timeout_s: float) -> bool:
     part = cache.with_suffix(f".{os.getpid()}.part")
     run = [command[0], *SHORT_RUN, f"-XX:AOTCacheOutput={part}", *command[1:]]
     try:
-        subprocess.run(run, capture_output=True, timeout=timeout_s, check=True)
+        subprocess.run(run, capture_output=True, timeout=timeout_s, check=True, preexec_fn=die_with_parent)
         os.replace(part, cache)
     except (OSError, subprocess.SubprocessError) as exc:
         log.warning("reasoning: no class cache for %s (%s)", cache.name, type(exc).__name__)

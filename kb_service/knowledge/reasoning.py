@@ -21,6 +21,7 @@ from typing import Any, Sequence
 import owlready2
 from owlready2 import World
 
+from planhrc.planner.process import die_with_parent
 from planhrc.vocabulary import ReasoningScope
 
 from ..reasoner import INFERENCES_IRI, REASONERS, _configure_java, drop_builtin_rules, reason_in_place
@@ -137,7 +138,8 @@ def explain_inconsistency(world: World, timeout_s: float, cache: Path | None = N
         command[1:1] = java_options(cache)
         command += ["explain", "--inconsistent", "--ignore-imports", str(path)]
         try:
-            proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
+            proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s,
+                                  preexec_fn=die_with_parent)
         except subprocess.TimeoutExpired:
             raise ReasonerError(f"pellet explain: no answer within {timeout_s:g} s") from None
         except OSError as exc:
