@@ -24,7 +24,7 @@ from owlready2 import World
 from owlready2.rule import BuiltinAtom
 
 from planhrc.model import AFFECTED, Atom
-from planhrc.planner.process import die_with_parent
+from planhrc.service_process import die_with_parent
 
 from .store import ABOX_IRI, TBOX_IRI, KnowledgeBase, KnowledgeStore
 from .store.errors import ReasonerError

@@ -28,7 +28,7 @@ from owlready2 import AllDifferent, And, Not, OneOf, Thing, World
 
 from planhrc.model import HAS_ORIENTATION, Atom, State, is_subsumed, make_object
 from planhrc.paths import default_tbox_path
-from planhrc.planner.process import die_with_parent
+from planhrc.service_process import die_with_parent
 
 from .reasoner import _configure_java, drop_builtin_rules, reason_in_place
 from .store import ABOX_IRI, PREDICATES, TBOX_IRI

@@ -15,12 +15,11 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Iterator, Mapping, Sequence
+from typing import IO, Any, Callable, Iterator, Mapping, Sequence
 
 import httpx
 
 from planhrc.errors import PlanhrcError
-from planhrc.planner.process import die_with_parent
 
 
 class ServiceStartError(PlanhrcError):
@@ -71,6 +70,33 @@ def wait_until_serving(proc: subprocess.Popen[bytes], base: str, timeout_s: floa
             where = f"; see {log_path}" if log_path else ""
             raise ServiceStartError(f"planhrc serve did not answer /health within {timeout_s:g} s{where}")
         time.sleep(0.05)
+
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _bound_prctl() -> Callable[..., int] | None:
+    """libc's `prctl`, looked up once in this process (Linux), so that a child between fork and exec only calls it."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        prctl: Callable[..., int] = ctypes.CDLL(None, use_errno=True).prctl
+        return prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _bound_prctl()
+
+
+def die_with_parent() -> None:
+    """`preexec_fn` of a child that must not outlive this process (Linux): it receives SIGTERM when the thread that
+    started it ends, which for a child started by a call that waits for it (`subprocess.run`) means when this process
+    dies, SIGKILL included. Elsewhere nothing."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 def stop_process_group(proc: subprocess.Popen[bytes], grace_s: float = 15.0) -> None:

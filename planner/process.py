@@ -6,7 +6,6 @@ import logging
 import os
 import signal
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -86,30 +85,3 @@ def kill_group(pgid: int) -> None:
         os.killpg(pgid, signal.SIGKILL)
     except ProcessLookupError:
         pass
-
-
-_PR_SET_PDEATHSIG = 1
-
-
-def _bound_prctl() -> Callable[..., int] | None:
-    """libc's `prctl`, looked up once in this process (Linux), so that a child between fork and exec only calls it."""
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        import ctypes
-
-        prctl: Callable[..., int] = ctypes.CDLL(None, use_errno=True).prctl
-        return prctl
-    except (OSError, AttributeError):
-        return None
-
-
-_PRCTL = _bound_prctl()
-
-
-def die_with_parent() -> None:
-    """`preexec_fn` of a child that must not outlive this process (Linux): it receives SIGTERM when the thread that
-    started it ends, which for a child started by a call that waits for it (`subprocess.run`) means when this process
-    dies, SIGKILL included. Elsewhere nothing."""
-    if _PRCTL is not None:
-        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM)

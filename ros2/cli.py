@@ -67,8 +67,7 @@ def running_bridge(kb_url: str, token: str | None, object_ids: tuple[str, ...] =
                    log_path: Path | None = None) -> Iterator[subprocess.Popen[bytes]]:
     """`planhrc ros2-bridge` as a child process in its own process group (stopped with it afterwards; on Linux it
     also gets SIGTERM when this process dies)."""
-    from planhrc.planner.process import die_with_parent
-    from planhrc.service_process import stop_process_group
+    from planhrc.service_process import die_with_parent, stop_process_group
 
     command = [sys.executable, "-m", "planhrc.cli", "ros2-bridge", "--kb", kb_url]
     for object_id in object_ids:

@@ -19,8 +19,7 @@ from typing import Any, Iterator
 
 import pytest
 
-from planhrc.planner.process import die_with_parent
-from planhrc.service_process import stop_process_group
+from planhrc.service_process import die_with_parent, stop_process_group
 from tests.replica_tools import events, perceive, replicas
 from tests.servers import serve_env, store_location
 

@@ -16,8 +16,7 @@ import pytest
 
 from planhrc.kb_service.cli import SettingsProblem, check_serve_settings
 from planhrc.kb_service.network import is_loopback
-from planhrc.planner.process import die_with_parent
-from planhrc.service_process import free_port, serve_command, stop_process_group
+from planhrc.service_process import die_with_parent, free_port, serve_command, stop_process_group
 from planhrc.settings import make_settings
 from tests.servers import serve_env, served
 

@@ -14,8 +14,7 @@ from typing import Iterator
 import httpx
 import pytest
 
-from planhrc.planner.process import die_with_parent
-from planhrc.service_process import RunningService, stop_process_group
+from planhrc.service_process import RunningService, die_with_parent, stop_process_group
 from tests.servers import (TOKEN, free_port, serve_env, served, settled_health, store_location, token_client,
                            wait_until_serving)
 

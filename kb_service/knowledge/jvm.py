@@ -18,7 +18,7 @@ import subprocess
 from pathlib import Path
 from typing import Sequence
 
-from planhrc.planner.process import die_with_parent
+from planhrc.service_process import die_with_parent
 
 log = logging.getLogger(__name__)
 

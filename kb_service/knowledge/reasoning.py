@@ -21,7 +21,7 @@ from typing import Any, Sequence
 import owlready2
 from owlready2 import World
 
-from planhrc.planner.process import die_with_parent
+from planhrc.service_process import die_with_parent
 from planhrc.vocabulary import ReasoningScope
 
 from ..reasoner import INFERENCES_IRI, REASONERS, _configure_java, drop_builtin_rules, reason_in_place
