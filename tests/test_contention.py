@@ -22,6 +22,7 @@ with warnings.catch_warnings():
 from planhrc.kb_service.app import create_app
 from planhrc.settings import make_settings
 from tests.servers import free_port, serve_command, serve_env, serving, timed_beside, wait_until_serving
+from tests.processes import alive
 
 pytestmark = pytest.mark.slow
 
@@ -83,14 +84,6 @@ def _children(pid: int) -> set[int]:
     return out
 
 
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL], ids=lambda s: s.name)
 def test_no_planning_worker_outlives_the_service(tmp_path, sig):
     """The service's planning workers (started by an absolute 20-link re-plan; one of them busy with a 200-link
@@ -121,16 +114,16 @@ def test_no_planning_worker_outlives_the_service(tmp_path, sig):
         proc.send_signal(sig)
         proc.wait(30)
         until = time.monotonic() + 10
-        while any(_alive(p) for p in workers) and time.monotonic() < until:
+        while any(alive(p) for p in workers) and time.monotonic() < until:
             time.sleep(0.1)
-        assert not [p for p in workers if _alive(p)], log_path.read_text()[-2000:]
+        assert not [p for p in workers if alive(p)], log_path.read_text()[-2000:]
         busy.join(60)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
         for p in workers:
-            if _alive(p):
+            if alive(p):
                 os.kill(p, signal.SIGKILL)
 
 

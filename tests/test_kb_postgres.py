@@ -23,6 +23,7 @@ from planhrc.model import make_object, snap_angle
 from planhrc.paths import default_tbox_path
 from tests.store_backends import journal_rows
 from tests.test_kb_scenarios import plan_for
+from tests.processes import alive
 
 TBOX = default_tbox_path()
 CREATED_AT = rdflib.URIRef(TBOX_IRI + "createdAt")
@@ -303,16 +304,10 @@ def test_a_test_process_killed_leaves_no_server_behind(pg_cluster):
     pid, folder = done.stdout.split()
     try:
         deadline = time.monotonic() + 30
-        while _alive(int(pid)) and time.monotonic() < deadline:
+        while alive(int(pid)) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert not _alive(int(pid)), f"postgres {pid} outlived the process that started it"
+        assert not alive(int(pid)), f"postgres {pid} outlived the process that started it"
     finally:
         shutil.rmtree(folder, ignore_errors=True)  # what a killed run leaves: its folder in the temporary folder
 
 
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except FileNotFoundError:
-        return False

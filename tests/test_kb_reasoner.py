@@ -17,6 +17,7 @@ from planhrc.kb_service.store import TBOX_IRI, KnowledgeBase
 from planhrc.kb_service.subsumption import describe_state, dl_subsumption, subsumes_fast
 from planhrc.model import is_subsumed, make_object, relative_from_absolute, snap_angle
 from planhrc.paths import default_tbox_path
+from tests.processes import alive
 
 TBOX = default_tbox_path()
 
@@ -181,7 +182,6 @@ def test_dl_subsumption_by_classification_agrees(name):
     assert dl_subsumption(pairs, name, method="classify") == fast
 
 
-
 def test_a_child_started_with_die_with_parent_ends_with_its_parent_killed_with_sigkill():
     """The mechanism: a child that would sleep for a minute gets SIGTERM when its parent is killed (nothing of the
     parent runs any more) while it waits for the child."""
@@ -193,7 +193,7 @@ def test_a_child_started_with_die_with_parent_ends_with_its_parent_killed_with_s
     script = textwrap.dedent("""
         import os, signal, subprocess, sys, threading, time
         from pathlib import Path
-        from planhrc.planner.process import die_with_parent
+        from planhrc.service_process import die_with_parent
 
         def watch():  # the child's pid once it runs, then this process is killed
             while True:
@@ -215,19 +215,11 @@ def test_a_child_started_with_die_with_parent_ends_with_its_parent_killed_with_s
         parent.wait()
     assert parent.returncode == -9
     deadline = time.monotonic() + 10
-    while _alive(child) and time.monotonic() < deadline:
+    while alive(child) and time.monotonic() < deadline:
         time.sleep(0.05)
-    if _alive(child):
+    if alive(child):
         subprocess.run(["kill", "-9", str(child)])
         raise AssertionError("a child started with die_with_parent outlived its parent")
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 @pytest.mark.parametrize("name", sorted(REASONERS))
@@ -237,7 +229,7 @@ def test_the_reasoners_jvm_is_started_to_end_with_the_service(name, monkeypatch)
     own for half an hour), and after the call nothing of it is left there."""
     from planhrc.kb_service.reasoner import reason_in_place
     from planhrc.kb_service.store.owl import reasoner_subprocess_kwargs
-    from planhrc.planner.process import die_with_parent
+    from planhrc.service_process import die_with_parent
 
     seen: dict[str, object] = {}
     monkeypatch.setitem(REASONERS, name, lambda world: seen.update(reasoner_subprocess_kwargs()))

@@ -19,6 +19,7 @@ from planhrc.kb_service.planning_pool import (ATOMS_PER_FRAME, PlanningJob, Plan
 from planhrc.model import make_object
 from planhrc.settings import make_settings
 from planhrc.vocabulary import PlanningStatus
+from tests.processes import alive
 
 
 @pytest.fixture(scope="module")
@@ -29,14 +30,6 @@ def config():
 def _job(config, obj, start, goal, deadline_s=10.0):
     return PlanningJob(obj, obj.state(start), obj.configuration_atoms(goal), config, None,
                        time.monotonic() + deadline_s)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 def test_a_worker_gives_the_outcome_the_pipeline_gives_in_process(config):
@@ -100,7 +93,7 @@ def test_the_pool_survives_a_worker_that_dies_mid_plan(config):
         again = pool.plan(_job(config, small, [0] * 4, [0, 90, 0, 30]))
         assert again.solved, again.message
         assert pool.pids() and pool.pids() != (pid,)
-    assert not _alive(pid)
+    assert not alive(pid)
 
 
 def test_a_worker_keeps_the_deadline_and_stays(config):
@@ -133,9 +126,9 @@ def test_a_worker_past_the_deadline_and_its_grace_is_stopped_and_replaced(config
         assert pool.plan(_job(config, small, [0] * 4, [0, 90, 0, 30])).solved
         assert pool.pids() != (pid,)
         deadline = time.monotonic() + 5
-        while _alive(pid) and time.monotonic() < deadline:
+        while alive(pid) and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert not _alive(pid)
+        assert not alive(pid)
 
 
 def test_a_closed_pool_has_no_process_left_and_takes_nothing(config):
@@ -144,7 +137,7 @@ def test_a_closed_pool_has_no_process_left_and_takes_nothing(config):
     assert pool.plan(_job(config, small, [0] * 4, [90, 0, 0, 30])).solved
     pids = pool.pids()
     pool.close()
-    assert pids and not any(_alive(p) for p in pids)
+    assert pids and not any(alive(p) for p in pids)
     assert not pool.takes(small)
     assert pool.plan(_job(config, small, [0] * 4, [90, 0, 0, 30])).status is PlanningStatus.ERROR
 

@@ -18,6 +18,7 @@ from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.validate import keep_off_this_cpu, start_validation, validate_plan
 from planhrc.translator.problem import get_problem
+from tests.processes import alive
 
 DATA = Path(__file__).parent / "data"
 DOMAIN = (DATA / "domain-relative.pddl").read_text()
@@ -37,14 +38,6 @@ def _task(formulation: str = "relative", links: int = 6, k: int = 8) -> tuple[st
 
 def _scratch_files() -> set[str]:
     return {p for p in os.listdir("/dev/shm") if p.startswith("planhrc-val")} if os.path.isdir("/dev/shm") else set()
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 def test_a_run_answers_later_and_as_a_plain_run_does():
@@ -68,7 +61,7 @@ def test_a_run_past_its_time_limit_is_killed_and_leaves_no_files():
     pid = run.pid
     with pytest.raises(PlannerError, match="did not finish within"):
         run.result(0.0005)
-    assert not _alive(pid)
+    assert not alive(pid)
     # this run's scratch folder is gone (another process on the machine may have its own meanwhile)
     assert run._tmp is not None and os.path.basename(run._tmp) not in before
     assert not os.path.exists(run._tmp) and os.path.basename(run._tmp) not in _scratch_files()
@@ -125,9 +118,9 @@ def test_closing_ends_every_armed_process_and_removes_its_files():
     _armed_once(armed, DOMAIN)
     pids = [a.proc.pid for runs in armed._armed.values() for a in runs]
     assert len(pids) == armed.per_domain
-    assert pids and all(_alive(p) for p in pids)
+    assert pids and all(alive(p) for p in pids)
     armed.close()
-    assert not any(_alive(p) for p in pids)
+    assert not any(alive(p) for p in pids)
     assert _scratch_files() == before
     assert armed.start(DOMAIN, problem, plan).verdict(None).valid  # after close: cold runs, nothing armed again
     assert armed.armed_count() == 0
@@ -169,14 +162,14 @@ def test_an_armed_process_does_not_outlive_its_owner_killed_with_sigkill(tmp_pat
     owner = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
     try:
         pids = [int(p) for p in owner.stdout.readline().split()]
-        assert pids and all(_alive(p) for p in pids)
+        assert pids and all(alive(p) for p in pids)
     finally:
         owner.kill()
         owner.wait()
     deadline = time.monotonic() + 10
-    while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+    while any(alive(p) for p in pids) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not any(_alive(p) for p in pids), "an armed VAL process outlived its owner"
+    assert not any(alive(p) for p in pids), "an armed VAL process outlived its owner"
 
 
 def test_an_armed_process_does_not_outlive_an_owner_killed_before_it_reached_the_fifo(tmp_path):
@@ -202,9 +195,9 @@ def test_an_armed_process_does_not_outlive_an_owner_killed_before_it_reached_the
         owner.wait()
     assert owner.returncode == -signal.SIGKILL
     deadline = time.monotonic() + 10
-    while _alive(pid) and time.monotonic() < deadline:
+    while alive(pid) and time.monotonic() < deadline:
         time.sleep(0.05)
-    if _alive(pid):
+    if alive(pid):
         os.kill(pid, signal.SIGKILL)
         raise AssertionError("an armed VAL process outlived an owner killed before VAL opened the FIFO")
 
