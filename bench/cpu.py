@@ -4,8 +4,9 @@
 `ROBOT_PAUSE_S` after the last answer has settled) and reads the server's CPU around each perception and the work
 behind its answer: its threads' run time to the nanosecond (`/proc/<pid>/task/*/schedstat`; /proc's own count, in
 clock ticks, for a window in which a thread ended), its reaped children's (VAL's processes) and its live
-descendants' (the planning pool's workers, where an absolute task is planned and replayed, and the VAL processes
-armed for the next plan: they are not reaped while the service runs). So everything a re-plan costs is in its
+descendants' (the planning pool's workers, where an absolute task is planned and replayed, and VAL's fork server
+with the runs it reaped, or the VAL processes armed for the next plan: they are not reaped while the service runs;
+VAL's are told from the others by their command name). So everything a re-plan costs is in its
 window: the request, its VAL runs, the work behind the answer (the plan's later pieces under VAL, the next VAL
 armed, anything the store writes after the commit). After each answer the bench waits until that work is done:
 every later piece of the plan has its `val_verdict` event and the store writes nothing more (`/health`'s
@@ -43,6 +44,7 @@ ROBOT_PAUSE_S = 0.25  # as `grid.ROBOT_PAUSE_S`: a robot's next perception follo
 SETTLE_POLL_S = 0.05
 SETTLE_LIMIT_S = 60.0
 ANCHORS = ("madagascar", "fd-lama")  # the anchor planners, in order of preference
+VAL_COMMAND = "Validate"  # VAL's processes, by their command name
 
 
 def process_cpu_s(pid: int) -> tuple[float, float]:
@@ -59,13 +61,21 @@ def _total(cpu: tuple[float, float]) -> float:
 def live_descendants_cpu_s(pid: int) -> float:
     """User + system seconds (with their reaped children's) of a process's descendants still running (Linux /proc);
     one that ends while it is read is left out."""
-    total = 0.0
+    return sum(live_children_cpu_s(pid).values())
+
+
+def live_children_cpu_s(pid: int) -> dict[str, float]:
+    """`live_descendants_cpu_s` by the name of the process's child each descendant descends from (its command
+    name, /proc's `comm`: `Validate` for VAL's fork server and armed processes, `python` for planning workers)."""
+    found: dict[str, float] = {}
     for child in _children(pid):
         try:
-            total += _total(process_cpu_s(child)) + live_descendants_cpu_s(child)
+            name = Path(f"/proc/{child}/comm").read_text().strip()
+            cpu = _total(process_cpu_s(child)) + live_descendants_cpu_s(child)
         except (OSError, IndexError, ValueError):  # gone meanwhile
             continue
-    return total
+        found[name] = found.get(name, 0.0) + cpu
+    return found
 
 
 def _children(pid: int) -> list[int]:
@@ -86,9 +96,9 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
                         env: Mapping[str, str] | None = None, pause_s: float = ROBOT_PAUSE_S) -> dict[str, Any]:
     """The service's whole CPU per re-plan (see the module's note), in ms, read around each perception and the work
     behind its answer: `per_replan_ms` (own + children + live descendants, the settle probes taken off, averaged
-    over the perceptions that re-planned), `own_ms`, `val_children_ms` (VAL's processes that ended) and
-    `descendants_ms` (the planning workers and armed VAL processes still running) of those, and the answers'
-    latency. A random perception now and then lets the plan go on (`decisions`): its CPU is reported apart
+    over the perceptions that re-planned), `own_ms`, `val_children_ms` (VAL's processes: those that ended, VAL's
+    fork server and its runs, the armed ones) and `descendants_ms` (the planning workers) of those, and the
+    answers' latency. A random perception now and then lets the plan go on (`decisions`): its CPU is reported apart
     (`other_ms`), and `per_perception_ms` averages every perception."""
     from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
 
@@ -108,7 +118,7 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
         idle_s = _idle_rate(server.pid)
         latencies: list[float] = []
         decisions: dict[str, int] = {}
-        spent: dict[str, list[tuple[float, float, float]]] = {}  # decision -> (own, children, live) per perception
+        spent: dict[str, list[tuple[float, float, float]]] = {}  # decision -> (own, VAL, other live) per perception
         probes = 0
         mark = _Reading(server.pid)
         for _ in range(runs):
@@ -119,8 +129,8 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
             count = settle.wait()
             probes += count
             now = _Reading(server.pid)
-            own, children, live = now.since(mark)
-            spent.setdefault(answer["decision"], []).append((own - count * probe_s, children, live))
+            own, val, live = now.since(mark)
+            spent.setdefault(answer["decision"], []).append((own - count * probe_s, val, live))
             mark = now
     replans = spent.get("replan") or [(0.0, 0.0, 0.0)]
     others = [row for kind, rows in spent.items() if kind != "replan" for row in rows]
@@ -147,16 +157,18 @@ class _Reading:
     def __init__(self, pid: int) -> None:
         self.threads = _threads_ns(pid)
         self.own, self.children = process_cpu_s(pid)
-        self.live = live_descendants_cpu_s(pid)
+        live = live_children_cpu_s(pid)
+        self.val = self.children + live.pop(VAL_COMMAND, 0.0)  # VAL's processes, reaped or (a fork server) not
+        self.live = sum(live.values())
 
     def since(self, before: _Reading) -> tuple[float, float, float]:
-        """(own, children, live descendants) seconds from `before` to this reading; the own part from the threads'
+        """(own, VAL, other live descendants) seconds from `before` to this reading; the own part from the threads'
         times while every thread of `before` still runs, else (a thread ended) as /proc counts it."""
         if set(before.threads) <= set(self.threads):
             own = sum(self.threads.values()) / 1e9 - sum(before.threads.values()) / 1e9
         else:
             own = self.own - before.own
-        return own, self.children - before.children, self.live - before.live
+        return own, self.val - before.val, self.live - before.live
 
 
 def _replan(client: httpx.Client, ident: str, angles: list[float]) -> tuple[float, dict[str, Any]]:

@@ -2,6 +2,7 @@
 so a wheel installed anywhere finds them as a source checkout does."""
 from __future__ import annotations
 
+import os
 from importlib import resources
 from pathlib import Path
 
@@ -24,3 +25,16 @@ def package_file(package: str, name: str) -> Path:
 def default_tbox_path() -> Path:
     """The TBox shipped with the package: `planhrc/ontology/planhrc.owl` (the repository's `ontology/`)."""
     return package_file("planhrc.ontology", "planhrc.owl")
+
+
+def cache_folder() -> Path | None:
+    """The user's cache folder for planhrc (made, private), or None when it cannot be."""
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    folder = base / "planhrc"
+    try:
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        if folder.stat().st_uid != os.getuid() or not os.access(folder, os.W_OK):
+            return None
+    except OSError:
+        return None
+    return folder

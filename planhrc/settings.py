@@ -85,9 +85,10 @@ class Settings(BaseSettings):
     )
     val_armed: bool = Field(
         default=True,
-        description="Keep one VAL process per domain in use started ahead of need, its domain already read, "
-        "waiting for the next plan's problem (`planner.armed`): a short check skips VAL's start-up, a large part of "
-        "it. The same binary and inputs as a cold run; Linux only.",
+        description="Start VAL ahead of need so that a short check skips VAL's start-up, most of its cost: one "
+        "`Validate` process past its start-up forks a run per check (`planner.valfork`; needs a C compiler once, to "
+        "build its small preloaded library), or where it cannot, one VAL process per domain in use waits with its "
+        "domain already read (`planner.armed`). The same binary, inputs and output as a cold run; Linux only.",
     )
     planning_workers: int = Field(
         default=2, ge=0, le=16,

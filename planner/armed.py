@@ -1,4 +1,5 @@
-"""VAL processes started ahead of need: each has read its domain and waits for a problem (`ArmedValidators`).
+"""VAL started ahead of need (`ArmedValidators`): a fork server whose runs skip VAL's start-up (`planner.valfork`),
+or, where there is none (no C compiler), VAL processes that have each read their domain and wait for a problem.
 
 A cold VAL run spends most of a short check before it reads the problem: starting the process, loading its
 libraries and parsing the domain (about half of a relative 20 x 12 check's CPU time, by `perf stat`). A
@@ -27,6 +28,7 @@ from typing import Sequence
 
 from .process import kill_group
 from .validate import VAL_FILES, ValRun, plan_text, remove_files, scratch_dir, spawn_val, start_validation, write_file
+from .valfork import ForkServer
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +36,7 @@ ARM_DELAY_S = 0.05  # a new process is armed this long after one was used: after
 MAX_DOMAINS = 4  # domains kept armed at once (the least recently used one is dropped)
 READY_WAIT_S = 2.0  # how long the arming thread watches a new process reach its problem
 FIRST_LOOK_S = 0.004  # the arming thread's first look at a new process, a little after VAL has read a short domain
+FORK_SERVER_STARTS = 3  # a fork server that went away is started again this many times at most, then checks arm
 
 
 class _Armed:
@@ -122,13 +125,15 @@ class _Armed:
 
 
 class ArmedValidators:
-    """VAL processes armed per domain for `start` to use, `per_domain` of each (a plan's first motion may be
-    checked in that many pieces at once); `close()` stops them (the service's shutdown).
+    """VAL started ahead of need for `start` to use: a fork server (`planner.valfork`) when one can be had here,
+    its runs past VAL's start-up whatever the domain; else VAL processes armed per domain, `per_domain` of each (a
+    plan's first motion may be checked in that many pieces at once). `close()` stops them (the service's
+    shutdown).
 
     Thread-safe: requests of several objects may start checks at once; one background thread arms."""
 
-    def __init__(self, arm_delay_s: float = ARM_DELAY_S, max_domains: int = MAX_DOMAINS, per_domain: int = 2
-                 ) -> None:
+    def __init__(self, arm_delay_s: float = ARM_DELAY_S, max_domains: int = MAX_DOMAINS, per_domain: int = 2, *,
+                 forking: bool = True) -> None:
         self.arm_delay_s = arm_delay_s
         self.max_domains = max_domains
         self.per_domain = max(1, per_domain)
@@ -139,13 +144,27 @@ class ArmedValidators:
         self._thread: threading.Thread | None = None
         self._folder: str | None = None  # made with the first armed process, removed by close()
         self._made = 0
-        self.counts = {"armed": 0, "cold": 0}  # checks started on an armed process, and cold ones
+        self.counts = {"forked": 0, "armed": 0, "cold": 0}  # checks started by each way
+        self.forking = forking and self.supported
+        self._forks: ForkServer | None = None
+        self._fork_starts = 0
 
     def start(self, domain: str, problem: str, plan: Sequence[str], *, nice: int = 0) -> ValRun:
         """A VAL run on the plan, on an armed process of `domain` when there is one ready, else started cold;
         either way `domain` is armed again for the next checks."""
         if not self.supported:
             return start_validation(domain, problem, plan, nice=nice)
+        forks = self._fork_server()
+        if forks is not None:
+            try:
+                run = self._forked(forks, domain, problem, plan, nice)
+                self._count("forked")
+                return run
+            except OSError as exc:  # the server went away: started again by the next check
+                log.warning("VAL's fork server could not take a check (%s): starting VAL cold", exc)
+                self._drop_fork_server(forks)
+                self._count("cold")
+                return start_validation(domain, problem, plan, nice=nice)
         with self._lock:
             if self._closed:
                 return start_validation(domain, problem, plan, nice=nice)
@@ -171,6 +190,47 @@ class ArmedValidators:
         self._count("cold")
         return start_validation(domain, problem, plan, nice=nice)
 
+    def _fork_server(self) -> ForkServer | None:
+        """The fork server, started by the first check that needs it (None: none here, or this is closed)."""
+        if not self.forking:
+            return None
+        with self._lock:
+            if self._closed:
+                return None
+            if self._forks is None and self._fork_starts < FORK_SERVER_STARTS:
+                self._fork_starts += 1
+                self._forks = ForkServer.start()
+                if self._forks is None:  # none can be had here: checks arm processes from now on
+                    self.forking = False
+            return self._forks
+
+    def _drop_fork_server(self, forks: ForkServer) -> None:
+        with self._lock:
+            if self._forks is forks:
+                self._forks = None
+        forks.close()
+
+    def _forked(self, forks: ForkServer, domain: str, problem: str, plan: Sequence[str], nice: int) -> ValRun:
+        """A check as a run of the fork server, its three files in the folder the armed processes use."""
+        with self._lock:
+            prefix = os.path.join(self._scratch(), f"f{self._made}-")
+        files = [prefix + name for name in VAL_FILES]
+        try:
+            for path, text in zip(files, (domain, problem, plan_text(plan))):
+                write_file(path, text)
+            return ValRun(forks.run(files), files, None, nice=nice)
+        except BaseException:
+            remove_files(files, None)
+            raise
+
+    def _scratch(self) -> str:
+        """The folder of the runs' files (made by the first run, removed by `close`), one more run counted in
+        `_made` for a prefix of its own (with the lock held)."""
+        if self._folder is None:
+            self._folder = tempfile.mkdtemp(prefix="planhrc-val-armed-", dir=scratch_dir())
+        self._made += 1
+        return self._folder
+
     def _count(self, kind: str) -> None:
         with self._lock:
             self.counts[kind] += 1
@@ -195,10 +255,9 @@ class ArmedValidators:
                 wanted = self._missing()
             for domain in wanted:
                 try:
-                    if self._folder is None:
-                        self._folder = tempfile.mkdtemp(prefix="planhrc-val-armed-", dir=scratch_dir())
-                    self._made += 1
-                    armed = _Armed(domain, self._folder, f"a{self._made}")
+                    with self._lock:
+                        folder, prefix = self._scratch(), f"a{self._made}"
+                    armed = _Armed(domain, folder, prefix)
                     armed.wait_ready(READY_WAIT_S)  # not ready by then: the check that takes it looks again
                 except Exception as exc:  # no VAL, no room in the scratch folder...: checks start cold
                     log.warning("could not arm a VAL process (%s): checks start VAL cold", exc)
@@ -221,13 +280,16 @@ class ArmedValidators:
             return sum(len(runs) for runs in self._armed.values())
 
     def close(self) -> None:
-        """Stop arming and end every armed process."""
+        """Stop arming and end every armed process and the fork server."""
         with self._lock:
             self._closed = True
             armed = [a for runs in self._armed.values() for a in runs]
             self._armed.clear()
             self._lock.notify_all()
             thread = self._thread
+            forks, self._forks = self._forks, None
+        if forks is not None:
+            forks.close()
         if thread is not None:
             thread.join(timeout=10)
         for a in armed:

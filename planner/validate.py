@@ -25,10 +25,13 @@ import time
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from .errors import PlannerError
 from .process import installed_file, kill_group, renice, run_limited
+
+if TYPE_CHECKING:
+    from .valfork import ForkedProcess
 
 log = logging.getLogger(__name__)
 
@@ -53,16 +56,17 @@ def val_env(binary: Path) -> dict[str, str]:
 
 
 class ValRun:
-    """One VAL process checking one plan, running from the moment it is made (`start_validation`, or an armed
-    process fed its problem: `planner.armed`).
+    """One VAL process checking one plan, running from the moment it is made (`start_validation`, an armed
+    process fed its problem: `planner.armed`, or a run of VAL's fork server: `planner.valfork`).
 
     `verdict(t)` waits up to t seconds (None: until VAL answers) and gives the result, or None while VAL still
     runs; it may be asked again. `result(t)` waits and raises PlannerError when VAL does not answer in time
     (the process group is killed). `cancel()` kills the run; every way out removes the run's files (`files`:
     domain, problem, plan) and, when given, their folder `tmp`."""
 
-    def __init__(self, proc: subprocess.Popen[bytes], files: Sequence[str], tmp: str | None, *, nice: int = 0,
-                 on_start: Callable[[int], None] | None = None, piped_problem: str | None = None) -> None:
+    def __init__(self, proc: subprocess.Popen[bytes] | ForkedProcess, files: Sequence[str], tmp: str | None, *,
+                 nice: int = 0, on_start: Callable[[int], None] | None = None, piped_problem: str | None = None
+                 ) -> None:
         self._start = time.perf_counter()
         self._proc = proc
         self._piped_problem = piped_problem  # the problem's text when VAL read it from a pipe (an armed run)
@@ -91,8 +95,12 @@ class ValRun:
             return self._result
         if not self._read_until_eof(timeout_s):
             return None
-        self._proc.wait()
-        quiet = b"".join(self._output).decode(errors="replace")
+        output = b"".join(self._output)
+        if isinstance(self._proc, subprocess.Popen):
+            self._proc.wait()
+        else:  # a forked run: its exit code follows its output (`planner.valfork`)
+            output = self._proc.settle(output)
+        quiet = output.decode(errors="replace")
         try:
             if self._proc.returncode == 0 and "Plan valid" in quiet:
                 self._result = ValidationResult(True, "Plan valid", time.perf_counter() - self._start)

@@ -18,7 +18,7 @@ from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.validate import keep_off_this_cpu, start_validation, validate_plan
 from planhrc.translator.problem import get_problem
-from tests.processes import alive
+from tests.processes import alive, left_alive, pids_of_a_killed_owner
 
 DATA = Path(__file__).parent / "data"
 DOMAIN = (DATA / "domain-relative.pddl").read_text()
@@ -95,15 +95,15 @@ def _armed_once(armed: ArmedValidators, domain: str) -> None:
 def test_an_armed_process_gives_the_verdict_of_a_cold_run(formulation):
     domain = DOMAIN if formulation == "relative" else PAPER_ABSOLUTE
     problem, plan = _task(formulation)
-    armed = ArmedValidators(arm_delay_s=0.0)
+    armed = ArmedValidators(arm_delay_s=0.0, forking=False)
     try:
         assert armed.start(domain, problem, plan).verdict(None).valid  # cold: nothing armed yet
-        assert armed.counts == {"armed": 0, "cold": 1}
+        assert armed.counts == {"forked": 0, "armed": 0, "cold": 1}
         _armed_once(armed, domain)
         good = armed.start(domain, problem, plan).verdict(None)
         _armed_once(armed, domain)
         bad = armed.start(domain, problem, plan[:-1]).verdict(None)
-        assert armed.counts == {"armed": 2, "cold": 1}
+        assert armed.counts == {"forked": 0, "armed": 2, "cold": 1}
         assert good.valid
         assert not bad.valid and bad.reason == validate_plan(domain, problem, plan[:-1]).reason
     finally:
@@ -113,7 +113,7 @@ def test_an_armed_process_gives_the_verdict_of_a_cold_run(formulation):
 def test_closing_ends_every_armed_process_and_removes_its_files():
     before = _scratch_files()
     problem, plan = _task()
-    armed = ArmedValidators(arm_delay_s=0.0)
+    armed = ArmedValidators(arm_delay_s=0.0, forking=False)
     armed.start(DOMAIN, problem, plan).verdict(None)
     _armed_once(armed, DOMAIN)
     pids = [a.proc.pid for runs in armed._armed.values() for a in runs]
@@ -128,7 +128,7 @@ def test_closing_ends_every_armed_process_and_removes_its_files():
 
 def test_an_armed_process_that_died_is_replaced_by_a_cold_run():
     problem, plan = _task()
-    armed = ArmedValidators(arm_delay_s=0.0)
+    armed = ArmedValidators(arm_delay_s=0.0, forking=False)
     try:
         armed.start(DOMAIN, problem, plan).verdict(None)
         _armed_once(armed, DOMAIN)
@@ -152,24 +152,14 @@ def test_an_armed_process_does_not_outlive_its_owner_killed_with_sigkill(tmp_pat
         from planhrc.planner.armed import ArmedValidators
         domain = Path({str(DATA / "domain-relative.pddl")!r}).read_text()
         problem = Path({str(tmp_path / "p.pddl")!r}).read_text()
-        armed = ArmedValidators(arm_delay_s=0.0)
+        armed = ArmedValidators(arm_delay_s=0.0, forking=False)
         armed.start(domain, problem, {plan!r}).verdict(None)
         while armed.armed_count() < armed.per_domain:
             time.sleep(0.01)
         print(*[a.proc.pid for runs in armed._armed.values() for a in runs], flush=True)
         time.sleep(60)
     """)
-    owner = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
-    try:
-        pids = [int(p) for p in owner.stdout.readline().split()]
-        assert pids and all(alive(p) for p in pids)
-    finally:
-        owner.kill()
-        owner.wait()
-    deadline = time.monotonic() + 10
-    while any(alive(p) for p in pids) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not any(alive(p) for p in pids), "an armed VAL process outlived its owner"
+    assert not left_alive(pids_of_a_killed_owner(script)), "an armed VAL process outlived its owner"
 
 
 def test_an_armed_process_does_not_outlive_an_owner_killed_before_it_reached_the_fifo(tmp_path):

@@ -125,6 +125,7 @@ def test_wheel_holds_one_namespace_and_every_module(wheel: Path):
     assert tops == {"planhrc"}
     assert "planhrc/ontology/planhrc.owl" in names
     assert "planhrc/py.typed" in names
+    assert "planhrc/planner/valfork.c" in names  # VAL's fork server is compiled from it where it runs
     for data in ("index.html", "console.js", "console.css"):
         assert f"planhrc/kb_service/console/{data}" in names
     for folder, package in PACKAGE_DIRS.items():

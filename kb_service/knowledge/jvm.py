@@ -25,19 +25,6 @@ log = logging.getLogger(__name__)
 SHORT_RUN = ("-XX:TieredStopAtLevel=1", "-XX:+UseSerialGC")
 
 
-def cache_folder() -> Path | None:
-    """The user's cache folder for planhrc (made, private), or None when it cannot be."""
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    folder = base / "planhrc"
-    try:
-        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
-        if folder.stat().st_uid != os.getuid() or not os.access(folder, os.W_OK):
-            return None
-    except OSError:
-        return None
-    return folder
-
-
 def cache_file(reasoner: str, java: str, classpath: str, folder: Path | None) -> Path | None:
     """Where the AOT cache of `reasoner` on this Java and class path lives; None when it cannot have one."""
     entries = classpath.split(os.pathsep)

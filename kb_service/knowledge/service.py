@@ -13,12 +13,12 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from planhrc.paths import cache_folder
 from planhrc.settings import Settings
 from planhrc.vocabulary import ReasoningScope
 
 from .explain import explain_subsumption
 from .graph import KnowledgeGraph, KnowledgeSource
-from .jvm import cache_folder
 from .reasoning import ReasoningRequest, ReasoningResult, check_request, reason, scope_of
 from .reasoning_jobs import Job, ReasoningJobs
 from .sparql import ENGINES, SparqlAnswer, SparqlEndpoint, SparqlRequest

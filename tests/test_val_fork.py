@@ -1,0 +1,176 @@
+"""VAL's fork server (`planner.valfork`): its runs write what `Validate` started on its own writes, with the same
+exit code; a cancelled or killed run leaves the server serving; nothing outlives the owner; without a C compiler
+the checks go on as before."""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from planhrc.planner.armed import ArmedValidators
+from planhrc.planner.errors import PlannerError
+from planhrc.planner.validate import (VAL_ADDRESS_SPACE_BYTES, VAL_FILES, ValRun, plan_text, val_env,
+                                      validate_binary)
+from planhrc.planner.valfork import ForkServer, library
+from tests.processes import alive, left_alive, pids_of_a_killed_owner
+from tests.test_val_runs import DOMAIN, PAPER_ABSOLUTE, _task
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("cc") is None,
+                                reason="the fork server needs Linux (glibc) and a C compiler")
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    forks = ForkServer.start(tmp_path_factory.mktemp("valfork-cache"))  # compiled afresh, as on a new machine
+    assert forks is not None, "no fork server although there is a C compiler"
+    yield forks
+    forks.close()
+
+
+def _files(folder: Path, domain: str, problem: str, plan: list[str]) -> list[str]:
+    folder.mkdir(exist_ok=True)
+    files = [str(folder / name) for name in VAL_FILES]
+    for path, text in zip(files, (domain, problem, plan_text(plan))):
+        Path(path).write_text(text)
+    return files
+
+
+def _forked(server: ForkServer, files: list[str]) -> tuple[bytes, int]:
+    proc = server.run(files)
+    output = b""
+    while chunk := proc.stdout.read(65536):
+        output += chunk
+    proc.stdout.close()
+    output = proc.settle(output)
+    assert proc.returncode is not None
+    return output, proc.returncode
+
+
+def _cold(files: list[str]) -> tuple[bytes, int]:
+    binary = validate_binary()
+    done = subprocess.run([str(binary), *files], env=val_env(binary), stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, timeout=60)
+    return done.stdout, done.returncode
+
+
+@pytest.mark.parametrize("formulation", ["relative", "absolute"])
+def test_a_forked_run_writes_what_validate_on_its_own_writes(server, tmp_path, formulation):
+    problem, plan = _task(formulation)
+    domain = DOMAIN if formulation == "relative" else PAPER_ABSOLUTE
+    swapped = [plan[1], plan[0], *plan[2:]] if len(plan) > 2 else plan[:-1]
+    for name, steps in (("whole", plan), ("short", plan[:-1]), ("swapped", swapped)):
+        files = _files(tmp_path / name, domain, problem, steps)
+        forked, cold = _forked(server, files), _cold(files)
+        assert forked == cold, name
+    assert _cold(_files(tmp_path / "whole", domain, problem, plan))[1] == 0
+    assert b"Plan valid" in _forked(server, [str(tmp_path / "whole" / n) for n in VAL_FILES])[0]
+
+
+def test_a_run_on_a_missing_file_fails_as_validate_fails(server, tmp_path):
+    problem, plan = _task()
+    files = _files(tmp_path, DOMAIN, problem, plan)
+    files[1] = str(tmp_path / "no-such-problem.pddl")
+    forked, cold = _forked(server, files), _cold(files)
+    assert forked == cold and cold[1] != 0
+
+
+def test_cancelled_and_killed_runs_leave_the_server_serving(server, tmp_path):
+    problem, plan = _task("absolute", 12, 8)
+    for i in range(5):  # cancelled at once: the server writes a status nobody reads (no SIGPIPE for it)
+        files = _files(tmp_path / "x", PAPER_ABSOLUTE, problem, plan)
+        run = ValRun(server.run(files), files, None)
+        pid = run.pid
+        if i % 2:
+            with pytest.raises(PlannerError, match="did not finish within"):
+                run.result(0.0005)  # past its time: the run's group killed
+        else:
+            run.cancel()
+        deadline = time.monotonic() + 10
+        while alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not alive(pid)
+        assert not any((tmp_path / "x").iterdir())  # the run's files are gone
+        (tmp_path / "x").rmdir()
+    assert server.alive()
+    files = _files(tmp_path, PAPER_ABSOLUTE, problem, plan)
+    verdict = ValRun(server.run(files), files, None).result(60)
+    assert verdict.valid
+
+
+def test_a_forked_run_cannot_take_the_hosts_memory(server, tmp_path):
+    fifo = tmp_path / "problem.pddl"
+    os.mkfifo(fifo)  # no writer: the run waits there, still running when its limits are read
+    problem, plan = _task()
+    files = _files(tmp_path / "f", DOMAIN, problem, plan)
+    files[1] = str(fifo)
+    proc = server.run(files)
+    try:
+        with open(f"/proc/{proc.pid}/limits") as f:
+            line = next(l for l in f if l.startswith("Max address space"))
+        assert line.split()[3] == str(VAL_ADDRESS_SPACE_BYTES)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.stdout.close()
+
+
+def test_the_server_and_its_runs_end_with_their_owner_killed_with_sigkill(tmp_path):
+    """The owner holds the server's socket: when it dies the server reads end-of-file and exits, and a run still
+    going (here waiting on a problem nobody writes) dies with the server."""
+    problem, plan = _task()
+    files = _files(tmp_path, DOMAIN, problem, plan)
+    os.unlink(files[1])
+    os.mkfifo(files[1])
+    script = textwrap.dedent(f"""
+        import time
+        from planhrc.planner.valfork import ForkServer
+        forks = ForkServer.start()
+        proc = forks.run({files!r})
+        print(forks.pid, proc.pid, flush=True)
+        time.sleep(60)
+    """)
+    pids = pids_of_a_killed_owner(script)
+    assert len(pids) == 2
+    assert not left_alive(pids), "the fork server or its run outlived its owner"
+
+
+def test_checks_run_on_the_fork_server_and_arm_without_a_c_compiler(monkeypatch):
+    problem, plan = _task()
+    forking = ArmedValidators(arm_delay_s=0.0)
+    try:
+        assert forking.start(DOMAIN, problem, plan).verdict(None).valid
+        assert not forking.start(DOMAIN, problem, plan[:-1]).verdict(None).valid
+        assert forking.counts == {"forked": 2, "armed": 0, "cold": 0}
+        assert forking.armed_count() == 0  # nothing armed beside the server
+    finally:
+        forking.close()
+    monkeypatch.setattr("planhrc.planner.valfork.library", lambda folder=None: None)
+    armed = ArmedValidators(arm_delay_s=0.0)
+    try:
+        assert armed.start(DOMAIN, problem, plan).verdict(None).valid
+        assert armed.counts == {"forked": 0, "armed": 0, "cold": 1} and not armed.forking
+    finally:
+        armed.close()
+
+
+def test_without_a_c_compiler_there_is_no_library(monkeypatch, tmp_path):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    assert library(tmp_path) is None
+    assert ForkServer.start(tmp_path) is None
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_library_that_fails_to_compile_is_not_kept(monkeypatch, tmp_path):
+    bad = tmp_path / "valfork.c"
+    bad.write_text("this is not C\n")
+    monkeypatch.setattr("planhrc.planner.valfork.SOURCE", bad)
+    folder = tmp_path / "cache"
+    folder.mkdir()
+    assert library(folder) is None
+    assert not list(folder.iterdir())
