@@ -29,6 +29,7 @@ from typing import Sequence
 
 from planhrc.paths import cache_folder
 
+from .errors import PlannerError
 from .validate import VAL_ADDRESS_SPACE_BYTES, cap_address_space, val_env, validate_binary
 
 log = logging.getLogger(__name__)
@@ -40,7 +41,7 @@ REPLY_TIMEOUT_S = 5.0  # how long a request may wait for the run's pid
 COMPILE_TIMEOUT_S = 60.0
 
 
-class ForkServerError(OSError):
+class ForkServerError(PlannerError, OSError):
     """The server could not take a request (it is gone, or refused it): the caller starts VAL cold."""
 
 
