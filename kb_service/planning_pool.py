@@ -51,6 +51,7 @@ import subprocess
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Callable, Iterator
@@ -61,7 +62,8 @@ from planhrc.pipeline.replan import PlanningJob
 from planhrc.transition import changes_along
 from planhrc.vocabulary import PlanningStatus
 
-__all__ = ["ATOMS_PER_FRAME", "PlanningJob", "PlanningPool", "pack_outcome", "state_size", "unpack_outcome"]
+__all__ = ["ATOMS_PER_FRAME", "JobCollector", "PlanningJob", "PlanningPool", "pack_outcome", "state_size",
+           "unpack_outcome"]
 
 log = logging.getLogger(__name__)
 
@@ -339,19 +341,34 @@ def run_worker() -> None:
     from planhrc import pipeline
 
     conn = Connection(fd)
-    for done in itertools.count(1):
+    collector = JobCollector()
+    while True:
         try:
             job = conn.recv()
         except (EOFError, OSError):
             return
-        gc.disable()  # see the module's note; collected below, after the answer
-        try:
+        with collector.job():
             sent = _answer(conn, job, pipeline.plan)
-        finally:
-            gc.enable()
-        gc.collect(2 if done % FULL_COLLECT_JOBS == 0 else 1)
         if not sent:
             return
+
+
+class JobCollector:
+    """The cyclic garbage collector of a process that plans jobs one after another (see the module's note): off
+    during a job, the young generations collected after it, every generation after every `FULL_COLLECT_JOBS`."""
+
+    def __init__(self) -> None:
+        self.done = 0
+
+    @contextmanager
+    def job(self) -> Iterator[None]:
+        gc.disable()
+        try:
+            yield
+        finally:
+            gc.enable()
+            self.done += 1
+            gc.collect(2 if self.done % FULL_COLLECT_JOBS == 0 else 1)
 
 
 def _answer(conn: Connection, job: PlanningJob, plan: Callable[..., PlanOutcome]) -> bool:

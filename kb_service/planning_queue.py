@@ -13,6 +13,9 @@
   the service takes one outcome per job: one plan, whichever worker made it.
 * **VAL** gates dispatch exactly as with the service's own pool: with the early answer the service runs VAL on the
   outcome (`pipeline.replan`), else the worker checks the whole plan before it answers.
+* **The garbage collector** of a worker is handled as the pool's workers' (`planning_pool.JobCollector`): off
+  during a job, the young generations after it, a full pass every `FULL_COLLECT_JOBS` jobs, so that the grounded
+  tasks a worker keeps are not walked after every job.
 * **A job on the wire** is pickled, as the service's own pool sends it to its workers, and so is its outcome
   (`planning_pool.pack_outcome`): whoever may write the database may run code in the workers, so the database's
   credentials are the trust boundary (they already guard every plan the robot executes). Service and workers run
@@ -36,7 +39,7 @@ from planhrc.model import ArticulatedObject
 from planhrc.pipeline import PlanOutcome
 from planhrc.vocabulary import PlanningStatus
 
-from .planning_pool import PlanningJob, pack_outcome, state_size, unpack_outcome
+from .planning_pool import JobCollector, PlanningJob, pack_outcome, state_size, unpack_outcome
 from .store import UnavailableError
 from .store.postgres.jobs import (CLAIM, COLLECT, DONE_CHANNEL, FINISH, FORGET, HAND_BACK, JOB_CHANNEL, JOB_TABLES,
                                   MIN_LEFT_S, RENEW, SUBMIT, WITHDRAW, claimed)
@@ -235,6 +238,7 @@ def serve_jobs(db: str, password: str | None, tbox_path: str, lease_s: float, st
 
     worker = worker or worker_name()
     link = _Link(db, password, "planhrc-planning-worker")
+    collector = JobCollector()  # as the pool's workers: the grounded tasks it keeps are not walked after each job
     listener: Connection | None = None
     forgotten_at = 0.0
     try:
@@ -252,7 +256,8 @@ def serve_jobs(db: str, password: str | None, tbox_path: str, lease_s: float, st
                     for _ in listener.notifies(timeout=min(1.0, lease_s / 2), stop_after=1):
                         pass
                     continue
-                _run_job(pipeline.plan, link, db, password, worker, got, tbox_path, lease_s)
+                with collector.job():
+                    _run_job(pipeline.plan, link, db, password, worker, got, tbox_path, lease_s)
             except (UnavailableError, psycopg.OperationalError) as exc:
                 log.warning("planning worker %s: %s; trying again", worker, " ".join(str(exc).split())[:200])
                 if listener is not None:

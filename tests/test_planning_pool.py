@@ -148,3 +148,26 @@ def test_only_large_tasks_go_to_the_pool():
     assert not pool.takes(make_object("r", "relative", 20, 12))
     assert pool.takes(make_object("a", "absolute", 20, 12))
     assert not PlanningPool(0, 1).takes(make_object("a", "absolute", 20, 12))
+
+
+def test_a_planning_process_collects_after_each_job_and_everything_every_hundred():
+    """The collector is off during a job; after it the young generations are collected, and every generation
+    after every FULL_COLLECT_JOBS-th job (the grounded tasks a worker keeps are walked only then)."""
+    import gc
+
+    from planhrc.kb_service.planning_pool import FULL_COLLECT_JOBS, JobCollector
+
+    collector = JobCollector()
+    assert gc.isenabled()
+    young, old = gc.get_stats()[1]["collections"], gc.get_stats()[2]["collections"]
+    for _ in range(FULL_COLLECT_JOBS - 1):
+        with collector.job():
+            assert not gc.isenabled()
+    assert gc.isenabled()
+    assert gc.get_stats()[1]["collections"] - young >= FULL_COLLECT_JOBS - 1
+    full_before = gc.get_stats()[2]["collections"]
+    with pytest.raises(RuntimeError):
+        with collector.job():  # a job that fails is still followed by its collection, the collector back on
+            raise RuntimeError("planning failed")
+    assert gc.isenabled() and collector.done == FULL_COLLECT_JOBS
+    assert gc.get_stats()[2]["collections"] == full_before + 1 and full_before >= old
