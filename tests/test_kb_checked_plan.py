@@ -93,3 +93,25 @@ def test_actions_checked_once_are_valid_for_their_object_only(kb):
     assert not bigger.valid_actions
     with pytest.raises(ValidationError):
         check_plan(bigger, actions, states)
+
+
+def test_a_plan_checked_ahead_has_its_journal_row_made_ahead_too(kb, monkeypatch):
+    """The journal row's body is made with the check, outside the store's lock: the write that stores the plan
+    does not make it again (a large plan's body takes most of a second, which every other write would wait for)."""
+    from planhrc.kb_service.store import journal
+
+    obj = make_object("obj1", "absolute", 4, 4)
+    kb.create_object(obj)
+    init = kb.add_state("obj1", "perceived", obj.state([0, 90, 180, 270]))
+    actions, states = plan_for(obj, init.atoms, [(1, True), (3, False)])
+    goal = kb.add_state("obj1", "goal", states[-1])
+    problem = kb.add_problem("obj1", init.id, goal.id)
+    checked = kb.check_plan("obj1", actions, states)
+    assert checked.journal_body == journal.encode_body(checked.actions, checked.expected_states)
+
+    def made_inside(*args):
+        raise AssertionError("the journal row's body was made inside the write")
+
+    monkeypatch.setattr(journal, "encode_body", made_inside)
+    plan = kb.add_plan(problem.id, "inproc", checked.actions, checked.expected_states, checked)
+    assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == list(states)

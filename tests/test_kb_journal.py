@@ -145,9 +145,39 @@ def test_a_row_holds_the_expected_states_as_changes_and_rows_of_the_layout_befor
     entry = JournalEntry("obj1_plan_3", "obj1", "obj1_problem_2", "inproc", 12.5, 7, tuple(actions), tuple(states))
     row = encode(entry)
     assert decode(row) == entry
-    whole = pickle.dumps((journal.WHOLE_STATES, *pickle.loads(row)[1:8], tuple(states)), protocol=5)
+    header = pickle.loads(row)[1:7]  # plan, object, problem, planner, time, first state's counter
+    action_pieces, count, first_pieces, change_pieces = pickle.loads(pickle.loads(row)[7])  # the body, in pieces
+    actions_rows = tuple(row for piece in action_pieces for row in pickle.loads(piece))
+    first = frozenset(atom for piece in first_pieces for atom in pickle.loads(piece))
+    as_changes = (count, first, tuple(c for piece in change_pieces for c in pickle.loads(piece)))
+    whole = pickle.dumps((journal.WHOLE_STATES, *header, actions_rows, tuple(states)), protocol=5)
     assert decode(whole) == entry
+    inline = pickle.dumps((journal.AS_CHANGES, *header, actions_rows, as_changes), protocol=5)
+    assert decode(inline) == entry  # the layout before the body was pickled apart
     assert len(row) < len(whole) / 2, (len(row), len(whole))
+    # the body made before the write (outside the store's lock) is the body the row would have made itself
+    assert encode(entry, journal.encode_body(entry.actions, entry.expected_states)) == row
+
+
+def test_a_large_plans_row_is_pickled_in_pieces_that_each_hold_the_interpreter_briefly(monkeypatch):
+    """No single pickling of a large plan's row holds the interpreter (and every other request) for long: the
+    body is pickled in pieces of at most ATOMS_PER_PIECE atoms (one item larger alone: its own piece), and reads
+    back the same whatever the pieces' size."""
+    import pickle
+
+    obj = make_object("obj1", "absolute", 12, 8)
+    start = obj.state([0] * obj.n_joints)
+    actions, states = plan_for(obj, start, [(k, k % 3 == 0) for k in range(1, obj.n_joints + 1)] * 3)
+    entry = JournalEntry("obj1_plan_3", "obj1", "obj1_problem_2", "inproc", 12.5, 7, tuple(actions), tuple(states))
+    whole = decode(encode(entry))
+    monkeypatch.setattr(journal, "ATOMS_PER_PIECE", 40)
+    row = encode(entry)
+    assert decode(row) == entry == whole
+    action_pieces, _, first_pieces, change_pieces = pickle.loads(pickle.loads(row)[7])
+    assert len(action_pieces) > 10 and len(first_pieces) > 2 and len(change_pieces) > 1
+    for piece in action_pieces:
+        rows = pickle.loads(piece)
+        assert len(rows) == 1 or sum(journal._action_atoms(r) for r in rows) <= 40
     with pytest.raises(DamagedStoreError, match="unknown layout"):
         decode(pickle.dumps((99, "x")))
     with pytest.raises(DamagedStoreError, match="does not read back"):

@@ -41,9 +41,9 @@ class PlanBacklog:
         return self._rows
 
     # -- adopting a plan (inside the write that stores it) ---------------------------------------------------
-    def adopt(self, entry: JournalEntry) -> StoredPlan:
+    def adopt(self, entry: JournalEntry, body: bytes | None = None) -> StoredPlan:
         """Journal a plan in the open transaction; its records, cached (the row is the plan from now on)."""
-        self._table.append(entry)
+        self._table.append(entry, body)
         self._pending += 1
         return self._records.put_entry(entry)
 

@@ -8,6 +8,7 @@ and writes, and adds what differs: its transactions, side tables, plan journal, 
 from __future__ import annotations
 
 from contextlib import AbstractContextManager
+from dataclasses import replace
 from typing import Iterator, Protocol, Sequence
 
 from planhrc.model import ArticulatedObject, Atom, Perception
@@ -17,6 +18,7 @@ from .checks import check_export, check_plan
 from .errors import NotFoundError, ValidationError
 from .execution import ExecutionCursor
 from .export import export_pieces
+from .journal import encode_body
 from .names import ABOX_IRI, TBOX_IRI
 from .records import ActionSpec, CheckedPlan, Execution, StoredAction, StoredPlan, StoredProblem, StoredState
 from .unit import RecordsOfWrites
@@ -105,7 +107,10 @@ class StoreFacade:
                    deadline_at: float | None = None) -> CheckedPlan:
         with self._guard:  # only to look the object up: the checks read nothing else
             info = self._records.info(object_id, "object_id")
-        return check_plan(info, tuple(actions), tuple(expected_states), deadline_at)
+        checked = check_plan(info, tuple(actions), tuple(expected_states), deadline_at)
+        # the journal row's body too, here, outside the store's lock: for a large plan the write would hold the
+        # lock every object's write needs for most of a second making it (`journal.encode_body`)
+        return replace(checked, journal_body=encode_body(checked.actions, checked.expected_states))
 
     def _checked_execution(self, object_id: str, execution: Execution) -> str:
         """Check a new execution of an object (with the store's guard held); the object's id."""

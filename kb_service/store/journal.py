@@ -38,8 +38,10 @@ INDEX = ("CREATE INDEX IF NOT EXISTS planhrc_plan_journal_states ON planhrc_plan
          "(object_id, first_state, last_state)")
 # the columns a table made before rows named their states lacks, with their types
 NAMED = {"object_id": "TEXT", "first_state": "INTEGER", "last_state": "INTEGER"}
-FORMAT = 2  # the payload's layout (2: expected states as changes); a row of another layout is refused when read
-WHOLE_STATES = 1  # the layout before: every expected state whole (still read, from a store written by it)
+FORMAT = 3  # the payload's layout (3: the header, then the body pickled apart); another layout is refused when read
+AS_CHANGES = 2  # the layout before: the body inline (still read, from a store written by it)
+WHOLE_STATES = 1  # the layout before that: every expected state whole (still read)
+ATOMS_PER_PIECE = 5_000  # the body is pickled in pieces of about this many atoms (`encode_body`)
 
 
 @dataclass(frozen=True)
@@ -75,18 +77,53 @@ class JournalEntry:
         return plan, states
 
 
-def encode(entry: JournalEntry) -> bytes:
-    """The row: the actions, and the expected states as the first one and, for each next one, the atoms it drops
-    and adds. An action changes a few atoms of a state, so the row is a fraction of the plan's states written
-    whole, and it is written inside the re-plan's transaction, before the answer."""
-    actions = tuple((a.name, tuple(a.params), a.pre, a.eff_neg, a.eff_pos,
-                     tuple((c.when, c.eff_neg, c.eff_pos) for c in a.cond_eff)) for a in entry.actions)
-    states = entry.expected_states
-    first = frozenset(states[0]) if states else frozenset()
-    changes = changes_along(states, entry.actions)  # a plan's states are its actions' replay
+def encode_body(actions: tuple[ActionSpec, ...], expected_states: tuple[frozenset[Atom], ...]) -> bytes:
+    """The row's body: the actions, and the expected states as the first one and, for each next one, the atoms it
+    drops and adds. An action changes a few atoms of a state, so the body is a fraction of the plan's states written
+    whole. It names nothing the transaction gives (the plan's name, its states' counters), so it is made before the
+    write, outside the store's lock (`CheckedPlan.journal_body`): for a large plan it is most of the row's cost
+    (absolute 200 x 12, a 607-step plan: 0.8 s), which every other object's write would otherwise wait for. It is
+    pickled in pieces of at most `ATOMS_PER_PIECE` atoms: one `pickle.dumps` (or `loads`) of a whole large plan holds
+    the interpreter, every other request's thread and the event loop with it, for half a second."""
+    rows = [(a.name, tuple(a.params), a.pre, a.eff_neg, a.eff_pos,
+             tuple((c.when, c.eff_neg, c.eff_pos) for c in a.cond_eff)) for a in actions]
+    first = frozenset(expected_states[0]) if expected_states else frozenset()
+    changes = changes_along(expected_states, actions)  # a plan's states are its actions' replay
+    return pickle.dumps((_pieces(rows, _action_atoms), len(expected_states), _pieces(sorted(first), lambda a: 1),
+                         _pieces(changes, lambda c: len(c[0]) + len(c[1]))), protocol=5)
+
+
+def _action_atoms(row: tuple[Any, ...]) -> int:
+    _, _, pre, neg, pos, conditional = row
+    return len(pre) + len(neg) + len(pos) + sum(len(w) + len(n) + len(p) for w, n, p in conditional)
+
+
+def _pieces(items: list[Any] | tuple[Any, ...], atoms: Any) -> tuple[bytes, ...]:
+    """`items` pickled in consecutive pieces of at most `ATOMS_PER_PIECE` atoms (an item larger alone: its own)."""
+    pieces: list[bytes] = []
+    start, weight = 0, 0
+    for i, item in enumerate(items):
+        size = atoms(item)
+        if i > start and weight + size > ATOMS_PER_PIECE:
+            pieces.append(pickle.dumps(tuple(items[start:i]), protocol=5))
+            start, weight = i, 0
+        weight += size
+    if start < len(items):
+        pieces.append(pickle.dumps(tuple(items[start:]), protocol=5))
+    return tuple(pieces)
+
+
+def _unpieced(pieces: tuple[bytes, ...]) -> list[Any]:
+    return [item for piece in pieces for item in pickle.loads(piece)]
+
+
+def encode(entry: JournalEntry, body: bytes | None = None) -> bytes:
+    """The row, written inside the re-plan's transaction, before the answer: the header and the body
+    (`encode_body`, made here unless given)."""
+    if body is None:
+        body = encode_body(entry.actions, entry.expected_states)
     return pickle.dumps((FORMAT, entry.plan_id, entry.object_id, entry.problem_id, entry.planner,
-                         float(entry.created_at), int(entry.first_state), actions, (len(states), first, changes)),
-                        protocol=5)
+                         float(entry.created_at), int(entry.first_state), body), protocol=5)
 
 
 def decode(payload: bytes) -> JournalEntry:
@@ -94,10 +131,19 @@ def decode(payload: bytes) -> JournalEntry:
         data: Any = pickle.loads(payload)
     except (pickle.UnpicklingError, EOFError, ValueError, TypeError) as exc:
         raise DamagedStoreError(f"plan journal: a row that does not read back ({exc})") from None
-    if not isinstance(data, tuple) or not data or data[0] not in (WHOLE_STATES, FORMAT):
+    if not isinstance(data, tuple) or not data or data[0] not in (WHOLE_STATES, AS_CHANGES, FORMAT):
         found = data[0] if isinstance(data, tuple) and data else "?"
         raise DamagedStoreError(f"plan journal: a row of an unknown layout ({found})")
-    layout, plan_id, object_id, problem_id, planner, created, first_state, actions, states = data
+    if data[0] == FORMAT:
+        layout, plan_id, object_id, problem_id, planner, created, first_state, body = data
+        try:
+            action_pieces, count, first_pieces, change_pieces = pickle.loads(body)
+            actions = _unpieced(action_pieces)
+            states = (count, frozenset(_unpieced(first_pieces)), tuple(_unpieced(change_pieces)))
+        except (pickle.UnpicklingError, EOFError, ValueError, TypeError) as exc:
+            raise DamagedStoreError(f"plan journal: a row whose body does not read back ({exc})") from None
+    else:
+        layout, plan_id, object_id, problem_id, planner, created, first_state, actions, states = data
     specs = tuple(ActionSpec(name=n, params=tuple(p), pre=frozenset(pre), eff_neg=frozenset(neg),
                              eff_pos=frozenset(pos),
                              cond_eff=tuple(CondEffect(frozenset(w), frozenset(cn), frozenset(cp)) for w, cn, cp in ces))
@@ -149,9 +195,10 @@ class JournalTable:
             decode(payload)
         return len(rows)
 
-    def append(self, entry: JournalEntry) -> None:
+    def append(self, entry: JournalEntry, body: bytes | None = None) -> None:
         self.quads.execute("INSERT INTO planhrc_plan_journal VALUES (?, ?, ?, ?, ?)",
-                           (entry.plan_id, encode(entry), entry.object_id, entry.first_state, entry.last_state))
+                           (entry.plan_id, encode(entry, body), entry.object_id, entry.first_state,
+                            entry.last_state))
 
     def remove(self, plan_id: str) -> None:
         self.quads.execute("DELETE FROM planhrc_plan_journal WHERE plan_id=?", (plan_id,))

@@ -73,11 +73,13 @@ class Execution:
 @dataclass(frozen=True)
 class CheckedPlan:
     """A plan's actions and expected states, checked against their object (`check_plan`) before its write: the
-    write (`add_plan(..., checked=...)`) given these very tuples does not check them again."""
+    write (`add_plan(..., checked=...)`) given these very tuples does not check them again, and takes its journal
+    row's body from `journal_body` when there is one (made with the check, outside the store's lock)."""
 
     object_id: str
     actions: tuple[ActionSpec, ...]
     expected_states: tuple[frozenset[Atom], ...]
+    journal_body: bytes | None = None
 
 
 @dataclass(frozen=True)

@@ -80,4 +80,6 @@ class RecordsOfWrites(Protocol):
 class PlanAdopter(Protocol):
     """Stores a new plan inside the open transaction (a journal row, written out as triples when they are read)."""
 
-    def adopt(self, entry: JournalEntry) -> StoredPlan: ...
+    def adopt(self, entry: JournalEntry, body: bytes | None = None) -> StoredPlan:
+        """`body`: the row's body made before the write (`journal.encode_body`), else made here."""
+        ...

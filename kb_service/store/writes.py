@@ -148,7 +148,11 @@ class Writes:
         actions = tuple(actions)
         expected_states = tuple(expected_states)
         ident = info.obj.ident
-        if not is_checked(checked, ident, actions, expected_states):
+        body = None
+        if is_checked(checked, ident, actions, expected_states):
+            assert checked is not None
+            body = checked.journal_body
+        else:
             check_plan(info, actions, expected_states)
         created = time.time()
 
@@ -156,6 +160,6 @@ class Writes:
             plan_id = record_name(ident, "plan", abox.next_counter(counter_name(ident, "plan")))
             first_state = abox.reserve_counter(counter_name(ident, "state"), len(expected_states))
             return self._backlog.adopt(JournalEntry(plan_id, ident, problem_id, planner, created, first_state,
-                                                    actions, expected_states))
+                                                    actions, expected_states), body)
 
         return abox.write(fill)

@@ -46,10 +46,11 @@ class PgJournal:
         return int(row[0]) if row else 0
 
     # -- adopting a plan (inside the write that stores it) -------------------------------------------------
-    def adopt(self, entry: JournalEntry) -> StoredPlan:
+    def adopt(self, entry: JournalEntry, body: bytes | None = None) -> StoredPlan:
         self._session.execute("INSERT INTO planhrc_plan_journal (plan_id, object_id, first_state, last_state, "
                               "payload) VALUES (%s, %s, %s, %s, %s)",
-                              (entry.plan_id, entry.object_id, entry.first_state, entry.last_state, encode(entry)))
+                              (entry.plan_id, entry.object_id, entry.first_state, entry.last_state,
+                               encode(entry, body)))
         return self._records.put_entry(entry)
 
     # -- writing plans out (for readers of the triples) -----------------------------------------------------
