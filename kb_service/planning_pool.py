@@ -29,7 +29,14 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   the young generations, where everything the job made is: its cycles go, for about a millisecond on absolute
   20 x 12. A full collection, which also walks what the worker keeps from job to job (the grounded tasks: about
   45 ms there, more than planning the job), runs every `FULL_COLLECT_JOBS` jobs. The service pauses its collector
-  only while it unpacks an outcome that has arrived (`_CollectorPause`), not while it waits for one.
+  only while it unpacks an outcome that has arrived (`_CollectorPause`), not while it waits for one. A huge outcome
+  (`FREEZE_ATOMS` atoms in its expected states: absolute 200 x 12 has about 12 million) is then frozen out of the
+  collector's passes (`gc.freeze`, as start-up's objects are): each full pass walked all its states while it held
+  the interpreter, half a second or more, and every other object's request and /health waited (`planhrc
+  service-bench --parts contention`: another object's slowest perception 1.0-1.1 s -> 0.17 s, the slowest /health
+  0.5-1.0 s -> 0.05 s). Its objects are still freed when the plan is dropped (they hold no reference cycle); what
+  else was in the collector's generations at that moment is frozen with it until shutdown, which is why only huge
+  outcomes are.
 * **Priority.** A worker runs at nice 10: on a machine whose cores are all busy, the service's requests come
   first and the large task gets what is left (`planhrc service-bench --parts contention` compares the slowest
   /health and the other object's slowest perception with the workers at the service's priority).
@@ -71,6 +78,7 @@ ATOMS_PER_FRAME = 5_000  # one frame's unpickling holds the service's interprete
 EFFECTS_PER_FRAME = 1_000  # actions' conditional effects per frame (absolute 200 links: about 200 an action)
 WORKER_NICE = 10  # below the service's requests when they compete for a core
 FULL_COLLECT_JOBS = 100  # a worker collects every generation after this many jobs, the young ones after each
+FREEZE_ATOMS = 1_000_000  # an outcome whose expected states hold this many atoms in all is frozen (module's note)
 _PARENT_POLL_S = 0.2
 _STOP_WAIT_S = 1.0
 
@@ -240,6 +248,8 @@ class PlanningPool:
             header = next(frames)  # the worker's answer has come: the rest follows at once
             with self._pause:
                 outcome = unpack_outcome(itertools.chain((header,), frames), job.init)
+                if sum(map(len, outcome.expected_states)) >= FREEZE_ATOMS:
+                    gc.freeze()  # see the module's note: kept out of the collector's full passes
             healthy = True
             return outcome
         except _Overrun:

@@ -77,6 +77,29 @@ def test_the_outcome_comes_back_equal_with_its_states_made_on_the_initial_state(
     assert unpack_outcome(pack_outcome(bare)).expected_states == outcome.expected_states
 
 
+def test_a_huge_outcome_is_frozen_out_of_the_collectors_full_passes(config, monkeypatch):
+    """An outcome whose expected states hold FREEZE_ATOMS atoms or more is frozen once unpacked (`gc.freeze`): the
+    collector's full passes, which hold the interpreter, would walk it after every few thousand allocations; a
+    smaller one is not."""
+    import gc
+
+    import planhrc.kb_service.planning_pool as planning_pool
+
+    rod = make_object("rod", "absolute", 8, 8)
+    start, goal = [45 * (i % 8) for i in range(8)], [(90 + 45 * i) % 360 for i in range(8)]
+    try:
+        with PlanningPool(1, 1) as pool:
+            frozen = gc.get_freeze_count()
+            assert pool.plan(_job(config, rod, start, goal)).status is PlanningStatus.SOLVED
+            assert gc.get_freeze_count() == frozen  # small: left to the collector
+            monkeypatch.setattr(planning_pool, "FREEZE_ATOMS", 1)
+            outcome = pool.plan(_job(config, rod, start, goal))
+            assert outcome.status is PlanningStatus.SOLVED and gc.get_freeze_count() > frozen
+            assert gc.isenabled()
+    finally:
+        gc.unfreeze()
+
+
 def test_the_pool_survives_a_worker_that_dies_mid_plan(config):
     big = make_object("big", "absolute", 120, 12)
     small = make_object("small", "absolute", 4, 12)
