@@ -67,10 +67,11 @@ def cpu_seconds(pid: int) -> float:
 
 
 def _replanning_with_cpu(client: httpx.Client, server: Server, object_id: str, links: int, orientations: int,
-                         count: int, rng: random.Random) -> tuple[list[float], float]:
-    """`replanning_latencies`, and the server's CPU milliseconds per perception posted meanwhile."""
+                         count: int, rng: random.Random, acting: bool = False) -> tuple[list[float], float]:
+    """`replanning_latencies`, and the server's CPU milliseconds per perception posted meanwhile (with `acting`,
+    the robot's calls between two perceptions included)."""
     before = cpu_seconds(server.pid)
-    lat = replanning_latencies(client, object_id, links, orientations, count, rng)
+    lat = replanning_latencies(client, object_id, links, orientations, count, rng, acting=acting)
     return lat, round((cpu_seconds(server.pid) - before) / max(count, 1) * 1000, 2)
 
 
@@ -111,14 +112,28 @@ def perceive(client: httpx.Client, object_id: str, angles: list[float]) -> tuple
     return seconds, str(r.json()["decision"])
 
 
+def act(client: httpx.Client, object_id: str) -> None:
+    """The robot's part between two perceptions: take the next action, if there is one, and report it done."""
+    r = client.post(f"/objects/{object_id}/actions/next")
+    r.raise_for_status()
+    action = r.json()
+    if action:
+        client.post(f"/objects/{object_id}/actions/{action['id']}/feedback",
+                    json={"outcome": "succeeded"}).raise_for_status()
+
+
 def replanning_latencies(client: httpx.Client, object_id: str, links: int, orientations: int, count: int,
-                         rng: random.Random, pause_s: float = 0.0) -> list[float]:
-    """Seconds of `count` perceptions that each force a new plan (random configurations far from the plan),
-    `pause_s` apart (0: back to back)."""
+                         rng: random.Random, pause_s: float = 0.0, acting: bool = False) -> list[float]:
+    """Seconds of the perceptions, of `count` random configurations far from the plan, that forced a new plan,
+    `pause_s` apart (0: back to back). With `acting` the robot executes the next action before each perception
+    (`act`): a bimanual plan begins with grasps, which no link orientation prevents, so without acting every
+    perception lets the plan go on (the cooperation model's continue) and none re-plans."""
     out = []
     for _ in range(count):
         if pause_s:
             time.sleep(pause_s)
+        if acting:
+            act(client, object_id)
         seconds, decision = perceive(client, object_id, random_angles(rng, links, orientations))
         if decision == DecisionKind.REPLAN:
             out.append(seconds)
@@ -215,7 +230,8 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
             while sent < checkpoint - samples:
                 perceive(client, obj, random_angles(rng, links, orientations))
                 sent += 1
-            lat, cpu_ms = _replanning_with_cpu(client, server, obj, links, orientations, samples, rng)
+            lat, cpu_ms = _replanning_with_cpu(client, server, obj, links, orientations, samples, rng,
+                                               acting=formulation == "bimanual")
             sent += samples
             last_seq = _last_seq(client, obj, last_seq)
             reads: dict[str, Any] = {}
@@ -280,7 +296,7 @@ def bench_history_side_by_side(short: int, long: int, samples: int, links: int, 
                 if count <= 0:
                     continue
                 lat, cpu_ms = _replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
-                                                   count, rng)
+                                                   count, rng, acting=formulation == "bimanual")
                 side.latencies += lat
                 side.cpu_s += cpu_ms * count / 1000
                 side.posted += count
@@ -406,7 +422,9 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p.add_argument("--samples", type=_positive_int, default=30, help="re-planning perceptions per measurement")
     p.add_argument("--links", type=_positive_int, default=8)
     p.add_argument("--orientations", type=_positive_int, default=12)
-    p.add_argument("--formulation", choices=["relative", "absolute"], default="relative")
+    p.add_argument("--formulation", choices=["relative", "absolute", "bimanual"], default="relative",
+                   help="the history parts' object (bimanual: the robot executes the next action before each "
+                   "re-planning perception, the server's CPU per perception counting its calls)")
     p.add_argument("--big-links", type=_positive_int, default=200, help="links of the large object (contention)")
     p.add_argument("--big-orientations", type=_positive_int, default=12)
     p.add_argument("--planning-workers", type=_non_negative_int, default=None,

@@ -38,6 +38,17 @@ def test_service_bench_reports_numbers(tmp_path):
     assert (tmp_path / "service-bench.md").read_text().count("|") > 10
 
 
+def test_service_bench_re_plans_a_bimanual_object_with_the_robot_acting(tmp_path):
+    """A bimanual plan begins with grasps: without the robot acting, every random perception lets the plan go on.
+    With it (the next action taken and done before each perception) the perceptions re-plan."""
+    out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "history",
+                          "--checkpoints", "12", "--samples", "10", "--links", "4", "--orientations", "8",
+                          "--formulation", "bimanual"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    (row,) = json.loads(out.stdout)["history"]
+    assert row["replan"]["n"] >= 3 and row["replan"]["p50_ms"] > 0
+
+
 def test_service_bench_side_by_side_measures_both_histories_in_one_run(tmp_path):
     out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "side-by-side",
                           "--checkpoints", "2,6", "--samples", "5", "--links", "4", "--orientations", "4",
