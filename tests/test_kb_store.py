@@ -273,8 +273,8 @@ def test_failure_inside_a_write_rolls_everything_back():
         actions, states = plan_for(a, w["states"][0].atoms, [(1, True), (2, True)])
         original = JournalTable.append
 
-        def append_then_fail(self, entry):
-            original(self, entry)  # the plan's journal row and ids are in the open transaction ...
+        def append_then_fail(self, entry, body=None):
+            original(self, entry, body)  # the plan's journal row and ids are in the open transaction ...
             raise OSError("disk full")  # ... when the write fails
 
         with pytest.MonkeyPatch.context() as patch:
