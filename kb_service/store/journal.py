@@ -89,7 +89,7 @@ def encode_body(actions: tuple[ActionSpec, ...], expected_states: tuple[frozense
              tuple((c.when, c.eff_neg, c.eff_pos) for c in a.cond_eff)) for a in actions]
     first = frozenset(expected_states[0]) if expected_states else frozenset()
     changes = changes_along(expected_states, actions)  # a plan's states are its actions' replay
-    return pickle.dumps((_pieces(rows, _action_atoms), len(expected_states), _pieces(sorted(first), lambda a: 1),
+    return pickle.dumps((_pieces(rows, _action_atoms), len(expected_states), _pieces(tuple(first), lambda a: 1),
                          _pieces(changes, lambda c: len(c[0]) + len(c[1]))), protocol=5)
 
 
