@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Collection, Sequence
+from typing import Collection, Mapping, Sequence
 
 import numpy as np
 
@@ -214,11 +214,78 @@ def reach_shortfall(point_xy: Sequence[float] | np.ndarray, robot: RobotBody | N
     p = np.asarray(point_xy, dtype=float)
     best = math.inf
     for shoulder, side in ((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0)):
-        beyond = max(0.0, float(np.linalg.norm(p - np.asarray(shoulder))) - robot.reach_m)
+        beyond = max(0.0, float(np.hypot(p[0] - shoulder[0], p[1] - shoulder[1])) - robot.reach_m)
         if p[0] < robot.near_x_m and side * p[1] < robot.own_side_y_m:
             beyond = max(beyond, min(robot.near_x_m - p[0], robot.own_side_y_m - side * p[1]))
         best = min(best, beyond)
     return best
+
+
+@dataclass(frozen=True)
+class Measures:
+    """What `configuration_feasible` measures of B configurations of one object at once (arrays, the batch first):
+    how far each link lies past the table's edges for each clearance asked for, whether it enters the robot's
+    body, how far its centre lies beyond each arm's reach, which neighbours fold onto each other and which other
+    pairs of links come closer than their width. The one place these checks are computed: the verdicts and the
+    reasons are read off it (`configuration_feasible`, and `planhrc.judge.TurnJudge` for many turns at once)."""
+
+    points: np.ndarray  # (B, N+1, 2): joint points p1 .. p(N+1)
+    outside: Mapping[float, np.ndarray]  # clearance -> (B, N+1): how far each point lies past the shrunk table
+    off: Mapping[float, np.ndarray]  # clearance -> (B, N): the larger of each link's two ends
+    inside: np.ndarray  # (B, N) bool: the link enters the robot's body
+    short: np.ndarray  # (B, N, 2): how far each link's centre lies beyond the left, the right arm's reach
+    folds: np.ndarray  # (B, N-1) bool: link k+2 folds back onto link k+1
+    pairs: tuple[np.ndarray, np.ndarray]  # the non-neighbouring pairs (i, j), i < j - 1, 0-based
+    close: Mapping[float, np.ndarray]  # overlap tolerance -> (B, P) bool: the pair comes closer than its limit
+
+    @property
+    def reach(self) -> np.ndarray:
+        """(B, N): how far each link's centre lies beyond the nearer arm's reach (0 when one reaches it)."""
+        return np.asarray(self.short.min(axis=2))
+
+
+def measure_configurations(geometry: ObjectGeometry, values: np.ndarray, cell: Cell,
+                           tolerances: Collection[Tolerance] = (STRICT,), min_fold_gap_deg: float = 25.0,
+                           base_points: np.ndarray | None = None) -> Measures:
+    """`Measures` of B configurations: link orientations `values` (B, N, degrees) with the base point at
+    `base_points` (B, 2; default: `geometry`'s), for the clearances and overlap tolerances of `tolerances`."""
+    values = np.asarray(values, dtype=float)
+    b, n = values.shape
+    bases = (np.broadcast_to(np.asarray(geometry.base_point_xy, dtype=float), (b, 2)) if base_points is None
+             else np.asarray(base_points, dtype=float))
+    t = np.radians(values)
+    steps = np.asarray(geometry.link_lengths_m)[None, :, None] * np.stack((np.cos(t), -np.sin(t)), axis=2)
+    points = np.empty((b, n + 1, 2))
+    points[:, 0] = bases
+    np.cumsum(steps, axis=1, out=points[:, 1:])
+    points[:, 1:] += points[:, :1]
+    half_width = geometry.link_width_m / 2.0
+    outside, off = {}, {}
+    for clearance in sorted({tol.clearance_m for tol in tolerances}):
+        x0, x1, y0, y1 = cell.table.bounds(margin_m=half_width + clearance)
+        px, py = points[..., 0], points[..., 1]
+        outside[clearance] = np.hypot(np.maximum(np.maximum(x0 - px, 0.0), px - x1),
+                                      np.maximum(np.maximum(y0 - py, 0.0), py - y1))
+        off[clearance] = np.maximum(outside[clearance][:, :-1], outside[clearance][:, 1:])
+    a, e = points[:, :-1].reshape(-1, 2), points[:, 1:].reshape(-1, 2)
+    inside = _segments_enter_box(a, e, cell.robot.footprint_xy, half_width).reshape(b, n)
+    short = arm_shortfalls((a + e) / 2.0, cell.robot).reshape(b, n, 2)
+    folds = (np.abs((np.diff(values, axis=1) % 360.0) - 180.0) < min_fold_gap_deg) if n > 1 else np.zeros((b, 0), bool)
+    i, j = np.triu_indices(n, k=2) if n > 2 else (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
+    close = {}
+    for overlap in sorted({tol.overlap_m for tol in tolerances}):
+        limit = geometry.link_width_m - overlap
+        out = np.zeros((b, len(i)), dtype=bool)
+        if len(i):
+            pa, pb = points[:, :-1], points[:, 1:]
+            lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)  # pairs whose bounding boxes lie `limit` apart are far
+            near = np.all((lo[:, i] - hi[:, j] < limit) & (lo[:, j] - hi[:, i] < limit), axis=2)
+            rows, cols = np.nonzero(near)
+            if len(rows):
+                out[rows, cols] = _segment_distances(pa[rows, i[cols]], pb[rows, i[cols]], pa[rows, j[cols]],
+                                                     pb[rows, j[cols]]) < limit
+        close[overlap] = out
+    return Measures(points, outside, off, inside, short, folds, (i, j), close)
 
 
 def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], cell: Cell | None = None,
@@ -229,20 +296,15 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
 
     `reach_links` restricts the reach check to those links (the ones a rotation grasps); None checks every link.
     `tolerance` (see `Tolerance`) forgives a small overhang past the table's edge and between links.
-    The checks are vectorised over links and link pairs: a plan's ordering calls this thousands of times."""
+    The checks are vectorised over links and link pairs (`measure_configurations`): a plan's ordering calls this
+    thousands of times."""
     cell = cell or Cell()
     values = _check_angles(geometry, angles)
-    points = _points(geometry, values)
+    m = measure_configurations(geometry, np.asarray([values]), cell, (tolerance,), min_fold_gap_deg)
     n = geometry.n_links
-    half_width = geometry.link_width_m / 2.0
-    a, b = points[:-1], points[1:]
-    x0, x1, y0, y1 = cell.table.bounds(margin_m=half_width + tolerance.clearance_m)
-    outside = np.hypot(np.maximum(np.maximum(x0 - points[:, 0], 0.0), points[:, 0] - x1),
-                       np.maximum(np.maximum(y0 - points[:, 1], 0.0), points[:, 1] - y1))
-    off = np.maximum(outside[:-1], outside[1:])
-    inside = _segments_enter_box(a, b, cell.robot.footprint_xy, half_width)
-    centres = (a + b) / 2.0
-    short = _reach_shortfalls(centres, cell.robot)
+    points, outside, off = m.points[0], m.outside[tolerance.clearance_m][0], m.off[tolerance.clearance_m][0]
+    x0, x1, y0, y1 = cell.table.bounds(margin_m=geometry.link_width_m / 2.0 + tolerance.clearance_m)
+    short = m.reach[0]
     checked = range(1, n + 1) if reach_links is None else sorted(k for k in set(reach_links) if 1 <= k <= n)
     reach = set(checked)
     reasons: list[Infeasibility] = []
@@ -254,29 +316,23 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
                         f"link {k} comes within {tolerance.clearance_m - d:.2f} m of the table's edge")
             end = points[k - 1] if outside[k - 1] >= outside[k] else points[k]
             reasons.append(Infeasibility(Infeasible.OFF_TABLE, k, sentence, d, _edge(end, (x0, x1, y0, y1))))
-        if inside[k - 1]:
+        if m.inside[0, k - 1]:
             reasons.append(Infeasibility(Infeasible.INSIDE_ROBOT, k, f"link {k} lies inside the robot's body",
                                          against="the robot's body"))
         if k in reach and short[k - 1] > 1e-9:
             d = float(short[k - 1])
             reasons.append(Infeasibility(Infeasible.OUT_OF_REACH, k, f"link {k} unreachable: {d:.2f} m beyond reach",
                                          d, "the arms' reach"))
-    folds = (np.diff(np.asarray(values)) % 360.0) if n > 1 else np.zeros(0)
-    for fold in np.flatnonzero(np.abs(folds - 180.0) < min_fold_gap_deg):  # neighbours fold onto each other
+    for fold in np.flatnonzero(m.folds[0]):  # neighbours fold onto each other
         reasons.append(Infeasibility(Infeasible.OVERLAP, int(fold) + 2,
                                      f"link {int(fold) + 2} folds back onto link {int(fold) + 1}",
                                      against=f"link {int(fold) + 1}"))
-    if n > 2:
-        i, j = np.triu_indices(n, k=2)
-        limit = geometry.link_width_m - tolerance.overlap_m
-        lo, hi = np.minimum(a, b), np.maximum(a, b)  # pairs whose bounding boxes lie `limit` apart are not close
-        near = np.all((lo[i] - hi[j] < limit) & (lo[j] - hi[i] < limit), axis=1)
-        i, j = i[near], j[near]
-        close = _segment_distances(a[i], b[i], a[j], b[j]) < limit if len(i) else np.zeros(0, dtype=bool)
-        for pi, pj in zip(i[close], j[close]):
-            reasons.append(Infeasibility(Infeasible.OVERLAP, int(pj) + 1,
-                                         f"link {int(pj) + 1} overlaps link {int(pi) + 1}",
-                                         against=f"link {int(pi) + 1}"))
+    i, j = m.pairs
+    close = m.close[tolerance.overlap_m][0]
+    for pi, pj in zip(i[close], j[close]):
+        reasons.append(Infeasibility(Infeasible.OVERLAP, int(pj) + 1,
+                                     f"link {int(pj) + 1} overlaps link {int(pi) + 1}",
+                                     against=f"link {int(pi) + 1}"))
     return Feasibility(not reasons, tuple(reasons))
 
 
@@ -289,18 +345,13 @@ def _edge(point: np.ndarray, bounds: tuple[float, float, float, float]) -> str:
     return max(past, key=lambda name: past[name])
 
 
-def _reach_shortfalls(points: np.ndarray, robot: RobotBody) -> np.ndarray:
-    """`reach_shortfall` of many table points at once."""
-    return np.asarray(arm_shortfalls(points, robot).min(axis=1))
-
-
 def arm_shortfalls(points: np.ndarray, robot: RobotBody) -> np.ndarray:
     """How far each table point lies beyond each arm's reach: an (n, 2) array, the left arm's then the right's
     (0 where the arm reaches it)."""
     points = np.atleast_2d(np.asarray(points, dtype=float))
     out = np.empty((len(points), 2))
     for column, (shoulder, side) in enumerate(((robot.left_shoulder_xy, 1.0), (robot.right_shoulder_xy, -1.0))):
-        beyond = np.maximum(0.0, np.linalg.norm(points - np.asarray(shoulder), axis=1) - robot.reach_m)
+        beyond = np.maximum(0.0, np.hypot(points[:, 0] - shoulder[0], points[:, 1] - shoulder[1]) - robot.reach_m)
         awkward = (points[:, 0] < robot.near_x_m) & (side * points[:, 1] < robot.own_side_y_m)
         across = np.minimum(robot.near_x_m - points[:, 0], robot.own_side_y_m - side * points[:, 1])
         out[:, column] = np.where(awkward, np.maximum(beyond, across), beyond)

@@ -27,7 +27,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from planhrc.geometry import (PLANNING, ROOMY, STRICT, Cell, Feasibility, Infeasibility, ObjectGeometry, Tolerance,
-                              arm_shortfalls, configuration_feasible, link_centres, reach_shortfall, rotated)
+                              Measures, arm_shortfalls, configuration_feasible, link_centres, measure_configurations,
+                              reach_shortfall, rotated)
 from planhrc.vocabulary import Infeasible
 
 SWEEP_INCREMENT_DEG = 5.0  # how finely a turn's sweep is checked
@@ -105,3 +106,124 @@ def two_arms(geometry: ObjectGeometry, angles: Sequence[float], turned: int, hel
     what = "" if alone > 1e-9 else " by the arm left free by the other grasp"
     return Infeasibility(Infeasible.OUT_OF_REACH, worst, f"link {worst} unreachable{what}: {miss:.2f} m beyond reach",
                          miss, "the arms' reach")
+
+
+class TurnJudge:
+    """`judge_turn`'s verdict (feasible or not) on many downstream turns from many poses at once, from one baseline:
+    what a search over configurations asks thousands of times. The configurations every turn sweeps through are
+    measured in one batch (`geometry.measure_configurations`, the same computation `configuration_feasible` reads
+    its reasons from) and judged as `judge_turn` judges them: the grasped links within reach of two arms where the
+    turn starts and where it ends, every swept configuration on the table, out of the robot and unfolded as drawn,
+    the last one with `rest`'s clearance, problems the baseline has (no worse) excused, reach never. A test holds
+    the two to the same answers. Each verdict comes with a second one: whether the turn also rests with `roomy`'s
+    clearance (what a search prefers where it can)."""
+
+    def __init__(self, geometry: ObjectGeometry, cell: Cell, baseline: Baseline, rest: Tolerance = PLANNING,
+                 roomy: Tolerance = ROOMY) -> None:
+        self.geometry, self.cell, self.rest, self.roomy = geometry, cell, rest, roomy
+        n = geometry.n_links
+        self._tolerances = (STRICT, rest, roomy)
+        self._off_base = np.full((3, n), -np.inf)  # per tolerance: the start's distance past the edge (-inf: none)
+        self._inside_base = np.zeros((3, n), dtype=bool)
+        self._overlap_base = np.zeros((3, n), dtype=bool)  # folds and overlaps share the code: by the later link
+        for t, tolerance in enumerate(self._tolerances):
+            for (tol, code, link), distance in baseline.problems.items():
+                if tol != tolerance or not 1 <= link <= n:
+                    continue
+                if code is Infeasible.OFF_TABLE:
+                    self._off_base[t, link - 1] = distance
+                elif code is Infeasible.INSIDE_ROBOT:
+                    self._inside_base[t, link - 1] = True
+                elif code is Infeasible.OVERLAP:
+                    self._overlap_base[t, link - 1] = True
+
+    def excused(self, tolerance: Tolerance) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The start's problems this judge excuses under `tolerance` (STRICT, its rest or its roomy one): how far each
+        link lay past the table's edge (-inf: it did not), which lay inside the robot, which folded onto or
+        overlapped another."""
+        t = self._tolerances.index(tolerance)
+        return self._off_base[t], self._inside_base[t], self._overlap_base[t]
+
+    def turns_ok(self, base_point_xy: Sequence[float], angles: Sequence[float],
+                 turns: Sequence[tuple[int, int, float]]) -> np.ndarray:
+        """For each downstream turn (turned, held = turned - 1, delta_deg) from the pose (the base point, link
+        orientations `angles`): whether `judge_turn` would find it feasible (a bool array)."""
+        ok, _ = self.judge_many([base_point_xy], [angles], turns)
+        return np.asarray(ok[0])
+
+    def judge_many(self, base_points: Sequence[Sequence[float]], poses: Sequence[Sequence[float]],
+                   turns: Sequence[tuple[int, int, float]]) -> tuple[np.ndarray, np.ndarray]:
+        """`turns_ok` for every pose (base point, link orientations) at once: (P, T) arrays of the verdicts, and of
+        whether each turn also rests with the roomy clearance. Where each turn comes to rest is judged first (most
+        refused turns are refused there), the configurations it sweeps through only for the turns that rest."""
+        n = self.geometry.n_links
+        start = np.asarray(poses, dtype=float).reshape(-1, n)
+        bases = np.asarray(base_points, dtype=float).reshape(-1, 2)
+        p = len(start)
+        spec = np.asarray(turns, dtype=float).reshape(-1, 3)
+        if np.any(spec[:, 0] != spec[:, 1] + 1):
+            raise ValueError("turns: only downstream turns (turned = held + 1) are judged in a batch")
+        t_count = len(spec)
+        counts = np.maximum(1, np.ceil(np.abs(spec[:, 2]) / SWEEP_INCREMENT_DEG)).astype(int)
+        turned, held = spec[:, 0].astype(int) - 1, spec[:, 1].astype(int) - 1  # 0-based; -1: the table
+        moved = np.arange(n)[None, :] >= turned[:, None]  # (T, N): the links each turn moves
+
+        # where each turn comes to rest, and the start (for the arms there): one batch
+        rests = np.where(moved[None], (start[:, None, :] + spec[None, :, 2, None] * counts[None, :, None]
+                                       / counts[None, :, None]) % 360.0, start[:, None, :])
+        values = np.concatenate((start[:, None, :], rests), axis=1).reshape(p * (t_count + 1), n)
+        m = measure_configurations(self.geometry, values, self.cell, self._tolerances[1:],
+                                   base_points=np.repeat(bases, t_count + 1, axis=0))
+        bad = self._problems(m, 1).reshape(p, t_count + 1)[:, 1:]
+        tight = self._problems(m, 2).reshape(p, t_count + 1)[:, 1:]
+        reach = m.reach.reshape(p, t_count + 1, n)[:, 1:]
+        t = np.arange(t_count)
+        bad |= (reach[:, t, turned] > 1e-9) | ((held >= 0)[None, :] & (reach[:, t, np.maximum(held, 0)] > 1e-9))
+        short = m.short.reshape(p, t_count + 1, n, 2)
+        ok = ~bad & _arms_hold(short[:, [0] * t_count], turned, held) & _arms_hold(short[:, 1:], turned, held)
+
+        # the configurations swept through on the way, for the turns that rest: one more batch
+        pose_i, turn_i = np.nonzero(ok & (counts > 1)[None, :])
+        if len(pose_i):
+            inner = counts[turn_i] - 1
+            owner = np.repeat(np.arange(len(pose_i)), inner)
+            firsts = np.concatenate(([0], np.cumsum(inner)[:-1]))
+            within = np.arange(len(owner)) - firsts[owner] + 1  # 1 .. count - 1 within its turn
+            which = turn_i[owner]
+            share = spec[which, 2] * within / counts[which]  # each row's share of its turn, in degrees
+            swept = np.where(moved[which], (start[pose_i[owner]] + share[:, None]) % 360.0, start[pose_i[owner]])
+            ms = measure_configurations(self.geometry, swept, self.cell, self._tolerances[:1],
+                                        base_points=bases[pose_i[owner]])
+            rows = np.arange(len(owner))
+            row_bad = self._problems(ms, 0)
+            row_bad |= (ms.reach[rows, turned[which]] > 1e-9) | (
+                (held[which] >= 0) & (ms.reach[rows, np.maximum(held[which], 0)] > 1e-9))
+            ok[pose_i, turn_i] &= ~np.logical_or.reduceat(row_bad, firsts)
+        return ok, ok & ~tight
+
+    def _problems(self, m: Measures, t: int) -> np.ndarray:
+        """Per measured configuration: whether it has a problem the baseline does not excuse under tolerance `t`
+        (reach aside)."""
+        tolerance = self._tolerances[t]
+        off = m.off[tolerance.clearance_m]
+        added = (off > tolerance.overhang_m + 1e-9) & ~(off <= self._off_base[t] + 1e-3)
+        added |= m.inside & ~self._inside_base[t]
+        bad = added.any(axis=1)
+        overlap_base = self._overlap_base[t]
+        if m.folds.shape[1]:
+            bad |= (m.folds & ~overlap_base[1:]).any(axis=1)
+        i, j = m.pairs
+        if len(i):
+            bad |= (m.close[tolerance.overlap_m] & ~overlap_base[j]).any(axis=1)
+        return np.asarray(bad)
+
+
+def _arms_hold(short: np.ndarray, turned: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """`two_arms` finds nothing, for each pose and turn (0-based `turned`, `held`; -1: the table), from the
+    shortfalls (P, T, N, 2) of the configuration each turn is judged in."""
+    t = np.arange(len(turned))
+    alone = short[:, t, turned].min(axis=2)
+    h = np.maximum(held, 0)
+    paired = np.minimum(np.maximum(short[:, t, turned, 0], short[:, t, h, 1]),
+                        np.maximum(short[:, t, turned, 1], short[:, t, h, 0]))
+    return np.asarray(np.where(held[None, :] >= 0, paired, alone) <= 1e-9)
