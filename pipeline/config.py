@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
 
-from planhrc.detour import Room
 from planhrc.model import ActionSpec, ArticulatedObject, State
+from planhrc.motion_search import Slide
 from planhrc.ordering import HelpItem
 from planhrc.planner.result import PlannerAttempt
 from planhrc.settings import Settings
@@ -63,7 +63,7 @@ class PlanOutcome:
     validated_steps: int = 0  # VAL accepted the first steps a_1 .. a_k so far (the early answer; see `validate_first`)
     help: tuple[HelpItem, ...] = ()  # no feasible order: what the human could do instead
     ordering: str = ""  # what the ordering did, in words (empty when the object is not placed)
-    room: Room | None = None  # no feasible plan where the object lies, one where the robot may slide it first
+    slide: Slide | None = None  # the plan's turns are made after the robot has slid the object there
 
     @property
     def solved(self) -> bool:

@@ -1,86 +1,85 @@
-"""An order of a plan's steps that keeps every configuration of an object placed in the cell on the table: the
-planner's steps in another order or one joint the other way round (`planhrc.ordering`), else a longer plan through
-intermediate configurations (`planhrc.detour.find_detour`); when none fits where the object lies, the place nearer
-the table's middle where one does, for the robot to slide the object to first (`planhrc.detour.find_room`)."""
+"""The robot's plan for an object placed in the cell: the planner says where the object must end (the state of the
+domain its plan reaches); the robot's turns and slides that get it there in the least robot time, every
+configuration on the table, come from one search (`planhrc.motion_search.plan_work`), and are grounded again as
+steps of the domain for VAL and the replay. When no such plan exists, the refusal says why and what to ask the
+human."""
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
 from typing import Sequence
 
-from planhrc.detour import Room, find_detour, find_room
-from planhrc.model import HAS_ORIENTATION, ArticulatedObject, DomainModelSpec, Formulation, State, orientation_name
-from planhrc.ordering import CLOCKWISE, HelpItem, Move, Placement, feasible_alternative, first_obstacle, help_for
+from planhrc.model import (HAS_ORIENTATION, HOLDING, IN_CENTRE, KEEPER, ArticulatedObject, DomainModelSpec,
+                           Formulation, State, orientation_name)
+from planhrc.motion_search import Hands, NoWork, Slide, Work, alphabet_of, plan_work, target_offsets
+from planhrc.ordering import ANTICLOCKWISE, CLOCKWISE, HelpItem, Move, Placement, first_obstacle, help_for
 from planhrc.transition import StateIndex, apply, ground_action
 
 from .motion import move_of
 
-# How long the search for a detour may take, in step checks and as a share of the planning time left, then the
-# search for room (a detour where the object cannot be turned at all would take every check it may: room gets the
-# rest), and what they leave of the planning deadline for grounding, replaying and validating the plan they find.
-# Shares rather than seconds: on a loaded machine a check takes longer, and a longer deadline gives the searches
-# what they need to come to the same answer. Without a deadline each search gets UNBOUNDED_SEARCH_S.
-DETOUR_CHECKS = 2000
-DETOUR_SHARE = 0.5
-ROOM_SHARE = 1.0
+# What share of the planning time left the search takes (after VAL_RESERVE_S kept for grounding, replaying and
+# validating the plan it finds); shares rather than seconds: on a loaded machine a longer deadline gives the search
+# what it needs to come to the same answer. Without a deadline the search gets UNBOUNDED_SEARCH_S.
+SEARCH_SHARE = 0.8
 VAL_RESERVE_S = 2.0
-UNBOUNDED_SEARCH_S = 2.5
+UNBOUNDED_SEARCH_S = 8.0
 
 
 @dataclass(frozen=True)
 class Ordered:
-    """The plan's steps in a feasible order, and what the ordering did in words."""
+    """The plan's steps as the robot will do them, what the search found in words, and the slide that comes first
+    (None: the robot turns where the object lies)."""
 
     steps: tuple[str, ...]
     sentence: str
+    slide: Slide | None = None
 
 
 @dataclass(frozen=True)
 class Refusal:
-    """No feasible order: why, and what to ask the human."""
+    """No plan the robot can carry out on this table: why, and what to ask the human."""
 
     message: str
     help: tuple[HelpItem, ...]
-    room: Room | None = None  # where the plan would fit: the robot may slide the object there first
 
 
 def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, steps: Sequence[str],
                 placement: Placement, deadline_at: float | None = None) -> Ordered | Refusal:
-    """The planner's steps in an order whose every configuration is feasible (`ordering.feasible_alternative`:
-    the same steps, else a longer plan turning one joint the other way round; else `detour.find_detour`: single
-    steps through intermediate configurations), grounded again in that order (in the absolute formulation an
-    action's from/to orientations depend on the turns before it). When nothing fits where the object lies, the
-    refusal names the place where it would (`detour.find_room`). A bimanual plan is not reordered (its turns happen
-    between a grasp and a release at their joint): its own order is checked."""
-    moves = [move_of(obj, step) for step in steps]
-    if obj.formulation is Formulation.BIMANUAL:
+    """The robot's plan reaching the end of the planner's `steps` (the same state of the domain) in the least robot
+    time the table allows, or within the bound the search states (`planhrc.motion_search`), grounded from `init`."""
+    moves = [m for m in (move_of(obj, step) for step in steps) if m.delta_deg]
+    alphabet = alphabet_of(obj)
+    target = target_offsets(alphabet, moves, obj.orientations, obj.step)
+    if target is None:
+        return Refusal("the plan turns a joint the robot does not turn", ())
+    work = plan_work(placement, alphabet, target, obj.orientations, hands=hands_of(obj, init),
+                     slides=placement.slides, deadline_at=search_deadline(deadline_at, SEARCH_SHARE))
+    if isinstance(work, NoWork):
         step, problem = first_obstacle(placement, moves)
-        if problem is None:
-            return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table")
-        return Refusal(f"the plan's action {step} would not stay on the table or within reach: {problem.sentence()}",
-                       help_for(placement, moves, problem))
-    answer, added = feasible_alternative(placement, moves, obj.orientations)
-    if answer.moves is None:
-        alphabet = alphabet_of(obj)
-        detour = find_detour(placement, moves, alphabet, obj.orientations, budget=DETOUR_CHECKS,
-                             deadline_at=search_deadline(deadline_at, DETOUR_SHARE))
-        if detour.moves is not None:
-            longer = len(detour.moves) - len(moves)
-            obstacle = answer.problem.sentence() if answer.problem is not None else "no order found"
-            why = (f"{longer} steps longer than the planner's {len(moves)}: no order of its steps, nor a joint "
-                   f"turned the other way round, stays on the table ({obstacle}), so the plan goes through "
-                   "intermediate configurations")
-            return Ordered(steps_of(obj, model, init, detour.moves), why)
-        room = find_room(placement, moves, alphabet, obj.orientations,
-                         deadline_at=search_deadline(deadline_at, ROOM_SHARE))
-        return Refusal(answer.sentence(), answer.help, room)
-    clearance = f" ({answer.clearance_m * 100:.1f} cm from its edges at rest)"
-    if list(answer.moves) == moves:
-        return Ordered(tuple(steps), f"the planner's order of {len(moves)} actions stays on the table{clearance}")
-    what = (f"{added} steps longer: one joint turns the other way round" if added
-            else f"reordered {len(moves)} actions")
-    return Ordered(steps_of(obj, model, init, answer.moves),
-                   f"{what} so that every configuration stays on the table{clearance}")
+        return Refusal(f"no plan of the robot's turns{' and slides' if placement.slides else ''} stays on the table "
+                       f"and within reach: {work.reason}", help_for(placement, moves, problem))
+    grounded = (bimanual_steps(obj, model, init, work.turns) if obj.formulation is Formulation.BIMANUAL
+                else steps_of(obj, model, init, work.turns))
+    slide = work.motions[0] if work.motions and isinstance(work.motions[0], Slide) else None
+    return Ordered(grounded, _sentence(work, len(steps), len(grounded)), slide)
+
+
+def _sentence(work: Work, planned: int, steps: int) -> str:
+    """What the search found, for the decision's reason: its length beside the planner's and the unconstrained
+    shortest, the robot's time and the proof."""
+    first = f"{work.slides[0].sentence()} first, then " if work.slides else ""
+    return f"{first}{steps} steps that keep every configuration on the table and within reach ({work.sentence()})"
+
+
+def hands_of(obj: ArticulatedObject, init: State) -> Hands:
+    """What the robot's hands do when the plan starts: a bimanual robot's centred joint and whether it holds the
+    links there; nothing for the other formulations (each turn grasps anew)."""
+    if obj.formulation is not Formulation.BIMANUAL:
+        return Hands()
+    centre = next((obj.joint_indices[obj.joints.index(a[1])] for a in init if a[0] == IN_CENTRE), 1)
+    up, down = obj.joint_links(centre)
+    held = {a[2] for a in init if a[0] == HOLDING}
+    return Hands(bimanual=True, centre=centre, grasped={up, down} <= held)
 
 
 def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves: Sequence[Move]) -> tuple[str, ...]:
@@ -89,8 +88,8 @@ def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves:
     index = StateIndex(state)
     for move in moves:
         joint = obj.joint(move.joint)
-        now = next(int(a[1].split("_", 1)[1]) for a in state if a[0] == HAS_ORIENTATION and a[2] == joint)
-        after = (now + (obj.step if move.name == "rotateclockwise" else -obj.step)) % 360
+        now = _orientation(state, joint)
+        after = (now + (obj.step if move.name == CLOCKWISE else -obj.step)) % 360
         step = (f"({move.name} {obj.link(move.turned)} {obj.link(move.held)} {joint} {orientation_name(now)} "
                 f"{orientation_name(after)})")
         state = apply(state, ground_action(model, step, state, index))
@@ -99,18 +98,73 @@ def steps_of(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves:
     return tuple(steps)
 
 
+def bimanual_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, moves: Sequence[Move]
+                   ) -> tuple[str, ...]:
+    """The bimanual robot's steps for single-step `moves` (each the downstream link of its joint, the link before
+    held) from `init`: for each run of turns at one joint, the hands let go of the joint they hold, centre on it
+    and grasp (as needed), then turn, consecutive steps one way merged into 45-degree turns where the domain has
+    them; the hands keep the last grasp."""
+    keeper = next(a[1] for a in init if a[0] == KEEPER)
+    turner = next(g for g in obj.grippers if g != keeper)
+    state = frozenset(init)
+    index = StateIndex(state)
+    out: list[str] = []
+
+    def do(step: str) -> None:
+        nonlocal state
+        state = apply(state, ground_action(model, step, state, index))
+        index.moved(state)
+        out.append(step)
+
+    hands = hands_of(obj, init)
+    centre, grasped = hands.centre, hands.grasped
+    macro = obj.has_macros and 45 // obj.step
+    i = 0
+    while i < len(moves):
+        k = moves[i].joint
+        up, down = obj.joint_links(k)
+        if centre != k:
+            if grasped:
+                was_up, was_down = obj.joint_links(centre)
+                do(f"(releaselinks {was_down} {was_up} {obj.joint(centre)} {turner} {keeper})")
+            do(f"(movetocentre {down} {up} {obj.joint(k)} {obj.joint(centre)} {turner} {keeper})")
+            centre, grasped = k, False
+        if not grasped:
+            do(f"(grasplinks {down} {up} {obj.joint(k)} {turner} {keeper})")
+            grasped = True
+        run = i
+        while run < len(moves) and moves[run].joint == k:
+            run += 1
+        j = i
+        while j < run:
+            name = moves[j].name
+            same = 1
+            while j + same < run and moves[j + same].name == name:
+                same += 1
+            whole, single = (divmod(same, macro) if macro else (0, same))
+            for _ in range(whole):
+                now = _orientation(state, obj.joint(k))
+                after = (now + (45 if name == CLOCKWISE else -45)) % 360
+                do(f"({name}45 {down} {up} {obj.joint(k)} {orientation_name(now)} {orientation_name(after)} "
+                   f"{turner} {keeper})")
+            for _ in range(single):
+                now = _orientation(state, obj.joint(k))
+                after = (now + (obj.step if name == CLOCKWISE else -obj.step)) % 360
+                do(f"({name} {down} {up} {obj.joint(k)} {orientation_name(now)} {orientation_name(after)} "
+                   f"{turner} {keeper})")
+            j += same
+        i = run
+    return tuple(out)
+
+
+def _orientation(state: State, joint: str) -> int:
+    return next(int(a[1].split("_", 1)[1]) for a in state if a[0] == HAS_ORIENTATION and a[2] == joint)
+
+
 def search_deadline(deadline_at: float | None, share: float) -> float:
-    """When a search for a longer plan or for room stops: after `share` of the time left until `VAL_RESERVE_S`
-    before the planning deadline (the plan found is still grounded, replayed and checked by VAL within it)."""
+    """When the search stops: after `share` of the time left until `VAL_RESERVE_S` before the planning deadline
+    (the plan found is still grounded, replayed and checked by VAL within it)."""
     now = time.monotonic()
     if deadline_at is None:
         return now + UNBOUNDED_SEARCH_S
     return now + max(0.0, deadline_at - VAL_RESERVE_S - now) * share
-
-
-def alphabet_of(obj: ArticulatedObject) -> tuple[Move, ...]:
-    """One clockwise step of every joint the robot turns in a detour: the downstream link, the one before held
-    (absolute: link K about joint K, link 1 against the table; relative: link K+1 about joint K)."""
-    if obj.formulation is Formulation.ABSOLUTE:
-        return tuple(Move(CLOCKWISE, k, k - 1, k, obj.step) for k in range(1, obj.n_links + 1))
-    return tuple(Move(CLOCKWISE, k + 1, k, k, obj.step) for k in range(1, obj.n_links))

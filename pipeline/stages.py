@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 from planhrc.model import ArticulatedObject, DomainModelSpec, State, is_subsumed
+from planhrc.motion_search import Slide
 from planhrc.ordering import Move, Placement, order_moves
 from planhrc.planner.chain import plan_with_fallback
 from planhrc.planner.result import PlannerAttempt, PlanResult, PlanStatus
@@ -78,6 +79,7 @@ class Found:
     timings: Mapping[str, float]
     started: float  # time.perf_counter() when the pipeline began
     config: PlanningConfig
+    slide: Slide | None = None  # the robot slides the object there before the plan's first turn
 
     @property
     def steps(self) -> tuple[str, ...]:
@@ -112,17 +114,17 @@ def find_plan(obj: ArticulatedObject, init: State, goal: State, config: Planning
         return PlanOutcome(status, message, result.planner, None, timings=timings, task=task,
                            attempts=result.attempts)
 
-    ordering = ""
+    ordering, slide = "", None
     if placement is not None:
         t = time.perf_counter()
         ordered = order_steps(obj, model, init, result.plan, placement, deadline_at)
         timings["order"] = time.perf_counter() - t
         if isinstance(ordered, Refusal):
             return PlanOutcome(PlanningStatus.UNSOLVABLE, ordered.message, result.planner, None, timings=timings,
-                               task=task, attempts=result.attempts, help=ordered.help, room=ordered.room)
-        ordering = ordered.sentence
-        result = replace(result, plan=ordered.steps)
-    return Found(task, model, result, ordering, timings, t0, config)
+                               task=task, attempts=result.attempts, help=ordered.help)
+        ordering, slide = ordered.sentence, ordered.slide
+        result = replace(result, plan=ordered.steps, optimal=None)
+    return Found(task, model, result, ordering, timings, t0, config, slide)
 
 
 def expect(obj: ArticulatedObject, init: State, goal: State, found: Found, deadline_at: float) -> PlanOutcome:
@@ -146,7 +148,7 @@ def expect(obj: ArticulatedObject, init: State, goal: State, found: Found, deadl
     timings["pipeline"] = time.perf_counter() - found.started
     return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
                        tuple(states), timings, found.task, result.attempts, tuple(result.plan),
-                       ordering=found.ordering)
+                       ordering=found.ordering, slide=found.slide)
 
 
 def plan_moves(obj: ArticulatedObject, init: State, goal: State, moves: Sequence[Move],

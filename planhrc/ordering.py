@@ -81,6 +81,7 @@ class Placement:
     # motions the robot refused from a state before: never proposed again from that state
     refused: frozenset["RefusedMotion"] = frozenset()
     grid_deg: int = 1  # the orientation step: what a help request's orientations are rounded to (`link_deg` is measured)
+    slides: bool = True  # whether the robot may slide the object first to make room (`planhrc.motion_search`)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,8 @@
 """Imports run one way: every module's imports (function-level ones included) point to its own layer or below.
 
     0 model        planhrc.model, .control, .vocabulary, .grounding, .transition, .cooperation, .paths, .settings,
-                   .geometry, .ordering, .stats, .errors, .judge and .detour (the one judge of a turn, the search for
-                   plans that fit the table),
+                   .geometry, .ordering, .stats, .errors, .judge and .motion_search (the one judge of a
+                   turn, the search for the robot's plans that fit the table),
                    .cli_args (argument checks every command shares), planhrc.ontology
     0.5 client     planhrc.client, planhrc.service_process (layer 0 and httpx only: the service's HTTP client,
                    `planhrc serve` as a child process)
@@ -34,7 +34,7 @@ PACKAGES = {"planhrc": "planhrc", "kb_service": "planhrc.kb_service", "translato
 LAYERS: dict[str, float] = {
     "planhrc.model": 0, "planhrc.control": 0, "planhrc.vocabulary": 0, "planhrc.grounding": 0, "planhrc.transition": 0,
     "planhrc.cooperation": 0, "planhrc.paths": 0, "planhrc.settings": 0, "planhrc.geometry": 0, "planhrc.ordering": 0,
-    "planhrc.stats": 0, "planhrc.errors": 0, "planhrc.judge": 0, "planhrc.detour": 0,
+    "planhrc.stats": 0, "planhrc.errors": 0, "planhrc.judge": 0, "planhrc.motion_search": 0,
     "planhrc.cli_args": 0, "planhrc.ontology": 0,
     "planhrc.client": 0.5, "planhrc.service_process": 0.5,
     "planhrc.translator": 1,

@@ -109,7 +109,7 @@ def replan_request(obj: ArticulatedObject, perception: Perception, goal: State, 
         turned = other_way(obj, [move_of(obj, a.spec) for a in rest], memo.failure)
         moves = tuple(turned) if turned is not None else None
     return ReplanRequest(obj, perception.atoms, goal, deadline_at,
-                         placement(obj, perception.raw_deg, base, memo.refused), moves)
+                         placement(obj, perception.raw_deg, base, memo.refused, may_slide(memo, base)), moves)
 
 
 # Slides asked for per goal: room is made once or twice; a plan that still does not fit goes to the human.
@@ -127,13 +127,14 @@ def may_slide(memo: ObjectMemo, base: Base) -> bool:
 
 
 def placement(obj: ArticulatedObject, link_deg: Sequence[float], base: Base,
-              refused: Sequence[RefusedMotion] = ()) -> Placement | None:
+              refused: Sequence[RefusedMotion] = (), slides: bool = True) -> Placement | None:
     """Where a placed object lies with its links at `link_deg` (as measured: the one judge's pose) and its base
-    point at `base`, with the turns the robot refused before (None for an abstract one: no geometric checks)."""
+    point at `base`, with the turns the robot refused before and whether it may slide the object first (None for
+    an abstract one: no geometric checks)."""
     if base is None:
         return None
     return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in link_deg),
-                     whole_turn_deg=whole_turn_deg(obj), refused=frozenset(refused), grid_deg=obj.step)
+                     whole_turn_deg=whole_turn_deg(obj), refused=frozenset(refused), grid_deg=obj.step, slides=slides)
 
 
 def whole_turn_deg(obj: ArticulatedObject) -> int:

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from planhrc.geometry import ObjectGeometry, configuration_feasible
+from planhrc.geometry import PLANNING, Cell, ObjectGeometry, configuration_feasible
 from planhrc.model import ArticulatedObject, Formulation, State, snap_angle
+from planhrc.motion_search import room_for_goal
 from planhrc.vocabulary import ExecutionStatus
 
 from ..store import Execution, ValidationError
@@ -91,8 +92,29 @@ def _warnings(context: Context, obj: ArticulatedObject, memo: ObjectMemo, atoms:
         raise ValidationError("goal: " + "; ".join(r.message for r in blocking)
                               + " (send allow_infeasible: true to set it anyway)")
     if blocking:
-        warnings = [f"goal accepted although infeasible: {r.message}" for r in blocking] + warnings
-    return warnings
+        return [f"goal accepted although infeasible: {r.message}" for r in blocking] + warnings
+    return _margin(obj, base, links, request.allow_infeasible) + warnings
+
+
+def _margin(obj: ArticulatedObject, base: tuple[float, float], links: tuple[int, ...], allow: bool) -> list[str]:
+    """A goal keeps the clearance every configuration of a plan comes to rest with (`geometry.PLANNING`: a
+    physical turn ends a degree or two off): one drawn closer to the table's edges is reached where the robot can
+    slide the object to make room (a warning says so), and refused when no such place exists (unless `allow`)."""
+    geometry = ObjectGeometry.of(obj, base)
+    tight = configuration_feasible(geometry, links, tolerance=PLANNING, reach_links=())
+    if tight.ok:
+        return []
+    room = room_for_goal(geometry, links, Cell())
+    why = "; ".join(r.message for r in tight.reasons)
+    if room is not None:
+        return [f"goal: {why} where the object lies; with its base point at ({room[0]:.2f}, {room[1]:.2f}) it keeps "
+                f"{PLANNING.clearance_m * 100:.1f} cm from the table's edges: the robot makes room first where it can"]
+    if not allow:
+        raise ValidationError(f"goal: {why}; a goal keeps {PLANNING.clearance_m * 100:.1f} cm from the table's edges "
+                              "(a physical turn ends a degree or two off) and no place the robot can slide the object "
+                              "to gives it that (send allow_infeasible: true to set it anyway)")
+    return [f"goal accepted although it does not keep {PLANNING.clearance_m * 100:.1f} cm from the table's edges: "
+            f"{why}"]
 
 
 def _goal_links(context: Context, obj: ArticulatedObject, memo: ObjectMemo, atoms: State,

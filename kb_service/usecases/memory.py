@@ -50,9 +50,8 @@ class ObjectMemo:
     @property
     def where(self) -> tuple[float, float] | None:
         """The base point the geometric checks use: the latest measured one, else the one the object was created
-        with; None for an abstract object (no geometric checks)."""
-        if self.base_point_xy is None:
-            return None
+        with; None for an abstract object (created without a base point and never perceived with one: no geometric
+        checks). A perception that carries a base point places the object from then on."""
         return self.measured_base_xy or self.base_point_xy
 
 

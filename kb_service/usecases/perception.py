@@ -108,7 +108,7 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         execution = store.get_execution(obj.ident)
         goal = store.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
         plan, view = context.views.get(store, execution.plan_id)
-        base = (measured or memo.where) if memo.base_point_xy is not None else None
+        base = measured or memo.where  # a perception with a base point places the object (None: abstract)
         seen = _Seen(obj, perception, execution, goal, plan, memo, base, measured, key, print_, mark)
         if goal is None:
             return _write(context, seen).turn
@@ -179,8 +179,7 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
         elif planned is None or outcome is None:
             written = follow(context, obj, perceived, seen.execution, seen.plan, decision, seen.memo, seen.base)
         else:
-            written = adopt(context, obj, perceived, goal, decision, outcome, checked, planned.verdict.early_answer(),
-                            refine.may_slide(seen.memo, seen.base))
+            written = adopt(context, obj, perceived, goal, decision, outcome, checked, planned.verdict.early_answer())
         turn = written.turn
         data = decision_data(written, goal.id if goal is not None else None,
                              decision.remedy if decision is not None else None, seen.measured)

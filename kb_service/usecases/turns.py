@@ -73,11 +73,11 @@ def follow(context: Context, obj: ArticulatedObject, perceived: StoredState, exe
 
 
 def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
-          outcome: PlanOutcome, checked: CheckedPlan | None, early: EarlyAnswer | None,
-          may_slide: bool = True) -> Written:
+          outcome: PlanOutcome, checked: CheckedPlan | None, early: EarlyAnswer | None) -> Written:
     """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL: the whole plan, or
-    with the early answer its first motion), its plan with expected states; move the execution. With the early
-    answer the decision's event names the plan's pieces and those accepted (`decision_data`): the record the
+    with the early answer its first motion), its plan with expected states; move the execution. A plan whose turns
+    come after a slide is answered with the slide (`robot_skill`): the robot slides the object, perceives again and
+    goes on with the plan from its first step. With the early answer the decision's event names the plan's pieces and those accepted (`decision_data`): the record the
     dispatch gate starts from, through a restart."""
     store = context.store
     problem = store.add_problem(obj.ident, perceived.id, goal.id)
@@ -94,19 +94,19 @@ def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal
         checked_by = (f"; VAL accepted a_1..a_{outcome.validated_steps}, a_{outcome.validated_steps + 1}.."
                       f"a_{len(plan.actions)} are checked before they are dispatched" if early is not None else "")
         reason = f"{decision.reason}; new plan {plan.id} of {len(plan.actions)} actions{ordering}{checked_by}"
+        if outcome.slide is not None:  # the plan's turns are made where the robot slides the object first
+            store.set_execution(obj.ident, Execution(plan.id, 1, IDLE, None))  # nothing dispatched before it
+            slide = outcome.slide
+            skill = SkillRequest(Skill.SLIDE, slide.to_xy, slide.links, slide.sentence())
+            turn = Turn(DecisionKind.ROBOT_SKILL, plan.id, perceived.id, None, decision.matched_expected_step,
+                        f"{reason}; the robot makes room first: {slide.sentence()}", skill=skill)
+            return written(turn, early, (plan, view))
         action = next_action(context.settings.merge_macro_steps, obj, plan, plan.actions[0])
         turn = Turn(DecisionKind.REPLAN, plan.id, perceived.id, action, decision.matched_expected_step, reason)
         return written(turn, early, (plan, view))
     if outcome.solved:  # the perceived state already satisfies the goal
         store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
         return written(Turn(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message))
-    if outcome.room is not None and may_slide:  # the plan fits nearer the table's middle: the robot slides it there
-        store.set_execution(obj.ident, Execution(None, None, IDLE, None))
-        room = outcome.room
-        reason = f"{decision.reason}; {outcome.message}; the robot makes room first: {room.sentence}"
-        skill = SkillRequest(Skill.SLIDE, room.to_xy, room.links, room.sentence)
-        return written(Turn(DecisionKind.ROBOT_SKILL, None, perceived.id, None, decision.matched_expected_step,
-                            reason, skill=skill))
     if outcome.help:  # a plan exists but the robot cannot carry it out on this table: ask the human
         store.set_execution(obj.ident, Execution(None, None, IDLE, None))
         reason = f"{decision.reason}; {outcome.message}; the robot asks the human for help"

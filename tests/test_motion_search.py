@@ -1,0 +1,237 @@
+"""The robot's plan for a placed object (`planhrc.motion_search`): the least robot time the table allows, proved by
+an exhaustive search written here independently (uniform-cost search over every configuration, each turn judged by
+`judge_turn` itself, each slide by `slide_feasible`); the batched judge the search uses gives `judge_turn`'s
+verdicts; a bounded search states its bound; the bimanual robot's plan is grounded so that VAL accepts it."""
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from planhrc import pipeline
+from planhrc.geometry import PLANNING, ROOMY, STRICT, Cell, ObjectGeometry, configuration_feasible
+from planhrc.judge import Baseline, TurnJudge, judge_turn
+from planhrc.model import make_object, perceive
+from planhrc.motion_search import (MAX_SLIDE_M, SKILL_COSTS, Hands, NoWork, Slide, SkillCosts, Work, _places,
+                                   grip_links, plan_work, resting_places, slide_feasible, target_offsets,
+                                   unconstrained_steps)
+from planhrc.ordering import Move, Placement
+from planhrc.motion_search import alphabet_of
+
+CELL = Cell()
+
+
+def _ms(seconds: float) -> int:
+    return int(round(seconds * 1000))
+
+
+def brute_force(placement: Placement, alphabet: tuple[Move, ...], target: tuple[int, ...], orientations: int,
+                costs: SkillCosts, slides: bool) -> int | None:
+    """The least robot time (ms) from offsets 0 to `target`: Dijkstra over (offsets, place, motion under way),
+    every turn judged by `judge_turn` (resting with the planning clearance), slides (from the start only) by
+    `slide_feasible`; None when the goal cannot be reached."""
+    step = 360 // orientations
+    base = tuple(float(a) for a in placement.link_deg)
+    baseline = Baseline.of(placement.geometry, placement.link_deg, placement.cell)
+    places = _places(placement, slides)
+
+    def angles(offsets: tuple[int, ...]) -> tuple[float, ...]:
+        turn = [0.0] * len(base)
+        for i, offset in enumerate(offsets):
+            for k in range(alphabet[i].turned - 1, len(base)):
+                turn[k] += offset * step
+        return tuple((a + t) % 360.0 for a, t in zip(base, turn))
+
+    start = (tuple(0 for _ in alphabet), 0, (-1, 0))
+    best = {start: 0}
+    tie = itertools.count()
+    frontier = [(0, next(tie), start)]
+    while frontier:
+        g, _, node = heapq.heappop(frontier)
+        if g > best[node]:
+            continue
+        offsets, place, (joint, direction) = node
+        if offsets == target:
+            return g
+        here = angles(offsets)
+        geometry = placement.geometry.placed(places[place])
+        for i, move in enumerate(alphabet):
+            for sign in (1, -1):
+                if not judge_turn(geometry, here, move.turned, move.held, sign * step, placement.cell, baseline,
+                                  rest=PLANNING).ok:
+                    continue
+                seconds = step * costs.turn_s_per_deg + (0.0 if (joint, direction) == (i, sign) else costs.turn_s)
+                after = (tuple((v + sign) % orientations if j == i else v for j, v in enumerate(offsets)), place,
+                         (i, sign))
+                cost = g + _ms(seconds)
+                if cost < best.get(after, math.inf):
+                    best[after] = cost
+                    heapq.heappush(frontier, (cost, next(tie), after))
+        if node == start:
+            for p, to in enumerate(places[1:], start=1):
+                if math.dist(places[0], to) > MAX_SLIDE_M + 1e-9:
+                    continue
+                links = grip_links(placement, to)
+                if links is None or not slide_feasible(placement, to, links).ok:
+                    continue
+                if not resting_places(placement.geometry, here, placement.cell, [to], PLANNING,
+                                      TurnJudge(placement.geometry, placement.cell, baseline).excused(PLANNING))[0]:
+                    continue
+                after = (offsets, p, (-1, 0))
+                cost = g + _ms(costs.slide_s + costs.slide_s_per_m * math.dist(places[0], to))
+                if cost < best.get(after, math.inf):
+                    best[after] = cost
+                    heapq.heappush(frontier, (cost, next(tie), after))
+    return None
+
+
+def _tasks(formulation: str, links: int, orientations: int, count: int, seed: int):
+    """Random placed tasks: a feasible start and a goal configuration that rests with the planning clearance."""
+    rng = np.random.default_rng(seed)
+    obj = make_object("o", formulation, links, orientations)
+    step = 360 // orientations
+    out = []
+    while len(out) < count:
+        base = (float(rng.uniform(0.45, 0.7)), float(rng.uniform(-0.3, 0.3)))
+        geometry = ObjectGeometry.of(obj, base)
+        start = tuple(float(v) for v in rng.integers(0, orientations, links) * step)
+        goal = tuple(float(v) for v in rng.integers(0, orientations, links) * step)
+        if formulation == "relative":
+            goal = (start[0],) + goal[1:]
+        if not (configuration_feasible(geometry, start).ok and configuration_feasible(geometry, goal,
+                                                                                   tolerance=PLANNING).ok):
+            continue
+        d = [int(round((b - a) / step)) % orientations for a, b in zip(start, goal)]
+        if formulation == "absolute":
+            target = tuple((d[k] - (d[k - 1] if k else 0)) % orientations for k in range(links))
+        else:
+            target = tuple((d[k] - d[k - 1]) % orientations for k in range(1, links))
+        out.append((obj, Placement(geometry, start, grid_deg=step), target))
+    return out
+
+
+@pytest.mark.parametrize("formulation,links,orientations,slides", [
+    ("relative", 4, 6, False), ("absolute", 3, 8, False), ("relative", 3, 6, True), ("absolute", 3, 4, True)])
+def test_the_search_finds_the_least_robot_time_an_exhaustive_search_finds(formulation, links, orientations, slides):
+    found = 0
+    for obj, placement, target in _tasks(formulation, links, orientations, 4, seed=links * 100 + orientations):
+        alphabet = alphabet_of(obj)
+        want = brute_force(placement, alphabet, target, orientations, SKILL_COSTS, slides)
+        work = plan_work(placement, alphabet, target, orientations, slides=slides, expansions=10**6)
+        if want is None:
+            assert isinstance(work, NoWork) and work.exhausted, work
+            continue
+        assert isinstance(work, Work) and work.exact, work
+        assert _ms(work.cost_s) == want, (placement, target, work)
+        found += 1
+        # the plan does what it says: every turn feasible from where the ones before leave the object
+        geometry, angles = placement.geometry, placement.link_deg
+        baseline = Baseline.of(geometry, angles, CELL)
+        offsets = [0] * len(alphabet)
+        for motion in work.motions:
+            if isinstance(motion, Slide):
+                geometry = geometry.placed(motion.to_xy)
+                continue
+            assert judge_turn(geometry, angles, motion.turned, motion.held, motion.delta_deg, CELL, baseline,
+                              rest=PLANNING).ok
+            angles = tuple((a + motion.delta_deg) % 360.0 if k >= motion.turned - 1 else a
+                           for k, a in enumerate(angles))
+            i = next(j for j, m in enumerate(alphabet) if m.joint == motion.joint)
+            offsets[i] = (offsets[i] + (1 if motion.delta_deg > 0 else -1)) % orientations
+        assert tuple(offsets) == target
+        assert len(work.turns) >= unconstrained_steps(target, orientations) == work.unconstrained_steps
+    assert found >= 2  # the comparison is not empty
+
+
+def test_the_batched_judge_gives_the_one_judges_verdicts():
+    rng = np.random.default_rng(11)
+    compared = feasible = 0
+    for trial in range(60):
+        n = int(rng.integers(1, 7))
+        geometry = ObjectGeometry((0.155,) * n, (float(rng.uniform(0.3, 0.9)), float(rng.uniform(-0.6, 0.6))))
+        k = (4, 8, 12, 24)[trial % 4]
+        step = 360 // k
+        start = tuple(float(v) for v in rng.integers(0, k, n) * step + rng.normal(0, 2, n))
+        baseline = Baseline.of(geometry, start, CELL)
+        rest = (PLANNING, STRICT, ROOMY)[trial % 3]
+        judge = TurnJudge(geometry, CELL, baseline, rest)
+        poses = [tuple(float(v) for v in (np.asarray(start) + rng.integers(0, k, n) * step) % 360) for _ in range(3)]
+        bases = [(float(geometry.base_point_xy[0] + rng.normal(0, 0.05)),
+                  float(geometry.base_point_xy[1] + rng.normal(0, 0.05))) for _ in poses]
+        turns = [(j, j - 1, float(s * step * int(rng.integers(1, 3)))) for j in range(1, n + 1) for s in (1, -1)]
+        ok, roomy = judge.judge_many(bases, poses, turns)
+        for p, (base, pose) in enumerate(zip(bases, poses)):
+            placed = geometry.placed(base)
+            for t, (turned, held, delta) in enumerate(turns):
+                want = judge_turn(placed, pose, turned, held, delta, CELL, baseline, rest=rest).ok
+                assert ok[p, t] == want, (placed, pose, turned, delta)
+                assert roomy[p, t] == (want and judge_turn(placed, pose, turned, held, delta, CELL, baseline,
+                                                           rest=ROOMY).ok)
+                compared += 1
+                feasible += want
+    assert feasible > 50 and compared - feasible > 50  # both verdicts are exercised
+
+
+def test_a_search_stopped_short_states_its_bound_from_the_exhaustive_one():
+    obj, placement, target = next((o, p, t) for o, p, t in _tasks("relative", 5, 8, 30, seed=5)
+                                  if unconstrained_steps(t, 8) >= 6)
+    full = plan_work(placement, alphabet_of(obj), target, 8, expansions=10**6)
+    short = plan_work(placement, alphabet_of(obj), target, 8, expansions=2)
+    if isinstance(full, NoWork):
+        assert isinstance(short, NoWork)
+        return
+    assert full.exact and full.bound == 1.0
+    if isinstance(short, Work):  # the weighted search found one: its bound holds against the least time
+        assert not short.exact and short.lower_bound_s <= full.cost_s + 1e-9
+        assert short.cost_s <= short.bound * full.cost_s + 1e-6 and short.cost_s >= full.cost_s - 1e-9
+        assert "at most" in short.sentence()
+    else:
+        assert not short.exhausted
+
+
+def test_a_goal_that_fits_nowhere_is_said_at_once():
+    obj = make_object("o", "absolute", 5, 8)
+    geometry = ObjectGeometry.of(obj, (0.6, 0.0))
+    placement = Placement(geometry, (0.0,) * 5, grid_deg=45)
+    work = plan_work(placement, alphabet_of(obj), (0, 4, 0, 4, 0), 8)  # folded back onto itself twice
+    assert isinstance(work, NoWork) and work.exhausted and work.expansions == 0
+    assert "does not fit on the table" in work.reason
+
+
+def test_target_offsets_count_steps_either_side_and_45_degree_turns():
+    obj = make_object("o", "relative", 4, 8)
+    alphabet = alphabet_of(obj)
+    moves = [Move("rotateclockwise", 3, 2, 2, 45), Move("rotateclockwise", 2, 3, 2, -45),  # j2 from either side
+             Move("rotateanticlockwise", 4, 3, 3, -45)]
+    assert target_offsets(alphabet, moves, 8, 45) == (0, 2, 7)
+    bimanual = make_object("b", "bimanual", 4, 24)
+    assert target_offsets(alphabet_of(bimanual), [Move("rotateclockwise45", 3, 2, 2, 45)], 24, 15) == (0, 3, 0)
+
+
+@pytest.mark.parametrize("seed", [2, 11, 29])
+def test_a_bimanual_robots_plan_is_grounded_with_its_hands_and_accepted_by_val(seed):
+    from planhrc.robot_sim.demo import random_scenario
+
+    scenario = random_scenario(seed, formulation="bimanual", interventions=0)
+    obj = make_object("o", "bimanual", 5, 8)
+    init = perceive(obj, list(scenario.initial_deg), control=obj.initial_control()).atoms
+    goal = frozenset(a for a in perceive(obj, list(scenario.goal_deg), control=obj.initial_control()).atoms
+                     if a[0] == "hasorientation")
+    placement = Placement(ObjectGeometry.of(obj, scenario.base_point_xy), tuple(scenario.initial_deg), grid_deg=45)
+    outcome = pipeline.plan(obj, init, goal, placement=placement)
+    assert outcome.solved and outcome.validated, outcome.message
+    names = [a.name for a in outcome.actions]
+    assert names[0] in ("grasplinks", "movetocentre") and "rotateclockwise" in " ".join(names)
+    assert "the least robot time the table allows" in outcome.ordering or "at most" in outcome.ordering
+
+
+def test_hands_of_a_bimanual_state_name_the_centred_joint_and_the_grasp():
+    from planhrc.pipeline.order import hands_of
+
+    obj = make_object("b", "bimanual", 4, 8)
+    init = obj.state([0, 0, 0])
+    assert hands_of(obj, init) == Hands(bimanual=True, centre=2, grasped=False)
+    assert hands_of(make_object("r", "relative", 4, 8), make_object("r", "relative", 4, 8).state([0, 0, 0])) == Hands()
