@@ -29,7 +29,10 @@ import numpy as np
 from planhrc.cli_args import SubParsers, http_url, non_negative_int, positive_int, writable_dir
 from planhrc.client import KBClient, ProtocolError
 from planhrc.service_process import ServiceStartError, running_service
-from planhrc.geometry import configuration_feasible
+from planhrc.geometry import PLANNING, configuration_feasible
+from planhrc.model import make_object
+from planhrc.motion_search import reachable_in_plane
+from planhrc.ordering import Placement
 from planhrc.robot_sim.bimanual import step_kind
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import SceneSpec, is_feasible, random_orientations
@@ -86,14 +89,20 @@ DEMO_SCENARIOS: dict[str, DemoScenario] = {
 def random_goal(rng: np.random.Generator, spec: SceneSpec, start: Sequence[float], formulation: str,
                 orientations: int, min_changed: int = 3, max_changed: int = 10, attempts: int = 2_000
                 ) -> tuple[float, ...]:
-    """A goal drawn uniformly from the feasible configurations (on the table, clear of the robot, within
-    reach, see `planhrc.geometry`) in which `min_changed` .. `max_changed` links have another orientation
-    than at the start. The relative formulation does not move l1, so its goals keep l1 where it is."""
+    """A goal drawn uniformly from the feasible configurations (on the table, clear of the robot, within reach,
+    see `planhrc.geometry`) in which `min_changed` .. `max_changed` links have another orientation than at the
+    start, that keep the clearance every resting configuration of a plan keeps from the table's edges
+    (`geometry.PLANNING`), and that somebody turning the links in the plane can reach from the start (a goal
+    across a link's own fold or through another link is no task for anybody: `motion_search.reachable_in_plane`).
+    The robot turns no link about the table in the relative and bimanual formulations (their states say nothing of
+    where l1 points), so their goals keep l1 where it is."""
     step = 360.0 / orientations
-    fixed_first = formulation == "relative"
+    fixed_first = formulation in ("relative", "bimanual")
     limit = min(max_changed, spec.n_links - (1 if fixed_first else 0))
     if limit < min_changed:
         raise SimError(f"n_links: {spec.n_links} links cannot have {min_changed} changed in a {formulation} goal")
+    obj = make_object("task", formulation, spec.n_links, orientations)
+    placement = Placement(spec.geometry(), tuple(float(v) for v in start), spec.cell())
     for _ in range(attempts):
         goal = random_orientations(rng, spec, step_deg=step)
         if fixed_first:
@@ -101,20 +110,31 @@ def random_goal(rng: np.random.Generator, spec: SceneSpec, start: Sequence[float
             if not is_feasible(spec, goal):
                 continue
         changed = sum(1 for a, b in zip(goal, start) if abs((a - b + 180.0) % 360.0 - 180.0) > 1e-6)
-        if min_changed <= changed <= limit:
+        if not min_changed <= changed <= limit:
+            continue
+        if not configuration_feasible(spec.geometry(), goal, spec.cell(), tolerance=PLANNING, reach_links=()).ok:
+            continue
+        if reachable_in_plane(placement, obj, goal):
             return tuple(float(v) % 360.0 for v in goal)
     raise SimError(f"no feasible random goal with {min_changed}..{limit} links changed in {attempts} attempts")
 
 
-def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interventions: int = 3) -> DemoScenario:
+RANDOM_FORMULATIONS = ("relative", "absolute", "bimanual")  # `--scenario random` draws them in turn, by seed
+
+
+def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interventions: int = 3,
+                    formulation: str | None = None) -> DemoScenario:
     """A random feasible start (not always straight), a goal drawn uniformly from the feasible configurations
-    with 3 or more links changed (seeded), either formulation, and `interventions` random human moves at
-    random moments anywhere on the chain (each keeps the object feasible).
+    with 3 or more links changed (seeded), the formulation given or drawn by seed (relative, absolute, bimanual in
+    turn), and `interventions` random human moves at random moments anywhere on the chain (each keeps the object
+    feasible; 0: the robot alone).
 
     A straight start lies where a straight object fits (the scene's default place); any other start has its base
     point drawn in the middle of the table, between the arms, where both can work on the links around it."""
     rng = np.random.default_rng(seed)
-    formulation = ("relative", "absolute")[seed % 2]
+    formulation = formulation or RANDOM_FORMULATIONS[seed % len(RANDOM_FORMULATIONS)]
+    if formulation not in RANDOM_FORMULATIONS:
+        raise SimError(f"formulation: expected one of {', '.join(RANDOM_FORMULATIONS)}, got {formulation!r}")
     step = 360.0 / orientations
     if rng.random() < 0.25:
         spec = SceneSpec(n_links=n_links)
@@ -124,8 +144,9 @@ def random_scenario(seed: int, n_links: int = 5, orientations: int = 8, interven
         spec = SceneSpec(n_links=n_links, base_point_xy=base)
         start = random_orientations(rng, spec, step_deg=step)
     goal = random_goal(rng, spec, start, formulation, orientations)
-    return DemoScenario(f"random-{seed}", formulation, orientations, tuple(start), goal,
-                        f"random:{seed}:{interventions}", "random start, goal and human interventions",
+    human = f"random:{seed}:{interventions}" if interventions else "none"
+    what = "random start, goal and human interventions" if interventions else "random start and goal, no human"
+    return DemoScenario(f"random-{seed}", formulation, orientations, tuple(start), goal, human, what,
                         base_point_xy=spec.base_xy)
 
 
@@ -198,6 +219,10 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
                      "held_link_index": a.get("held_link_index"), "delta_deg": a.get("delta_deg")}
                     for a in actions],
         "outcomes": list(summary.outcomes),
+        # the plan steps the robot carried out (a macro step counts its steps; a refused turn none)
+        "executed_steps": sum(int(s.action.get("last_step") or s.action.get("step") or 0)
+                              - int(s.action.get("step") or 0) + 1 for s in acted
+                              if s.action is not None and s.outcome in (ActionOutcome.SUCCEEDED, ActionOutcome.PARTIAL)),
         # every dispatched action by what it does (a bimanual plan's centre, grasp, release; any turn), and those
         # the worker reported succeeded
         "action_kinds": dict(Counter(step_kind(str(a.get("name"))) for a in actions)),
