@@ -1,0 +1,103 @@
+"""The robot alone (no human to help): goals that keep the clearance a physical turn needs, an object placed by its
+first perception, and a task that needs room before its first turn, carried out by the physical Baxter to the goal
+with no help request and no link ever past the table's edge."""
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")  # starlette's notice about httpx2
+    from fastapi.testclient import TestClient
+
+from planhrc.geometry import PLANNING, Cell, ObjectGeometry, configuration_feasible
+from planhrc.kb_service.app import create_app
+from planhrc.settings import make_settings
+
+CREATED = [0.6, 0.39]
+STRAIGHT = [90, 90, 90, 90, 90]
+
+
+def _app() -> TestClient:
+    # a generous deadline: the search's time share then does not depend on how loaded the machine is
+    return TestClient(create_app(make_settings(db_path=None, token=None, validate_plans=True,
+                                               planning_deadline_s=60.0)))
+
+
+@pytest.fixture
+def client():
+    with _app() as c:
+        yield c
+
+
+def test_a_goal_drawn_at_the_edge_is_reached_where_it_keeps_the_clearance(client):
+    oid = client.post("/objects", json={"name": "rod", "links": 5, "orientations": 8, "formulation": "absolute",
+                                        "base_point_xy": [0.6, -0.15]}).json()["id"]
+    goal = [270, 270, 270, 270, 270]  # straight along +y, its end 1 cm inside the table's left edge as drawn
+    geometry = ObjectGeometry((0.155,) * 5, (0.6, -0.15))
+    assert configuration_feasible(geometry, goal, reach_links=()).ok  # on the table as drawn
+    assert not configuration_feasible(geometry, goal, tolerance=PLANNING, reach_links=()).ok  # but no clearance
+    answer = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal}).json()
+    assert any("keeps 1.5 cm from the table's edges" in w for w in answer["warnings"]), answer
+    decision = client.post(f"/objects/{oid}/perceptions",
+                           json={"link_orientations_deg": [270, 270, 270, 270, 0],
+                                 "base_point_xy": [0.6, -0.15]}).json()
+    assert decision["decision"] == "robot_skill", decision  # room first: the goal fits only with a slide
+    to = decision["skill"]["base_point_xy"]
+    end = configuration_feasible(ObjectGeometry((0.155,) * 5, tuple(to)), goal, tolerance=PLANNING, reach_links=())
+    assert end.ok, end.sentence()  # where the plan ends, the goal keeps the clearance
+
+
+def test_a_goal_that_keeps_the_clearance_nowhere_is_refused_naming_why_and_nothing_is_stored(client):
+    links = [{"name": f"l{k}", "length_m": 0.1375} for k in range(1, 5)]  # 0.55 m: the table is 0.6 m deep
+    oid = client.post("/objects", json={"name": "bar", "links": links, "orientations": 8, "formulation": "absolute",
+                                        "base_point_xy": [0.32, 0.0]}).json()["id"]
+    goal = [0, 0, 0, 0]  # straight forward across the table: 1 cm from both edges as drawn at best
+    refused = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal})
+    assert refused.status_code == 422, refused.text
+    detail = refused.json()["detail"]
+    assert detail.startswith("goal: ") and "1.5 cm from the table's edges" in detail and "allow_infeasible" in detail
+    assert client.get(f"/objects/{oid}").json()["goal_state_id"] is None
+    allowed = client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal, "allow_infeasible": True})
+    assert allowed.status_code == 200 and allowed.json()["warnings"][0].startswith("goal accepted although")
+
+
+def test_an_object_created_without_a_base_point_is_placed_by_the_perception_that_measures_one(client):
+    abstract = client.post("/objects", json={"name": "rod", "links": 5, "orientations": 8,
+                                             "formulation": "relative"}).json()["id"]
+    placed = client.post("/objects", json={"name": "rod", "links": 5, "orientations": 8,
+                                           "formulation": "relative"}).json()["id"]
+    goal = [90, 90, 0, 270, 270]
+    for oid in (abstract, placed):
+        assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": goal}).status_code == 200
+    plain = client.post(f"/objects/{abstract}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+    assert plain["decision"] == "replan" and "on the table" not in plain["reason"]  # abstract: no geometry
+    seen = client.post(f"/objects/{placed}/perceptions",
+                       json={"link_orientations_deg": STRAIGHT, "base_point_xy": CREATED}).json()
+    assert seen["decision"] in ("replan", "robot_skill"), seen
+    assert "keep every configuration on the table" in seen["reason"]  # planned where the camera measured it
+    # a later perception without a base point keeps the object placed where it was last measured (here: not slid)
+    again = client.post(f"/objects/{placed}/perceptions", json={"link_orientations_deg": STRAIGHT}).json()
+    assert "keep every configuration on the table" in again["reason"]
+    if seen["decision"] == "robot_skill":  # the slide it asked for was not made: its plan does not fit where it lies
+        assert again["decision"] == "replan" and "(0.600, 0.390)" in again["reason"], again
+    assert client.get(f"/objects/{placed}").json()["base_point_xy"] is None  # as created
+
+
+@pytest.mark.sim
+def test_the_robot_alone_makes_room_first_and_reaches_the_goal_on_the_table(tmp_path):
+    from planhrc.robot_sim.demo import DemoScenario, kb_service, run_episode
+
+    # the chain lies close to the robot: its plan's least robot time starts by sliding it (a random task of the
+    # demo's generator, kept here with its numbers)
+    scenario = DemoScenario("room-first", "relative", 8, (90.0, 0.0, 135.0, 90.0, 45.0),
+                            (90.0, 0.0, 270.0, 270.0, 180.0), "none", "a task that needs room first",
+                            base_point_xy=(0.554, 0.074))
+    with kb_service(tmp_path, "t0ken") as url:
+        result = run_episode(url, "t0ken", scenario, tmp_path / "episode", False, "camera", 30, 0)
+    assert result["reached_goal"] and not result["help_reasons"], result["decisions"]
+    assert result["robot_skills"], result["decisions"]  # it slid the object before turning
+    assert result["states_off_table"] == 0
+    first = next(d for d in result["decisions"] if d["kind"] in ("replan", "robot_skill"))
+    assert first["kind"] == "robot_skill" and "the least robot time the table allows" in first["reason"]
