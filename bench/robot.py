@@ -20,6 +20,7 @@ import secrets
 import statistics
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -29,7 +30,7 @@ from planhrc.geometry import ObjectGeometry
 from planhrc.model import make_object, perceive
 from planhrc.ordering import Placement
 from planhrc.pipeline import plan as plan_task
-from planhrc.robot_sim.demo import RANDOM_FORMULATIONS, kb_service, random_scenario, run_episode
+from planhrc.robot_sim.demo import RANDOM_FORMULATIONS, DemoScenario, kb_service, random_scenario, run_episode
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import SceneSpec
 from planhrc.vocabulary import DecisionKind
@@ -59,31 +60,32 @@ def constrained(formulation: str, orientations: int, start: Sequence[float], goa
 
 
 def run_bench(tasks: int, formulations: Sequence[str], modes: Sequence[str], seed: int, out_dir: Path,
-              kb_url: str | None = None, token: str | None = None) -> dict[str, Any]:
+              kb_url: str | None = None, token: str | None = None,
+              given: Sequence[DemoScenario] | None = None) -> dict[str, Any]:
+    """Run the tasks (`given`, else `tasks` random ones per formulation from `seed`) in each mode; write the files."""
     out_dir.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     rows: list[dict[str, Any]] = []
+    chosen = list(given) if given is not None else [
+        random_scenario(seed + i, formulation=f, interventions=0) for f in formulations for i in range(tasks)]
 
     def run_all(url: str, tok: str | None) -> None:
-        for formulation in formulations:
-            for i in range(tasks):
-                task_seed = seed + i
-                base = random_scenario(task_seed, formulation=formulation, interventions=0)
-                shortest = constrained(formulation, base.orientations, base.initial_deg, base.goal_deg,
-                                       base.base_point_xy or SceneSpec().base_xy)
-                for mode in modes:
-                    scenario = random_scenario(task_seed, formulation=formulation,
-                                               interventions=INTERVENTIONS if mode == "human" else 0)
-                    folder = out_dir / f"{formulation}-{mode}-{task_seed:03d}"
-                    result = run_episode(url, tok, scenario, folder, False, "camera", 40, task_seed)
-                    row = _row(formulation, mode, task_seed, scenario.initial_deg, scenario.goal_deg,
-                               scenario.base_point_xy, result, shortest)
-                    rows.append(row)
-                    print(f"[robot-bench] {formulation} {mode} {task_seed}: "
-                          f"{'reached' if row['reached'] else row['stop_reason']}, {row['help_requests']} help "
-                          f"requests, {row['executed_steps']} steps (constrained {row['constrained_steps']}, "
-                          f"unconstrained {row['unconstrained_steps']}), {row['slides']} slides, "
-                          f"{row['time_to_goal_s']:.1f} s", flush=True)
+        for task in chosen:
+            task_seed = int(task.name.rsplit("-", 1)[1])
+            shortest = constrained(task.formulation, task.orientations, task.initial_deg, task.goal_deg,
+                                   task.base_point_xy or SceneSpec().base_xy)
+            for mode in modes:
+                scenario = replace(task, human=f"random:{task_seed}:{INTERVENTIONS}" if mode == "human" else "none")
+                folder = out_dir / f"{task.formulation}-{mode}-{task_seed:03d}"
+                result = run_episode(url, tok, scenario, folder, False, "camera", 40, task_seed)
+                row = _row(task.formulation, mode, task_seed, scenario.initial_deg, scenario.goal_deg,
+                           scenario.base_point_xy, result, shortest)
+                rows.append(row)
+                print(f"[robot-bench] {task.formulation} {mode} {task_seed}: "
+                      f"{'reached' if row['reached'] else row['stop_reason']}, {row['help_requests']} help "
+                      f"requests, {row['executed_steps']} steps (constrained {row['constrained_steps']}, "
+                      f"unconstrained {row['unconstrained_steps']}), {row['slides']} slides, "
+                      f"{row['time_to_goal_s']:.1f} s", flush=True)
 
     if kb_url is None:
         tok = token or secrets.token_urlsafe(16)
@@ -91,18 +93,39 @@ def run_bench(tasks: int, formulations: Sequence[str], modes: Sequence[str], see
             run_all(url, tok)
     else:
         run_all(kb_url, token)
-    summary = {"command": " ".join(["planhrc", "robot-bench", *sys.argv[2:]]), "tasks": tasks,
-               "formulations": list(formulations), "modes": list(modes), "seed": seed,
-               "wall_s": round(time.perf_counter() - started, 1), "table": table(rows), "rows": rows}
+    lines = table(rows)
+    summary = {"command": " ".join(["planhrc", "robot-bench", *sys.argv[2:]]), "tasks": len(chosen),
+               "formulations": list(dict.fromkeys(t.formulation for t in chosen)), "modes": list(modes),
+               "seed": seed, "wall_s": round(time.perf_counter() - started, 1), "table": lines, "rows": rows}
     (out_dir / "robot-bench.json").write_text(json.dumps(summary, indent=2))
-    (out_dir / "robot-bench.md").write_text(markdown(summary["table"]))
+    (out_dir / "robot-bench.md").write_text(markdown(lines))
     return summary
+
+
+def tasks_from(path: Path, formulations: Sequence[str]) -> list[DemoScenario]:
+    """The tasks of an earlier run (its `robot-bench.json`), once each, of the formulations asked for: the same
+    tasks for another build of the robot, side by side."""
+    try:
+        rows = json.loads(path.read_text())["rows"]
+        seen: dict[tuple[str, int], DemoScenario] = {}
+        for r in rows:
+            if r["formulation"] in formulations and (r["formulation"], int(r["seed"])) not in seen:
+                seen[(r["formulation"], int(r["seed"]))] = DemoScenario(
+                    f"random-{int(r['seed'])}", r["formulation"], int(r.get("orientations", 8)),
+                    tuple(float(v) for v in r["start_deg"]), tuple(float(v) for v in r["goal_deg"]), "none",
+                    "a task of an earlier run",
+                    base_point_xy=(float(r["base_point_xy"][0]), float(r["base_point_xy"][1]))
+                    if r["base_point_xy"] else None)
+        return list(seen.values())
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SimError(f"--tasks-from: cannot read the tasks of {path} ({exc})") from None
 
 
 def _row(formulation: str, mode: str, seed: int, start: Sequence[float], goal: Sequence[float],
          base: Sequence[float] | None, result: dict[str, Any], shortest: dict[str, Any]) -> dict[str, Any]:
     decisions = result["decision_counts"]
-    return {"formulation": formulation, "mode": mode, "seed": seed, "start_deg": list(start), "goal_deg": list(goal),
+    return {"formulation": formulation, "mode": mode, "seed": seed, "orientations": 8, "start_deg": list(start),
+            "goal_deg": list(goal),
             "base_point_xy": list(base) if base else None, "reached": result["reached_goal"],
             "stop_reason": result["stop_reason"], "help_requests": len(result["help_reasons"]),
             "help_reasons": result["help_reasons"], "executed_steps": result["executed_steps"],
@@ -162,20 +185,23 @@ def add_robot_bench_parser(subparsers: SubParsers) -> None:
     p.add_argument("--out", type=writable_dir, default="robot-bench-out")
     p.add_argument("--kb", type=http_url, default=None, metavar="URL", help="a running service instead of a new one")
     p.add_argument("--token", default=None, help="the bearer token of --kb's service")
+    p.add_argument("--tasks-from", type=Path, default=None, metavar="JSON",
+                   help="run the tasks of an earlier run's robot-bench.json instead of drawing new ones")
     p.set_defaults(func=run_robot_bench)
 
 
 def run_robot_bench(args: argparse.Namespace) -> int:
     formulations = [f.strip() for f in args.formulations.split(",") if f.strip()]
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
-    for name, given, allowed in (("--formulations", formulations, RANDOM_FORMULATIONS), ("--modes", modes, MODES)):
-        wrong = [v for v in given if v not in allowed]
-        if wrong or not given:
+    for name, values, allowed in (("--formulations", formulations, RANDOM_FORMULATIONS), ("--modes", modes, MODES)):
+        wrong = [v for v in values if v not in allowed]
+        if wrong or not values:
             print(f"planhrc robot-bench: argument {name}: expected some of {', '.join(allowed)}, got "
-                  f"{','.join(given) or 'nothing'}", file=sys.stderr)
+                  f"{','.join(values) or 'nothing'}", file=sys.stderr)
             return 2
     try:
-        summary = run_bench(args.tasks, formulations, modes, args.seed, Path(args.out), args.kb, args.token)
+        given = tasks_from(args.tasks_from, formulations) if args.tasks_from is not None else None
+        summary = run_bench(args.tasks, formulations, modes, args.seed, Path(args.out), args.kb, args.token, given)
     except (SimError, ProtocolError) as exc:
         print(f"planhrc robot-bench: {exc}", file=sys.stderr)
         return 1
