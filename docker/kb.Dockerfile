@@ -14,7 +14,7 @@ WORKDIR /app
 # 1. The dependencies alone, pinned by constraints.txt: this layer is rebuilt only when pyproject.toml or
 #    constraints.txt change, not when the code does.
 COPY pyproject.toml constraints.txt docker/requirements.py ./
-RUN python requirements.py postgresql > requirements.txt \
+RUN python requirements.py postgresql tracing > requirements.txt \
     && pip install --no-cache-dir -c constraints.txt -r requirements.txt
 # 2. The project, a regular (non-editable) install: the TBox travels as package data of planhrc.ontology.
 COPY README.md LICENSE ./

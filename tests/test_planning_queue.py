@@ -57,21 +57,23 @@ def test_the_queue_hands_each_job_to_one_worker_never_starts_a_late_one_and_keep
 
     with psycopg.connect(db, autocommit=True) as a, psycopg.connect(db, autocommit=True) as b:
         ensure_tables(a)
-        late = a.execute(SUBMIT, ("obj1", b"late", 0.01)).fetchone()[0]
-        first = a.execute(SUBMIT, ("obj1", b"first", 30)).fetchone()[0]
-        second = a.execute(SUBMIT, ("obj2", b"second", 30)).fetchone()[0]
+        late = a.execute(SUBMIT, ("obj1", b"late", 0.01, None)).fetchone()[0]
+        first = a.execute(SUBMIT, ("obj1", b"first", 30, "00-0123456789abcdef0123456789abcdef-0123456789abcdef-01")
+                          ).fetchone()[0]
+        second = a.execute(SUBMIT, ("obj2", b"second", 30, None)).fetchone()[0]
         time.sleep(0.1)
         b.execute("SET statement_timeout = '30s'")  # a claim that waited for a's would fail, not hang the test
         with a.transaction():  # a worker's claim not committed yet: the other takes the next job, without waiting
             got_a = claimed(a.execute(CLAIM, {"worker": "a", "lease": 0.3}).fetchone())
             got_b = claimed(b.execute(CLAIM, {"worker": "b", "lease": 30}).fetchone())
         assert got_a is not None and got_b is not None
-        assert (got_a[0], got_a[2]) == (first, b"first") and (got_b[0], got_b[2]) == (second, b"second")
-        assert 20 < got_b[3] <= 30 and got_b[4] == 1  # seconds left, attempts
+        assert (got_a.id, got_a.blob) == (first, b"first") and (got_b.id, got_b.blob) == (second, b"second")
+        assert 20 < got_b.left <= 30 and got_b.attempts == 1 and not got_b.taken_over
+        assert got_a.trace is not None and got_a.trace.startswith("00-0123") and got_b.trace is None
         assert claimed(b.execute(CLAIM, {"worker": "b", "lease": 30}).fetchone()) is None  # the late one: never
         time.sleep(0.5)  # worker a stops renewing: its lease expires and b takes the job again
         again = claimed(b.execute(CLAIM, {"worker": "b", "lease": 30}).fetchone())
-        assert again is not None and again[0] == first and again[4] == 2
+        assert again is not None and again.id == first and again.attempts == 2 and again.taken_over
         assert a.execute(RENEW, (30, first, "a")).fetchall() == []  # not a's any more
         assert a.execute(FINISH, (b"a's", first, "a")).fetchall() == []  # a's outcome is not kept
         assert len(b.execute(FINISH, (b"b's", first, "b")).fetchall()) == 1
@@ -90,7 +92,7 @@ def test_a_job_the_worker_cannot_read_is_answered_with_an_error(db):
 
     with psycopg.connect(db, autocommit=True) as conn:
         ensure_tables(conn)
-        job = conn.execute(SUBMIT, ("obj1", b"not a pickle", 30)).fetchone()[0]
+        job = conn.execute(SUBMIT, ("obj1", b"not a pickle", 30, None)).fetchone()[0]
         stop = threading.Event()
         thread = threading.Thread(target=serve_jobs, args=(db, None, str(default_tbox_path()), 1.0, stop, "test"))
         thread.start()
@@ -217,7 +219,7 @@ def test_a_worker_stopped_with_sigterm_hands_its_job_back_and_says_so_in_one_lin
     job = PlanningJob(obj, init, goal, config_from_settings(make_settings(planning_deadline_s=60)), None, 0.0)
     with psycopg.connect(db, autocommit=True) as conn:
         ensure_tables(conn)
-        conn.execute(SUBMIT, ("obj1", pickle.dumps(job), 60))
+        conn.execute(SUBMIT, ("obj1", pickle.dumps(job), 60, None))
     log_path = tmp_path / "worker-w.log"
     with worker(db, tmp_path, lease_s=30) as proc:
         deadline = time.monotonic() + 60
