@@ -53,6 +53,9 @@ class Role(StrEnum):
     READER = "reader"
 
 
+ROLES = frozenset(r.value for r in Role)
+
+
 class ClientError(KBError):
     """A `planhrc keys` request the registry refuses (unknown client, a name taken, a bad role)."""
 
@@ -134,12 +137,14 @@ class _SqliteTable:
 class _PostgresTable:
     def __init__(self, db: str, password: str | None) -> None:
         from .store.postgres.schema import SCHEMA_LOCK
-        from .store.postgres.session import connect
+        from .store.postgres.session import Connection, connect
 
-        self._db, self._password = db, password
-        self._connect = lambda: connect(db, password, "planhrc-clients")
+        def connected() -> Connection:
+            return connect(db, password, "planhrc-clients")
+
+        self._connect = connected
         self._lock = threading.Lock()
-        self._conn = self._connect()
+        self._conn = connected()
         with self._conn.transaction():
             self._conn.execute("SELECT pg_advisory_xact_lock(%s)", (SCHEMA_LOCK,))
             self._conn.execute(POSTGRES_TABLE)
@@ -209,7 +214,7 @@ class ClientRegistry:
     def refresh(self) -> None:
         """Read the table again (a blocking read: the service runs it off its event loop)."""
         rows = self._table.rows("SELECT key_sha256, name, role FROM planhrc_client WHERE revoked_at IS NULL")
-        keys = {digest: Client(name, frozenset({Role(role)})) for digest, name, role in rows if role in Role}
+        keys = {digest: Client(name, frozenset({Role(role)})) for digest, name, role in rows if role in ROLES}
         with self._guard:
             self._keys, self._read_at = keys, time.monotonic()
 
@@ -232,8 +237,12 @@ class ClientRegistry:
         check_name(name)
         checked = check_role(role)
         key = new_key()
-        self._table.rows("INSERT INTO planhrc_client (name, role, key_sha256, created_at) VALUES (?, ?, ?, ?)",
-                         (name, checked.value, key_hash(key), time.time()))
+        try:
+            self._table.rows("INSERT INTO planhrc_client (name, role, key_sha256, created_at) VALUES (?, ?, ?, ?)",
+                             (name, checked.value, key_hash(key), time.time()))
+        except ClientError:
+            raise ClientError(f"name: a client named {name!r} exists already (a revoked client keeps its name: its "
+                              "events name it)") from None
         return key
 
     def rotate(self, name: str) -> str:

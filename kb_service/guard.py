@@ -75,7 +75,7 @@ def check_routes(routes: Iterable[BaseRoute]) -> None:
     """Every route the API document shows declares its access: a new route cannot be left open by omission."""
     from fastapi.routing import APIRoute
 
-    missing = [f"{sorted(r.methods)} {r.path}" for r in routes
+    missing = [f"{sorted(r.methods or ())} {r.path}" for r in routes
                if isinstance(r, APIRoute) and r.include_in_schema and ACCESS not in (r.openapi_extra or {})]
     if missing:
         raise RuntimeError(f"routes without a declared access ({ACCESS}): {', '.join(missing)}")

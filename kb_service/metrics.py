@@ -79,9 +79,10 @@ class ServiceMetrics:
     def validated(self, accepted: bool, seconds: float) -> None:
         self.val_verdicts.labels("accepted" if accepted else "refused").inc()
 
-    def stored(self, seconds: float) -> None:
+    def stored(self, seconds: float, replanned: bool) -> None:
         self.store_seconds.observe(seconds)
-        self.stage_seconds.labels("store").observe(seconds)
+        if replanned:
+            self.stage_seconds.labels("store").observe(seconds)
 
     def watch_queue(self, depth: Callable[[], Mapping[str, int]] | None) -> None:
         """Report the planning queue's depth (read from the database at each scrape; None: no queue)."""

@@ -38,9 +38,9 @@ class Observation:
         if self.metrics is not None:
             self.metrics.validated(accepted, seconds)
 
-    def stored(self, seconds: float) -> None:
+    def stored(self, seconds: float, replanned: bool) -> None:
         if self.metrics is not None:
-            self.metrics.stored(seconds)
+            self.metrics.stored(seconds, replanned)
 
     def span(self, name: str, **attributes: Any) -> AbstractContextManager[Any]:
         return self.tracing.span(name, attributes)

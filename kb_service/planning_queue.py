@@ -320,8 +320,8 @@ def _run_job(plan: Any, link: _Link, db: str, password: str | None, worker: str,
         lease = _Lease(db, password, job_id, worker, lease_s)
         lease.start()
         try:
-            outcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
-                           deadline_at=job.deadline_at)
+            outcome: PlanOutcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
+                                        deadline_at=job.deadline_at)
         except Exception as exc:  # the service gets an outcome whatever happens
             log.exception("planning failed for %s", object_id)
             outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)

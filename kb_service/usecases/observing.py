@@ -14,8 +14,8 @@ class Observer(Protocol):
     def validated(self, accepted: bool, seconds: float) -> None:
         """VAL's verdict on a new plan or on a piece of one."""
 
-    def stored(self, seconds: float) -> None:
-        """A perception's write took `seconds`."""
+    def stored(self, seconds: float, replanned: bool) -> None:
+        """A perception's write took `seconds` (a re-plan's write: `replanned`)."""
 
     def span(self, name: str, **attributes: Any) -> AbstractContextManager[Any]:
         """A span around a stage (the request's trace)."""
@@ -31,7 +31,7 @@ class _Quiet:
     def validated(self, accepted: bool, seconds: float) -> None:
         pass
 
-    def stored(self, seconds: float) -> None:
+    def stored(self, seconds: float, replanned: bool) -> None:
         pass
 
     def span(self, name: str, **attributes: Any) -> AbstractContextManager[Any]:

@@ -201,7 +201,7 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
                              decision.remedy if decision is not None else None, seen.measured)
         store.add_event(obj.ident, turn.decision, turn.reason, data)
         remember(store, obj.ident, seen.key, seen.fingerprint, turn_record(turn))
-    context.observer.stored(time.perf_counter() - started)
+    context.observer.stored(time.perf_counter() - started, replanned=planned is not None)
     return written
 
 
