@@ -202,6 +202,7 @@ class ClientRegistry:
             self._shortcuts[key_hash(read_token)] = Client(READ_TOKEN_CLIENT, frozenset({Role.READER}))
         self._guard = threading.Lock()
         self._keys: dict[str, Client] = {}
+        self._ever = False
         self._read_at = float("-inf")
 
     def close(self) -> None:
@@ -213,14 +214,16 @@ class ClientRegistry:
 
     def refresh(self) -> None:
         """Read the table again (a blocking read: the service runs it off its event loop)."""
-        rows = self._table.rows("SELECT key_sha256, name, role FROM planhrc_client WHERE revoked_at IS NULL")
-        keys = {digest: Client(name, frozenset({Role(role)})) for digest, name, role in rows if role in ROLES}
+        rows = self._table.rows("SELECT key_sha256, name, role, revoked_at FROM planhrc_client")
+        keys = {digest: Client(name, frozenset({Role(role)})) for digest, name, role, revoked in rows
+                if role in ROLES and revoked is None}
         with self._guard:
-            self._keys, self._read_at = keys, time.monotonic()
+            self._keys, self._ever, self._read_at = keys, bool(rows), time.monotonic()
 
     def guarded(self) -> bool:
-        """Whether any key is in force: without one (and without `--token`) the service is open, as before keys."""
-        return bool(self._shortcuts or self._keys)
+        """Whether the service needs keys: it has a token, or a client was ever added (revoking every key closes
+        the service, it does not open it). Without either it is open, as before clients."""
+        return bool(self._shortcuts or self._ever)
 
     def client_of(self, key: str) -> Client | None:
         """The client whose key `key` is (None: no such key, or revoked). The lookup is by hash; the hash found is
