@@ -36,6 +36,9 @@ USER 10001:10001
 WORKDIR /data
 VOLUME ["/data"]
 EXPOSE 8000
+# Readiness (/health/ready: the store's database answers, the TBox is loaded, planning is reachable): what
+# `depends_on: condition: service_healthy` waits for. An orchestrator with two probes takes /health/live for the
+# other (docs/operations.md).
 HEALTHCHECK --interval=5s --timeout=3s --retries=12 \
-  CMD ["python", "-c", "import urllib.request; urllib.request.urlopen('http://127.0.0.1:8000/health', timeout=2)"]
+  CMD ["python", "-c", "import urllib.request; urllib.request.urlopen('http://127.0.0.1:8000/health/ready', timeout=2)"]
 CMD ["planhrc", "serve", "--host", "0.0.0.0", "--port", "8000"]

@@ -100,7 +100,7 @@ def create_app(settings: Settings | None = None,
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        tracing = observation.tracing = Tracing.start("planhrc-service", settings.otlp_endpoint)
+        tracing = observation.tracing = Tracing.start("planhrc-service", settings.otlp_endpoint, settings.trace_ratio)
         pool = open_planning(settings, tracing)
         try:
             kb = open_store(settings)

@@ -35,7 +35,8 @@ SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "db_pass
                  "read_token_file": "--read-token-file", "protect_reads": "--protect-reads", "insecure": "--insecure",
                  "ssl_certfile": "--ssl-certfile", "ssl_keyfile": "--ssl-keyfile", "tbox_path": "--tbox",
                  "planner": "--planner", "log_level": "--log-level", "planning_queue": "--planning-queue",
-                 "log_format": "--log-format", "otlp_endpoint": "--otlp-endpoint", "metrics": "--no-metrics"}
+                 "log_format": "--log-format", "otlp_endpoint": "--otlp-endpoint", "metrics": "--no-metrics",
+                 "trace_ratio": "--trace-ratio"}
 
 
 def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
@@ -82,6 +83,9 @@ def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser
     add_observing_options(p)
     p.add_argument("--no-metrics", dest="metrics", action="store_false", default=None,
                    help="serve no /metrics and count nothing (env PLANHRC_METRICS=false)")
+    p.add_argument("--trace-ratio", type=float, default=None, metavar="0..1",
+                   help="the share of requests traced (env PLANHRC_TRACE_RATIO; default: OTEL_TRACES_SAMPLER, else "
+                   "every request); a request whose client sent a sampled traceparent is always traced")
     p.set_defaults(func=run_serve)
     return p
 
@@ -213,7 +217,7 @@ def run_serve(args: argparse.Namespace) -> int:
         "ssl_certfile": args.ssl_certfile, "ssl_keyfile": args.ssl_keyfile,
         "tbox_path": args.tbox, "planner": args.planner, "log_level": args.log_level,
         "planning_queue": args.planning_queue, "log_format": args.log_format, "otlp_endpoint": args.otlp_endpoint,
-        "metrics": args.metrics,
+        "metrics": args.metrics, "trace_ratio": args.trace_ratio,
     }.items() if value is not None}
     warnings: list[str] = []
     try:

@@ -14,8 +14,8 @@ continues the trace (`span(..., parent=carrier)`).
 from __future__ import annotations
 
 import os
-from contextlib import AbstractContextManager, contextmanager, nullcontext
-from typing import Any, Iterator, Mapping
+from contextlib import AbstractContextManager, nullcontext
+from typing import Any, Mapping
 
 TRACES_PATH = "/v1/traces"
 
@@ -44,14 +44,23 @@ class Tracing:
     def __init__(self, provider: Any = None) -> None:
         self._provider = provider
         self._tracer = provider.get_tracer("planhrc") if provider is not None else None
+        self._kinds: tuple[Any, Any] | None = None
+        self._propagator: Any = None
+        if provider is not None:  # what every span needs, looked up once
+            from opentelemetry.trace import SpanKind
+            from opentelemetry.trace.propagation.tracecontext import TraceContextTextMapPropagator
+
+            self._kinds = (SpanKind.INTERNAL, SpanKind.SERVER)
+            self._propagator = TraceContextTextMapPropagator()
 
     @classmethod
     def off(cls) -> "Tracing":
         return cls(None)
 
     @classmethod
-    def start(cls, service_name: str, endpoint: str | None) -> "Tracing":
-        """On when `tracing_wanted(endpoint)`, else off."""
+    def start(cls, service_name: str, endpoint: str | None, ratio: float | None = None) -> "Tracing":
+        """On when `tracing_wanted(endpoint)`, else off. `ratio`: the share of traces started here that are
+        recorded (a span whose parent was recorded always is); None: OTEL_TRACES_SAMPLER's, else all."""
         if not tracing_wanted(endpoint):
             return cls.off()
         from opentelemetry.exporter.otlp.proto.http.trace_exporter import OTLPSpanExporter
@@ -63,7 +72,12 @@ class Tracing:
 
         resource = Resource.create({"service.name": os.environ.get("OTEL_SERVICE_NAME", service_name),
                                     "service.version": planhrc.__version__})
-        provider = TracerProvider(resource=resource)
+        sampler = None
+        if ratio is not None:
+            from opentelemetry.sdk.trace.sampling import ParentBased, TraceIdRatioBased
+
+            sampler = ParentBased(TraceIdRatioBased(ratio))
+        provider = TracerProvider(resource=resource, sampler=sampler)
         exporter = OTLPSpanExporter(endpoint=traces_url(endpoint)) if endpoint else OTLPSpanExporter()
         provider.add_span_processor(BatchSpanProcessor(exporter))
         return cls(provider)
@@ -77,29 +91,18 @@ class Tracing:
         """A span around a block (the current span's child, or `parent`'s: a carrier from another process)."""
         if self._tracer is None:
             return nullcontext()
-        return self._span(name, attributes, parent, server)
-
-    @contextmanager
-    def _span(self, name: str, attributes: Mapping[str, Any] | None, parent: Mapping[str, str] | None,
-              server: bool) -> Iterator[Any]:
-        from opentelemetry.trace import SpanKind
-        from opentelemetry.trace.propagation.tracecontext import TraceContextTextMapPropagator
-
-        assert self._tracer is not None
-        context = TraceContextTextMapPropagator().extract(dict(parent)) if parent is not None else None
-        kind = SpanKind.SERVER if server else SpanKind.INTERNAL
-        with self._tracer.start_as_current_span(name, context=context, kind=kind,
-                                                attributes=dict(attributes or {})) as span:
-            yield span
+        assert self._kinds is not None
+        context = self._propagator.extract(parent) if parent is not None else None
+        span: AbstractContextManager[Any] = self._tracer.start_as_current_span(
+            name, context=context, kind=self._kinds[server], attributes=attributes)
+        return span
 
     def carrier(self) -> dict[str, str]:
         """The current trace context as W3C headers (empty when off or outside a span)."""
         if self._tracer is None:
             return {}
-        from opentelemetry.trace.propagation.tracecontext import TraceContextTextMapPropagator
-
         carrier: dict[str, str] = {}
-        TraceContextTextMapPropagator().inject(carrier)
+        self._propagator.inject(carrier)
         return carrier
 
     def flush(self, timeout_s: float = 2.0) -> None:

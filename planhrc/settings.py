@@ -139,6 +139,11 @@ class Settings(BaseSettings):
         "without it tracing is off unless OpenTelemetry's own OTEL_EXPORTER_OTLP_ENDPOINT (or "
         "OTEL_TRACES_EXPORTER=otlp) is set.",
     )
+    trace_ratio: float | None = Field(
+        default=None, ge=0, le=1,
+        description="The share of requests traced (a request whose client sent a sampled `traceparent` always is); "
+        "default: OpenTelemetry's OTEL_TRACES_SAMPLER, else every request.",
+    )
     read_token: str | None = Field(
         default=None,
         description="A second, read-only bearer token: accepted for reads of the knowledge base when "
