@@ -157,7 +157,7 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
     check_otlp_endpoint(settings, name)
     warnings = [] if warnings is None else warnings
     settings = resolve_secrets(settings, given, name, warnings)
-    check_exposure(settings, name, warnings)
+    check_exposure(settings, name, warnings, has_clients=store_has_clients(settings))
     if settings.planning_queue and backend_of(settings.db_path) != "postgresql":
         raise SettingsProblem(f"{name('planning_queue')}: the planning job queue is a PostgreSQL store's; give "
                               f"{name('db_path')} a postgresql:// URL, or plan in the service's own workers")
@@ -179,6 +179,27 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
             raise SettingsProblem(f"{name('port')}/{name('host')}: cannot listen on {settings.host}:{settings.port} "
                                   f"({exc.strerror or exc})") from None
     return settings
+
+
+def store_has_clients(settings: Settings) -> bool:
+    """Whether the store names a client (`planhrc keys`): then its writes need keys. False when the store does not
+    exist yet or cannot be read now (the checks below say why)."""
+    from .clients import ClientRegistry, open_table
+
+    db = settings.db_path
+    if db in (None, "", ":memory:") or (backend_of(db) == "sqlite" and not Path(str(db)).is_file()):
+        return False
+    password = settings.db_password.get_secret_value() if settings.db_password else None
+    try:
+        registry = ClientRegistry(open_table(str(db), password))
+    except Exception:  # not a store, or a database away: the store's own checks say so in their words
+        return False
+    try:
+        return bool(registry.records())
+    except Exception:
+        return False
+    finally:
+        registry.close()
 
 
 def check_store_server(settings: Settings, option: str) -> None:
