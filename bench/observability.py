@@ -109,12 +109,12 @@ def bench_observability(samples: int, links: int, orientations: int, seed: int,
                 side.latencies += lat
                 side.cpu_s += cpu_ms * count / 1000
                 side.posted += count
-        rows = [{"metrics_and_tracing": name, **summary_ms(side.latencies),
-                 "server_cpu_ms": round(side.cpu_s / side.posted * 1000, 3), "rss_mb": round(rss_mb(side.server.pid), 1)}
-                for name, side in sides.items()]
-    cpu_off = rows[0]["server_cpu_ms"]
+        cpu = {name: side.cpu_s / side.posted * 1000 for name, side in sides.items()}
+        rows: list[dict[str, Any]] = [
+            {"metrics_and_tracing": name, **summary_ms(side.latencies), "server_cpu_ms": round(cpu[name], 3),
+             "rss_mb": round(rss_mb(side.server.pid), 1)} for name, side in sides.items()]
     for row in rows[1:]:
-        row["cpu_increase_pct"] = round((row["server_cpu_ms"] / cpu_off - 1) * 100, 2)
+        row["cpu_increase_pct"] = round((cpu[row["metrics_and_tracing"]] / cpu["off"] - 1) * 100, 2)
     report = {"round_size": round_size, "rows": rows, "scrapes": sum(s[0] for s in scrapes.values()),
               "span_exports": exported[0], "span_bytes": exported[1], "target_pct": TARGET_PCT}
     print(f"[service-bench] observability: {report}", file=sys.stderr, flush=True)

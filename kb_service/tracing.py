@@ -46,12 +46,16 @@ class Tracing:
         self._tracer = provider.get_tracer("planhrc") if provider is not None else None
         self._kinds: tuple[Any, Any] | None = None
         self._propagator: Any = None
+        self._current: Any = None
         if provider is not None:  # what every span needs, looked up once
             from opentelemetry.trace import SpanKind
             from opentelemetry.trace.propagation.tracecontext import TraceContextTextMapPropagator
 
+            from opentelemetry.trace import get_current_span
+
             self._kinds = (SpanKind.INTERNAL, SpanKind.SERVER)
             self._propagator = TraceContextTextMapPropagator()
+            self._current = get_current_span
 
     @classmethod
     def off(cls) -> "Tracing":
@@ -92,6 +96,8 @@ class Tracing:
         if self._tracer is None:
             return nullcontext()
         assert self._kinds is not None
+        if parent is None and not server and not self._current().is_recording():
+            return nullcontext()  # inside a request not sampled (`--trace-ratio`): its stages are not either
         context = self._propagator.extract(parent) if parent is not None else None
         span: AbstractContextManager[Any] = self._tracer.start_as_current_span(
             name, context=context, kind=self._kinds[server], attributes=attributes)
