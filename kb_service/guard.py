@@ -158,9 +158,9 @@ class RequestGuard:
         key = bearer(headers.get("authorization"))
         client = registry.client_of(key) if registry is not None and key is not None else None
         if client is None:
-            what = "this request" if allowed == READ else f"this request (for role {allowed})"
+            what = "reads of the knowledge base need" if allowed == READ else f"this request (for role {allowed}) needs"
             said = "no key was sent" if key is None else "the key is unknown or revoked"
-            return None, (401, f"Authorization: {what} needs 'Bearer <key>' of a client; {said}")
+            return None, (401, f"Authorization: {what} 'Bearer <key>' of a client on this service; {said}")
         if allowed != READ and not client.may(Role(allowed)):
             roles = ", ".join(sorted(client.roles))
             return None, (403, f"Authorization: this request needs the role {allowed}; client {client.name!r} "

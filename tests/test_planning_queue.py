@@ -17,9 +17,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
+import httpx
 import pytest
 
-from planhrc.service_process import die_with_parent, stop_process_group
+from planhrc.service_process import die_with_parent, free_port, stop_process_group
 from tests.replica_tools import events, perceive, replicas
 from tests.servers import serve_env, store_location
 
@@ -32,12 +33,13 @@ def db(pg_cluster, tmp_path, request) -> str:
 
 
 @contextmanager
-def worker(db: str, folder: Path, lease_s: float = 1.0, name: str = "w") -> Iterator[subprocess.Popen[bytes]]:
-    """`planhrc planning-worker` on `db`; its log is `<folder>/worker-<name>.log`."""
+def worker(db: str, folder: Path, lease_s: float = 1.0, name: str = "w",
+           *args: str) -> Iterator[subprocess.Popen[bytes]]:
+    """`planhrc planning-worker` on `db` (with `args`); its log is `<folder>/worker-<name>.log`."""
     log_path = folder / f"worker-{name}.log"
     with open(log_path, "wb") as log:
         proc = subprocess.Popen([sys.executable, "-m", "planhrc.cli", "planning-worker", "--db", db, "--lease-s",
-                                 str(lease_s)], env=serve_env(), stdout=log, stderr=subprocess.STDOUT,
+                                 str(lease_s), *args], env=serve_env(), stdout=log, stderr=subprocess.STDOUT,
                                 start_new_session=True, preexec_fn=die_with_parent)
     try:
         yield proc
@@ -164,7 +166,9 @@ def test_without_a_worker_the_deadline_holds_and_nothing_is_stored(db, tmp_path)
 def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_gets_one_plan(db, tmp_path):
     env = {**QUEUED, "PLANHRC_PLANNING_DEADLINE_S": "45"}  # a 503 at the deadline comes within the client's 60 s
     links = 40  # an absolute task a worker needs a few seconds for
-    with worker(db, tmp_path, name="a") as first, worker(db, tmp_path, name="b") as second, \
+    ports = {"a": free_port(), "b": free_port()}  # each worker's own /metrics
+    with worker(db, tmp_path, 1.0, "a", "--metrics-port", str(ports["a"])) as first, \
+            worker(db, tmp_path, 1.0, "b", "--metrics-port", str(ports["b"])) as second, \
             replicas(db, tmp_path, count=1, args=("--planning-queue",), env=env) as [(_, c)]:
         oid = c.post("/objects", json={"name": "long", "links": links, "orientations": 12,
                                        "formulation": "absolute"}).json()["id"]
@@ -194,8 +198,11 @@ def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_get
         assert answer["took"] < 45 + 14  # by the planning deadline (a loaded machine's slack on top)
         if reply.status_code == 200:
             assert reply.json()["decision"] == "replan"
-        survivor = (tmp_path / f"worker-{'b' if victim is first else 'a'}.log").read_text()
+        other = "b" if victim is first else "a"
+        survivor = (tmp_path / f"worker-{other}.log").read_text()
         assert "attempt 2" in survivor, survivor
+        metrics = httpx.get(f"http://127.0.0.1:{ports[other]}/metrics").text  # the takeover, counted by the taker
+        assert "planhrc_planning_leases_taken_over_total 1.0" in metrics, metrics
         plans = [e for e in events(c, oid) if e["kind"] == "replan"]
         assert len(plans) == (1 if reply.status_code == 200 else 0)
         assert rows(db) == []
