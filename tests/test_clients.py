@@ -24,7 +24,7 @@ from planhrc.kb_service.app import create_app
 from planhrc.kb_service.clients import ROLES
 from planhrc.kb_service.guard import ACCESS, OPEN, READ
 from planhrc.settings import make_settings
-from tests.servers import serve_env, serving
+from tests.servers import serve_env, serving, store_location
 
 GOAL = [0, 90, 90, 180]
 # A body for each write the walk sends; a write not named here gets `{}` (a 422 once admitted: still no 401/403).
@@ -191,15 +191,23 @@ def eventually(check: Any, within_s: float = 10.0) -> bool:
     return False
 
 
-def test_a_store_made_before_clients_opens_and_works(tmp_path):
-    """An existing SQLite store written before events named their client (no `client` column, no client table)."""
-    db = tmp_path / "kb.sqlite3"
-    settings = make_settings(db_path=str(db), val_armed=False)
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_a_store_made_before_clients_opens_and_works(tmp_path, backend, request):
+    """An existing store written before events named their client (no `client` column, no client table)."""
+    db = store_location(backend, tmp_path, request)
+    settings = make_settings(db_path=db, val_armed=False)
     with TestClient(create_app(settings)) as client:
         oid = client.post("/objects", json=BODIES[("post", "/objects")]).json()["id"]
-    with sqlite3.connect(db) as conn:  # as main's code left it
-        conn.execute("ALTER TABLE planhrc_event DROP COLUMN client")
-        conn.execute("DROP TABLE planhrc_client")
+    if backend == "sqlite":
+        with sqlite3.connect(db) as conn:  # as main's code left it
+            conn.execute("ALTER TABLE planhrc_event DROP COLUMN client")
+            conn.execute("DROP TABLE planhrc_client")
+    else:
+        import psycopg
+
+        with psycopg.connect(db, autocommit=True) as conn:
+            conn.execute("ALTER TABLE planhrc_event DROP COLUMN client")
+            conn.execute("DROP TABLE planhrc_client")
     with TestClient(create_app(settings)) as client:
         old = client.get(f"/objects/{oid}/events").json()
         assert [e["kind"] for e in old] == ["object_created"] and old[0]["client"] is None

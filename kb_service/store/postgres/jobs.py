@@ -36,7 +36,11 @@ JOB_TABLES = (
     " created_at timestamptz NOT NULL DEFAULT now(), CHECK (state IN ('queued', 'running', 'done')))",
     "CREATE INDEX IF NOT EXISTS planhrc_planning_job_open ON planhrc_planning_job (id) WHERE state <> 'done'",
     # the trace context of the request that queued the job (W3C traceparent; null when it was not traced)
-    "ALTER TABLE planhrc_planning_job ADD COLUMN IF NOT EXISTS trace text",
+    # (a look first: each worker's connection runs these, and an ALTER TABLE locks the table even when it finds the
+    # column)
+    "DO $$ BEGIN IF NOT EXISTS (SELECT 1 FROM information_schema.columns WHERE table_schema = current_schema() "
+    "AND table_name = 'planhrc_planning_job' AND column_name = 'trace') THEN ALTER TABLE planhrc_planning_job ADD COLUMN trace text; "
+    "END IF; END $$",
 )
 
 SUBMIT = ("WITH j AS (INSERT INTO planhrc_planning_job (object_id, job, deadline, trace) "
