@@ -203,6 +203,7 @@ class ClientRegistry:
         self._guard = threading.Lock()
         self._keys: dict[str, Client] = {}
         self._ever = False
+        self._read_once = False
         self._read_at = float("-inf")
 
     def close(self) -> None:
@@ -212,13 +213,26 @@ class ClientRegistry:
     def stale(self) -> bool:
         return time.monotonic() - self._read_at >= self._refresh_s
 
+    @property
+    def read_once(self) -> bool:
+        """Whether the table was ever read (its copy, stale or not, can answer)."""
+        return self._read_once
+
     def refresh(self) -> None:
-        """Read the table again (a blocking read: the service runs it off its event loop)."""
-        rows = self._table.rows("SELECT key_sha256, name, role, revoked_at FROM planhrc_client")
+        """Read the table again (a blocking read: the service runs it off its event loop). A read that fails (the
+        database away) is tried again only after `refresh_s`, so an outage does not cost every request a connect
+        timeout; the caller may go on with the copy it has (`read_once`)."""
+        try:
+            rows = self._table.rows("SELECT key_sha256, name, role, revoked_at FROM planhrc_client")
+        except KBError:
+            with self._guard:
+                self._read_at = time.monotonic()
+            raise
         keys = {digest: Client(name, frozenset({Role(role)})) for digest, name, role, revoked in rows
                 if role in ROLES and revoked is None}
         with self._guard:
             self._keys, self._ever, self._read_at = keys, bool(rows), time.monotonic()
+            self._read_once = True
 
     def guarded(self) -> bool:
         """Whether the service needs keys: it has a token, or a client was ever added (revoking every key closes

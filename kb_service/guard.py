@@ -19,6 +19,7 @@ runs as its client (`store.acting.acting_as`): every event it leads to records t
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import dataclass
 from typing import Any, Awaitable, Callable, Iterable, MutableMapping
 
@@ -28,6 +29,8 @@ from starlette.routing import BaseRoute, Match, Route
 from .clients import Client, ClientRegistry, Role
 from .store.acting import acting_as
 from .store.errors import UnavailableError
+
+log = logging.getLogger(__name__)
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -149,10 +152,10 @@ class RequestGuard:
         route = route_of(scope)
         allowed = route[1] if route is not None else OPEN
         if allowed == OPEN or (allowed == READ and not self.policy.protect_reads):
-            return await self._client(scope, headers), None
+            return None, None  # nobody to name: such a request writes no event
         registry = self.registry(scope)
-        if registry is not None and registry.stale():
-            await anyio.to_thread.run_sync(registry.refresh)
+        if registry is not None:
+            await _refreshed(registry)
         if allowed != READ and (registry is None or not registry.guarded()):
             return None, None  # no key anywhere: an open service, as before clients
         key = bearer(headers.get("authorization"))
@@ -167,16 +170,6 @@ class RequestGuard:
                                f"has the role {roles}")
         return client, None
 
-    async def _client(self, scope: Scope, headers: dict[str, str]) -> Client | None:
-        """A request that needs no key is still its client's when it carries a valid one."""
-        key = bearer(headers.get("authorization"))
-        registry = self.registry(scope)
-        if key is None or registry is None:
-            return None
-        if registry.stale():
-            await anyio.to_thread.run_sync(registry.refresh)
-        return registry.client_of(key)
-
     def _refuse_length(self, headers: dict[str, str]) -> tuple[int, str] | None:
         length = headers.get("content-length")
         if length is not None:
@@ -185,6 +178,19 @@ class RequestGuard:
             if int(length) > self.policy.max_body_bytes:
                 return 413, f"request body: {int(length)} bytes, over the limit of {self.policy.max_body_bytes} bytes"
         return None
+
+
+async def _refreshed(registry: ClientRegistry) -> None:
+    """The registry's copy of the clients' table, read again when stale; when the database cannot be reached, the
+    copy it has (an `UnavailableError` only when it never read the table)."""
+    if not registry.stale():
+        return
+    try:
+        await anyio.to_thread.run_sync(registry.refresh)
+    except UnavailableError as exc:
+        if not registry.read_once:
+            raise
+        log.warning("clients: %s; going on with the keys read before", exc)
 
 
 async def _read_body(receive: Receive, limit: int) -> tuple[bytes, bool]:

@@ -215,3 +215,37 @@ def test_a_store_made_before_clients_opens_and_works(tmp_path, backend, request)
         assert client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0, 0]}).is_success
         assert [e["kind"] for e in client.get(f"/objects/{oid}/events").json()] == \
             ["object_created", "goal_set", "replan"]
+
+
+def test_a_registry_whose_database_is_away_keeps_the_keys_it_read_and_does_not_retry_at_every_request():
+    from planhrc.kb_service.clients import ClientRegistry, open_table
+    from planhrc.kb_service.store.errors import UnavailableError
+
+    class Away:
+        """The registry's table, until `down`: then every statement fails as a lost connection does."""
+
+        def __init__(self) -> None:
+            self.table, self.down, self.tries = open_table(None), False, 0
+
+        def rows(self, sql: str, params: Any = ()) -> list[tuple[Any, ...]]:
+            if self.down:
+                self.tries += 1
+                raise UnavailableError("db: cannot connect")
+            return self.table.rows(sql, params)
+
+        def close(self) -> None:
+            self.table.close()
+
+    table = Away()
+    registry = ClientRegistry(table, refresh_s=60.0)  # type: ignore[arg-type]
+    with pytest.raises(UnavailableError):  # never read: nothing to go on with
+        table.down = True
+        registry.refresh()
+    assert not registry.read_once and not registry.stale() and table.tries == 1  # not again before refresh_s
+    table.down = False
+    key = registry.add("baxter-1", "robot")
+    registry.refresh()
+    table.down = True
+    with pytest.raises(UnavailableError):
+        registry.refresh()
+    assert registry.read_once and registry.client_of(key) is not None  # the copy read before still answers
