@@ -132,13 +132,13 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         # re-plan: the pipeline once, VAL running in its own processes meanwhile
         context.validator.stop(obj.ident)  # the plan being replaced needs no more checking
         replan = refine.replan_request(obj, perception, goal.atoms, plan, decision, memo, base, deadline_at)
-        with context.observer.span("plan", object_id=obj.ident):
+        with context.observer.span("plan"):  # the object: on `perceive`
             planned = plan_for_service(replan, context.planning, context.validator, context.pool)
         try:
             if planned.outcome.status is PlanningStatus.TIMEOUT:
                 raise DeadlineError(f"planning: {planned.outcome.message}")
             checked = _check_plan(context, obj, planned.outcome, deadline_at)
-            with context.observer.span("val", object_id=obj.ident, in_write=planned.verdict.read_in_write):
+            with context.observer.span("val"):
                 if not planned.verdict.read_in_write:
                     planned.verdict.outcome(None)  # VAL's verdict before the write: the store is not held meanwhile
                 try:
@@ -179,7 +179,7 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
     OVERLAP_WAIT_S."""
     store, obj, goal, decision = context.store, seen.obj, seen.goal, seen.decision
     started = time.perf_counter()
-    with context.observer.span("store", object_id=obj.ident), object_write(context, obj.ident, seen.mark):
+    with context.observer.span("store"), object_write(context, obj.ident, seen.mark):
         perceived = store.add_perception(seen.perception)
         outcome: PlanOutcome | None = None
         if planned is not None:
