@@ -66,6 +66,18 @@ class ServiceMetrics:
         self.event_streams = Gauge("planhrc_event_streams_open", "Server-Sent Events streams open now.", registry=r)
         self._queue = _QueueDepth()
         r.register(self._queue)
+        # each (route, method, status)'s series, found once: a request then costs two updates, no label lookup
+        self._answers: dict[tuple[str, str, int], tuple[Any, Any]] = {}
+
+    def answered(self, route: str, method: str, status: int, seconds: float) -> None:
+        """A request answered: its count and its time."""
+        key = (route, method, status)
+        series = self._answers.get(key)
+        if series is None:
+            series = self._answers.setdefault(key, (self.requests.labels(route, method, str(status)),
+                                                    self.request_seconds.labels(route, method)))
+        series[0].inc()
+        series[1].observe(seconds)
 
     # -- what the use cases and routes report (`usecases.Observer`) ---------------------------------------------
     def decided(self, kind: str, timings: Mapping[str, float] | None) -> None:

@@ -93,5 +93,4 @@ class Observe:
                 set_attributes(span, **{"http.response.status_code": status})
                 if metrics is not None:
                     end = answered if answered is not None else time.perf_counter()
-                    metrics.requests.labels(template, method, str(status)).inc()
-                    metrics.request_seconds.labels(template, method).observe(end - started)
+                    metrics.answered(template, method, status, end - started)
