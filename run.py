@@ -280,6 +280,23 @@ def ensure_postgresql() -> None:
         say("apt-get installed postgresql but its initdb is not there: the PostgreSQL store's tests will skip")
 
 
+PROMETHEUS = Path("/usr/bin/prometheus")
+
+
+def ensure_prometheus() -> None:
+    """The metrics test scrapes the service with Debian's Prometheus server (run by the test as an unprivileged
+    user): install the `prometheus` package when it is missing and apt is usable (as root). Otherwise say why;
+    that test then skips (in CI it fails: there it must run)."""
+    if PROMETHEUS.exists():
+        return
+    if not apt_usable():
+        say(f"{PROMETHEUS} is missing and apt-get cannot be used here (needs root on Debian): the Prometheus test "
+            "will skip")
+        return
+    if apt_install("prometheus", "the Prometheus test") and not PROMETHEUS.exists():
+        say(f"apt-get installed prometheus but {PROMETHEUS} is not there: the Prometheus test will skip")
+
+
 def on_sigterm(signum: int, frame: object) -> None:
     raise Terminated()
 
@@ -382,6 +399,7 @@ def main(argv: "list[str]") -> int:
         if task == "test":
             ensure_chromium()
             ensure_postgresql()
+            ensure_prometheus()
             try_ros2_environment()
     except InstallFailed as exc:
         say(f"{exc}\nRun the same command again to retry: the environment will be repaired.")

@@ -10,7 +10,9 @@ Each part starts its own `planhrc serve` process on a fresh SQLite file and driv
 * **refusal** — the time to refuse a 150 MB body without the token, and over the size limit with it;
 * **knowledge** — SPARQL, subsumption over HTTP and reasoning jobs after a long history (`bench.knowledge`);
 * **scale-out** — perceptions per second, latency and CPU per perception of SQLite against 1, 2, 4 replicas on one
-  PostgreSQL database (`--db`), 10 and 100 objects (`bench.scale_out`).
+  PostgreSQL database (`--db`), 10 and 100 objects (`bench.scale_out`);
+* **observability** — the server's CPU per re-planning perception with metrics and tracing off and on, two services
+  side by side (`bench.observability`).
 
 Prints one JSON document on stdout (`--out DIR` also writes `service-bench.json` and a Markdown table).
 """
@@ -413,7 +415,8 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("service-bench", help="measure the KB service with a long history (not a test)",
                               description=__doc__.splitlines()[0] if __doc__ else None)
     p.add_argument("--parts", default="objects,history,contention,refusal",
-                   help="comma-separated: objects, history, side-by-side, contention, refusal, knowledge, scale-out "
+                   help="comma-separated: objects, history, side-by-side, contention, refusal, knowledge, scale-out, "
+                   "observability "
                    "(side-by-side: the first and last --checkpoints on two services at once, measured in alternating "
                    "rounds; knowledge: after the last --checkpoints perceptions; scale-out: needs --db)")
     p.add_argument("--objects", type=_int_list, default=[1, 200, 1000], help="stored-object counts (1,200,1000)")
@@ -446,7 +449,8 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
 
 def run_service_bench(args: argparse.Namespace) -> int:
     parts = {p.strip() for p in args.parts.split(",") if p.strip()}
-    unknown = parts - {"objects", "history", "side-by-side", "contention", "refusal", "knowledge", "scale-out"}
+    unknown = parts - {"objects", "history", "side-by-side", "contention", "refusal", "knowledge", "scale-out",
+                       "observability"}
     if unknown:
         print(f"planhrc service-bench: --parts: unknown part(s) {', '.join(sorted(unknown))}", file=sys.stderr)
         return 2
@@ -484,6 +488,10 @@ def run_service_bench(args: argparse.Namespace) -> int:
                 args.db, args.scale_replicas, args.scale_objects, args.scale_clients, args.scale_seconds,
                 args.scale_size[0], args.scale_size[-1], args.seed,
                 log=lambda line: print(f"[service-bench] {line}", file=sys.stderr, flush=True))
+        if "observability" in parts:
+            from .observability import bench_observability
+
+            report["observability"] = bench_observability(args.samples, args.links, args.orientations, args.seed)
     except (RuntimeError, httpx.HTTPError, BenchError) as exc:
         print(f"planhrc service-bench: {exc}", file=sys.stderr)
         return 1
@@ -537,6 +545,10 @@ def markdown(report: dict[str, Any]) -> str:
         from .scale_out import scale_out_markdown
 
         lines += scale_out_markdown(report["scale_out"])
+    if "observability" in report:
+        from .observability import observability_markdown
+
+        lines += observability_markdown(report["observability"])
     lines += [f"* {line}" for line in targets(report)] + [""]
     if "contention" in report:
         c = report["contention"]

@@ -14,7 +14,7 @@ WORKDIR /app
 # 1. The dependencies alone, pinned by constraints.txt: this layer is rebuilt only when pyproject.toml or
 #    constraints.txt change, not when the code does.
 COPY pyproject.toml constraints.txt docker/requirements.py ./
-RUN python requirements.py postgresql > requirements.txt \
+RUN python requirements.py postgresql tracing > requirements.txt \
     && pip install --no-cache-dir -c constraints.txt -r requirements.txt
 # 2. The project, a regular (non-editable) install: the TBox travels as package data of planhrc.ontology.
 COPY README.md LICENSE ./
@@ -36,6 +36,9 @@ USER 10001:10001
 WORKDIR /data
 VOLUME ["/data"]
 EXPOSE 8000
+# Readiness (/health/ready: the store's database answers, the TBox is loaded, planning is reachable): what
+# `depends_on: condition: service_healthy` waits for. An orchestrator with two probes takes /health/live for the
+# other (docs/operations.md).
 HEALTHCHECK --interval=5s --timeout=3s --retries=12 \
-  CMD ["python", "-c", "import urllib.request; urllib.request.urlopen('http://127.0.0.1:8000/health', timeout=2)"]
+  CMD ["python", "-c", "import urllib.request; urllib.request.urlopen('http://127.0.0.1:8000/health/ready', timeout=2)"]
 CMD ["planhrc", "serve", "--host", "0.0.0.0", "--port", "8000"]

@@ -1,7 +1,7 @@
 """HTTP routes of the knowledge-base service. The only module that chooses HTTP status codes:
 
 NotFoundError -> 404, ValidationError / ModelError / TranslationError / bad request body -> 422 (the message
-names the field), ConflictError -> 409, AuthError -> 401, DeadlineError (planning past its deadline) -> 503,
+names the field), ConflictError -> 409, DeadlineError (planning past its deadline) -> 503,
 UnavailableError (the store lost its database connection, a PostgreSQL store only; nothing written) -> 503.
 Handlers are plain `def`s: FastAPI runs them in its thread pool, and the use cases' per-object locks serialize
 what touches one object. A handler turns its body into a use case's request (`usecases`) and the use case's frozen
@@ -24,10 +24,13 @@ import planhrc
 from planhrc.translator.errors import TranslationError
 
 from . import usecases
-from .auth import AuthError, check_bearer
-from .events import stream_events
+from .clients import Role
+from .guard import OPEN, READ, access
+from .events import counted_stream, stream_events
 from .store import MAX_EVENTS_PAGE, ConflictError, DeadlineError, NotFoundError, UnavailableError, ValidationError
-from .record_schemas import ErrorPublic, EventPublic, HealthPublic, PlanPublic, ProblemPublic, StatePublic
+from .health import usecases_ready
+from .record_schemas import (ErrorPublic, EventPublic, HealthPublic, LivePublic, PlanPublic, ProblemPublic, ReadyPublic,
+                             StatePublic)
 from .schemas import (
     DecisionPublic,
     FeedbackCreate,
@@ -48,8 +51,10 @@ log = logging.getLogger(__name__)
 
 ERRORS: dict[int | str, dict[str, Any]] = {
     400: {"model": ErrorPublic, "description": "The body is not UTF-8 JSON, or Content-Length is not a number."},
-    401: {"model": ErrorPublic, "description": "A bearer token is configured and missing or wrong (writes; reads "
-          "of the knowledge base too when reads are protected)."},
+    401: {"model": ErrorPublic, "description": "No key, or an unknown or revoked one, where the service needs a key "
+          "(writes when the service has keys or a token; reads too when reads are protected)."},
+    403: {"model": ErrorPublic, "description": "The client's key is valid but its role may not do this; the message "
+          "names the role needed. Nothing was stored."},
     404: {"model": ErrorPublic, "description": "Unknown object, state, problem, plan or action."},
     409: {"model": ErrorPublic, "description": "Conflicts with what is stored."},
     413: {"model": ErrorPublic, "description": "The request body is over the service's size limit."},
@@ -66,7 +71,7 @@ RDF_TYPES = {"application/rdf+xml": "xml", "text/turtle": "turtle", "application
 NEXT_ACTION_MOVED = ("GET /objects/{object_id}/next-action was removed (a GET must not change state): take the next "
                      "action with POST /objects/{object_id}/actions/next")
 
-router = APIRouter(responses={401: ERRORS[401], 404: ERRORS[404], 422: ERRORS[422], 503: ERRORS[503]})
+router = APIRouter(responses={401: ERRORS[401], 403: ERRORS[403], 404: ERRORS[404], 422: ERRORS[422], 503: ERRORS[503]})
 
 
 def links(status: int, targets: dict[str, tuple[str, str, dict[str, str]]]) -> dict[int | str, dict[str, Any]]:
@@ -94,21 +99,17 @@ async def get_context(request: Request) -> usecases.Context:
     return context
 
 
-async def require_writer(request: Request, authorization: Annotated[str | None, Header()] = None) -> None:
-    """Every request that changes something needs the bearer token when one is configured."""
-    check_bearer(request.app.state.settings.token, authorization)
-
-
 Ctx = Annotated[usecases.Context, Depends(get_context)]
 # The robot's loop (perceive, take the next action, report its outcome) and /health are `async def` and hand their
 # use case to the thread pool themselves: FastAPI runs a plain `def` handler there and then validates its answer on
 # the pool too, a second trip on every call; these answers are small, validated on the event loop in microseconds.
-Writer = [Depends(require_writer)]
-WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for status in (400, 401, 409, 413)}
+# Who may call each route (`guard`): the role of a write, READ for a read, OPEN for the probes.
+ROBOT, OPERATOR, READS, OPEN_TO_ALL = access(Role.ROBOT), access(Role.OPERATOR), access(READ), access(OPEN)
+WRITE_ERRORS: dict[int | str, dict[str, Any]] = {status: ERRORS[status] for status in (400, 401, 403, 409, 413)}
 
 
 # -- objects ------------------------------------------------------------------------------------------------
-@router.post("/objects", status_code=201, response_model=ObjectPublic, dependencies=Writer,
+@router.post("/objects", status_code=201, response_model=ObjectPublic, openapi_extra=OPERATOR,
              responses={**WRITE_ERRORS, **links(201, {
                  "read": (OBJECT, "get", NEW_OBJECT), "set_goal": (f"{OBJECT}/goal", "put", NEW_OBJECT),
                  "perceive": (f"{OBJECT}/perceptions", "post", NEW_OBJECT),
@@ -126,19 +127,19 @@ def create_object(body: ObjectCreate, context: Ctx) -> ObjectPublic:
     return ObjectPublic.model_validate(created, from_attributes=True)
 
 
-@router.get("/objects", response_model=list[ObjectPublic], tags=["objects"])
+@router.get("/objects", response_model=list[ObjectPublic], tags=["objects"], openapi_extra=READS)
 def list_objects(context: Ctx) -> list[ObjectPublic]:
     """Every stored object."""
     return [ObjectPublic.model_validate(o, from_attributes=True) for o in usecases.list_objects(context)]
 
 
-@router.get("/objects/{object_id}", response_model=ObjectPublic, tags=["objects"])
+@router.get("/objects/{object_id}", response_model=ObjectPublic, tags=["objects"], openapi_extra=READS)
 def read_object(object_id: str, context: Ctx) -> ObjectPublic:
     """One object with its goal and execution state."""
     return ObjectPublic.model_validate(usecases.read_object(context, object_id), from_attributes=True)
 
 
-@router.put("/objects/{object_id}/goal", response_model=GoalPublic, dependencies=Writer,
+@router.put("/objects/{object_id}/goal", response_model=GoalPublic, openapi_extra=OPERATOR,
             responses={**WRITE_ERRORS, **links(200, {
                 "perceive": (f"{OBJECT}/perceptions", "post", SAME_OBJECT),
                 "read_problem": ("/problems/{problem_id}", "get", {"problem_id": "$response.body#/problem_id"})})},
@@ -159,7 +160,7 @@ def update_goal(object_id: str, body: GoalUpdate, context: Ctx) -> GoalPublic:
     return GoalPublic.model_validate(goal, from_attributes=True)
 
 
-@router.post("/objects/{object_id}/perceptions", response_model=DecisionPublic, dependencies=Writer,
+@router.post("/objects/{object_id}/perceptions", response_model=DecisionPublic, openapi_extra=ROBOT,
              responses={**WRITE_ERRORS, 503: ERRORS[503], **links(200, {
                  "take_next_action": (f"{OBJECT}/actions/next", "post", SAME_OBJECT),
                  "read_plan": ("/plans/{plan_id}", "get", {"plan_id": "$response.body#/plan_id"}),
@@ -183,7 +184,7 @@ async def create_perception(
     return DecisionPublic.model_validate(turn, from_attributes=True)
 
 
-@router.post("/objects/{object_id}/actions/next", response_model=NextActionPublic | None, dependencies=Writer,
+@router.post("/objects/{object_id}/actions/next", response_model=NextActionPublic | None, openapi_extra=ROBOT,
              responses={**WRITE_ERRORS, **links(200, {"feedback": (
                  f"{OBJECT}/actions/{{action_id}}/feedback", "post",
                  {**SAME_OBJECT, "action_id": "$response.body#/id"})})},
@@ -206,7 +207,7 @@ def read_next_action_gone(object_id: str) -> JSONResponse:
 
 
 @router.post("/objects/{object_id}/actions/{action_id}/feedback", response_model=FeedbackPublic,
-             dependencies=Writer, responses=WRITE_ERRORS, tags=["cooperation"])
+             openapi_extra=ROBOT, responses=WRITE_ERRORS, tags=["cooperation"])
 async def create_feedback(
     object_id: str,
     action_id: str,
@@ -223,7 +224,7 @@ async def create_feedback(
     return FeedbackPublic.model_validate(result, from_attributes=True)
 
 
-@router.post("/objects/{object_id}/give-up", response_model=GiveUpPublic, dependencies=Writer,
+@router.post("/objects/{object_id}/give-up", response_model=GiveUpPublic, openapi_extra=ROBOT,
              responses=WRITE_ERRORS, tags=["cooperation"])
 def create_give_up(object_id: str, body: GiveUpCreate, context: Ctx) -> GiveUpPublic:
     """For workers: say that the worker stopped working on the object, and why. The service records a
@@ -235,43 +236,43 @@ def create_give_up(object_id: str, body: GiveUpCreate, context: Ctx) -> GiveUpPu
 
 
 # -- stored records -------------------------------------------------------------------------------------
-@router.get("/objects/{object_id}/plan", response_model=PlanPublic, tags=["records"], responses=links(200, {
+@router.get("/objects/{object_id}/plan", response_model=PlanPublic, tags=["records"], openapi_extra=READS, responses=links(200, {
     "read_problem": ("/problems/{problem_id}", "get", {"problem_id": "$response.body#/problem_id"})}))
 def read_object_plan(object_id: str, context: Ctx) -> PlanPublic:
     """The plan being followed (or, when none is, the latest one), with its expected states."""
     return PlanPublic.model_validate(usecases.read_current_plan(context, object_id), from_attributes=True)
 
 
-@router.get("/plans/{plan_id}", response_model=PlanPublic, tags=["records"])
+@router.get("/plans/{plan_id}", response_model=PlanPublic, tags=["records"], openapi_extra=READS)
 def read_plan(plan_id: str, context: Ctx) -> PlanPublic:
     return PlanPublic.model_validate(usecases.read_plan(context, plan_id), from_attributes=True)
 
 
-@router.get("/states/{state_id}", response_model=StatePublic, tags=["records"])
+@router.get("/states/{state_id}", response_model=StatePublic, tags=["records"], openapi_extra=READS)
 def read_state(state_id: str, context: Ctx) -> StatePublic:
     return StatePublic.model_validate(usecases.read_state(context, state_id), from_attributes=True)
 
 
-@router.get("/problems/{problem_id}", response_model=ProblemPublic, tags=["records"])
+@router.get("/problems/{problem_id}", response_model=ProblemPublic, tags=["records"], openapi_extra=READS)
 def read_problem(problem_id: str, context: Ctx) -> ProblemPublic:
     return ProblemPublic.model_validate(usecases.read_problem(context, problem_id), from_attributes=True)
 
 
 @router.get("/objects/{object_id}/pddl/domain", response_class=PlainTextResponse, responses=TEXT_ERRORS,
-            tags=["pddl"])
+            tags=["pddl"], openapi_extra=READS)
 def read_pddl_domain(object_id: str, context: Ctx) -> PlainTextResponse:
     """The PDDL domain of the object's formulation, written from the TBox."""
     return PlainTextResponse(usecases.read_pddl(context, object_id).domain)
 
 
 @router.get("/objects/{object_id}/pddl/problem", response_class=PlainTextResponse, responses=TEXT_ERRORS,
-            tags=["pddl"])
+            tags=["pddl"], openapi_extra=READS)
 def read_pddl_problem(object_id: str, context: Ctx) -> PlainTextResponse:
     """The PDDL problem of the object's latest Problem (initial state and goal from the ABox)."""
     return PlainTextResponse(usecases.read_pddl(context, object_id, with_problem=True).problem)
 
 
-@router.get("/ontology", tags=["records"],
+@router.get("/ontology", tags=["records"], openapi_extra=READS,
             responses={200: {"content": {"application/rdf+xml": {}, "text/turtle": {}, "application/n-triples": {}},
                              "description": "TBox and ABox."}})
 def read_ontology(
@@ -295,7 +296,7 @@ def read_ontology(
 
 
 # -- events ---------------------------------------------------------------------------------------------
-@router.get("/objects/{object_id}/events", response_model=list[EventPublic], tags=["events"])
+@router.get("/objects/{object_id}/events", response_model=list[EventPublic], tags=["events"], openapi_extra=READS)
 def list_events(
     object_id: str,
     context: Ctx,
@@ -309,7 +310,7 @@ def list_events(
             for e in usecases.list_events(context, object_id, after_seq, limit)]
 
 
-@router.get("/objects/{object_id}/events/stream", tags=["events"],
+@router.get("/objects/{object_id}/events/stream", tags=["events"], openapi_extra=READS,
             responses={200: {"content": {"text/event-stream": {}}, "description": "Server-Sent Events."}})
 def stream_object_events(
     object_id: str,
@@ -328,15 +329,52 @@ def stream_object_events(
     frames = stream_events(lambda seq: usecases.events_after(context, object_id, seq), request.is_disconnected,
                            after_seq=after_seq, max_events=max_events, timeout_s=timeout_s,
                            news=None if bell is None else lambda: bell.subscribe(object_id))
+    metrics = request.app.state.observation.metrics
+    if metrics is not None:
+        frames = counted_stream(frames, metrics.event_streams)
     return StreamingResponse(frames, media_type="text/event-stream",
                              headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
 
 
-@router.get("/health", response_model=HealthPublic, tags=["service"])
+@router.get("/health", response_model=HealthPublic, tags=["service"], openapi_extra=OPEN_TO_ALL)
 async def read_health(context: Ctx) -> HealthPublic:
     health = await run_in_threadpool(usecases.read_health, context)  # one trip to the pool: see `Ctx`
     return HealthPublic(status="ok", version=planhrc.__version__, objects=health.objects, triples=health.triples,
                         plans_to_write=health.plans_to_write, auth=bool(context.settings.token))
+
+
+@router.get("/health/live", response_model=LivePublic, tags=["service"], openapi_extra=OPEN_TO_ALL)
+async def read_liveness() -> LivePublic:
+    """Liveness, for an orchestrator: the process answers HTTP (its event loop runs). Touches nothing else, so a
+    slow database never gets a live service restarted."""
+    return LivePublic(status="alive", version=planhrc.__version__)
+
+
+@router.get("/health/ready", response_model=ReadyPublic, tags=["service"], openapi_extra=OPEN_TO_ALL,
+            responses={503: {"model": ReadyPublic, "description": "Not ready: `checks` says what failed."}})
+async def read_readiness(request: Request) -> JSONResponse:
+    """Readiness, for an orchestrator or a load balancer: 200 when the store answers (a query on its database,
+    within `READY_WAIT_S`), the TBox is loaded and planning is reachable (the service's planning pool is open, or
+    the planning queue's database answers); else 503 with what failed, so traffic goes to another replica."""
+    checks = await usecases_ready(request)
+    ready = all(check == "ok" for check in checks.values())
+    body = ReadyPublic(status="ready" if ready else "not ready", version=planhrc.__version__, checks=checks)
+    return JSONResponse(body.model_dump(), status_code=200 if ready else 503)
+
+
+@router.get("/metrics", tags=["service"], openapi_extra=READS, response_class=PlainTextResponse,
+            responses={200: {"content": {"text/plain": {}}, "description": "Prometheus' text format."},
+                       404: ERRORS[404]})
+async def read_metrics(request: Request) -> Response:
+    """The service's measurements in Prometheus' text format (`metrics`), every name under `planhrc_`: a read
+    (it needs a key when reads are protected); 404 when the service runs without metrics."""
+    metrics = request.app.state.observation.metrics
+    if metrics is None:
+        raise NotFoundError("metrics: this service runs without metrics (PLANHRC_METRICS=false)")
+    from .metrics import CONTENT_TYPE
+
+    body = await run_in_threadpool(metrics.text)
+    return Response(body, media_type=CONTENT_TYPE)
 
 
 # -- errors ---------------------------------------------------------------------------------------------
@@ -346,8 +384,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     def handler(status: int) -> Callable[[Request, Exception], Awaitable[JSONResponse]]:
         async def handle(request: Request, exc: Exception) -> JSONResponse:
-            headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
-            return JSONResponse({"detail": str(exc)}, status_code=status, headers=headers)
+            return JSONResponse({"detail": str(exc)}, status_code=status)
         return handle
 
     app.add_exception_handler(NotFoundError, handler(404))
@@ -355,7 +392,6 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ModelError, handler(422))
     app.add_exception_handler(TranslationError, handler(422))
     app.add_exception_handler(ConflictError, handler(409))
-    app.add_exception_handler(AuthError, handler(401))
     app.add_exception_handler(DeadlineError, handler(503))
     app.add_exception_handler(UnavailableError, handler(503))
     app.add_exception_handler(RequestValidationError, _request_validation_error)

@@ -8,14 +8,19 @@ from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING, AsyncIterator, Callable
 
 from fastapi import FastAPI
+from starlette.routing import Mount, Route
 
 import planhrc
 from planhrc.settings import Settings, get_settings
 
 from .api import install_error_handlers, router
+from .clients import ClientRegistry, open_table
 from .console import install_console
 from .events import EventBell
-from .guard import GuardPolicy, RequestGuard
+from .guard import GuardPolicy, RequestGuard, Scope, check_routes, route_table
+from .metrics import ServiceMetrics
+from .observe import Observation, Observe
+from .tracing import Tracing
 from .knowledge.service import KnowledgeService
 from .knowledge_api import install_knowledge_errors
 from .knowledge_api import router as knowledge_router
@@ -41,7 +46,7 @@ def open_knowledge_base(settings: Settings) -> KnowledgeStore:
     return open_store(settings.db_path, settings.tbox_path, password)
 
 
-def open_planning(settings: Settings) -> PlanningPool | QueuedPlanning:
+def open_planning(settings: Settings, tracing: Tracing | None = None) -> PlanningPool | QueuedPlanning:
     """Where the service plans large tasks: the database's planning job queue (`planning_queue`, PostgreSQL), served
     by `planhrc planning-worker` processes on any host, else its own planning worker processes."""
     if settings.planning_queue:
@@ -50,8 +55,21 @@ def open_planning(settings: Settings) -> PlanningPool | QueuedPlanning:
         from .planning_queue import QueuedPlanning
 
         password = settings.db_password.get_secret_value() if settings.db_password else None
-        return QueuedPlanning(settings.db_path, password, settings.planning_pool_min_atoms)
-    return PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms)
+        return QueuedPlanning(settings.db_path, password, settings.planning_pool_min_atoms, tracing=tracing)
+    environment = {"PLANHRC_OTLP_ENDPOINT": settings.otlp_endpoint} if settings.otlp_endpoint else {}
+    return PlanningPool(settings.planning_workers, settings.planning_pool_min_atoms, tracing=tracing,
+                        environment=environment)
+
+
+def open_clients(settings: Settings) -> ClientRegistry:
+    """The clients' keys in the store's database (an in-memory store's: in memory), with the tokens' shortcuts."""
+    password = settings.db_password.get_secret_value() if settings.db_password else None
+    return ClientRegistry(open_table(settings.db_path, password), settings.token, settings.read_token)
+
+
+def _registry(scope: Scope) -> ClientRegistry | None:
+    registry: ClientRegistry | None = getattr(scope["app"].state, "clients", None)
+    return registry
 
 
 def compact_on_schedule(kb: KnowledgeStore, settings: Settings, stop: threading.Event) -> None:
@@ -78,16 +96,24 @@ def create_app(settings: Settings | None = None,
     one the settings name) and closed at shutdown."""
     settings = settings or get_settings()
 
+    observation = Observation(ServiceMetrics() if settings.metrics else None, Tracing.off())
+
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        pool = open_planning(settings)
+        tracing = observation.tracing = Tracing.start("planhrc-service", settings.otlp_endpoint, settings.trace_ratio)
+        pool = open_planning(settings, tracing)
         try:
             kb = open_store(settings)
+            clients = open_clients(settings)
         except BaseException:
             pool.close()
+            tracing.close()
             raise
         app.state.kb = kb
-        context = app.state.context = open_context(kb, settings, ObjectLocks(), pool)
+        app.state.clients = clients
+        context = app.state.context = open_context(kb, settings, ObjectLocks(), pool, observation)
+        if observation.metrics is not None:
+            observation.metrics.watch_queue(getattr(pool, "depth", None))
         knowledge = app.state.knowledge = KnowledgeService(kb, settings)
         # a store other processes write too: event streams wait on its feed of committed events
         bell = app.state.bell = EventBell(kb.event_feed) if isinstance(kb, EventFeeding) else None
@@ -110,7 +136,12 @@ def create_app(settings: Settings | None = None,
             knowledge.close()
             close_context(context)
             pool.close()
+            clients.close()
             kb.close()
+            tracing.close()
+            observation.tracing = Tracing.off()
+            if observation.metrics is not None:
+                observation.metrics.watch_queue(None)
             gc.unfreeze()
             log.info("knowledge base closed")
 
@@ -124,12 +155,17 @@ def create_app(settings: Settings | None = None,
         redoc_url=None,
     )
     app.state.settings = settings
-    app.add_middleware(RequestGuard, policy=GuardPolicy(
-        token=settings.token, read_token=settings.read_token, protect_reads=settings.protect_reads,
-        max_body_bytes=settings.max_body_bytes))
+    app.state.observation = observation
+    app.add_middleware(RequestGuard, policy=GuardPolicy(protect_reads=settings.protect_reads,
+                                                        max_body_bytes=settings.max_body_bytes), registry=_registry)
+    app.add_middleware(Observe, observation=observation)  # the outermost: refusals are counted and traced too
     install_error_handlers(app)
     install_knowledge_errors(app)
     app.include_router(router)
     app.include_router(knowledge_router)
     install_console(app, protect_reads=settings.protect_reads)
+    # what the guard and the metrics match a request against: the routers' routes and the app's own
+    routes = [*router.routes, *knowledge_router.routes, *(r for r in app.routes if isinstance(r, (Route, Mount)))]
+    check_routes(routes)
+    app.state.routes = route_table(routes)
     return app

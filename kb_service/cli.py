@@ -13,7 +13,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Callable, TypeVar
 
 from .network import SettingsProblem, check_exposure, resolve_secrets
 from .store.backends import backend_of
@@ -34,7 +34,9 @@ SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "db_pass
                  "token": "--token", "token_file": "--token-file", "read_token": "--read-token",
                  "read_token_file": "--read-token-file", "protect_reads": "--protect-reads", "insecure": "--insecure",
                  "ssl_certfile": "--ssl-certfile", "ssl_keyfile": "--ssl-keyfile", "tbox_path": "--tbox",
-                 "planner": "--planner", "log_level": "--log-level", "planning_queue": "--planning-queue"}
+                 "planner": "--planner", "log_level": "--log-level", "planning_queue": "--planning-queue",
+                 "log_format": "--log-format", "otlp_endpoint": "--otlp-endpoint", "metrics": "--no-metrics",
+                 "trace_ratio": "--trace-ratio"}
 
 
 def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
@@ -78,8 +80,47 @@ def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser
                    help="plan large tasks through the database's planning job queue, served by `planhrc "
                    "planning-worker` processes on any host (a PostgreSQL store; env PLANHRC_PLANNING_QUEUE)")
     p.add_argument("--log-level", default=None, choices=list(LOG_LEVELS), help="uvicorn log level (default info)")
+    add_observing_options(p)
+    p.add_argument("--no-metrics", dest="metrics", action="store_false", default=None,
+                   help="serve no /metrics and count nothing (env PLANHRC_METRICS=false)")
+    p.add_argument("--trace-ratio", type=float, default=None, metavar="0..1",
+                   help="the share of requests traced (env PLANHRC_TRACE_RATIO; default: OTEL_TRACES_SAMPLER, else "
+                   "every request); a request whose client sent a sampled traceparent is always traced")
     p.set_defaults(func=run_serve)
     return p
+
+
+def add_observing_options(p: argparse.ArgumentParser) -> None:
+    """The options `serve` and `planning-worker` share: the log lines' format and where traces go."""
+    from .logs import LOG_FORMATS
+
+    p.add_argument("--log-format", default=None, choices=LOG_FORMATS,
+                   help="log lines as text (default) or one JSON object a line, with request, object and trace ids "
+                   "(env PLANHRC_LOG_FORMAT)")
+    p.add_argument("--otlp-endpoint", default=None, metavar="URL",
+                   help="send traces over OTLP/HTTP to this collector, e.g. http://127.0.0.1:4318 (env "
+                   "PLANHRC_OTLP_ENDPOINT, or OpenTelemetry's OTEL_EXPORTER_OTLP_ENDPOINT); default: no traces")
+
+
+def check_otlp_endpoint(settings: Settings, name: Callable[[str], str]) -> None:
+    """An endpoint is an http(s) URL, and tracing needs the `tracing` extra."""
+    from urllib.parse import urlsplit
+
+    from .tracing import tracing_wanted
+
+    endpoint = settings.otlp_endpoint
+    if endpoint:
+        parts = urlsplit(endpoint)
+        if parts.scheme not in ("http", "https") or not parts.hostname:
+            raise SettingsProblem(f"{name('otlp_endpoint')}: {endpoint!r} is not an http:// or https:// URL of an "
+                                  "OTLP collector (e.g. http://127.0.0.1:4318)")
+    if tracing_wanted(endpoint):
+        try:
+            import opentelemetry.exporter.otlp.proto.http  # noqa: F401
+            import opentelemetry.sdk  # noqa: F401
+        except ImportError:
+            raise SettingsProblem(f"{name('otlp_endpoint') if endpoint else 'OTEL_EXPORTER_OTLP_ENDPOINT'}: tracing "
+                                  "needs OpenTelemetry: pip install 'planhrc[tracing]'") from None
 
 
 def check_serve_settings(settings: Settings, given: set[str], warnings: list[str] | None = None) -> Settings:
@@ -113,9 +154,10 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
                               f"choose from {', '.join(LOG_LEVELS)}")
     if problem := tbox_problem(settings.tbox_path):
         raise SettingsProblem(f"{name('tbox_path')}: {problem}")
+    check_otlp_endpoint(settings, name)
     warnings = [] if warnings is None else warnings
     settings = resolve_secrets(settings, given, name, warnings)
-    check_exposure(settings, name, warnings)
+    check_exposure(settings, name, warnings, has_clients=store_has_clients(settings))
     if settings.planning_queue and backend_of(settings.db_path) != "postgresql":
         raise SettingsProblem(f"{name('planning_queue')}: the planning job queue is a PostgreSQL store's; give "
                               f"{name('db_path')} a postgresql:// URL, or plan in the service's own workers")
@@ -137,6 +179,27 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
             raise SettingsProblem(f"{name('port')}/{name('host')}: cannot listen on {settings.host}:{settings.port} "
                                   f"({exc.strerror or exc})") from None
     return settings
+
+
+def store_has_clients(settings: Settings) -> bool:
+    """Whether the store names a client (`planhrc keys`): then its writes need keys. False when the store does not
+    exist yet or cannot be read now (the checks below say why)."""
+    from .clients import ClientRegistry, open_table
+
+    db = settings.db_path
+    if db in (None, "", ":memory:") or (backend_of(db) == "sqlite" and not Path(str(db)).is_file()):
+        return False
+    password = settings.db_password.get_secret_value() if settings.db_password else None
+    try:
+        registry = ClientRegistry(open_table(str(db), password))
+    except Exception:  # not a store, or a database away: the store's own checks say so in their words
+        return False
+    try:
+        return bool(registry.records())
+    except Exception:
+        return False
+    finally:
+        registry.close()
 
 
 def check_store_server(settings: Settings, option: str) -> None:
@@ -174,7 +237,8 @@ def run_serve(args: argparse.Namespace) -> int:
         "read_token_file": args.read_token_file, "protect_reads": args.protect_reads, "insecure": args.insecure,
         "ssl_certfile": args.ssl_certfile, "ssl_keyfile": args.ssl_keyfile,
         "tbox_path": args.tbox, "planner": args.planner, "log_level": args.log_level,
-        "planning_queue": args.planning_queue,
+        "planning_queue": args.planning_queue, "log_format": args.log_format, "otlp_endpoint": args.otlp_endpoint,
+        "metrics": args.metrics, "trace_ratio": args.trace_ratio,
     }.items() if value is not None}
     warnings: list[str] = []
     try:
@@ -187,11 +251,14 @@ def run_serve(args: argparse.Namespace) -> int:
         return 2
     for warning in warnings:  # at every start, whatever the log level
         print(f"planhrc serve: warning: {warning}", file=sys.stderr, flush=True)
+    from .logs import configure_logging
+
     level = settings.log_level.lower()
-    logging.basicConfig(level=logging.DEBUG if level == "trace" else level.upper(),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    configure_logging(level, settings.log_format)
+    # JSON lines: uvicorn's loggers write through the root's handler (no configuration of its own)
+    uvicorn_logging = {"log_config": None} if settings.log_format == "json" else {}
     try:
-        serve(create_app(settings), host=settings.host, port=settings.port, log_level=level,
+        serve(create_app(settings), host=settings.host, port=settings.port, log_level=level, **uvicorn_logging,
               ssl_certfile=settings.ssl_certfile, ssl_keyfile=settings.ssl_keyfile,
               # an open event stream (a console page) must not keep a stopping service alive
               timeout_graceful_shutdown=2)
@@ -294,7 +361,7 @@ def run_compact(args: argparse.Namespace) -> int:
 
 
 def add_planning_worker_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
-    from planhrc.cli_args import tbox_file
+    from planhrc.cli_args import port, tbox_file
 
     p = subparsers.add_parser(
         "planning-worker", help="plan queued tasks for the services of a PostgreSQL store, on any host",
@@ -315,6 +382,11 @@ def add_planning_worker_parser(subparsers: argparse._SubParsersAction[_Parser]) 
     p.add_argument("--nice", type=int, default=10, choices=range(0, 20), metavar="0..19",
                    help="scheduling priority below the other processes of the host (default 10: on a service's "
                    "host, the service's requests come first)")
+    p.add_argument("--metrics-port", type=port, default=None, metavar="PORT",
+                   help="serve this worker's /metrics (Prometheus' text format) on this port; default: none")
+    p.add_argument("--metrics-host", default="127.0.0.1", metavar="HOST",
+                   help="the interface of --metrics-port (default 127.0.0.1)")
+    add_observing_options(p)
     p.set_defaults(func=run_planning_worker)
     return p
 
@@ -328,9 +400,11 @@ def run_planning_worker(args: argparse.Namespace) -> int:
     from planhrc.settings import make_settings
 
     options = {"db_path": "--db", "db_password_file": "--db-password-file", "tbox_path": "--tbox",
-               "planning_lease_s": "--lease-s"}
+               "planning_lease_s": "--lease-s", "log_format": "--log-format", "otlp_endpoint": "--otlp-endpoint"}
     overrides = {key: value for key, value in {"db_path": args.db, "db_password_file": args.db_password_file,
-                                               "tbox_path": args.tbox, "planning_lease_s": args.lease_s}.items()
+                                               "tbox_path": args.tbox, "planning_lease_s": args.lease_s,
+                                               "log_format": args.log_format,
+                                               "otlp_endpoint": args.otlp_endpoint}.items()
                  if value is not None}
 
     def name(field: str) -> str:
@@ -348,6 +422,7 @@ def run_planning_worker(args: argparse.Namespace) -> int:
             raise SettingsProblem(f"{name('db_path')}: a planning worker serves the job queue of a PostgreSQL store: "
                                   "give its URL, postgresql://user@host:port/database")
         check_store_server(settings, name("db_path"))
+        check_otlp_endpoint(settings, name)
     except ValidationError as exc:
         print(f"planhrc planning-worker: {settings_error_line(exc, {f: options[f] for f in overrides})}",
               file=sys.stderr)
@@ -357,12 +432,32 @@ def run_planning_worker(args: argparse.Namespace) -> int:
         return 2
     for warning in warnings:
         print(f"planhrc planning-worker: warning: {warning}", file=sys.stderr, flush=True)
+    from .logs import configure_logging
+    from .metrics import WorkerMetrics
     from .planning_queue import serve_jobs
+    from .tracing import Tracing
 
+    configure_logging("warning", settings.log_format)
     logging.getLogger("planhrc").setLevel(logging.INFO)
+    metrics = WorkerMetrics()
+    server = None
+    if args.metrics_port is not None:
+        try:
+            server = metrics.serve(args.metrics_host, args.metrics_port)
+        except OSError as exc:
+            print(f"planhrc planning-worker: --metrics-port/--metrics-host: cannot listen on "
+                  f"{args.metrics_host}:{args.metrics_port} ({exc.strerror or exc})", file=sys.stderr)
+            return 2
     os.nice(args.nice)
     password = settings.db_password.get_secret_value() if settings.db_password else None
-    serve_jobs(settings.db_path, password, settings.tbox_path, settings.planning_lease_s, threading.Event())
+    tracing = Tracing.start("planhrc-planning-worker", settings.otlp_endpoint)
+    try:
+        serve_jobs(settings.db_path, password, settings.tbox_path, settings.planning_lease_s, threading.Event(),
+                   metrics=metrics, tracing=tracing)
+    finally:
+        tracing.close()
+        if server is not None:
+            server.shutdown()
     return 0
 
 

@@ -4,8 +4,7 @@ The console is plain HTML, JavaScript and CSS shipped as package data (`console/
 fetched from elsewhere. It only reads and posts goals and perceptions through the JSON API; it never takes an
 action for execution (that is the worker's). Swagger UI and ReDoc load their scripts from the `fastapi-offline`
 package's files, so the documentation works on a network that reaches no CDN. The OpenAPI document declares the
-bearer-token scheme on every operation that takes an `Authorization` header, so the docs page has an Authorize
-button.
+bearer scheme on every operation that needs a key, so the docs page has an Authorize button.
 """
 from __future__ import annotations
 
@@ -18,7 +17,7 @@ from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagge
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
-from .guard import is_data_path
+from .guard import ACCESS, OPEN, READ
 
 CONSOLE_URL = "/"
 CONSOLE_ASSETS_URL = "/console"
@@ -91,11 +90,8 @@ def install_console(app: FastAPI, protect_reads: bool = False) -> None:
 
 
 def openapi_with_bearer(build: Callable[[], dict[str, Any]], protect_reads: bool = False) -> Callable[[], dict[str, Any]]:
-    """Wrap FastAPI's OpenAPI builder: declare the bearer scheme where an operation takes `Authorization`, and
-    on every read of the knowledge base when reads are protected.
-
-    The header parameter itself is dropped from those operations (OpenAPI ignores a header parameter named
-    Authorization; the security requirement is how a client is told to send it)."""
+    """Wrap FastAPI's OpenAPI builder: declare the bearer scheme on every operation for a role, and on every read
+    when reads are protected (each operation's `x-planhrc-access`, `guard`)."""
     def openapi() -> dict[str, Any]:
         schema = build()  # FastAPI caches the document: this adds the scheme once
         schemes = schema.setdefault("components", {}).setdefault("securitySchemes", {})
@@ -103,18 +99,15 @@ def openapi_with_bearer(build: Callable[[], dict[str, Any]], protect_reads: bool
             return schema
         schemes[SECURITY_SCHEME] = {
             "type": "http", "scheme": "bearer",
-            "description": "The token given to `planhrc serve --token` (or PLANHRC_TOKEN). Requests that change "
-            "the knowledge base need it when the service has one; reads stay open.",
+            "description": "A client's key (`planhrc keys add NAME --role ROLE`), or the token given to `planhrc "
+            "serve --token`. Each write needs the role its operation names (`x-planhrc-access`) once the service has "
+            "a key or a token; reads need a key of any role when reads are protected.",
         }
         for path, operations in schema.get("paths", {}).items():
             for operation in operations.values():
-                params = operation.get("parameters", [])
-                auth = [p for p in params if p.get("in") == "header" and p.get("name", "").lower() == "authorization"]
-                if not auth and not (protect_reads and is_data_path(path)):
+                allowed = operation.get(ACCESS, OPEN)
+                if allowed == OPEN or (allowed == READ and not protect_reads):
                     continue
-                operation["parameters"] = [p for p in params if p not in auth]
-                if not operation["parameters"]:
-                    del operation["parameters"]
                 operation.setdefault("security", [{SECURITY_SCHEME: []}])
         return schema
 

@@ -20,7 +20,7 @@ import threading
 import time
 from contextlib import contextmanager
 from dataclasses import asdict
-from typing import AsyncIterator, Awaitable, Callable, ContextManager, Iterator, Protocol, Sequence
+from typing import Any, AsyncIterator, Awaitable, Callable, ContextManager, Iterator, Protocol, Sequence
 
 import anyio
 
@@ -200,3 +200,13 @@ async def stream_events(
 @contextmanager
 def _nothing(value: News) -> Iterator[News]:
     yield value
+
+
+async def counted_stream(frames: AsyncIterator[str], gauge: Any) -> AsyncIterator[str]:
+    """`frames`, with `gauge` (a Prometheus gauge of the streams open) one higher while they are sent."""
+    gauge.inc()
+    try:
+        async for frame in frames:
+            yield frame
+    finally:
+        gauge.dec()

@@ -8,8 +8,8 @@ Protocol's "malformed query"), BusyError (the reasoning queue is full) -> 429 wi
 NotFoundError -> 404, ValidationError -> 422 and UnavailableError (the store lost its database connection; nothing
 written) -> 503.
 
-Reads follow the service's token policy for reads (the request guard counts `POST /sparql` as a read: a query
-changes nothing); `POST /reasoning` stores what the reasoner inferred, so it needs the write token.
+Reads follow the service's policy for reads (`POST /sparql` is a read: a query changes nothing); `POST /reasoning`
+stores what the reasoner inferred, so it is the operator's.
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from starlette.concurrency import run_in_threadpool
 
 from planhrc.vocabulary import ReasoningScope
 
-from .api import ERRORS, require_writer
+from .api import ERRORS, OPERATOR, READS
 from .knowledge.reasoning_jobs import BusyError
 from .knowledge.service import KnowledgeService
 from .knowledge.sparql import GRAPH_TYPES, RESULT_TYPES, EngineError, QueryError, SparqlRequest
@@ -48,7 +48,7 @@ UNAVAILABLE = {"model": ERRORS[422]["model"], "description": "The store's databa
                "PostgreSQL store); nothing was written: send the request again later."}
 SPARQL_CONTENT: dict[str, dict[str, Any]] = {media: {} for media in (*RESULT_TYPES, *GRAPH_TYPES)}
 
-router = APIRouter(responses={401: ERRORS[401], 422: ERRORS[422], 503: UNAVAILABLE})
+router = APIRouter(responses={401: ERRORS[401], 403: ERRORS[403], 422: ERRORS[422], 503: UNAVAILABLE})
 
 
 class ReasoningCreate(BaseModel):
@@ -71,7 +71,7 @@ Knowledge = Annotated[KnowledgeService, Depends(get_knowledge)]
 
 
 # -- SPARQL ---------------------------------------------------------------------------------------------------
-@router.get("/sparql", tags=["knowledge"], responses={200: {"content": SPARQL_CONTENT, "description":
+@router.get("/sparql", tags=["knowledge"], openapi_extra=READS, responses={200: {"content": SPARQL_CONTENT, "description":
             "SPARQL results (SELECT, ASK) or RDF (CONSTRUCT, DESCRIBE) in the format Accept names."}, **QUERY_ERRORS})
 def read_sparql(
     knowledge: Knowledge,
@@ -91,7 +91,7 @@ def read_sparql(
                                             tuple(named_graph_uri or ())))
 
 
-@router.post("/sparql", tags=["knowledge"], openapi_extra={"requestBody": {"required": True, "content": {
+@router.post("/sparql", tags=["knowledge"], openapi_extra={**READS, "requestBody": {"required": True, "content": {
              SPARQL_QUERY: {"schema": {"type": "string"}},
              FORM: {"schema": {"type": "object", "properties": {"query": {"type": "string"}}}}}}},
              responses={200: {"content": SPARQL_CONTENT, "description": "As GET."}, **QUERY_ERRORS, 413: ERRORS[413]})
@@ -139,7 +139,7 @@ class SubsumptionPublic(BaseModel):
 
 
 @router.get("/states/{state_id}/subsumed-by/{by_state_id}", response_model=SubsumptionPublic,
-            tags=["knowledge"], responses={404: ERRORS[404]})
+            tags=["knowledge"], openapi_extra=READS, responses={404: ERRORS[404]})
 def read_subsumption(state_id: str, by_state_id: str, knowledge: Knowledge) -> dict[str, Any]:
     """Is D(state) ⊑ D(by)? The check the cooperation model runs (is the perceived state within the goal, or
     the expected state?); when not, the atoms of `by` that `state` does not entail, i.e. why not."""
@@ -147,7 +147,7 @@ def read_subsumption(state_id: str, by_state_id: str, knowledge: Knowledge) -> d
 
 
 # -- reasoning ------------------------------------------------------------------------------------------------
-@router.post("/reasoning", dependencies=[Depends(require_writer)], tags=["knowledge"], status_code=200,
+@router.post("/reasoning", openapi_extra=OPERATOR, tags=["knowledge"], status_code=200,
              responses={202: {"description": "The job runs on; its answer will be at Location."}, 400: ERRORS[400],
                         404: ERRORS[404], 413: ERRORS[413],
                         429: {"model": ERRORS[422]["model"], "description": "Too many reasoning jobs at once; "
@@ -165,7 +165,7 @@ def create_reasoning(body: ReasoningCreate, knowledge: Knowledge) -> JSONRespons
     return JSONResponse(answer, status_code=200)
 
 
-@router.get("/reasoning/{job_id}", tags=["knowledge"], responses={404: ERRORS[404]})
+@router.get("/reasoning/{job_id}", tags=["knowledge"], openapi_extra=READS, responses={404: ERRORS[404]})
 def read_reasoning(job_id: str, knowledge: Knowledge) -> dict[str, Any]:
     """A reasoning job: `queued`, `running`, `done` (with its result) or `failed` (with its error)."""
     return knowledge.reasoning_job(job_id)

@@ -86,9 +86,10 @@ def resolve_secrets(settings: Settings, given: set[str], name: Name, warnings: l
     return settings.model_copy(update=update) if update else settings  # values of the fields' types: no validation
 
 
-def check_exposure(settings: Settings, name: Name, warnings: list[str]) -> None:
-    """Refuse a service open to the network without a token (unless `insecure`), and TLS files that do not load;
-    warn of an insecure service and of a token sent in clear over a network."""
+def check_exposure(settings: Settings, name: Name, warnings: list[str], has_clients: bool = False) -> None:
+    """Refuse a service open to the network without a token or a client's key in its store (`has_clients`:
+    `planhrc keys add`), unless `insecure`, and TLS files that do not load; warn of an insecure service and of a
+    key sent in clear over a network."""
     if settings.ssl_keyfile and not settings.ssl_certfile:
         raise SettingsProblem(f"{name('ssl_keyfile')}: a key needs its certificate ({name('ssl_certfile')})")
     if settings.ssl_certfile:
@@ -106,17 +107,17 @@ def check_exposure(settings: Settings, name: Name, warnings: list[str]) -> None:
     if is_loopback(settings.host):
         return
     where = f"{settings.host}:{settings.port}"
-    if not settings.token:
+    if not settings.token and not has_clients:
         if not settings.insecure:
             raise SettingsProblem(
                 f"{name('host')}: {settings.host} is not a loopback address, and without a token anyone who reaches "
-                f"{where} may set goals and post perceptions that the robot then acts on; give a token "
-                "(--token-file or PLANHRC_TOKEN_FILE, or PLANHRC_TOKEN), or say --insecure (PLANHRC_INSECURE) to "
-                "serve without one")
+                f"{where} may set goals and post perceptions that the robot then acts on; add clients' keys "
+                "(`planhrc keys add NAME --role ROLE --db ...`) or give a token (--token-file or PLANHRC_TOKEN_FILE, "
+                "or PLANHRC_TOKEN), or say --insecure (PLANHRC_INSECURE) to serve without one")
         warnings.append(f"{name('insecure')}: serving {where} without a token: anyone who reaches it may set goals "
                         "and post perceptions that the robot then acts on")
     elif not settings.ssl_certfile:
-        warnings.append(f"{name('host')}: the token travels in clear text to {where}; serve HTTPS "
+        warnings.append(f"{name('host')}: keys and tokens travel in clear text to {where}; serve HTTPS "
                         "(--ssl-certfile and --ssl-keyfile) or behind a TLS reverse proxy")
 
 

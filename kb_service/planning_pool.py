@@ -61,13 +61,15 @@ import time
 from contextlib import contextmanager
 from dataclasses import replace
 from multiprocessing.connection import Connection
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Mapping
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
 from planhrc.pipeline.replan import PlanningJob
 from planhrc.transition import changes_along
 from planhrc.vocabulary import PlanningStatus
+
+from .tracing import Tracing
 
 __all__ = ["ATOMS_PER_FRAME", "JobCollector", "PlanningJob", "PlanningPool", "pack_outcome", "state_size",
            "unpack_outcome"]
@@ -153,12 +155,13 @@ def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOu
 
 # -- the pool (in the service) --------------------------------------------------------------------------------
 class _Worker:
-    def __init__(self) -> None:
+    def __init__(self, environment: Mapping[str, str]) -> None:
         parent_end, child_end = socket.socketpair()
         code = "from planhrc.kb_service.planning_pool import run_worker; run_worker()"
         self.proc = subprocess.Popen(
             [sys.executable, "-c", code, str(child_end.fileno()), str(os.getpid())],
-            pass_fds=(child_end.fileno(),), stdin=subprocess.DEVNULL, start_new_session=True)
+            pass_fds=(child_end.fileno(),), stdin=subprocess.DEVNULL, start_new_session=True,
+            env={**os.environ, **environment})
         child_end.close()
         self.conn = Connection(parent_end.detach())
         self.last_object: str | None = None
@@ -188,10 +191,15 @@ class _Worker:
 class PlanningPool:
     """Up to `workers` planning processes, started when a job first needs one and kept until `close`;
     `plan(job)` runs a job on a free one (the one that last planned the same object when it is free: its memoised
-    grounding is warm) and returns the outcome by the job's deadline and its grace."""
+    grounding is warm) and returns the outcome by the job's deadline and its grace. With `tracing` on, each job
+    carries the current trace context to its worker, whose span continues the request's trace (the workers trace to
+    the endpoint `environment` names: PLANHRC_OTLP_ENDPOINT, or OpenTelemetry's variables, which they inherit)."""
 
-    def __init__(self, workers: int, min_atoms: int, grace_s: float = 1.0) -> None:
+    def __init__(self, workers: int, min_atoms: int, grace_s: float = 1.0, tracing: Tracing | None = None,
+                 environment: Mapping[str, str] | None = None) -> None:
         self.size = workers
+        self._tracing = tracing or Tracing.off()
+        self._environment = dict(environment or {})
         self.min_atoms = min_atoms
         self.grace_s = grace_s
         self._idle: list[_Worker] = []
@@ -220,6 +228,10 @@ class PlanningPool:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def reachable(self) -> bool:
+        """Whether the pool takes jobs (open; a pool of no workers plans in the service's process)."""
+        return not self._closed
+
     def pids(self) -> tuple[int, ...]:
         with self._cond:
             return tuple(sorted(w.pid for w in self._all))
@@ -243,7 +255,7 @@ class PlanningPool:
                             "exceeded while waiting for a free planning worker")
         healthy = False
         try:
-            worker.conn.send(job)
+            worker.conn.send((job, self._tracing.carrier()))
             frames = self._frames(worker, job.deadline_at + self.grace_s)
             header = next(frames)  # the worker's answer has come: the rest follows at once
             with self._pause:
@@ -280,7 +292,7 @@ class PlanningPool:
                     self._idle.remove(worker)
                     break
                 if len(self._all) < self.size:
-                    worker = _Worker()
+                    worker = _Worker(self._environment)
                     self._all.add(worker)
                     log.info("planning worker %d started", worker.pid)
                     break
@@ -352,15 +364,22 @@ def run_worker() -> None:
 
     conn = Connection(fd)
     collector = JobCollector()
-    while True:
-        try:
-            job = conn.recv()
-        except (EOFError, OSError):
-            return
-        with collector.job():
-            sent = _answer(conn, job, pipeline.plan)
-        if not sent:
-            return
+    tracing = Tracing.start("planhrc-planning-pool", os.environ.get("PLANHRC_OTLP_ENDPOINT") or None)
+    try:
+        while True:
+            try:
+                job, carrier = conn.recv()
+            except (EOFError, OSError):
+                return
+            with collector.job():
+                with tracing.span("planning_job", {"object_id": job.obj.ident, "worker.pid": os.getpid(),
+                                                   "queue": "pool"}, parent=carrier):
+                    sent = _answer(conn, job, pipeline.plan)
+            tracing.flush()
+            if not sent:
+                return
+    finally:
+        tracing.close()
 
 
 class JobCollector:

@@ -39,10 +39,12 @@ from planhrc.model import ArticulatedObject
 from planhrc.pipeline import PlanOutcome
 from planhrc.vocabulary import PlanningStatus
 
+from .metrics import WorkerMetrics
 from .planning_pool import JobCollector, PlanningJob, pack_outcome, state_size, unpack_outcome
 from .store import UnavailableError
-from .store.postgres.jobs import (CLAIM, COLLECT, DONE_CHANNEL, FINISH, FORGET, HAND_BACK, JOB_CHANNEL, JOB_TABLES,
-                                  MIN_LEFT_S, RENEW, SUBMIT, WITHDRAW, claimed)
+from .store.postgres.jobs import (CLAIM, COLLECT, DEPTH, DONE_CHANNEL, FINISH, FORGET, HAND_BACK, JOB_CHANNEL,
+                                  JOB_TABLES, MIN_LEFT_S, RENEW, SUBMIT, WITHDRAW, Claimed, claimed)
+from .tracing import Tracing
 from .store.postgres.schema import SCHEMA_LOCK
 from .store.postgres.session import Connection, connect
 
@@ -94,10 +96,13 @@ class _Link:
 # -- the service's side ---------------------------------------------------------------------------------------
 class QueuedPlanning:
     """Large tasks planned by `planhrc planning-worker` processes through the database (`plan(job)` queues the job
-    and waits for its outcome, by the job's deadline and `grace_s`)."""
+    and waits for its outcome, by the job's deadline and `grace_s`). With `tracing` on, a job carries the trace
+    context of the request that queued it (the row's `trace`), and the worker's span continues that trace."""
 
-    def __init__(self, db: str, password: str | None, min_atoms: int, grace_s: float = 1.0) -> None:
+    def __init__(self, db: str, password: str | None, min_atoms: int, grace_s: float = 1.0,
+                 tracing: Tracing | None = None) -> None:
         self.min_atoms = min_atoms
+        self._tracing = tracing or Tracing.off()
         self.grace_s = grace_s
         self._db, self._password = db, password
         self._link = _Link(db, password, "planhrc-planning")
@@ -136,8 +141,9 @@ class QueuedPlanning:
         job_id: int | None = None
         collected = False
         try:
+            trace = self._tracing.carrier().get("traceparent")
             job_id = int(self._link.execute(SUBMIT, (job.obj.ident, pickle.dumps(job, pickle.HIGHEST_PROTOCOL),
-                                                     left))[0][0])
+                                                     left, trace))[0][0])
             with self._guard:
                 self._waiting[job_id] = done
             until = job.deadline_at + self.grace_s
@@ -162,6 +168,18 @@ class QueuedPlanning:
                     self._waiting.pop(job_id, None)
                 if not collected:
                     self._withdraw(job_id)
+
+    def depth(self) -> dict[str, int]:
+        """Jobs queued and running in the database now (every service's, not only this one's)."""
+        return {str(state): int(count) for state, count in self._link.execute(DEPTH)}
+
+    def reachable(self) -> bool:
+        """Whether the queue's database answers now."""
+        try:
+            self._link.execute("SELECT 1")
+        except UnavailableError:
+            return False
+        return True
 
     def _withdraw(self, job_id: int) -> None:
         try:
@@ -231,12 +249,17 @@ class _Lease(threading.Thread):
 
 
 def serve_jobs(db: str, password: str | None, tbox_path: str, lease_s: float, stop: threading.Event,
-               worker: str | None = None) -> None:
+               worker: str | None = None, metrics: WorkerMetrics | None = None,
+               tracing: Tracing | None = None) -> None:
     """Plan queued jobs one at a time until `stop` is set; a database that goes away is reached again. SIGTERM (a
-    `BaseException` raised in this thread) hands the running job back to the queue."""
+    `BaseException` raised in this thread) hands the running job back to the queue. What it does is counted in
+    `metrics` (served by the caller) and traced with `tracing`, each job's span a child of the request that queued
+    it."""
     from planhrc import pipeline
 
     worker = worker or worker_name()
+    metrics = metrics or WorkerMetrics()
+    tracing = tracing or Tracing.off()
     link = _Link(db, password, "planhrc-planning-worker")
     collector = JobCollector()  # as the pool's workers: the grounded tasks it keeps are not walked after each job
     listener: Connection | None = None
@@ -256,8 +279,15 @@ def serve_jobs(db: str, password: str | None, tbox_path: str, lease_s: float, st
                     for _ in listener.notifies(timeout=min(1.0, lease_s / 2), stop_after=1):
                         pass
                     continue
-                with collector.job():
-                    _run_job(pipeline.plan, link, db, password, worker, got, tbox_path, lease_s)
+                if got.taken_over:
+                    metrics.taken_over.inc()
+                parent = {"traceparent": got.trace} if got.trace else None
+                with collector.job(), tracing.span("planning_job", {"object_id": got.object_id, "worker": worker,
+                                                                    "attempt": got.attempts, "queue": "postgresql"},
+                                                   parent=parent):
+                    outcome = _run_job(pipeline.plan, link, db, password, worker, got, tbox_path, lease_s)
+                metrics.finished(str(outcome.status), outcome.timings)
+                tracing.flush()
             except (UnavailableError, psycopg.OperationalError) as exc:
                 log.warning("planning worker %s: %s; trying again", worker, " ".join(str(exc).split())[:200])
                 if listener is not None:
@@ -270,9 +300,10 @@ def serve_jobs(db: str, password: str | None, tbox_path: str, lease_s: float, st
         link.close()
 
 
-def _run_job(plan: Any, link: _Link, db: str, password: str | None, worker: str,
-             got: tuple[int, str, bytes, float, int], tbox_path: str, lease_s: float) -> None:
-    job_id, object_id, blob, left, attempts = got
+def _run_job(plan: Any, link: _Link, db: str, password: str | None, worker: str, got: Claimed, tbox_path: str,
+             lease_s: float) -> PlanOutcome:
+    """Plan a claimed job and store its outcome (which it returns)."""
+    job_id, object_id, blob, left, attempts = got.id, got.object_id, got.blob, got.left, got.attempts
     lease: _Lease | None = None
     try:
         try:
@@ -282,15 +313,15 @@ def _run_job(plan: Any, link: _Link, db: str, password: str | None, worker: str,
             failed = PlanOutcome(PlanningStatus.ERROR, f"the planning worker could not read the job ({exc})",
                                  "none")
             link.execute(FINISH, (pickle.dumps(list(pack_outcome(failed))), job_id, worker))
-            return
+            return failed
         job = replace(job, config=replace(job.config, tbox_path=Path(tbox_path)),
                       deadline_at=time.monotonic() + left)
         log.info("planning job %d (%s, attempt %d, %.2f s left)", job_id, object_id, attempts, left)
         lease = _Lease(db, password, job_id, worker, lease_s)
         lease.start()
         try:
-            outcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
-                           deadline_at=job.deadline_at)
+            outcome: PlanOutcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
+                                        deadline_at=job.deadline_at)
         except Exception as exc:  # the service gets an outcome whatever happens
             log.exception("planning failed for %s", object_id)
             outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)
@@ -306,3 +337,4 @@ def _run_job(plan: Any, link: _Link, db: str, password: str | None, worker: str,
     frames = pickle.dumps(list(pack_outcome(outcome)), pickle.HIGHEST_PROTOCOL)
     if not link.execute(FINISH, (frames, job_id, worker)):
         log.warning("planning job %d was withdrawn or taken over meanwhile: its outcome is dropped", job_id)
+    return outcome

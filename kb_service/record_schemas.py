@@ -89,7 +89,7 @@ class EventPublic(BaseModel):
     model_config = schema_config(
         "One entry of an object's log: a decision with its reason, a goal, a dispatch or a feedback.",
         {"seq": 4, "object_id": "obj1", "kind": "continue", "reason": "the perceived state is subsumed by s^e_2",
-         "data": {"perceived_state_id": "obj1_state_2", "next_step": 2}, "created_at": 1.7e9},
+         "data": {"perceived_state_id": "obj1_state_2", "next_step": 2}, "created_at": 1.7e9, "client": "baxter-1"},
     )
 
     seq: int = Field(description="Position in the log (increasing).", examples=[4])
@@ -103,6 +103,10 @@ class EventPublic(BaseModel):
     reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by s^e_2"])
     data: dict[str, Any] = Field(description="Ids and numbers of the event.", examples=[{"next_step": 2}])
     created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
+    client: str | None = Field(default=None, description="The client (API key's name) whose request caused the "
+                               "event; `token` for the --token shortcut; null when no key was needed or the service "
+                               "wrote it on its own (VAL's verdicts checked after the answer).",
+                               examples=["baxter-1"])
 
 
 class HealthPublic(BaseModel):
@@ -133,3 +137,22 @@ class ErrorPublic(BaseModel):
 
     detail: str = Field(description="What was wrong, naming the field.",
                         examples=["link_orientations_deg: expected 4 values (one per link), got 3"])
+
+
+class LivePublic(BaseModel):
+    model_config = schema_config("The process answers.", {"status": "alive", "version": "0.1.0"})
+
+    status: Literal["alive"] = Field(description="Always `alive`: an answer at all is the news.")
+    version: str = Field(description="The planhrc version serving.")
+
+
+class ReadyPublic(BaseModel):
+    model_config = schema_config(
+        "Whether the service may take traffic, and each check's result.",
+        {"status": "ready", "version": "0.1.0", "checks": {"store": "ok", "tbox": "ok", "planning": "ok"}})
+
+    status: Literal["ready", "not ready"] = Field(description="`ready` when every check is `ok`.")
+    version: str = Field(description="The planhrc version serving.")
+    checks: dict[str, str] = Field(description="`store` (its database answers), `tbox` (loaded), `planning` (the "
+                                   "planning pool is open or the planning queue's database answers): `ok`, or why "
+                                   "not.")

@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
               "the paper's planning grid, re-planning latency and its CPU, the bimanual grid"),
     "serve": ("planhrc.kb_service.cli", "add_serve_parser", "run the knowledge-base HTTP service"),
     "compact": ("planhrc.kb_service.cli", "add_compact_parser", "drop the history the retention policy does not keep"),
+    "keys": ("planhrc.kb_service.keys_cli", "add_keys_parser", "the clients of a store: names, roles, API keys"),
     "planning-worker": ("planhrc.kb_service.cli", "add_planning_worker_parser",
                         "plan queued tasks for the services of a PostgreSQL store, on any host"),
     "worker": ("planhrc.robot_sim.worker_cli", "add_worker_parser", "run the simulated Baxter worker"),

@@ -6,7 +6,7 @@ Nothing is read or created at import time: `get_settings()` builds the process-w
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import AliasChoices, Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -125,6 +125,25 @@ class Settings(BaseSettings):
         "two 45 degree steps as one 90 degree step); the expected state after the merged step is checked.",
     )
     log_level: str = Field(default="info", description="Logging level of the service (uvicorn names).")
+    log_format: Literal["text", "json"] = Field(
+        default="text",
+        description="`json`: one JSON object a log line, with the request id, the object id and the trace id.",
+    )
+    metrics: bool = Field(
+        default=True,
+        description="Serve `/metrics` (Prometheus' text format) and count what the service does; false: neither.",
+    )
+    otlp_endpoint: str | None = Field(
+        default=None,
+        description="Send traces (OpenTelemetry, OTLP over HTTP) to this collector, e.g. http://127.0.0.1:4318; "
+        "without it tracing is off unless OpenTelemetry's own OTEL_EXPORTER_OTLP_ENDPOINT (or "
+        "OTEL_TRACES_EXPORTER=otlp) is set.",
+    )
+    trace_ratio: float | None = Field(
+        default=None, ge=0, le=1,
+        description="The share of requests traced (a request whose client sent a sampled `traceparent` always is); "
+        "default: OpenTelemetry's OTEL_TRACES_SAMPLER, else every request.",
+    )
     read_token: str | None = Field(
         default=None,
         description="A second, read-only bearer token: accepted for reads of the knowledge base when "
@@ -134,8 +153,8 @@ class Settings(BaseSettings):
         default=None, description="File holding the read-only bearer token (its first line).")
     protect_reads: bool = Field(
         default=False,
-        description="Reads of the knowledge base (objects, states, problems, plans, events, ontology) need the "
-        "token or the read-only token too; /health, the API docs and the console page stay open.",
+        description="Every read (objects, states, problems, plans, events, ontology, SPARQL, /metrics) needs a "
+        "client's key (any role) or a token too; the health probes, the API docs and the console page stay open.",
     )
     max_body_bytes: int = Field(
         default=1_048_576, ge=1024, le=1_073_741_824,

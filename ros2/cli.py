@@ -36,7 +36,9 @@ def add_bridge_parser(subparsers: SubParsers) -> None:
                               description="A ROS 2 node between a running KB service (HTTP) and ROS 2 topics under "
                                           "/planhrc/objects/<id>/ (see docs/ros2.md).")
     p.add_argument("--kb", type=http_url, required=True, help="base URL of the KB service")
-    p.add_argument("--token", default=None, help="bearer token for the service's writes (or PLANHRC_TOKEN)")
+    p.add_argument("--key", "--token", dest="token", default=None,
+                   help="the bridge's client key (`planhrc keys add NAME --role robot`; env PLANHRC_KEY), or the "
+                   "service's token (env PLANHRC_TOKEN)")
     p.add_argument("--object", dest="object_ids", action="append", default=[], metavar="ID",
                    help="serve this object (repeatable); default: every object, and each one created later")
     p.add_argument("--poll", type=positive_float, default=1.0, metavar="S",
@@ -51,7 +53,7 @@ def run_bridge_cli(args: argparse.Namespace) -> int:
         return 2
     from .node import BridgeSettings, run_bridge
 
-    settings = BridgeSettings(args.kb, args.token or os.environ.get("PLANHRC_TOKEN"), tuple(args.object_ids),
+    settings = BridgeSettings(args.kb, args.token or os.environ.get("PLANHRC_KEY") or os.environ.get("PLANHRC_TOKEN"), tuple(args.object_ids),
                               args.poll, args.frame_id)
 
     def ready(bridge: Any) -> None:

@@ -316,3 +316,64 @@ def test_numbers_are_json_numbers(service):
         r = client.post(path, json=body)
         assert r.status_code == 422 and r.json()["detail"].startswith(field), (body, r.text)
     assert client.get("/objects").json() == before
+
+
+ROLE_CHECKS = [checks.not_a_server_error, checks.response_schema_conformance, checks.status_code_conformance,
+               checks.content_type_conformance]
+
+
+@pytest.fixture(scope="module")
+def role_keys(service, tmp_path_factory) -> dict[str, str]:
+    """One client per role on the contract's service, made by `planhrc keys` beside it (in effect within a
+    second, without a restart)."""
+    client, _ = service
+    db = next(Path(p) for p in tmp_path_factory.getbasetemp().glob("contract*/kb.sqlite3"))
+    keys = {}
+    for role in ("robot", "operator", "reader"):
+        made = subprocess.run([sys.executable, "-m", "planhrc.cli", "keys", "add", f"contract-{role}", "--role", role,
+                               "--db", str(db)], capture_output=True, text=True, timeout=120,
+                              env={**os.environ, "PYTHONPATH": str(REPO)})
+        assert made.returncode == 0, made.stderr
+        keys[role] = made.stdout.strip()
+    probe = httpx.get(f"{client.base_url}/objects", headers={"Authorization": f"Bearer {keys['reader']}"})
+    assert probe.status_code == 200
+    return keys
+
+
+@pytest.mark.parametrize("role", ["robot", "operator", "reader"])
+def test_each_role_keeps_the_contract(service, role_keys, role):
+    """schemathesis with each role's key over every operation: no server error, and every answer (a 403 where
+    the role may not go) is a documented status with its documented schema; the refusals name the role needed."""
+    client, oid = service
+    key = role_keys[role]
+    schema = schemathesis.openapi.from_url(f"{client.base_url}/openapi.json")
+    failures: list[str] = []
+    refused: set[str] = set()
+    for operation in [result.ok() for result in schema.get_all_operations()]:
+        pinned = {"object_id": oid} if "{object_id}" in operation.path else None
+        strategy = operation.as_strategy(generation_mode=GenerationMode.POSITIVE, path_parameters=pinned)
+
+        @given(case=strategy)
+        @settings(max_examples=2, deadline=None, derandomize=True, database=None, phases=[Phase.generate],
+                  suppress_health_check=list(HealthCheck))
+        def run(case) -> None:
+            if case.path.endswith("/events/stream"):
+                case.query = {**(case.query or {}), "timeout_s": 0.2}
+            try:
+                response = case.call_and_validate(base_url=str(client.base_url), checks=ROLE_CHECKS, timeout=60,
+                                                  headers={"Authorization": f"Bearer {key}"})
+            except (AssertionError, ExceptionGroup) as failure:
+                failures.append(f"{operation.label} [{role}]: {str(failure)[:600]}")
+                return
+            if response.status_code == 403:
+                assert "needs the role" in response.json()["detail"]
+                refused.add(operation.label)
+
+        run()
+    assert not failures, "\n\n".join(failures)
+    writes = {"robot": {"POST /objects", "PUT /objects/{object_id}/goal", "POST /reasoning"},
+              "operator": {"POST /objects/{object_id}/perceptions", "POST /objects/{object_id}/actions/next",
+                           "POST /objects/{object_id}/actions/{action_id}/feedback",
+                           "POST /objects/{object_id}/give-up"}}
+    writes["reader"] = writes["robot"] | writes["operator"]
+    assert refused == writes[role], (role, refused)

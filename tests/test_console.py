@@ -175,6 +175,7 @@ def test_a_perception_over_http_appears_in_the_log_within_a_second_and_redraws(c
     newest = page.locator("#log li").first
     assert decision.replace("_", " ") in newest.locator(".kind").inner_text().lower()
     assert "human" in newest.locator(".actor").inner_text()
+    assert newest.locator(".client").inner_text() == "by token"  # the client whose request caused it (--token)
     assert drawn_angles(page)[-1] == "l4 90°"
 
 

@@ -16,7 +16,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 DOCKER = REPO / "docker"
-IMAGES = {"kb": ["postgresql"], "worker": ["sim"]}  # image -> extras it installs
+IMAGES = {"kb": ["postgresql", "tracing"], "worker": ["sim"]}  # image -> extras it installs
 COMPOSE_FILES = ("compose.yaml", "replicas.yaml")
 SIM_PACKAGES = {"pybullet", "opencv-python-headless", "example-robot-data", "matplotlib", "pillow"}
 SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "example_robot_data", "matplotlib", "PIL")
@@ -129,6 +129,13 @@ def test_the_replicas_compose_file_runs_two_replicas_and_a_worker_on_one_postgre
         assert services[name]["environment"]["PLANHRC_TOKEN_FILE"] == "/run/secrets/token"
         assert "token" in services[name]["secrets"]
     assert services["planning-worker"]["command"][:2] == ["planhrc", "planning-worker"]
+    # the probes: a replica is healthy when ready, the worker when its own /metrics answers
+    for name in ("kb1", "kb2"):
+        assert "/health/ready" in " ".join(services[name]["healthcheck"]["test"])
+    worker = services["planning-worker"]
+    port = worker["command"][worker["command"].index("--metrics-port") + 1]
+    assert f"127.0.0.1:{port}/metrics" in " ".join(worker["healthcheck"]["test"])
+    assert "/health/ready" in (DOCKER / "kb.Dockerfile").read_text().split("HEALTHCHECK", 1)[1]
     ports = [p for name in ("kb1", "kb2") for p in services[name]["ports"]]
     assert len(set(ports)) == 2 and all(p.startswith("127.0.0.1:") for p in ports)
     for service in services.values():

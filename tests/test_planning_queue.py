@@ -17,9 +17,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
+import httpx
 import pytest
 
-from planhrc.service_process import die_with_parent, stop_process_group
+from planhrc.service_process import die_with_parent, free_port, stop_process_group
 from tests.replica_tools import events, perceive, replicas
 from tests.servers import serve_env, store_location
 
@@ -32,12 +33,13 @@ def db(pg_cluster, tmp_path, request) -> str:
 
 
 @contextmanager
-def worker(db: str, folder: Path, lease_s: float = 1.0, name: str = "w") -> Iterator[subprocess.Popen[bytes]]:
-    """`planhrc planning-worker` on `db`; its log is `<folder>/worker-<name>.log`."""
+def worker(db: str, folder: Path, lease_s: float = 1.0, name: str = "w",
+           *args: str) -> Iterator[subprocess.Popen[bytes]]:
+    """`planhrc planning-worker` on `db` (with `args`); its log is `<folder>/worker-<name>.log`."""
     log_path = folder / f"worker-{name}.log"
     with open(log_path, "wb") as log:
         proc = subprocess.Popen([sys.executable, "-m", "planhrc.cli", "planning-worker", "--db", db, "--lease-s",
-                                 str(lease_s)], env=serve_env(), stdout=log, stderr=subprocess.STDOUT,
+                                 str(lease_s), *args], env=serve_env(), stdout=log, stderr=subprocess.STDOUT,
                                 start_new_session=True, preexec_fn=die_with_parent)
     try:
         yield proc
@@ -57,21 +59,23 @@ def test_the_queue_hands_each_job_to_one_worker_never_starts_a_late_one_and_keep
 
     with psycopg.connect(db, autocommit=True) as a, psycopg.connect(db, autocommit=True) as b:
         ensure_tables(a)
-        late = a.execute(SUBMIT, ("obj1", b"late", 0.01)).fetchone()[0]
-        first = a.execute(SUBMIT, ("obj1", b"first", 30)).fetchone()[0]
-        second = a.execute(SUBMIT, ("obj2", b"second", 30)).fetchone()[0]
+        late = a.execute(SUBMIT, ("obj1", b"late", 0.01, None)).fetchone()[0]
+        first = a.execute(SUBMIT, ("obj1", b"first", 30, "00-0123456789abcdef0123456789abcdef-0123456789abcdef-01")
+                          ).fetchone()[0]
+        second = a.execute(SUBMIT, ("obj2", b"second", 30, None)).fetchone()[0]
         time.sleep(0.1)
         b.execute("SET statement_timeout = '30s'")  # a claim that waited for a's would fail, not hang the test
         with a.transaction():  # a worker's claim not committed yet: the other takes the next job, without waiting
             got_a = claimed(a.execute(CLAIM, {"worker": "a", "lease": 0.3}).fetchone())
             got_b = claimed(b.execute(CLAIM, {"worker": "b", "lease": 30}).fetchone())
         assert got_a is not None and got_b is not None
-        assert (got_a[0], got_a[2]) == (first, b"first") and (got_b[0], got_b[2]) == (second, b"second")
-        assert 20 < got_b[3] <= 30 and got_b[4] == 1  # seconds left, attempts
+        assert (got_a.id, got_a.blob) == (first, b"first") and (got_b.id, got_b.blob) == (second, b"second")
+        assert 20 < got_b.left <= 30 and got_b.attempts == 1 and not got_b.taken_over
+        assert got_a.trace is not None and got_a.trace.startswith("00-0123") and got_b.trace is None
         assert claimed(b.execute(CLAIM, {"worker": "b", "lease": 30}).fetchone()) is None  # the late one: never
         time.sleep(0.5)  # worker a stops renewing: its lease expires and b takes the job again
         again = claimed(b.execute(CLAIM, {"worker": "b", "lease": 30}).fetchone())
-        assert again is not None and again[0] == first and again[4] == 2
+        assert again is not None and again.id == first and again.attempts == 2 and again.taken_over
         assert a.execute(RENEW, (30, first, "a")).fetchall() == []  # not a's any more
         assert a.execute(FINISH, (b"a's", first, "a")).fetchall() == []  # a's outcome is not kept
         assert len(b.execute(FINISH, (b"b's", first, "b")).fetchall()) == 1
@@ -90,7 +94,7 @@ def test_a_job_the_worker_cannot_read_is_answered_with_an_error(db):
 
     with psycopg.connect(db, autocommit=True) as conn:
         ensure_tables(conn)
-        job = conn.execute(SUBMIT, ("obj1", b"not a pickle", 30)).fetchone()[0]
+        job = conn.execute(SUBMIT, ("obj1", b"not a pickle", 30, None)).fetchone()[0]
         stop = threading.Event()
         thread = threading.Thread(target=serve_jobs, args=(db, None, str(default_tbox_path()), 1.0, stop, "test"))
         thread.start()
@@ -162,7 +166,9 @@ def test_without_a_worker_the_deadline_holds_and_nothing_is_stored(db, tmp_path)
 def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_gets_one_plan(db, tmp_path):
     env = {**QUEUED, "PLANHRC_PLANNING_DEADLINE_S": "45"}  # a 503 at the deadline comes within the client's 60 s
     links = 40  # an absolute task a worker needs a few seconds for
-    with worker(db, tmp_path, name="a") as first, worker(db, tmp_path, name="b") as second, \
+    ports = {"a": free_port(), "b": free_port()}  # each worker's own /metrics
+    with worker(db, tmp_path, 1.0, "a", "--metrics-port", str(ports["a"])) as first, \
+            worker(db, tmp_path, 1.0, "b", "--metrics-port", str(ports["b"])) as second, \
             replicas(db, tmp_path, count=1, args=("--planning-queue",), env=env) as [(_, c)]:
         oid = c.post("/objects", json={"name": "long", "links": links, "orientations": 12,
                                        "formulation": "absolute"}).json()["id"]
@@ -192,8 +198,11 @@ def test_a_worker_killed_mid_job_has_its_job_leased_again_and_the_perception_get
         assert answer["took"] < 45 + 14  # by the planning deadline (a loaded machine's slack on top)
         if reply.status_code == 200:
             assert reply.json()["decision"] == "replan"
-        survivor = (tmp_path / f"worker-{'b' if victim is first else 'a'}.log").read_text()
+        other = "b" if victim is first else "a"
+        survivor = (tmp_path / f"worker-{other}.log").read_text()
         assert "attempt 2" in survivor, survivor
+        metrics = httpx.get(f"http://127.0.0.1:{ports[other]}/metrics").text  # the takeover, counted by the taker
+        assert "planhrc_planning_leases_taken_over_total 1.0" in metrics, metrics
         plans = [e for e in events(c, oid) if e["kind"] == "replan"]
         assert len(plans) == (1 if reply.status_code == 200 else 0)
         assert rows(db) == []
@@ -217,7 +226,7 @@ def test_a_worker_stopped_with_sigterm_hands_its_job_back_and_says_so_in_one_lin
     job = PlanningJob(obj, init, goal, config_from_settings(make_settings(planning_deadline_s=60)), None, 0.0)
     with psycopg.connect(db, autocommit=True) as conn:
         ensure_tables(conn)
-        conn.execute(SUBMIT, ("obj1", pickle.dumps(job), 60))
+        conn.execute(SUBMIT, ("obj1", pickle.dumps(job), 60, None))
     log_path = tmp_path / "worker-w.log"
     with worker(db, tmp_path, lease_s=30) as proc:
         deadline = time.monotonic() + 60

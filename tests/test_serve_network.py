@@ -61,6 +61,15 @@ def test_a_service_open_to_the_network_needs_a_token_or_insecure(tmp_path, monke
     assert len(warnings) == 1 and "clear text" in warnings[0] and "--ssl-certfile" in warnings[0]
     _, warnings = _check({"host": "127.0.0.1"})  # loopback, no token: as before
     assert warnings == []
+    # clients' keys in the store guard it as a token does
+    from planhrc.kb_service.clients import ClientRegistry, open_table
+
+    db = str(tmp_path / "kb.sqlite3")
+    registry = ClientRegistry(open_table(db))
+    registry.add("baxter-1", "robot")
+    registry.close()
+    _, warnings = _check({"host": "0.0.0.0", "db_path": db})
+    assert len(warnings) == 1 and "clear text" in warnings[0]
 
 
 def test_secrets_come_from_files_and_one_on_the_command_line_is_warned_about(tmp_path, monkeypatch):

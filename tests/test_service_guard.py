@@ -19,7 +19,7 @@ import pytest
 
 from tests.servers import free_port, serving
 
-from planhrc.kb_service.guard import GuardPolicy, RequestGuard, is_data_path, token_matches
+from planhrc.kb_service.guard import GuardPolicy, RequestGuard, bearer
 
 pytestmark = pytest.mark.integration
 
@@ -98,27 +98,27 @@ def test_huge_bodies_are_refused_before_they_are_read(tmp_path: Path):
 def test_reads_behind_the_token_when_asked(tmp_path: Path):
     with guarded_server(tmp_path, protect_reads=True) as port:
         base = f"http://127.0.0.1:{port}"
-        assert httpx.get(f"{base}/health").status_code == 200  # liveness stays open
+        assert httpx.get(f"{base}/health").status_code == 200  # the probes stay open
+        assert httpx.get(f"{base}/health/live").status_code == 200
+        assert httpx.get(f"{base}/metrics").status_code == 401  # /metrics is a read
         assert httpx.get(f"{base}/openapi.json").status_code == 200
         refused = httpx.get(f"{base}/objects")
         assert refused.status_code == 401 and refused.headers["www-authenticate"] == "Bearer"
         assert httpx.get(f"{base}/ontology").status_code == 401
         reader = {"Authorization": f"Bearer {READ_TOKEN}"}
         assert httpx.get(f"{base}/objects", headers=reader).status_code == 200
-        # the read-only token never writes
+        assert httpx.get(f"{base}/metrics", headers=reader).text.count("planhrc_http_requests_total") > 0
+        # the read-only token never writes: its client is a reader
         write = httpx.post(f"{base}/objects", headers=reader,
                            json={"name": "bar", "links": 3, "orientations": 4, "formulation": "relative"})
-        assert write.status_code == 401
+        assert write.status_code == 403 and "operator" in write.json()["detail"]
         assert _count_objects(port) == 0
 
 
 def test_policy_helpers():
-    assert token_matches("Bearer abc", None, "abc") and token_matches("bearer  abc ", "abc")
-    assert not token_matches("Bearer abd", "abc") and not token_matches("Basic abc", "abc")
-    assert not token_matches("Bearer ", None, "") and not token_matches(None, "abc")
-    assert is_data_path("/objects") and is_data_path("/objects/obj1/plan") and is_data_path("/ontology")
-    assert not is_data_path("/objectsx") and not is_data_path("/health") and not is_data_path("/")
-    guard = RequestGuard(app=None, policy=GuardPolicy(TOKEN, None, False, LIMIT))  # type: ignore[arg-type]
-    assert guard._refuse_before_body("POST", "/objects", {"authorization": f"Bearer {TOKEN}",
-                                                          "content-length": "12x"})[0] == 400
-    assert guard._refuse_before_body("GET", "/objects", {}) is None
+    assert bearer("Bearer abc") == "abc" and bearer("bearer  abc ") == "abc"
+    assert bearer("Basic abc") is None and bearer("Bearer ") is None and bearer(None) is None
+    guard = RequestGuard(app=None, policy=GuardPolicy(False, LIMIT), registry=lambda scope: None)  # type: ignore[arg-type]
+    assert guard._refuse_length({"content-length": "12x"})[0] == 400
+    assert guard._refuse_length({"content-length": str(LIMIT + 1)})[0] == 413
+    assert guard._refuse_length({}) is None

@@ -400,6 +400,10 @@ async function logEvent(event) {
   const kind = document.createElement("span"); kind.className = "kind"; kind.textContent = event.kind.replace("_", " ");
   const reason = document.createElement("span"); reason.className = "reason"; reason.textContent = event.reason;
   li.append(seq, kind, reason);
+  if (event.client) {  // the client (API key's name) whose request caused the event
+    const client = document.createElement("span"); client.className = "client"; client.textContent = `by ${event.client}`;
+    li.appendChild(client);
+  }
   if (actor) {
     const who = document.createElement("span");
     who.className = `actor ${actor[0]}`;

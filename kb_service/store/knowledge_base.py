@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Iterator, Self, Sequence
 
 from .abox import Abox
+from .acting import acting_client
 from .backlog import PlanBacklog
 from .checks import check_events_page, check_keep_perceived
 from .errors import KBError
@@ -123,7 +124,8 @@ class SqliteStore(StoreFacade):
         with self._guard:
             ident = self._records.info(object_id, "object_id").obj.ident
             text = self._events.check(kind, reason, data)
-            return self._abox.write(lambda: self._events.append(ident, kind, reason, text))
+            client = acting_client()
+            return self._abox.write(lambda: self._events.append(ident, kind, reason, text, client))
 
     def set_execution(self, object_id: str, execution: Execution) -> None:
         with self._guard:

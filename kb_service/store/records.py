@@ -58,6 +58,7 @@ class StoredEvent:
     reason: str
     data: dict[str, Any] = field(default_factory=dict)
     created_at: float = 0.0
+    client: str | None = None  # who caused it (`clients`); None: the service on its own (VAL's later verdicts)
 
 
 @dataclass(frozen=True)

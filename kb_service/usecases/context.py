@@ -11,6 +11,7 @@ from planhrc.settings import Settings
 
 from ..locks import ObjectLocks
 from .memory import Memory, PlanViews
+from .observing import QUIET, Observer
 from ..store import KnowledgeStore
 
 
@@ -24,15 +25,16 @@ class Context:
     memory: Memory  # what each object's event log says
     views: PlanViews  # the cooperation model's view of each object's plan
     pool: PlanningPool | None = None  # large tasks are planned there (`planning_pool`), the rest in this process
+    observer: Observer = QUIET  # metrics and spans (`observe`)
 
 
 def open_context(store: KnowledgeStore, settings: Settings, locks: ObjectLocks | None = None,
-                 pool: PlanningPool | None = None) -> Context:
+                 pool: PlanningPool | None = None, observer: Observer = QUIET) -> Context:
     planning = config_from_settings(settings)
     validator = Validator(planning, early_answer=settings.val_early_answer,
                           merge_macro_steps=settings.merge_macro_steps,
                           armed=settings.val_armed and settings.validate_plans)
-    return Context(store, settings, planning, locks or ObjectLocks(), validator, Memory(), PlanViews(), pool)
+    return Context(store, settings, planning, locks or ObjectLocks(), validator, Memory(), PlanViews(), pool, observer)
 
 
 def close_context(context: Context) -> None:

@@ -18,6 +18,7 @@ stores nothing.
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, replace
 
 from planhrc.cooperation import Decision, decide
@@ -82,7 +83,11 @@ def perceive(context: Context, request: PerceptionRequest) -> Turn:
     """Decide on one perception and store all it leads to in one write (see the module's note), deciding again when
     another process wrote the object meanwhile (`unit_of_work`); the planning deadline holds for all of it."""
     deadline_at = deadline_from(context.planning)
-    return serialized(context, request.object_id, lambda: _perceive(context, request, deadline_at), deadline_at)
+    with context.observer.span("perceive", object_id=request.object_id) as span:
+        turn = serialized(context, request.object_id, lambda: _perceive(context, request, deadline_at), deadline_at)
+        if span is not None:
+            span.set_attribute("decision", str(turn.decision))
+        return turn
 
 
 def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) -> Turn:
@@ -111,7 +116,7 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         base = measured or memo.where  # a perception with a base point places the object (None: abstract)
         seen = _Seen(obj, perception, execution, goal, plan, memo, base, measured, key, print_, mark)
         if goal is None:
-            return _write(context, seen).turn
+            return _write(context, seen).turn  # no decision: nothing to count
 
         # decide
         decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
@@ -120,28 +125,36 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         decision = refine.gate_decision(context, obj, plan, decision, deadline_at)
         seen = replace(seen, decision=decision)
         if decision.kind not in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
-            return _write(context, seen).turn
+            written = _write(context, seen)
+            context.observer.decided(written.turn.decision, None)
+            return written.turn
 
         # re-plan: the pipeline once, VAL running in its own processes meanwhile
         context.validator.stop(obj.ident)  # the plan being replaced needs no more checking
         replan = refine.replan_request(obj, perception, goal.atoms, plan, decision, memo, base, deadline_at)
-        planned = plan_for_service(replan, context.planning, context.validator, context.pool)
+        with context.observer.span("plan"):  # the object: on `perceive`
+            planned = plan_for_service(replan, context.planning, context.validator, context.pool)
         try:
             if planned.outcome.status is PlanningStatus.TIMEOUT:
                 raise DeadlineError(f"planning: {planned.outcome.message}")
             checked = _check_plan(context, obj, planned.outcome, deadline_at)
-            if not planned.verdict.read_in_write:
-                planned.verdict.outcome(None)  # VAL's verdict before the write: the store is not held meanwhile
-            try:
-                written = _write(context, seen, planned, checked)
-            except _ValStillRunning:
-                log.info("VAL was slower than %.0f ms on %s's plan: the write waited for it outside the store",
-                         OVERLAP_WAIT_S * 1000, obj.ident)
-                planned.verdict.outcome(None)
-                written = _write(context, seen, planned, checked)
+            with context.observer.span("val"):
+                if not planned.verdict.read_in_write:
+                    planned.verdict.outcome(None)  # VAL's verdict before the write: the store is not held meanwhile
+                try:
+                    written = _write(context, seen, planned, checked)
+                except _ValStillRunning:
+                    log.info("VAL was slower than %.0f ms on %s's plan: the write waited for it outside the store",
+                             OVERLAP_WAIT_S * 1000, obj.ident)
+                    planned.verdict.outcome(None)
+                    written = _write(context, seen, planned, checked)
         except BaseException:
             planned.verdict.cancel()  # no VAL process outlives the request
             raise
+        verdict = planned.verdict.outcome(0) if planned.outcome.solved and planned.outcome.actions else None
+        if verdict is not None and "validate" in verdict.timings:
+            context.observer.validated(verdict.validated or verdict.validated_steps > 0, verdict.timings["validate"])
+        context.observer.decided(written.turn.decision, written.timings)
 
         # after the commit: the object's plan changed (or is gone); its checks behind the answer follow it
         adopted = written.adopted
@@ -152,6 +165,7 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         def record(piece: PieceVerdict) -> None:
             assert plan_id is not None  # only an adopted plan's pieces are checked behind the answer
             record_verdict(store, obj.ident, plan_id, piece)
+            context.observer.validated(piece.verdict.accepted, piece.seconds)
 
         context.validator.follow(obj.ident, plan_id, planned.verdict, record)
         return written.turn
@@ -164,7 +178,8 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
     refuses is stored as a problem without a plan), or raises _ValStillRunning (rolled back) after
     OVERLAP_WAIT_S."""
     store, obj, goal, decision = context.store, seen.obj, seen.goal, seen.decision
-    with object_write(context, obj.ident, seen.mark):
+    started = time.perf_counter()
+    with context.observer.span("store"), object_write(context, obj.ident, seen.mark):
         perceived = store.add_perception(seen.perception)
         outcome: PlanOutcome | None = None
         if planned is not None:
@@ -185,6 +200,7 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
                              decision.remedy if decision is not None else None, seen.measured)
         store.add_event(obj.ident, turn.decision, turn.reason, data)
         remember(store, obj.ident, seen.key, seen.fingerprint, turn_record(turn))
+    context.observer.stored(time.perf_counter() - started, replanned=planned is not None)
     return written
 
 

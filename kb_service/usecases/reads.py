@@ -104,7 +104,8 @@ def state_read(state: StoredState) -> StateRead:
 
 
 def event_read(event: StoredEvent) -> EventRead:
-    return EventRead(event.seq, event.object_id, event.kind, event.reason, dict(event.data), event.created_at)
+    return EventRead(event.seq, event.object_id, event.kind, event.reason, dict(event.data), event.created_at,
+                     event.client)
 
 
 def _plan_read(context: Context, plan: StoredPlan) -> PlanRead:

@@ -159,6 +159,7 @@ class EventRead:
     reason: str
     data: Mapping[str, Any]
     created_at: float
+    client: str | None = None
 
 
 @dataclass(frozen=True)

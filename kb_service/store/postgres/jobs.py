@@ -21,6 +21,7 @@ worker learns from the row how many seconds are left, and a lease is `now()` plu
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 JOB_CHANNEL = "planhrc_planning_job"  # a job was queued: workers wake
@@ -34,17 +35,27 @@ JOB_TABLES = (
     " worker text, lease_until timestamptz, attempts integer NOT NULL DEFAULT 0, outcome bytea,"
     " created_at timestamptz NOT NULL DEFAULT now(), CHECK (state IN ('queued', 'running', 'done')))",
     "CREATE INDEX IF NOT EXISTS planhrc_planning_job_open ON planhrc_planning_job (id) WHERE state <> 'done'",
+    # the trace context of the request that queued the job (W3C traceparent; null when it was not traced)
+    # (a look first: each worker's connection runs these, and an ALTER TABLE locks the table even when it finds the
+    # column)
+    "DO $$ BEGIN IF NOT EXISTS (SELECT 1 FROM information_schema.columns WHERE table_schema = current_schema() "
+    "AND table_name = 'planhrc_planning_job' AND column_name = 'trace') THEN ALTER TABLE planhrc_planning_job ADD COLUMN trace text; "
+    "END IF; END $$",
 )
 
-SUBMIT = ("WITH j AS (INSERT INTO planhrc_planning_job (object_id, job, deadline) "
-          "VALUES (%s, %s, now() + make_interval(secs => %s)) RETURNING id) "
+SUBMIT = ("WITH j AS (INSERT INTO planhrc_planning_job (object_id, job, deadline, trace) "
+          "VALUES (%s, %s, now() + make_interval(secs => %s), %s) RETURNING id) "
           f"SELECT id, pg_notify('{JOB_CHANNEL}', id::text) FROM j")
-CLAIM = ("UPDATE planhrc_planning_job SET state = 'running', worker = %(worker)s, attempts = attempts + 1, "
-         "lease_until = now() + make_interval(secs => %(lease)s) "
-         "WHERE id = (SELECT id FROM planhrc_planning_job WHERE (state = 'queued' OR (state = 'running' AND "
+# A claim returns, besides the job, whether it was taken over (running, on a lease that expired) and its trace.
+CLAIM = ("WITH old AS (SELECT id, state FROM planhrc_planning_job WHERE (state = 'queued' OR (state = 'running' AND "
          f"lease_until < now())) AND deadline > now() + make_interval(secs => {MIN_LEFT_S}) "
          "ORDER BY id LIMIT 1 FOR UPDATE SKIP LOCKED) "
-         "RETURNING id, object_id, job, extract(epoch FROM deadline - now())::float8, attempts")
+         "UPDATE planhrc_planning_job j SET state = 'running', worker = %(worker)s, attempts = j.attempts + 1, "
+         "lease_until = now() + make_interval(secs => %(lease)s) FROM old WHERE j.id = old.id "
+         "RETURNING j.id, j.object_id, j.job, extract(epoch FROM j.deadline - now())::float8, j.attempts, "
+         "old.state = 'running', j.trace")
+DEPTH = ("SELECT state, count(*) FROM planhrc_planning_job WHERE state <> 'done' AND deadline > now() "
+         "GROUP BY state")
 RENEW = ("UPDATE planhrc_planning_job SET lease_until = now() + make_interval(secs => %s) "
          "WHERE id = %s AND worker = %s AND state = 'running' RETURNING id")
 FINISH = ("WITH d AS (UPDATE planhrc_planning_job SET state = 'done', outcome = %s, lease_until = NULL "
@@ -58,8 +69,22 @@ WITHDRAW = "DELETE FROM planhrc_planning_job WHERE id = %s"
 FORGET = f"DELETE FROM planhrc_planning_job WHERE deadline < now() - make_interval(secs => {FORGOTTEN_S})"
 
 
-def claimed(row: Any) -> tuple[int, str, bytes, float, int] | None:
-    """(id, object id, job, seconds left, attempts so far) of a claimed row."""
+@dataclass(frozen=True)
+class Claimed:
+    """A claimed row: the job's id, its object, the pickled job, the seconds left, the attempts so far (this one
+    included), whether it was taken over from a worker whose lease expired, and the trace context it carries."""
+
+    id: int
+    object_id: str
+    blob: bytes
+    left: float
+    attempts: int
+    taken_over: bool
+    trace: str | None
+
+
+def claimed(row: Any) -> Claimed | None:
     if row is None:
         return None
-    return int(row[0]), str(row[1]), bytes(row[2]), float(row[3]), int(row[4])
+    return Claimed(int(row[0]), str(row[1]), bytes(row[2]), float(row[3]), int(row[4]), bool(row[5]),
+                   None if row[6] is None else str(row[6]))

@@ -31,6 +31,12 @@ TABLES = (
     "CREATE INDEX IF NOT EXISTS planhrc_triple_op ON planhrc_triple (o, p) WHERE o IS NOT NULL",
     "CREATE TABLE IF NOT EXISTS planhrc_event (object_id text NOT NULL, seq bigint NOT NULL, kind text NOT NULL,"
     " reason text NOT NULL, data json NOT NULL, created_at double precision NOT NULL, PRIMARY KEY (object_id, seq))",
+    # The client whose request caused the event (`clients`; null: the service on its own, or a store made before
+    # clients were recorded).
+    # (a look first: an ALTER TABLE, even one that finds the column, locks the table against every replica's reads)
+    "DO $$ BEGIN IF NOT EXISTS (SELECT 1 FROM information_schema.columns WHERE table_schema = current_schema() "
+    "AND table_name = 'planhrc_event' AND column_name = 'client') THEN ALTER TABLE planhrc_event ADD COLUMN client text; "
+    "END IF; END $$",
     "CREATE TABLE IF NOT EXISTS planhrc_execution (object_id text PRIMARY KEY, plan_id text, next_step integer,"
     " status text NOT NULL, dispatched_action_id text)",
     "CREATE TABLE IF NOT EXISTS planhrc_response (object_id text NOT NULL, key text NOT NULL, response json NOT NULL,"

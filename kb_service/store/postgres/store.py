@@ -42,6 +42,7 @@ from .inferred import PgInferred
 from .journal import PgJournal
 from .records import PgRecords
 from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, LOCK_OBJECT, EventFeed
+from ..acting import acting_client
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
 
@@ -53,7 +54,8 @@ log = logging.getLogger(__name__)
 _APPEND_EVENT = (
     "WITH c AS (INSERT INTO planhrc_counter AS c (name, value) VALUES (%s, 1) ON CONFLICT (name) "
     "DO UPDATE SET value = c.value + 1 RETURNING value), "
-    "e AS (INSERT INTO planhrc_event SELECT %s, value, %s, %s, %s::json, %s FROM c RETURNING seq) "
+    "e AS (INSERT INTO planhrc_event (object_id, seq, kind, reason, data, created_at, client) "
+    "SELECT %s, value, %s, %s, %s::json, %s, %s FROM c RETURNING seq) "
     "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
 )
 
@@ -150,13 +152,14 @@ class PostgresStore(StoreFacade):
             ident = self._records.info(object_id, "object_id").obj.ident
             text = EventLog.check(kind, reason, data)
             s = self._session
+            client = acting_client()
 
             def fill() -> StoredEvent:
                 created = time.time()
                 row = s.execute(_APPEND_EVENT, (counter_name(ident, "event"), ident, kind, reason, text, created,
-                                                EVENT_CHANNEL, ident)).fetchone()
+                                                client, EVENT_CHANNEL, ident)).fetchone()
                 assert row is not None
-                return StoredEvent(int(row[0]), ident, kind, reason, json.loads(text), created)
+                return StoredEvent(int(row[0]), ident, kind, reason, json.loads(text), created, client)
 
             return s.write(fill)
 
@@ -186,10 +189,10 @@ class PostgresStore(StoreFacade):
         with self._guard:
             ident = self._records.info(object_id).obj.ident
             rows = self._session.execute(
-                "SELECT seq, kind, reason, data, created_at FROM planhrc_event WHERE object_id = %s AND seq > %s "
-                "ORDER BY seq LIMIT %s", (ident, after_seq, limit)).fetchall()
-        return tuple(StoredEvent(int(seq), ident, kind, reason, data, float(created))
-                     for seq, kind, reason, data, created in rows)
+                "SELECT seq, kind, reason, data, created_at, client FROM planhrc_event WHERE object_id = %s "
+                "AND seq > %s ORDER BY seq LIMIT %s", (ident, after_seq, limit)).fetchall()
+        return tuple(StoredEvent(int(seq), ident, kind, reason, data, float(created), client)
+                     for seq, kind, reason, data, created, client in rows)
 
     def get_execution(self, object_id: str) -> Execution:
         with self._guard:

@@ -1,0 +1,139 @@
+"""Traces (OpenTelemetry): one trace per request, through the route, the use case, the planning job (in the
+service's planning pool or, through the PostgreSQL queue, in a `planhrc planning-worker` on any host), VAL and the
+store.
+
+Off unless asked: `planhrc serve --otlp-endpoint URL` (PLANHRC_OTLP_ENDPOINT), or OpenTelemetry's own variables
+(OTEL_EXPORTER_OTLP_ENDPOINT, OTEL_EXPORTER_OTLP_TRACES_ENDPOINT, OTEL_TRACES_EXPORTER=otlp; OTEL_SDK_DISABLED=true
+turns it off). Off, nothing of OpenTelemetry is imported and every span is `nullcontext()`. On, spans go in
+batches over OTLP/HTTP (protobuf) to the endpoint, a collector's `/v1/traces` (the `tracing` extra).
+
+Each process has its own `Tracing` (its own tracer provider; nothing global is set). A job handed to another
+process carries its trace context as W3C `traceparent` text (`carrier`), from which the other process's span
+continues the trace (`span(..., parent=carrier)`).
+"""
+from __future__ import annotations
+
+import os
+from contextlib import AbstractContextManager, nullcontext
+from typing import Any, Mapping
+
+TRACES_PATH = "/v1/traces"
+
+
+def tracing_wanted(endpoint: str | None) -> bool:
+    """Whether this process should trace: an endpoint given, or OpenTelemetry's variables ask for OTLP."""
+    env = os.environ
+    if env.get("OTEL_SDK_DISABLED", "").strip().lower() == "true":
+        return False
+    exporter = env.get("OTEL_TRACES_EXPORTER", "").strip().lower()
+    if exporter == "none":
+        return False
+    return bool(endpoint or env.get("OTEL_EXPORTER_OTLP_ENDPOINT") or env.get("OTEL_EXPORTER_OTLP_TRACES_ENDPOINT")
+                or exporter == "otlp")
+
+
+def traces_url(endpoint: str) -> str:
+    """A collector's base URL (as OTEL_EXPORTER_OTLP_ENDPOINT names it) -> its traces URL."""
+    endpoint = endpoint.rstrip("/")
+    return endpoint if endpoint.endswith(TRACES_PATH) else endpoint + TRACES_PATH
+
+
+class Tracing:
+    """One process's spans: `Tracing.off()` or `Tracing.start(name, endpoint)`."""
+
+    def __init__(self, provider: Any = None) -> None:
+        self._provider = provider
+        self._tracer = provider.get_tracer("planhrc") if provider is not None else None
+        self._kinds: tuple[Any, Any] | None = None
+        self._propagator: Any = None
+        self._current: Any = None
+        if provider is not None:  # what every span needs, looked up once
+            from opentelemetry.trace import SpanKind
+            from opentelemetry.trace.propagation.tracecontext import TraceContextTextMapPropagator
+
+            from opentelemetry.trace import get_current_span
+
+            self._kinds = (SpanKind.INTERNAL, SpanKind.SERVER)
+            self._propagator = TraceContextTextMapPropagator()
+            self._current = get_current_span
+
+    @classmethod
+    def off(cls) -> "Tracing":
+        return cls(None)
+
+    @classmethod
+    def start(cls, service_name: str, endpoint: str | None, ratio: float | None = None) -> "Tracing":
+        """On when `tracing_wanted(endpoint)`, else off. `ratio`: the share of traces started here that are
+        recorded (a span whose parent was recorded always is); None: OTEL_TRACES_SAMPLER's, else all."""
+        if not tracing_wanted(endpoint):
+            return cls.off()
+        from opentelemetry.exporter.otlp.proto.http.trace_exporter import OTLPSpanExporter
+        from opentelemetry.sdk.resources import Resource
+        from opentelemetry.sdk.trace import TracerProvider
+        from opentelemetry.sdk.trace.export import BatchSpanProcessor
+
+        import planhrc
+
+        resource = Resource.create({"service.name": os.environ.get("OTEL_SERVICE_NAME", service_name),
+                                    "service.version": planhrc.__version__})
+        sampler = None
+        if ratio is not None:
+            from opentelemetry.sdk.trace.sampling import ParentBased, TraceIdRatioBased
+
+            sampler = ParentBased(TraceIdRatioBased(ratio))
+        provider = TracerProvider(resource=resource, sampler=sampler)
+        exporter = OTLPSpanExporter(endpoint=traces_url(endpoint)) if endpoint else OTLPSpanExporter()
+        provider.add_span_processor(BatchSpanProcessor(exporter))
+        return cls(provider)
+
+    @property
+    def on(self) -> bool:
+        return self._tracer is not None
+
+    def span(self, name: str, attributes: Mapping[str, Any] | None = None, parent: Mapping[str, str] | None = None,
+             server: bool = False) -> AbstractContextManager[Any]:
+        """A span around a block (the current span's child, or `parent`'s: a carrier from another process)."""
+        if self._tracer is None:
+            return nullcontext()
+        assert self._kinds is not None
+        if parent is None and not server and not self._current().is_recording():
+            return nullcontext()  # inside a request not sampled (`--trace-ratio`): its stages are not either
+        context = self._propagator.extract(parent) if parent is not None else None
+        span: AbstractContextManager[Any] = self._tracer.start_as_current_span(
+            name, context=context, kind=self._kinds[server], attributes=attributes)
+        return span
+
+    def carrier(self) -> dict[str, str]:
+        """The current trace context as W3C headers (empty when off or outside a span)."""
+        if self._tracer is None:
+            return {}
+        carrier: dict[str, str] = {}
+        self._propagator.inject(carrier)
+        return carrier
+
+    def flush(self, timeout_s: float = 2.0) -> None:
+        if self._provider is not None:
+            self._provider.force_flush(int(timeout_s * 1000))
+
+    def close(self) -> None:
+        """Send what is left and stop."""
+        if self._provider is not None:
+            self._provider.shutdown()
+
+
+def current_trace_id() -> str | None:
+    """The current span's trace id (32 hex digits), None outside a span or when OpenTelemetry is not loaded."""
+    import sys
+
+    if "opentelemetry.trace" not in sys.modules:  # never imported: no span can be open
+        return None
+    from opentelemetry import trace
+
+    context = trace.get_current_span().get_span_context()
+    return format(context.trace_id, "032x") if context.is_valid else None
+
+
+def set_attributes(span: Any, **attributes: Any) -> None:
+    """Attributes on a span from `Tracing.span` (nothing when tracing is off)."""
+    if span is not None:
+        span.set_attributes({k: v for k, v in attributes.items() if v is not None})
