@@ -46,15 +46,28 @@ class PictureStep:
     markers_seen: int | None = None  # links whose marker the camera found (None: not perceived by camera)
 
 
+# What a bimanual plan's steps that turn nothing do, in words: {joint} is the joint, {pair} the two links it joins.
+HAND_STEP_WORDS = {"movetocentre": "centre the hands on {joint} ({pair})", "grasplinks": "grasp {pair} at {joint}",
+                   "releaselinks": "release {pair} at {joint}"}
+
+
 def describe_action(action: dict[str, Any] | None) -> str | None:
-    """`a_3 j2: turn l3 +90°, hold l2` from a next-action answer of the service."""
+    """`a_3 j2: turn l3 +90°, hold l2` from a next-action answer of the service; a bimanual plan's steps that turn
+    nothing say what they do: `a_1 j2: centre the hands on j2 (l2 and l3)`, `grasp l2 and l3 at j2`,
+    `release l2 and l3 at j2`."""
     if not action:
         return None
     held = "the table" if action.get("held_link_index") == 0 else f"l{action.get('held_link_index')}"
     step = action.get("step")
     last = action.get("last_step")
     steps = f"a_{step}" if last in (None, step) else f"a_{step}..a_{last}"
-    return (f"{steps} j{action.get('joint_index')}: turn l{action.get('turned_link_index')} "
+    joint = f"j{action.get('joint_index')}"
+    words = HAND_STEP_WORDS.get(str(action.get("name")))
+    if words is not None:
+        pair = " and ".join(f"l{k}" for k in sorted({int(action.get("held_link_index") or 0),
+                                                       int(action.get("turned_link_index") or 0)}) if k)
+        return f"{steps} {joint}: {words.format(joint=joint, pair=pair)}"
+    return (f"{steps} {joint}: turn l{action.get('turned_link_index')} "
             f"{int(action.get('delta_deg', 0)):+d}°, hold {held}")
 
 
