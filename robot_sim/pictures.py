@@ -21,7 +21,7 @@ from typing import Any, Sequence
 import cv2
 import numpy as np
 
-from planhrc.robot_sim.markers import aruco_dictionary
+from planhrc.robot_sim.vision import MarkerFinder, grey_image
 from planhrc.vocabulary import ActionOutcome, DecisionKind
 
 OUTCOME_COLOURS = {ActionOutcome.SUCCEEDED: "#2e7d32", ActionOutcome.PARTIAL: "#e07b00",
@@ -166,17 +166,7 @@ def _wrap(text: str, width: int) -> str:
 def detect_markers(frame: np.ndarray, upscales: Sequence[int] = (2, 1, 3)) -> dict[int, np.ndarray]:
     """Marker id -> its 4 corners in frame pixels, found as the camera perception finds them (the markers are
     only ~20 px wide, so enlarged copies are searched too)."""
-    grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
-    detector = cv2.aruco.ArucoDetector(aruco_dictionary(), cv2.aruco.DetectorParameters())
-    found: dict[int, np.ndarray] = {}
-    for k in upscales:
-        image = grey if k == 1 else cv2.resize(grey, None, fx=k, fy=k, interpolation=cv2.INTER_CUBIC)
-        corners, ids, _ = detector.detectMarkers(image)
-        if ids is None:
-            continue
-        for marker_corners, marker_id in zip(corners, ids.ravel()):
-            found.setdefault(int(marker_id), (marker_corners.reshape(4, 2) + 0.5) / k - 0.5)
-    return found
+    return MarkerFinder(upscales, refine=False).find(grey_image(frame))
 
 
 def overlay_markers(frame: np.ndarray, markers: dict[int, np.ndarray]) -> np.ndarray:
