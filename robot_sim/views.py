@@ -248,8 +248,8 @@ def held_out_views(rigs: int, shots: int, seed: int, resolution: tuple[int, int]
 
 
 def write_views(views: Sequence[View] | Iterator[View], out: Path, quality: int = 92) -> Path:
-    """Each view as a JPEG (a camera's usual way of keeping pictures) beside `views.json`: the rig, the shot, the
-    file, its encoding and the truth."""
+    """Each view as a JPEG (a camera's usual way of keeping pictures) beside `views.json` (the rig, the shot, the
+    file, its encoding and the truth) and `board.json`, the calibration board's markers."""
     out.mkdir(parents=True, exist_ok=True)
     entries = []
     for view in views:
@@ -260,6 +260,7 @@ def write_views(views: Sequence[View] | Iterator[View], out: Path, quality: int 
                         "shot": asdict(view.shot), "truth": view.truth})
     path = out / "views.json"
     path.write_text(json.dumps({"views": entries}, indent=1) + "\n")
+    (out / "board.json").write_text(json.dumps(SIM_BOARD.to_data(), indent=1) + "\n")  # what a cell's lab writes
     return path
 
 
