@@ -48,7 +48,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                       "a camera's images to the objects' perceived states (ROS 2)"),
 }
 # `worker --ros2` and `demo --ros2`: the same commands, registered by the ROS 2 layer (which gives the worker its
-# link through the bridge's topics); the robot's modules never import that layer.
+# link through the bridge's topics, and with `--record` its bag); the robot's modules never import that layer.
 ROS2_VARIANTS: dict[str, tuple[str, str]] = {
     "worker": ("planhrc.ros2.robot_cli", "add_worker_parser"),
     "demo": ("planhrc.ros2.robot_cli", "add_demo_parser"),
@@ -115,8 +115,9 @@ def wanted_command(argv: list[str]) -> str | None:
 
 
 def command_entry(name: str, argv: list[str]) -> tuple[str, str]:
-    """(module, parser function) of a command: the ROS 2 layer's variant when `--ros2` follows its name."""
-    if name in ROS2_VARIANTS and "--ros2" in argv[argv.index(name) + 1:]:
+    """(module, parser function) of a command: the ROS 2 layer's variant when `--ros2` or `--record` follows its
+    name."""
+    if name in ROS2_VARIANTS and {"--ros2", "--record"} & set(argv[argv.index(name) + 1:]):
         return ROS2_VARIANTS[name]
     return COMMANDS[name][0], COMMANDS[name][1]
 
