@@ -1,8 +1,8 @@
 """`planhrc perceive-node` and `planhrc perceive-calibrate`: a camera's images to the objects' perceived states, on
 the ROS 2 graph (rclpy).
 
-The node subscribes to a camera's `sensor_msgs/Image` and `sensor_msgs/CameraInfo` (best effort, the newest
-image only: a slow frame is dropped, never queued), finds the links' ArUco markers and reads each configured
+The node subscribes to a camera's `sensor_msgs/Image` and `sensor_msgs/CameraInfo` (the newest image only: a
+frame it has no time for is dropped, never queued), finds the links' ArUco markers and reads each configured
 object with the same code as the simulated worker's head camera (`planhrc.robot_sim.vision`), the camera's pose
 in the cell's frame coming from a calibration file that `perceive-calibrate` wrote from the board's markers on
 the table. For each object it publishes the bridge's perceived JointState (`perception_messages`: when it
@@ -38,8 +38,14 @@ from .perceive_messages import (PerceiveSettings, PublishPolicy, detail_text, gr
 log = logging.getLogger(__name__)
 
 DETAIL_SUFFIX = "perception"  # /planhrc/objects/<id>/perception: the detail of every image, JSON
-# a camera's images: the newest only, from a reliable or a best-effort publisher
-CAMERA_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+def camera_qos(best_effort: bool) -> QoSProfile:
+    """A camera's images: the newest only. Reliable by default (a camera driver's usual QoS; a best-effort reader
+    lost most 1280 x 720 images in fragments on this machine's loopback); best effort to match a camera that
+    publishes with the sensor-data profile."""
+    reliability = ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE
+    return QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
 
 
 def _stamp(msg: Any) -> tuple[int, int]:
@@ -86,9 +92,9 @@ class PerceiveNode:
         self.detail = {o.object_id: node.create_publisher(
             String, f"{topics.NAMESPACE}/{o.object_id}/{DETAIL_SUFFIX}", 10) for o in settings.objects}
         self.diagnostics = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, 10)
-        self.subs = [node.create_subscription(Image, settings.image_topic, self.on_image, CAMERA_QOS),
-                     node.create_subscription(CameraInfo, settings.camera_info_topic, self.camera.on_camera_info,
-                                              CAMERA_QOS)]
+        qos = camera_qos(settings.best_effort)
+        self.subs = [node.create_subscription(Image, settings.image_topic, self.on_image, qos),
+                     node.create_subscription(CameraInfo, settings.camera_info_topic, self.camera.on_camera_info, qos)]
         for o in settings.objects:
             policy = self.policies[o.object_id]
             self.subs.append(node.create_subscription(
@@ -192,7 +198,8 @@ def run_perceive_node(settings: PerceiveSettings, on_ready: Callable[[PerceiveNo
 class BoardWatcher:
     """Collects images in which the board's markers are found, for a calibration."""
 
-    def __init__(self, node: Node, board: Board, image_topic: str, camera_info_topic: str, frames: int) -> None:
+    def __init__(self, node: Node, board: Board, image_topic: str, camera_info_topic: str, frames: int,
+                 best_effort: bool = False) -> None:
         self.board, self.frames = board, frames
         self.camera = CameraInput()
         self.finder = MarkerFinder()
@@ -200,8 +207,9 @@ class BoardWatcher:
         self.images = 0
         self.best_seen: set[int] = set()
         self.problem = ""
-        self.subs = [node.create_subscription(Image, image_topic, self.on_image, CAMERA_QOS),
-                     node.create_subscription(CameraInfo, camera_info_topic, self.camera.on_camera_info, CAMERA_QOS)]
+        qos = camera_qos(best_effort)
+        self.subs = [node.create_subscription(Image, image_topic, self.on_image, qos),
+                     node.create_subscription(CameraInfo, camera_info_topic, self.camera.on_camera_info, qos)]
 
     def on_image(self, msg: Image) -> None:
         self.images += 1
@@ -220,10 +228,11 @@ class BoardWatcher:
 
 
 def run_calibration(board: Board, image_topic: str, camera_info_topic: str, frames: int, timeout_s: float,
-                    frame_id: str = "base") -> Calibration:
+                    frame_id: str = "base", best_effort: bool = False) -> Calibration:
     """Watch the camera until `frames` images show the board (or the timeout), then fit the camera's pose."""
     watcher: BoardWatcher = _spin("planhrc_perceive_calibrate",
-                                  lambda node: BoardWatcher(node, board, image_topic, camera_info_topic, frames),
+                                  lambda node: BoardWatcher(node, board, image_topic, camera_info_topic, frames,
+                                                            best_effort),
                                   until=lambda w: w.done(), timeout_s=timeout_s)
     if not watcher.views:
         if not watcher.images:

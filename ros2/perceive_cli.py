@@ -34,6 +34,8 @@ def object_arg(text: str) -> tuple[str, tuple[int, ...]]:
 def _camera_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--image-topic", default="/camera/image_raw", help="sensor_msgs/Image: rgb8, bgr8 or mono8")
     p.add_argument("--camera-info-topic", default="/camera/camera_info", help="sensor_msgs/CameraInfo (its K, D)")
+    p.add_argument("--best-effort", action="store_true",
+                   help="subscribe to the camera best effort (a driver publishing with the sensor-data QoS)")
 
 
 def add_calibrate_parser(subparsers: SubParsers) -> None:
@@ -59,7 +61,7 @@ def run_calibrate_cli(args: argparse.Namespace) -> int:
     from .perceive import run_calibration
 
     calibration = run_calibration(board, args.image_topic, args.camera_info_topic, args.frames, args.timeout,
-                                  args.frame_id)
+                                  args.frame_id, args.best_effort)
     calibration.write(args.out)
     x, y, z = calibration.pose.position
     print(f"[perceive-calibrate] camera at ({x:.3f}, {y:.3f}, {z:.3f}) m in {calibration.frame_id}, from board "
@@ -107,7 +109,7 @@ def node_settings(args: argparse.Namespace) -> PerceiveSettings:
                                   board_z + args.marker_height) for object_id, markers in args.objects)
     policy = PublishPolicy(period_s=args.period, change_deg=args.change_deg, every_image=args.every_image)
     return PerceiveSettings(calibration, objects, args.image_topic, args.camera_info_topic, policy,
-                            Limits(args.max_reprojection, args.max_sigma))
+                            Limits(args.max_reprojection, args.max_sigma), args.best_effort)
 
 
 def run_node_cli(args: argparse.Namespace) -> int:

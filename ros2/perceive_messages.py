@@ -183,4 +183,5 @@ class PerceiveSettings:
     camera_info_topic: str = "/camera/camera_info"
     policy: PublishPolicy | None = None  # a template: each object gets its own copy
     limits: Limits = Limits()
+    best_effort: bool = False  # subscribe to the camera best effort (a sensor-data publisher)
     node_name: str = "planhrc_perceive"

@@ -67,6 +67,8 @@ def test_the_node_reads_views_it_never_saw_from_its_own_calibration(ros_env, tmp
             answers = run_peer(CAMERA, [json.dumps({"mode": "perceive", "dir": str(DATA), "object": "obj1",
                                                     "views": [v["file"] for v in views], "timeout": 120,
                                                     "bad_first": n == 0})], ros_env, 150)
+        node_log = (tmp_path / f"{rig}-node.log").read_text(errors="replace")
+        assert "Traceback" not in node_log and node_log.strip().endswith("planhrc perceive-node: terminated")
         if n == 0:  # an image the node cannot read is refused, saying which field, and the node goes on
             assert "image.encoding: 'yuv422'" in answers.pop(0)["diagnostics"]["message"]
         assert [a["file"] for a in answers] == [v["file"] for v in views]
