@@ -33,10 +33,11 @@ def read_episode(bag: Path) -> dict[str, Any]:
         start = reader.start_time
         for connection, t, raw in reader.messages():
             topic, at = connection.topic, (t - start) / 1e9
-            msg = reader.deserialize(raw, connection.msgtype)
+            msg: Any = reader.deserialize(raw, connection.msgtype)
             if topic.endswith("/compressed"):
                 frame = cv2.imdecode(np.frombuffer(bytes(msg.data), np.uint8), cv2.IMREAD_COLOR)
-                out["images"].append((at, frame[:, :, ::-1]))
+                if frame is not None:
+                    out["images"].append((at, np.asarray(frame)[:, :, ::-1]))
             elif topic.endswith("/perceived"):
                 out["object_id"] = topic.split("/")[3]
                 out["perceived"].append((at, list(msg.name), [float(v) for v in msg.position]))
@@ -94,7 +95,7 @@ def draw_episode(bag: Path, path: Path, frames: int = 6, title: str = "") -> Pat
                       fontsize=7, rotation=30, ha="left")
     for start in episode["actions"]:  # each action: from its dispatch to its feedback, named by the decision before
         end, feedback = next(((t, f) for t, f in episode["feedback"] if t >= start), (start + 0.3, {}))
-        decision = next((d for t, d in reversed(decisions) if t <= start), {})
+        decision: dict[str, Any] = next((d for t, d in reversed(decisions) if t <= start), {})
         colour = OUTCOME_COLOURS.get(feedback.get("outcome"), "#5f6b7a")  # type: ignore[call-overload]
         line.barh(0.35, end - start, left=start, height=0.35, color=colour, alpha=0.8)
         words = describe_action(decision.get("next_action"))
