@@ -23,8 +23,9 @@ from __future__ import annotations
 import json
 import logging
 import math
+import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -283,16 +284,13 @@ class EpisodeBag:
 
 
 def step_record(step: Any) -> dict[str, Any]:
-    from dataclasses import asdict
-
+    """A step of the summary as the events topic carries it (without the timings, which the bag's times give)."""
     record = asdict(step)
     return {key: value for key, value in record.items() if key not in ("perception_s", "service_s", "action_s")}
 
 
 def write_bag(path: Path, messages: Sequence[Recorded], maker: MessageMaker) -> Path:
     """A rosbag2 folder (MCAP storage, CDR) with the messages in time order (`path` is replaced)."""
-    import shutil
-
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     if path.exists():

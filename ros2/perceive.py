@@ -61,13 +61,16 @@ class CameraInput:
 
     def on_camera_info(self, msg: CameraInfo) -> None:
         try:
+            if msg.binning_x > 1 or msg.binning_y > 1 or msg.roi.width:
+                raise Ros2Error("camera_info.binning, roi: a binned or cropped image is not read; send the full one")
             self.intrinsics = intrinsics_from_camera_info(msg.width, msg.height, msg.k, msg.d, msg.distortion_model)
+            self.problem = ""
         except Ros2Error as exc:
-            self.problem = str(exc)
+            self.intrinsics, self.problem = None, str(exc)
 
     def grey(self, msg: Image) -> tuple[np.ndarray, Intrinsics]:
         if self.intrinsics is None:
-            raise Ros2Error("camera_info: none received yet (its K is needed to read an image)")
+            raise Ros2Error(self.problem or "camera_info: none received yet (its K is needed to read an image)")
         camera = self.intrinsics
         if (msg.width, msg.height) != (camera.width, camera.height):
             raise Ros2Error(f"image: {msg.width} x {msg.height}, but camera_info says {camera.width} x {camera.height}")

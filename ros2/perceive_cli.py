@@ -11,7 +11,8 @@ import os
 import sys
 from pathlib import Path
 
-from planhrc.cli_args import SubParsers, existing_file, non_negative_float, positive_float, positive_int, writable_file
+from planhrc.cli_args import (SubParsers, existing_file, float_in, non_negative_float, positive_float, positive_int,
+                              writable_file)
 from planhrc.robot_sim.camera import Board, Calibration
 from planhrc.robot_sim.vision import Limits, ObjectMarkers
 
@@ -84,7 +85,7 @@ def add_node_parser(subparsers: SubParsers) -> None:
                    help="length of a link (m): the base point lies half a link behind l1's marker")
     p.add_argument("--marker-size", type=positive_float, default=DEFAULT_MARKER_SIZE_M, metavar="M",
                    help="side of the links' markers (m), the black border's outer edge")
-    p.add_argument("--marker-height", type=float, default=DEFAULT_MARKER_HEIGHT_M, metavar="M",
+    p.add_argument("--marker-height", type=float_in(-1.0, 1.0), default=DEFAULT_MARKER_HEIGHT_M, metavar="M",
                    help="height of the links' marker tops above the board's markers (m)")
     p.add_argument("--period", type=non_negative_float, default=1.0, metavar="S",
                    help="at most one perception of an object every S seconds")
