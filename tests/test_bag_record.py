@@ -171,3 +171,26 @@ def test_an_episode_is_drawn_from_its_bag(demo, tmp_path):
     done = subprocess.run([sys.executable, "-m", "planhrc.cli", "bag-picture", str(tmp_path), "--out",
                            str(tmp_path / "x.png")], capture_output=True, text=True, timeout=60)
     assert done.returncode == 1 and done.stderr.strip().endswith("has no metadata.yaml (a rosbag2 folder is expected)")
+
+
+def test_the_worker_records_its_episode_with_the_fallback_perception(tmp_path):
+    from planhrc.client import KBClient
+
+    from .servers import TOKEN, serving
+
+    with serving(tmp_path / "kb.sqlite3", env={"PLANHRC_TOKEN": TOKEN}) as url:
+        with KBClient(url, token=TOKEN) as kb:
+            oid = kb.create_object("rod", 3, 4, "relative", base_point_xy=(0.7, 0.2325))["id"]
+        out = tmp_path / "worker"
+        done = subprocess.run([sys.executable, "-m", "planhrc.cli", "worker", "--record", "--kb", url, "--token", TOKEN,
+                               "--object", oid, "--initial", "90,90,90", "--base", "0.7,0.2325", "--goal", "90,180,270",
+                               "--perception", "fallback", "--out", str(out)], capture_output=True, text=True,
+                              timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    steps = json.loads((out / "summary.json").read_text())["steps"]
+    by_topic: dict[str, list] = {}
+    for topic, _, _, msg in read_bag(out / "bag"):
+        by_topic.setdefault(short(topic, oid), []).append(msg)
+    assert len(by_topic["perceived"]) == len(steps) == len(by_topic["/camera/image_raw/compressed"])
+    assert [json.loads(m.data)["decision"] for m in by_topic["decision"]] == [s["decision"] for s in steps]
+    assert len([m for m in by_topic["next_action"] if m.points]) == sum(s["action"] is not None for s in steps)
