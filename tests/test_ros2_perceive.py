@@ -91,3 +91,12 @@ def test_the_node_reads_views_it_never_saw_from_its_own_calibration(ros_env, tmp
             else:
                 assert "base_x" not in answer["names"]
     assert seen >= 0.6 * visible
+
+
+def test_a_calibration_without_a_camera_says_so_in_one_line_and_writes_nothing(ros_env, tmp_path):
+    done = subprocess.run([str(ROS2_PYTHON), "-m", "planhrc.cli", "perceive-calibrate", "--board",
+                           str(DATA / "board.json"), "--out", str(tmp_path / "cal.json"), "--timeout", "2"],
+                          env=ros_env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1 and not (tmp_path / "cal.json").exists()
+    assert done.stderr.strip().splitlines()[-1] == \
+        "planhrc perceive-calibrate: calibration: no image on /camera/image_raw in 2 s"
