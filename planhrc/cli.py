@@ -64,7 +64,7 @@ NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench", "render-views
 
 # What the optional extras (pyproject.toml) provide: a command whose extra is missing says what to install
 # before it starts, instead of failing half-way. (command, sub-command or None) -> (extra, modules it needs)
-SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "matplotlib", "PIL", "numpy")  # the meshes come as data
+SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "matplotlib", "PIL", "numpy", "rosbags")  # the meshes come as data
 EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
     ("demo", None): ("sim", SIM_MODULES),
     ("worker", None): ("sim", SIM_MODULES),
