@@ -22,8 +22,8 @@ import pybullet
 from planhrc.robot_sim.camera import CameraPose, Intrinsics
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene
-from planhrc.robot_sim.vision import (Limits, MarkerFinder, ObjectMarkers, ObjectReading, grey_image, measure_marker,
-                                      read_object)
+from planhrc.robot_sim.vision import (Limits, MarkerFinder, ObjectMarkers, ObjectReading, find_links, grey_image,
+                                      measure_marker, read_object)
 from planhrc.robot_sim.vision import base_point as first_link_base_point
 
 if TYPE_CHECKING:
@@ -154,7 +154,7 @@ class CameraPerception:
 
     def read(self, frame: np.ndarray) -> ObjectReading:
         """The object as `frame` (taken from where the camera is aimed now) shows it."""
-        found = self._finder.find(grey_image(frame), set(self.markers.marker_ids))
+        found = find_links(grey_image(frame), self._finder, [self.markers], self.intrinsics, self.pose)
         return read_object(found, self.markers, self.intrinsics, self.pose, self.limits)
 
     def perceive(self) -> Perception:

@@ -33,7 +33,7 @@ class Limits:
     """When a measured marker counts as seen."""
 
     max_reprojection_px: float = 2.5
-    max_angle_sigma_deg: float = 1.5  # the orientation's standard error (its corners' noise taken >= 0.3 px)
+    max_angle_sigma_deg: float = 1.0  # the orientation's standard error (its corners' noise taken >= 0.3 px)
 
 
 @dataclass(frozen=True)
@@ -109,6 +109,24 @@ class MarkerFinder:
                         found[m] = (np.asarray(marker_corners, dtype=float).reshape(4, 2) + 0.5) / k - 0.5
             if wanted is not None and wanted <= found.keys():
                 break
+        if self.refine:
+            found = {m: self._refined(grey, m, corners) for m, corners in found.items()}
+        return found
+
+    def find_in(self, grey: np.ndarray, box: tuple[int, int, int, int], wanted: set[int] | frozenset[int],
+                scale: int = 2) -> dict[int, np.ndarray]:
+        """The wanted markers found in the image's region `box` (x0, y0, x1, y1), enlarged `scale` times first."""
+        x0, y0 = max(box[0], 0), max(box[1], 0)
+        x1, y1 = min(box[2], grey.shape[1]), min(box[3], grey.shape[0])
+        if x1 - x0 < 8 or y1 - y0 < 8:
+            return {}
+        crop = cv2.resize(grey[y0:y1, x0:x1], None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
+        corners, ids, _ = self._detector.detectMarkers(crop)
+        found: dict[int, np.ndarray] = {}
+        for marker_corners, marker_id in zip(corners, ids.ravel() if ids is not None else ()):
+            if int(marker_id) in wanted:
+                found[int(marker_id)] = (np.asarray(marker_corners, dtype=float).reshape(4, 2) + 0.5) / scale - 0.5 \
+                    + np.array([x0, y0])
         if self.refine:
             found = {m: self._refined(grey, m, corners) for m, corners in found.items()}
         return found
@@ -242,6 +260,52 @@ def base_point(angle_deg: float, centre_xy: Sequence[float], link_length_m: floa
     t = math.radians(angle_deg)
     half = link_length_m / 2.0
     return float(centre_xy[0] - half * math.cos(t)), float(centre_xy[1] + half * math.sin(t))
+
+
+def find_links(grey: np.ndarray, finder: MarkerFinder, objects: Sequence[ObjectMarkers], camera: Intrinsics,
+               pose: CameraPose) -> dict[int, np.ndarray]:
+    """The objects' markers in one image: found over the whole image, then, for a link whose marker was not and
+    whose neighbour's was, looked for again, enlarged twice, around the only places the chain leaves it: its centre
+    lies half a link from the joint it shares with that neighbour. (Enlarging the whole image twice found 16 % more
+    of the visible markers in the held-out views, at several times the cost; the regions are small.) What is found
+    there is measured and reported like any other marker."""
+    wanted = frozenset(m for o in objects for m in o.marker_ids)
+    found = finder.find(grey, wanted)
+    for markers in objects:
+        for box, marker_id in _regions(found, markers, camera, pose):
+            if marker_id not in found:
+                found.update(finder.find_in(grey, box, {marker_id}))
+    return found
+
+
+def _regions(found: Mapping[int, np.ndarray], markers: ObjectMarkers, camera: Intrinsics,
+             pose: CameraPose) -> list[tuple[tuple[int, int, int, int], int]]:
+    """(pixel box, marker id) where each missing link's marker can be, from its neighbours found."""
+    ids = markers.marker_ids
+    out = []
+    half = markers.link_length_m / 2.0
+    circle = np.linspace(0.0, 2.0 * math.pi, 16, endpoint=False)
+    for k, marker_id in enumerate(ids):
+        if marker_id in found:
+            continue
+        for neighbour, side in ((k - 1, 1.0), (k + 1, -1.0)):  # the joint after the link before, or before the next
+            if not 0 <= neighbour < len(ids) or ids[neighbour] not in found:
+                continue
+            measure = measure_marker(found[ids[neighbour]], camera, pose, markers.marker_z_m, markers.marker_size_m)
+            if measure is None:
+                continue
+            t = math.radians(measure.angle_deg)
+            joint = np.array(measure.centre_xy) + side * half * np.array([math.cos(t), -math.sin(t)])
+            reach = half + markers.marker_size_m
+            ring = np.column_stack([joint[0] + reach * np.cos(circle), joint[1] + reach * np.sin(circle),
+                                    np.full(len(circle), markers.marker_z_m)])
+            pixels = pose.project(ring, camera)
+            if not np.all(np.isfinite(pixels)):
+                continue
+            x0, y0 = np.floor(pixels.min(axis=0)).astype(int)
+            x1, y1 = np.ceil(pixels.max(axis=0)).astype(int)
+            out.append(((int(x0), int(y0), int(x1), int(y1)), marker_id))
+    return out
 
 
 def read_object(found: Mapping[int, np.ndarray], markers: ObjectMarkers, camera: Intrinsics, pose: CameraPose,

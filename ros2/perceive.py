@@ -27,7 +27,7 @@ from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 
 from planhrc.robot_sim.camera import Board, Calibration, Intrinsics, calibrate
-from planhrc.robot_sim.vision import MarkerFinder, read_object
+from planhrc.robot_sim.vision import MarkerFinder, find_links, read_object
 
 from . import topics
 from .channel import qos_of
@@ -82,7 +82,6 @@ class PerceiveNode:
         self.node, self.settings = node, settings
         self.camera = CameraInput()
         self.finder = MarkerFinder()
-        self.wanted = frozenset(m for o in settings.objects for m in o.marker_ids)
         template = settings.policy or PublishPolicy()
         self.policies = {o.object_id: PublishPolicy(template.period_s, template.change_deg, template.change_m,
                                                     template.action_timeout_s, template.every_image)
@@ -122,7 +121,7 @@ class PerceiveNode:
         if stamp == (0, 0):
             now = self.node.get_clock().now().to_msg()
             stamp = (int(now.sec), int(now.nanosec))
-        found = self.finder.find(grey, self.wanted)
+        found = find_links(grey, self.finder, self.settings.objects, camera, self.settings.calibration.pose)
         pose, frame_id = self.settings.calibration.pose, self.settings.calibration.frame_id
         for markers in self.settings.objects:
             reading = read_object(found, markers, camera, pose, self.settings.limits)
