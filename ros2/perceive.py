@@ -87,7 +87,7 @@ class PerceiveNode:
                                                     template.action_timeout_s, template.every_image)
                          for o in settings.objects}
         self.counts = {"images": 0, "refused": 0, "published": 0}
-        self.last_problem = ""
+        self.last_problem = self.last_refusal = ""
         self.latencies: list[float] = []
         self.perceived = {o.object_id: node.create_publisher(JointState, topics.PERCEIVED.name(o.object_id),
                                                              qos_of(topics.PERCEIVED)) for o in settings.objects}
@@ -115,8 +115,9 @@ class PerceiveNode:
             self.counts["refused"] += 1
             if str(exc) != self.last_problem:
                 log.warning("%s", exc)
-            self.last_problem = str(exc)
+            self.last_problem = self.last_refusal = str(exc)
             return
+        self.last_problem = ""  # the camera's images are read again: the warning ends (the last refusal is kept)
         stamp = _stamp(msg)
         if stamp == (0, 0):
             now = self.node.get_clock().now().to_msg()
@@ -147,6 +148,7 @@ class PerceiveNode:
         p95 = float(np.percentile(self.latencies, 95)) if self.latencies else None
         status.values = [KeyValue(key=k, value=str(v)) for k, v in self.counts.items()]
         status.values.append(KeyValue(key="image_to_state_p95_ms", value="" if p95 is None else f"{p95:.1f}"))
+        status.values.append(KeyValue(key="last_refusal", value=self.last_refusal))
         array.status.append(status)
         for object_id, policy in sorted(self.policies.items()):
             s = DiagnosticStatus(name=f"{self.settings.node_name}: {object_id}", hardware_id=object_id)
