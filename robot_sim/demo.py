@@ -35,6 +35,7 @@ from planhrc.motion_search import reachable_in_plane
 from planhrc.ordering import Placement
 from planhrc.robot_sim.bimanual import step_kind
 from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.recording import Recording
 from planhrc.robot_sim.scene import SceneSpec, is_feasible, random_orientations
 from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.vocabulary import ActionOutcome, DecisionKind, Infeasible
@@ -178,7 +179,8 @@ def serve_until_interrupted(url: str) -> None:
 
 
 def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir: Path, gui: bool,
-                perception: str, max_steps: int, seed: int, worker_link: WorkerLink | None = None) -> dict[str, Any]:
+                perception: str, max_steps: int, seed: int, worker_link: WorkerLink | None = None,
+                recording: Recording | None = None) -> dict[str, Any]:
     from planhrc.robot_sim.worker import run_worker
 
     spec = SceneSpec(n_links=len(scenario.initial_deg), initial_orientations_deg=scenario.initial_deg,
@@ -193,7 +195,7 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         with links as link:
             summary = run_worker(kb_url, obj["id"], spec, scenario.human, out_dir, gui=gui, max_steps=max_steps,
                                  token=token, perception=perception, goal_link_orientations_deg=scenario.goal_deg,
-                                 seed=seed, kb=link)
+                                 seed=seed, kb=link, recording=recording)
         events = kb.read_events(obj["id"])
     decisions = [e for e in events if e["kind"] in {str(kind) for kind in DecisionKind}]
     counts = Counter(e["kind"] for e in decisions)
@@ -326,7 +328,8 @@ def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
 
 def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str | None = None,
              token: str | None = None, episodes: int = 1, perception: str = "camera", max_steps: int = 40,
-             seed: int = 0, keep_serving: bool = False, worker_link: WorkerLink | None = None) -> dict[str, Any]:
+             seed: int = 0, keep_serving: bool = False, worker_link: WorkerLink | None = None,
+             recording: Recording | None = None) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     if scenario_name == "random":
         scenarios = [random_scenario(seed + i) for i in range(episodes)]
@@ -340,7 +343,7 @@ def run_demo(scenario_name: str, out_dir: Path, gui: bool = False, kb_url: str |
     def run_all(url: str, tok: str | None) -> None:
         for i, sc in enumerate(scenarios):
             folder = out_dir / f"episode-{i + 1:03d}"  # the worker's own records stay beside the demo's summary
-            result = run_episode(url, tok, sc, folder, gui, perception, max_steps, seed + i, worker_link)
+            result = run_episode(url, tok, sc, folder, gui, perception, max_steps, seed + i, worker_link, recording)
             results.append(result)
             print(f"[demo] {sc.name}: {'goal reached' if result['reached_goal'] else result['stop_reason']} "
                   f"in {result['time_to_goal_s']:.1f} s, {len(result['actions'])} actions "
@@ -394,16 +397,23 @@ def add_demo_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
                    help="leave the started service (and its console at /) up after the episodes, until Ctrl-C")
     p.add_argument("--ros2", action="store_true",
                    help="the worker talks to the service over ROS 2 through a `planhrc ros2-bridge` (in .venv-ros2)")
+    p.add_argument("--record", action="store_true",
+                   help="write each episode as a rosbag2 bag (MCAP) in its folder, on the bridge's topic names")
     p.set_defaults(func=run_demo_cli)
     return p
 
 
-def run_demo_cli(args: argparse.Namespace, worker_link: WorkerLink | None = None) -> int:
-    """The demo's command; `worker_link` is given by the ROS 2 layer for `--ros2`."""
+def run_demo_cli(args: argparse.Namespace, worker_link: WorkerLink | None = None,
+                 recording: Recording | None = None) -> int:
+    """The demo's command; `worker_link` is given by the ROS 2 layer for `--ros2`, `recording` for `--record`."""
     from planhrc.robot_sim.worker_cli import display_problem
 
     if args.ros2 and worker_link is None:
         print("planhrc demo: --ros2: the ROS 2 link is made by `planhrc demo --ros2` in .venv-ros2", file=sys.stderr)
+        return 2
+    if args.record and recording is None:
+        print("planhrc demo: --record: the bag is written by the ROS 2 layer (`planhrc demo --record`)",
+              file=sys.stderr)
         return 2
     if args.gui and (problem := display_problem()):
         print(f"planhrc demo: --gui: {problem}", file=sys.stderr)
@@ -411,7 +421,7 @@ def run_demo_cli(args: argparse.Namespace, worker_link: WorkerLink | None = None
     try:
         summary = run_demo(args.scenario, Path(args.out), args.gui, args.kb, args.token, args.episodes,
                            args.perception, args.max_steps, args.seed, keep_serving=args.keep_serving,
-                           worker_link=worker_link)
+                           worker_link=worker_link, recording=recording)
     except (SimError, ProtocolError) as exc:
         print(f"planhrc demo: {exc}", file=sys.stderr)
         return 1

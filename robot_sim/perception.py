@@ -1,14 +1,14 @@
 """Perception of the object's link orientations: a camera with ArUco markers, or noisy simulator poses.
 
 `CameraPerception` is a camera on Baxter's head (where the paper's Kinect sat): it takes the head camera
-link's pose and the head's pan from the simulated robot, renders what it sees with TinyRenderer, detects one
-ArUco marker per link and turns each marker's corners into a table angle. It reads nothing else from the
-simulator: a link whose marker it does not see is reported as unseen (None). `look` looks again with the head
+link's pose and the head's pan from the simulated robot (the robot's own kinematics: where its camera is), renders
+what it sees with TinyRenderer and reads the object from the image with the same code as `planhrc perceive-node`
+reads a real camera's (`vision`): one ArUco marker per link, each placed on the plane of the marker tops by
+fitting its four corners, its turn measured on the table in the world frame (theta = atan2(-dy, dx), clockwise
+seen from above from +x). It reads nothing else from the simulator: a link whose marker it does not see, or
+measures too poorly to trust (`vision.Limits`), is reported as unseen (None). `look` looks again with the head
 turned, keeping what each view saw. The base point p1 is measured too, from the first link's marker: its centre
-on the table, half a link back along the link's measured direction (None while that marker is unseen). Instead of reading the angle off the image
-(whose axes are tilted by the oblique view and flipped: image rows grow downwards), every corner is cast
-back through the camera onto the plane of the marker tops, and the angle is measured on the table in
-the world frame: theta = atan2(-dy, dx), clockwise seen from above from +x.
+on the table, half a link back along the link's measured direction (None while that marker is unseen).
 """
 from __future__ import annotations
 
@@ -16,13 +16,15 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
-import cv2
 import numpy as np
 import pybullet
 
+from planhrc.robot_sim.camera import CameraPose, Intrinsics
 from planhrc.robot_sim.errors import SimError
-from planhrc.robot_sim.markers import aruco_dictionary
 from planhrc.robot_sim.scene import Scene
+from planhrc.robot_sim.vision import (Limits, MarkerFinder, ObjectMarkers, ObjectReading, find_links, grey_image,
+                                      measure_marker, read_object)
+from planhrc.robot_sim.vision import base_point as first_link_base_point
 
 if TYPE_CHECKING:
     from pybullet_utils.bullet_client import BulletClient
@@ -73,37 +75,32 @@ class CameraSpec:
     look_again_pans_rad: tuple[float, ...] = (0.35, -0.35, 0.7, -0.7)
 
 
-def circular_mean_deg(angles: list[float]) -> float:
-    s = sum(math.sin(math.radians(a)) for a in angles)
-    c = sum(math.cos(math.radians(a)) for a in angles)
-    return math.degrees(math.atan2(s, c)) % 360.0
-
-
 def angle_difference_deg(a: float, b: float) -> float:
     """Signed smallest difference a - b in (-180, 180]."""
     d = (a - b) % 360.0
     return d - 360.0 if d > 180.0 else d
 
 
-def table_angle(vector_xy: np.ndarray) -> float:
-    """Orientation of a table vector: degrees clockwise seen from above from +x."""
-    return math.degrees(math.atan2(-vector_xy[1], vector_xy[0])) % 360.0
-
-
 class CameraPerception:
-    """Render, detect markers, back-project their corners onto the table and measure each link's angle."""
+    """Render from the head camera and read the object's markers in the image (`vision`)."""
 
-    def __init__(self, client: BulletClient, scene: Scene, camera: CameraSpec | None = None) -> None:
+    def __init__(self, client: BulletClient, scene: Scene, camera: CameraSpec | None = None,
+                 limits: Limits = Limits()) -> None:
         if scene.head_camera is None:
             raise SimError("scene: the head camera needs the robot (load_robot=True)")
         self.client = client
         self.scene = scene
         self.camera = camera or CameraSpec()
-        self._detector = cv2.aruco.ArucoDetector(aruco_dictionary(), self._detector_parameters())
+        self.limits = limits
+        self.intrinsics = Intrinsics.from_fov(self.camera.width, self.camera.height, self.camera.fov_deg)
+        self.markers = ObjectMarkers("object", tuple(asset.marker_id for asset in scene.markers),
+                                     scene.spec.link_length_m, scene.spec.marker_size_m, scene.marker_z)
+        self._finder = MarkerFinder(self.camera.upscales)
         self._aim()
 
     def _aim(self) -> None:
-        """View and projection matrices from the head camera link's pose and the head's pan."""
+        """View and projection matrices from the head camera link's pose and the head's pan; the camera's pose
+        (`vision` reads the image with it) from the view matrix."""
         c, cam, scene = self.client, self.camera, self.scene
         eye = np.asarray(c.getLinkState(scene.robot, scene.head_camera, computeForwardKinematics=True)[4])
         pan = c.getJointState(scene.robot, scene.head_pan)[0]
@@ -113,9 +110,7 @@ class CameraPerception:
         forward = np.array([math.cos(pan), math.sin(pan), 0.0])
         self._view = c.computeViewMatrix(eye.tolist(), (eye + ahead).tolist(), forward.tolist())
         self._proj = c.computeProjectionMatrixFOV(cam.fov_deg, cam.width / cam.height, cam.near, cam.far)
-        view = np.array(self._view, dtype=float).reshape(4, 4).T  # PyBullet matrices are column-major
-        proj = np.array(self._proj, dtype=float).reshape(4, 4).T
-        self._inverse = np.linalg.inv(proj @ view)
+        self.pose = CameraPose.from_gl_view(self._view)
 
     def turn_head(self, pan_rad: float, max_steps: int = 120, settled_rad: float = 5e-4) -> None:
         """Turn the head (its pan motor, on the physics clock) until it has settled at `pan_rad` (within
@@ -131,19 +126,6 @@ class CameraPerception:
                 break
         self._aim()
 
-    @staticmethod
-    def _detector_parameters() -> cv2.aruco.DetectorParameters:
-        params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR
-        params.minMarkerPerimeterRate = 0.01
-        params.adaptiveThreshWinSizeMin = 3
-        params.adaptiveThreshWinSizeMax = 23
-        params.adaptiveThreshWinSizeStep = 4
-        params.polygonalApproxAccuracyRate = 0.05
-        params.perspectiveRemovePixelPerCell = 8
-        params.perspectiveRemoveIgnoredMarginPerCell = 0.25
-        return params
-
     def render(self) -> np.ndarray:
         cam = self.camera
         self.scene.sync_markers()
@@ -154,45 +136,33 @@ class CameraPerception:
 
     def pixel_to_table(self, u: float, v: float, z: float) -> np.ndarray:
         """The (x, y) where the ray through pixel (u, v) meets the horizontal plane at height z."""
-        cam = self.camera
-        x_ndc = 2.0 * (u + 0.5) / cam.width - 1.0
-        y_ndc = 1.0 - 2.0 * (v + 0.5) / cam.height
-        near = self._inverse @ np.array([x_ndc, y_ndc, -1.0, 1.0])
-        far = self._inverse @ np.array([x_ndc, y_ndc, 1.0, 1.0])
-        near, far = near[:3] / near[3], far[:3] / far[3]
-        t = (z - near[2]) / (far[2] - near[2])
-        point: np.ndarray = (near + t * (far - near))[:2]
+        point: np.ndarray = self.pose.onto_plane(np.array([[u, v]]), z, self.intrinsics)[0]
         return point
 
-    def marker_angle(self, corners: np.ndarray) -> float:
-        """Table angle of a marker's corner 0 -> corner 1 direction, averaged over its four edges."""
-        return self.marker_pose(corners)[0]
-
     def marker_pose(self, corners: np.ndarray) -> tuple[float, np.ndarray]:
-        """(table angle, centre (x, y) on the table) of a marker from its four corners in pixels."""
-        z = self.scene.marker_z
-        tl, tr, br, bl = (self.pixel_to_table(float(u), float(v), z) for u, v in corners)
-        along = [table_angle(tr - tl), table_angle(br - bl)]
-        across = [table_angle(bl - tl) - 90.0, table_angle(br - tr) - 90.0]
-        return circular_mean_deg(along + across), (tl + tr + br + bl) / 4.0
+        """(table angle, centre (x, y) on the table) of a link marker from its four corners in pixels."""
+        measure = measure_marker(corners, self.intrinsics, self.pose, self.scene.marker_z, self.markers.marker_size_m)
+        if measure is None:
+            raise SimError("marker: its corners do not lie on the table as this camera sees it")
+        return measure.angle_deg, np.asarray(measure.centre_xy)
 
     def base_point(self, first: tuple[float, np.ndarray] | None) -> tuple[float, float] | None:
         """p1 from the first link's marker pose (its centre is the link's centre), or None when it was not seen."""
         if first is None:
             return None
-        angle, centre = first
-        t = math.radians(angle)
-        half = self.scene.spec.link_length_m / 2.0
-        return float(centre[0] - half * math.cos(t)), float(centre[1] + half * math.sin(t))
+        return first_link_base_point(first[0], (float(first[1][0]), float(first[1][1])), self.scene.spec.link_length_m)
+
+    def read(self, frame: np.ndarray) -> ObjectReading:
+        """The object as `frame` (taken from where the camera is aimed now) shows it."""
+        found = find_links(grey_image(frame), self._finder, [self.markers], self.intrinsics, self.pose)
+        return read_object(found, self.markers, self.intrinsics, self.pose, self.limits)
 
     def perceive(self) -> Perception:
         """One look from where the head points now."""
         self._aim()
         frame = self.render()
-        link_ids = [asset.marker_id for asset in self.scene.markers]
-        found = self.detect_poses(frame, set(link_ids))
-        return Perception(tuple(found[m][0] if m in found else None for m in link_ids), frame,
-                          base_point_xy=self.base_point(found.get(link_ids[0])))
+        reading = self.read(frame)
+        return Perception(reading.link_orientations_deg, frame, base_point_xy=reading.base_point_xy)
 
     def look(self) -> Perception:
         """Look; while markers are missing, look again with the head turned to each side, keeping what each
@@ -214,25 +184,10 @@ class CameraPerception:
                           base_point_xy=base)
 
     def detect(self, frame: np.ndarray, wanted: set[int]) -> dict[int, float]:
-        """Marker id -> table angle for the wanted markers seen in `frame`."""
-        return {m: angle for m, (angle, _) in self.detect_poses(frame, wanted).items()}
-
-    def detect_poses(self, frame: np.ndarray, wanted: set[int]) -> dict[int, tuple[float, np.ndarray]]:
-        """Marker id -> (table angle, centre on the table) for the wanted markers seen in `frame`."""
-        grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
-        found: dict[int, tuple[float, np.ndarray]] = {}
-        for k in self.camera.upscales:
-            image = grey if k == 1 else cv2.resize(grey, None, fx=k, fy=k, interpolation=cv2.INTER_CUBIC)
-            corners, ids, _ = self._detector.detectMarkers(image)
-            if ids is not None:
-                for marker_corners, marker_id in zip(corners, ids.ravel()):
-                    if int(marker_id) in wanted and int(marker_id) not in found:
-                        # corner (x, y) of the enlarged image -> pixel coordinates of the frame
-                        pixels = (marker_corners.reshape(4, 2) + 0.5) / k - 0.5
-                        found[int(marker_id)] = self.marker_pose(pixels)
-            if wanted <= found.keys():
-                break
-        return found
+        """Marker id -> table angle for the wanted link markers seen (and trusted) in `frame`."""
+        reading = self.read(frame)
+        return {s.marker_id: s.measure.angle_deg for s in reading.sightings
+                if s.seen and s.measure is not None and s.marker_id in wanted}
 
 
 class FallbackPerception:

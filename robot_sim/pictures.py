@@ -21,7 +21,7 @@ from typing import Any, Sequence
 import cv2
 import numpy as np
 
-from planhrc.robot_sim.markers import aruco_dictionary
+from planhrc.robot_sim.vision import MarkerFinder, grey_image
 from planhrc.vocabulary import ActionOutcome, DecisionKind
 
 OUTCOME_COLOURS = {ActionOutcome.SUCCEEDED: "#2e7d32", ActionOutcome.PARTIAL: "#e07b00",
@@ -46,15 +46,28 @@ class PictureStep:
     markers_seen: int | None = None  # links whose marker the camera found (None: not perceived by camera)
 
 
+# What a bimanual plan's steps that turn nothing do, in words: {joint} is the joint, {pair} the two links it joins.
+HAND_STEP_WORDS = {"movetocentre": "centre the hands on {joint} ({pair})", "grasplinks": "grasp {pair} at {joint}",
+                   "releaselinks": "release {pair} at {joint}"}
+
+
 def describe_action(action: dict[str, Any] | None) -> str | None:
-    """`a_3 j2: turn l3 +90°, hold l2` from a next-action answer of the service."""
+    """`a_3 j2: turn l3 +90°, hold l2` from a next-action answer of the service; a bimanual plan's steps that turn
+    nothing say what they do: `a_1 j2: centre the hands on j2 (l2 and l3)`, `grasp l2 and l3 at j2`,
+    `release l2 and l3 at j2`."""
     if not action:
         return None
     held = "the table" if action.get("held_link_index") == 0 else f"l{action.get('held_link_index')}"
     step = action.get("step")
     last = action.get("last_step")
     steps = f"a_{step}" if last in (None, step) else f"a_{step}..a_{last}"
-    return (f"{steps} j{action.get('joint_index')}: turn l{action.get('turned_link_index')} "
+    joint = f"j{action.get('joint_index')}"
+    words = HAND_STEP_WORDS.get(str(action.get("name")))
+    if words is not None:
+        pair = " and ".join(f"l{k}" for k in sorted({int(action.get("held_link_index") or 0),
+                                                       int(action.get("turned_link_index") or 0)}) if k)
+        return f"{steps} {joint}: {words.format(joint=joint, pair=pair)}"
+    return (f"{steps} {joint}: turn l{action.get('turned_link_index')} "
             f"{int(action.get('delta_deg', 0)):+d}°, hold {held}")
 
 
@@ -153,17 +166,7 @@ def _wrap(text: str, width: int) -> str:
 def detect_markers(frame: np.ndarray, upscales: Sequence[int] = (2, 1, 3)) -> dict[int, np.ndarray]:
     """Marker id -> its 4 corners in frame pixels, found as the camera perception finds them (the markers are
     only ~20 px wide, so enlarged copies are searched too)."""
-    grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
-    detector = cv2.aruco.ArucoDetector(aruco_dictionary(), cv2.aruco.DetectorParameters())
-    found: dict[int, np.ndarray] = {}
-    for k in upscales:
-        image = grey if k == 1 else cv2.resize(grey, None, fx=k, fy=k, interpolation=cv2.INTER_CUBIC)
-        corners, ids, _ = detector.detectMarkers(image)
-        if ids is None:
-            continue
-        for marker_corners, marker_id in zip(corners, ids.ravel()):
-            found.setdefault(int(marker_id), (marker_corners.reshape(4, 2) + 0.5) / k - 0.5)
-    return found
+    return MarkerFinder(upscales, refine=False).find(grey_image(frame))
 
 
 def overlay_markers(frame: np.ndarray, markers: dict[int, np.ndarray]) -> np.ndarray:

@@ -33,6 +33,7 @@ import pybullet
 
 from planhrc.geometry import (EXECUTION, STRICT, Cell, Infeasibility, ObjectGeometry, RobotBody, Table, Tolerance,
                               configuration_feasible, rotated)
+from planhrc.robot_sim.camera import Board
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.markers import MarkerAsset, write_marker_asset
 from planhrc.vocabulary import Infeasible
@@ -72,8 +73,11 @@ class SceneSpec:
     joint_damping: float = 0.05
     unmarked_links: tuple[int, ...] = ()  # links whose marker is painted over (the camera cannot see them)
     table_friction: float = 0.15  # Bullet multiplies the two bodies' coefficients: the links have 1.0
+    board: Board | None = None  # calibration markers lying on the table (`camera.SIM_BOARD`); none by default
 
     def __post_init__(self) -> None:
+        if self.board is not None and any(m.marker_id < self.n_links for m in self.board.markers):
+            raise SimError(f"board: marker ids {sorted(self.board.ids)} must not be links' (0..{self.n_links - 1})")
         if self.n_links < 1:
             raise SimError(f"n_links: must be at least 1, got {self.n_links}")
         if self.n_links > 50:
@@ -178,6 +182,7 @@ class Scene:
         self.table: int = -1
         self.body: int = -1  # the object: its base is l1, its PyBullet link K-2 is lK
         self.marker_bodies: list[int] = []
+        self.board_bodies: dict[int, int] = {}  # the calibration board's marker id -> its body
         self.markers: list[MarkerAsset] = []
         self.time_s = 0.0  # the physics clock
         self.gripped: set[int] = set()  # links a robot gripper holds now
@@ -510,6 +515,14 @@ def _load_table(scene: Scene) -> None:
         basePosition=[s.table_center_xy[0], s.table_center_xy[1], s.table_top_z - half[2]],
     )
     c.changeDynamics(scene.table, -1, lateralFriction=s.table_friction)
+    for marker in s.board.markers if s.board is not None else ():
+        asset = write_marker_asset(scene.directory / "board", marker.marker_id, marker.size_m)
+        mesh = c.createVisualShape(pybullet.GEOM_MESH, fileName=str(asset.obj_path), meshScale=[1, 1, 1])
+        body = c.createMultiBody(baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=mesh,
+                                 basePosition=[marker.x, marker.y, marker.z],
+                                 baseOrientation=c.getQuaternionFromEuler([0.0, 0.0, marker.yaw_rad]))
+        c.changeVisualShape(body, -1, textureUniqueId=c.loadTexture(str(asset.image_path)), rgbaColor=[1, 1, 1, 1])
+        scene.board_bodies[marker.marker_id] = body
 
 
 def _load_object(scene: Scene) -> None:

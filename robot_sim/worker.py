@@ -39,6 +39,7 @@ from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, P
 from planhrc.robot_sim.pictures import caption_frame, detect_markers, draw_configurations, step_caption, write_movie
 from planhrc.robot_sim.scenarios import HumanEvent, Scenario, get_scenario
 from planhrc.robot_sim.episode import StepRecord, WorkerSummary, picture_steps
+from planhrc.robot_sim.recording import EpisodeRecorder, Recording
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene
 from planhrc.robot_sim.service_link import ServiceLink
@@ -133,12 +134,14 @@ def run_worker(
     kb: ServiceLink | None = None,
     record_motion: bool = True,
     record_frames: bool = True,
+    recording: Recording | None = None,
 ) -> WorkerSummary:
     """Run the cooperation loop against the KB service until the goal is reached, or it cannot go on.
 
     `record_frames=False` skips the camera frames and the GIF when perceiving without the camera (faster);
     `record_motion=False` leaves out the GIF's frames taken half-way through each action. `kb` is the link to
     the service (default: a `KBClient` on `kb_url`; the ROS 2 layer passes its link through the bridge's topics).
+    `recording` makes the episode's recorder (`--record`: the ROS 2 layer's bag in `out_dir`).
     """
     if perception not in ("camera", "fallback"):
         raise SimError(f"perception: must be 'camera' or 'fallback', got {perception!r}")
@@ -149,6 +152,8 @@ def run_worker(
     kb = kb if kb is not None else KBClient(kb_url, token=token)
     client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
     scene: Scene | None = None
+    recorder: EpisodeRecorder | None = None
+    summary: WorkerSummary | None = None
     try:
         if goal_link_orientations_deg is not None:
             kb.set_goal(object_id, link_orientations_deg=list(goal_link_orientations_deg))
@@ -159,16 +164,21 @@ def run_worker(
             raise SimError(f"scene_spec.n_links: {spec.n_links}, but object {object_id} has {len(links)} links")
         scenario = human_scenario if isinstance(human_scenario, Scenario) else get_scenario(human_scenario, spec.n_links)
         scene = build_scene(client, spec)
+        served = kb
         robot = Robot(scene, realtime_s=0.01 if gui else 0.0)
         camera = CameraPerception(client, scene)
-        perceiver = camera if perception == "camera" else FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed)
+        perceiver: Perceiver = (camera if perception == "camera"
+                                else FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed))
+        if recording is not None:
+            recorder = recording(out, obj, goal_link_orientations_deg)
+            served, perceiver = recorder.link(kb), recorder.perceiver(perceiver, camera)
         human = Human(scene)
         # a bimanual plan's grasps stay across its steps: the worker's hands remember them
         both = BothHands(scene, robot) if obj.get("formulation") == "bimanual" else None
         context = HumanContext(step_deg=float(obj.get("step_deg") or 360 / int(obj["orientations"])),
                                goal_differences=_read_goal_differences(kb, obj))
         run = _Run()
-        summary_reason = _loop(kb, object_id, scene, robot, camera, perceiver, human, scenario, context,
+        summary_reason = _loop(served, object_id, scene, robot, camera, perceiver, human, scenario, context,
                                max_steps, run, record_motion=record_motion and record_frames,
                                record_frames=record_frames, both=both)
         reached = summary_reason is StopReason.GOAL_REACHED
@@ -191,6 +201,8 @@ def run_worker(
         _save(out, summary, run, spec, goal_link_orientations_deg)
         return summary
     finally:
+        if recorder is not None:
+            recorder.close(summary)
         if scene is not None:
             scene.close()
         client.disconnect()

@@ -11,6 +11,7 @@ from planhrc.cli_args import (SubParsers, float_tuple, http_url, non_negative_fl
                               writable_dir)
 from planhrc.client import KBClient, ProtocolError
 from planhrc.robot_sim.errors import SimError
+from planhrc.robot_sim.recording import Recording
 from planhrc.robot_sim.scene import SceneSpec
 from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.robot_sim.worker import run_worker
@@ -61,17 +62,24 @@ def add_worker_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p.add_argument("--goal", type=float_tuple, default=None, help="goal link orientations to PUT before starting")
     p.add_argument("--sigma", type=non_negative_float, default=1.0, help="noise (deg) of the fallback perception")
     p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--record", action="store_true",
+                   help="write the episode as a rosbag2 bag (MCAP) in --out, on the bridge's topic names")
     p.set_defaults(func=run_worker_cli)
     return p
 
 
-def run_worker_cli(args: argparse.Namespace, link: ServiceLink | None = None) -> int:
-    """The worker's command; `link` is given by the ROS 2 layer for `--ros2`."""
+def run_worker_cli(args: argparse.Namespace, link: ServiceLink | None = None,
+                   recording: Recording | None = None) -> int:
+    """The worker's command; `link` is given by the ROS 2 layer for `--ros2`, `recording` for `--record`."""
     if args.kb is None and not args.ros2:
         print("planhrc worker: --kb: required (or --ros2, through a running ROS 2 bridge)", file=sys.stderr)
         return 2
     if args.ros2 and link is None:
         print("planhrc worker: --ros2: the ROS 2 link is made by `planhrc worker --ros2` in .venv-ros2", file=sys.stderr)
+        return 2
+    if args.record and recording is None:
+        print("planhrc worker: --record: the bag is written by the ROS 2 layer (`planhrc worker --record`)",
+              file=sys.stderr)
         return 2
     if args.gui and (problem := display_problem()):
         print(f"planhrc worker: --gui: {problem}", file=sys.stderr)
@@ -95,7 +103,8 @@ def run_worker_cli(args: argparse.Namespace, link: ServiceLink | None = None) ->
                 kwargs["base_point_xy"] = tuple(args.base)
             spec = SceneSpec(**kwargs)
         summary = run_worker(args.kb or "", args.object_id, spec, args.scenario, args.out, args.gui, args.max_steps,
-                             args.token, args.perception, args.goal, args.sigma, args.seed, kb=link)
+                             args.token, args.perception, args.goal, args.sigma, args.seed, kb=link,
+                             recording=recording)
     except (ProtocolError, SimError) as exc:
         print(f"planhrc worker: {exc}", file=sys.stderr)
         return 1

@@ -1,6 +1,7 @@
 """`planhrc worker --ros2` and `planhrc demo --ros2`: the robot's own commands, with the worker's link to the
 service made over the bridge's topics (`Ros2Link`) instead of HTTP. The demo starts a bridge for each episode's
-object beside the service it starts, so its worker talks ROS 2 only.
+object beside the service it starts, so its worker talks ROS 2 only. With `--record` (over HTTP or ROS 2) each
+episode is written as a rosbag2 bag (`bag`: no rclpy needed).
 """
 from __future__ import annotations
 
@@ -24,13 +25,18 @@ def add_worker_parser(subparsers: SubParsers) -> None:
 
 
 def run_worker_cli(args: argparse.Namespace) -> int:
+    from .bag import episode_bag
+
+    recording = episode_bag if args.record else None
+    if not args.ros2:
+        return run_robot_worker(args, recording=recording)
     if problem := rclpy_problem("worker --ros2"):
         print(f"planhrc worker: --ros2: {problem}", file=sys.stderr)
         return 2
     from .link import Ros2Link
 
     with Ros2Link(args.object_id) as link:
-        return run_robot_worker(args, link=link)
+        return run_robot_worker(args, link=link, recording=recording)
 
 
 def add_demo_parser(subparsers: SubParsers) -> None:
@@ -38,10 +44,15 @@ def add_demo_parser(subparsers: SubParsers) -> None:
 
 
 def run_demo_cli(args: argparse.Namespace) -> int:
+    from .bag import episode_bag
+
+    recording = episode_bag if args.record else None
+    if not args.ros2:
+        return run_robot_demo(args, recording=recording)
     if problem := rclpy_problem("demo --ros2"):
         print(f"planhrc demo: --ros2: {problem}", file=sys.stderr)
         return 2
-    return run_robot_demo(args, worker_link=bridged_link)
+    return run_robot_demo(args, worker_link=bridged_link, recording=recording)
 
 
 @contextmanager

@@ -146,6 +146,27 @@ def test_console_shows_the_object_its_plan_and_its_drawing(cell):
     assert cell["outside"] == []
 
 
+def test_a_bimanual_plan_names_each_step_by_what_it_does(cell):
+    client = cell["client"]
+    oid = client.post("/objects", json={"name": "arms", "links": 4, "orientations": 4,
+                                        "formulation": "bimanual"}).json()["id"]
+    assert client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90, 180]}).status_code == 200
+    assert client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0, 0]}).status_code == 200
+    names = [s["name"] for s in client.get(f"/objects/{oid}/plan").json()["steps"]]
+    page = open_page(cell["browser"], f"{cell['base']}/?object={oid}", cell["outside"], bypass_csp=True)
+    try:
+        page.fill("#token", TOKEN)
+        page.dispatch_event("#token", "change")
+        page.wait_for_selector("#plan li")
+        texts = page.locator("#plan li").all_inner_texts()
+    finally:
+        page.close()
+    assert len(texts) == len(names) and not any(" 0°" in t for t in texts), texts
+    for name, text in zip(names, texts):
+        words = {"grasplinks": ": grasp l", "releaselinks": ": release l", "movetocentre": ": centre the hands on joint j"}
+        assert words.get(name, ": joint j") in text and ("turn l" in text) == (name not in words), text
+
+
 def test_the_console_runs_under_its_own_content_security_policy(cell):
     """The page as a person's browser sees it: the policy allows this service only, and the page still works."""
     assert "default-src 'self'" in httpx.get(cell["base"] + "/").headers["content-security-policy"]

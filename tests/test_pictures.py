@@ -32,6 +32,11 @@ def test_actor_and_action_in_words():
     assert describe_action(action) == "a_2..a_3 j3: turn l4 -90°, hold l3"
     assert describe_action({**action, "last_step": 2, "held_link_index": 0}).endswith("hold the table")
     assert describe_action(None) is None
+    hands = {"step": 4, "joint_index": 2, "turned_link_index": 3, "held_link_index": 2, "delta_deg": 0}
+    assert describe_action({**hands, "name": "movetocentre"}) == "a_4 j2: centre the hands on j2 (l2 and l3)"
+    assert describe_action({**hands, "name": "grasplinks"}) == "a_4 j2: grasp l2 and l3 at j2"
+    assert describe_action({**hands, "name": "releaselinks"}) == "a_4 j2: release l2 and l3 at j2"
+    assert describe_action({**hands, "name": "rotateclockwise45", "delta_deg": 45}) == "a_4 j2: turn l3 +45°, hold l2"
 
 
 def test_frames_show_the_detected_markers_and_a_caption(tmp_path):

@@ -1,6 +1,6 @@
 """`planhrc demo --ros2`: the service, a ROS 2 bridge and the Baxter worker talking ROS 2 only run Fig 13 to the
-goal with the same decisions and actions as the demo over HTTP; SIGTERM leaves neither the service nor the bridge
-behind."""
+goal with the same decisions and actions as the demo over HTTP (and `--record` writes its bag); SIGTERM leaves
+neither the service nor the bridge behind."""
 from __future__ import annotations
 
 import json
@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from .test_bag_record import check_episode
 from .test_hygiene import processes, wait_for
 from .test_ros2_bridge import ROS2_PYTHON
 
@@ -33,7 +34,7 @@ def episode(out: Path) -> dict:
 
 
 def test_fig13_over_ros2_reaches_the_goal_as_over_http(tmp_path):
-    command, env = demo_command(ROS2_PYTHON, tmp_path / "ros2", "--ros2")
+    command, env = demo_command(ROS2_PYTHON, tmp_path / "ros2", "--ros2", "--record")
     ros2 = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600)
     assert ros2.returncode == 0, ros2.stderr[-3000:]
     command, env = demo_command(sys.executable, tmp_path / "http")
@@ -47,6 +48,7 @@ def test_fig13_over_ros2_reaches_the_goal_as_over_http(tmp_path):
     # the worker's requests went over ROS 2: the bridge posted them (its log names the object it served)
     log = (tmp_path / "ros2" / "episode-001" / "ros2-bridge.log").read_text(errors="replace")
     assert f"serving {over_ros2['object_id']}" in log and "Traceback" not in log
+    check_episode(over_ros2)  # recorded over ROS 2 as over HTTP: the bag holds what the summary holds
 
 
 @pytest.mark.parametrize("signum, code, word", [(signal.SIGTERM, 143, "terminated"), (signal.SIGINT, 130, "interrupted")])

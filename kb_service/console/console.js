@@ -204,6 +204,18 @@ function turnDraftLink(k, sign) {
 }
 
 // -- plan ---------------------------------------------------------------------------------------------------
+// A bimanual plan's steps that turn nothing say what they do (centre, grasp, release); every other step turns.
+const HAND_STEPS = {movetocentre: "centre the hands on", grasplinks: "grasp", releaselinks: "release"};
+
+function stepWords(s) {
+  const pair = [s.held_link_index, s.turned_link_index].filter((k) => k > 0).sort((a, b) => a - b).map((k) => `l${k}`).join(" and ");
+  if (s.name === "movetocentre") return `${HAND_STEPS[s.name]} joint j${s.joint_index} (${pair})`;
+  if (s.name in HAND_STEPS) return `${HAND_STEPS[s.name]} ${pair} at joint j${s.joint_index}`;
+  const dir = s.delta_deg > 0 ? "clockwise" : "anticlockwise";
+  const held = s.held_link_index === 0 ? "table" : `l${s.held_link_index}`;
+  return `joint j${s.joint_index}, hold ${held}, turn l${s.turned_link_index} ${dir} ${Math.abs(s.delta_deg)}°`;
+}
+
 function drawPlan() {
   const list = $("plan");
   list.replaceChildren();
@@ -215,9 +227,7 @@ function drawPlan() {
   $("plan-meta").textContent = `${plan.id} · ${n} step${n === 1 ? "" : "s"} · ${plan.planner}` + (following ? ` · ${status}` : " · not followed");
   for (const s of plan.steps) {
     const li = document.createElement("li");
-    const dir = s.delta_deg > 0 ? "clockwise" : "anticlockwise";
-    const held = s.held_link_index === 0 ? "table" : `l${s.held_link_index}`;
-    li.textContent = `a_${s.step} ${s.name}: joint j${s.joint_index}, hold ${held}, turn l${s.turned_link_index} ${dir} ${Math.abs(s.delta_deg)}°`;
+    li.textContent = `a_${s.step} ${s.name}: ${stepWords(s)}`;
     li.dataset.step = s.step;
     const done = following && (status === "goal_reached" || (ex.next_step !== null && s.step < ex.next_step));
     if (done) li.classList.add("done");
