@@ -288,9 +288,10 @@ def plan_work(placement: Placement, alphabet: Sequence[Move], target: Sequence[i
     space.goal_extra_ms = _goal_extra(space, rest)
     free = unconstrained_steps(target, orientations)
     if all(extra < 0 for extra in space.goal_extra_ms):
+        where = ("anywhere the robot could slide the object to" if slides else
+                 "where the object lies (no slide is asked for now)")
         return NoWork(reason=f"the goal does not fit on the table with {rest.clearance_m * 100:.1f} cm to spare from "
-                      "its edges, clear of the robot and unfolded, anywhere the robot could slide the object to",
-                      exhausted=True, expansions=0)
+                      f"its edges, clear of the robot and unfolded, {where}", exhausted=True, expansions=0)
     exhaustive = _Astar(space, hands, 1.0)
     now = time.monotonic()
     found = exhaustive.run(expansions, None if deadline_at is None else now + EXACT_SHARE * (deadline_at - now))

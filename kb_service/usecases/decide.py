@@ -112,8 +112,9 @@ def replan_request(obj: ArticulatedObject, perception: Perception, goal: State, 
                          placement(obj, perception.raw_deg, base, memo.refused, may_slide(memo, base)), moves)
 
 
-# Slides asked for per goal: room is made once or twice; a plan that still does not fit goes to the human.
-MAX_SLIDES = 2
+# Slides asked for per goal: room is made a few times at most (a slide the object ends short of, a human's move may
+# need another); a plan that still does not fit goes to the human.
+MAX_SLIDES = 4
 
 
 def may_slide(memo: ObjectMemo, base: Base) -> bool:
