@@ -38,7 +38,7 @@ import heapq
 import itertools
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -243,7 +243,7 @@ def unconstrained_steps(target: Sequence[int], orientations: int) -> int:
     return sum(min(t % orientations, -t % orientations) for t in target)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class _Space:
     """What the search knows of the object: its joints, the places it may lie, the costs, the judge."""
 
@@ -254,10 +254,9 @@ class _Space:
     costs: SkillCosts
     judge: TurnJudge
     places: tuple[tuple[float, float], ...]  # place 0: where the object lies
-    goal_extra_ms: tuple[int, ...]  # per place: the least slide time to a place where the goal fits (0: it fits)
     step_deg: int
-    base: tuple[float, ...] = ()
-    baseline: Baseline = field(default_factory=lambda: Baseline({}))
+    base: tuple[float, ...]  # the link orientations where the object lies (offsets 0)
+    goal_extra_ms: tuple[int, ...] = ()  # per place: the least slide time to where the goal fits (0: it fits here)
 
     def angles(self, offsets: Sequence[int]) -> tuple[float, ...]:
         turn = [0.0] * len(self.base)
@@ -282,9 +281,9 @@ def plan_work(placement: Placement, alphabet: Sequence[Move], target: Sequence[i
     step = 360 // orientations
     baseline = Baseline.of(placement.geometry, placement.link_deg, placement.cell)
     places = _places(placement, slides)
-    space = _Space(placement, alphabet, orientations, target, costs,
-                   TurnJudge(placement.geometry, placement.cell, baseline, rest, ROOMY_CHECK), places, (), step,
-                   tuple(float(a) for a in placement.link_deg), baseline)
+    space = _Space(placement=placement, alphabet=alphabet, orientations=orientations, target=target, costs=costs,
+                   judge=TurnJudge(placement.geometry, placement.cell, baseline, rest, ROOMY_CHECK), places=places,
+                   step_deg=step, base=tuple(float(a) for a in placement.link_deg))
     space.goal_extra_ms = _goal_extra(space, rest)
     free = unconstrained_steps(target, orientations)
     if all(extra < 0 for extra in space.goal_extra_ms):
@@ -310,7 +309,7 @@ def plan_work(placement: Placement, alphabet: Sequence[Move], target: Sequence[i
         found = greedy.run(expansions, deadline_at)
         spent += greedy.expansions
         if found is not None:
-            return _work(space, found, exact=False, lower_ms=max(lower, _ms(0)), free=free, expansions=spent)
+            return _work(space, found, exact=False, lower_ms=lower, free=free, expansions=spent)
         if greedy.exhausted:
             break
     return NoWork(reason=f"the search for a plan that fits the table stopped after {spent} configurations",
