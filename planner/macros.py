@@ -133,7 +133,7 @@ class MacroReport:
                 if len(forward.get(value, ())) != 1 or len(backward.get(value, ())) != 1:
                     return f"{relation} does not give every {'/'.join(sorted(types))} exactly one next and one previous"
         for name, position, types in self.variables:
-            values = set().union(*(objects.get(t, set()) for t in types)) if types else None
+            allowed = set().union(*(objects.get(t, set()) for t in types)) if types else None
             owners: dict[tuple[str, ...], str] = {}
             for atom in problem.init:
                 if atom[0] != name or len(atom) <= position + 1:
@@ -142,7 +142,7 @@ class MacroReport:
                 value = atom[1 + position]
                 if owner in owners:
                     return f"the init gives {name} two values for {' '.join(owner) or 'its one owner'}"
-                if values is not None and value not in values:
+                if allowed is not None and value not in allowed:
                     return f"the init's {format_atom(atom)} holds a value of another type"
                 owners[owner] = value
         return None
@@ -492,10 +492,10 @@ def _difference(theory: _Theory, macro: _Run, sequence: _Run) -> str | None:
         if left != right:
             return f"after it {format_atom(atom)} is {_truth(left)} for the macro, {_truth(right)} for its expansion"
     for key in sorted(set(macro.values) | set(sequence.values)):
-        left, right = (_value_after(r, need_m, key) for r in (macro, sequence))
-        if left != right:
-            return (f"after it {key[0]} of {' '.join(key[1]) or 'its owner'} is {left or 'unchanged'} for the "
-                    f"macro, {right or 'unchanged'} for its expansion")
+        value_m, value_s = (_value_after(r, need_m, key) for r in (macro, sequence))
+        if value_m != value_s:
+            return (f"after it {key[0]} of {' '.join(key[1]) or 'its owner'} is {value_m or 'unchanged'} for the "
+                    f"macro, {value_s or 'unchanged'} for its expansion")
     moves_m, moves_s = _others(macro), _others(sequence)
     for key in sorted(set(moves_m) | set(moves_s)):
         if moves_m.get(key) != moves_s.get(key):
