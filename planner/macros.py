@@ -170,20 +170,19 @@ def analyse(domain: Domain) -> MacroReport:
     theory = _Theory.of(domain, operators)
     faithful: dict[str, Expansion] = {}
     unfaithful: dict[str, str] = {}
-    used: set[tuple[str, frozenset[str]]] = set()
     for macro in operators:
         found = _prove(theory, macro, [op for op in operators if op.name != macro.name])
         if isinstance(found, Expansion):
             faithful[macro.name] = found
-            for name in [macro.name, *(step for step, _ in found.steps)]:
-                used |= theory.relations_of(name)
         elif found is not None:
             unfaithful[macro.name] = found
             log.info("action %s is not a faithful macro: %s", macro.name, found)
+    if not faithful:
+        return MacroReport(unfaithful=unfaithful)
     variables = tuple((name, position, theory.value_types.get(name, frozenset()))
                       for name, position in sorted(theory.svs.items()))
-    return MacroReport(faithful, unfaithful, tuple(sorted(used, key=lambda u: (u[0], sorted(u[1])))) if faithful
-                       else (), variables if faithful else ())
+    return MacroReport(faithful, unfaithful, tuple(sorted(theory.relations(), key=lambda u: (u[0], sorted(u[1])))),
+                       variables)
 
 
 # -- the domain as the proof reads it ---------------------------------------------------------------------------
@@ -222,20 +221,32 @@ class _Theory:
                 if all(_keeps_one_value(op, name, position, fluents) for op in operators):
                     svs[name] = position
                     break
-        moves: dict[tuple[str, int], _Move | str] = {}
+        while True:  # a state variable keeps one value only if every conditional change of it is a move
+            moves: dict[tuple[str, int], _Move | str] = {}
+            for op in operators:
+                for index, block in enumerate(op.effects):
+                    if block.variables or block.condition:
+                        moves[(op.name, index)] = _move_of(op, block, svs, fluents)
+            unread = {atom[0] for (name, index), move in moves.items() if isinstance(move, str)
+                      for atom in _block(operators, name, index).add if atom[0] in svs}
+            if not unread:
+                break
+            svs = {name: position for name, position in svs.items() if name not in unread}
         value_types: dict[str, set[str]] = {}
-        for op in operators:
-            for index, block in enumerate(op.effects):
-                if block.variables or block.condition:
-                    move = _move_of(op, block, svs, fluents)
-                    moves[(op.name, index)] = move
-                    if isinstance(move, _Move):
-                        value_types.setdefault(move.predicate, set()).update(move.value_types)
+        for move in moves.values():
+            if isinstance(move, _Move):
+                value_types.setdefault(move.predicate, set()).update(move.value_types)
         return cls(fluents, svs, moves, {k: frozenset(v) for k, v in value_types.items()})
 
-    def relations_of(self, operator: str) -> set[tuple[str, frozenset[str]]]:
-        return {(relation, move.value_types) for (name, _), move in self.moves.items()
-                if name == operator and isinstance(move, _Move) for relation, _ in move.word}
+    def relations(self) -> set[tuple[str, frozenset[str]]]:
+        """The static relations every move of the domain steps along, with their value types: each must be a
+        bijection for a move to leave one value per owner (a premise of every proof)."""
+        return {(relation, move.value_types) for move in self.moves.values() if isinstance(move, _Move)
+                for relation, _ in move.word}
+
+
+def _block(operators: Sequence[Operator], name: str, index: int) -> EffectBlock:
+    return next(op for op in operators if op.name == name).effects[index]
 
 
 def _keeps_one_value(op: Operator, name: str, position: int, fluents: frozenset[str]) -> bool:

@@ -186,3 +186,46 @@ def test_a_plan_no_validator_finished_on_is_answered_unvalidated_with_its_own_ex
     assert cli_main(args) == 3
     text = capsys.readouterr().out
     assert ": unvalidated in" in text and "no validator finished" in text and "(release-links" in text
+
+
+@pytest.mark.slow
+def test_both_validators_agree_on_random_plans_and_random_breakages_where_val_expands_macros_cheaply():
+    """On the project's own macro variant at K = 8 (VAL expands a macro there in milliseconds: 8^4 instances per
+    joint), shortest plans of random tasks and copies broken at random (a step dropped, two steps swapped, a turn
+    from the wrong angle): VAL on the expansion and VAL on the plan as given agree on every one."""
+    import random
+
+    from planhrc.bench.bimanual_tasks import domain_text, make_instances, problem_text
+    from planhrc.planner.inproc import InprocPlanner
+
+    domain = domain_text("macros")
+    assert macro_report(domain).faithful
+    rng = random.Random(11)
+    seen = {True: 0, False: 0}
+    for inst in make_instances([4, 5], [8], 3, "macros"):
+        task = problem_text(inst)
+        plan = InprocPlanner().solve(domain, task, 60.0).plan
+        assert any("-3 " in step for step in plan) or len(plan) < 3
+        copies = [plan]
+        for _ in range(3):
+            steps = list(plan)
+            how = rng.choice(("drop", "swap", "angle"))
+            i = rng.randrange(len(steps))
+            if how == "drop":
+                del steps[i]
+            elif how == "swap" and len(steps) > 1:
+                j = rng.randrange(len(steps))
+                steps[i], steps[j] = steps[j], steps[i]
+            else:
+                words = steps[i].strip("()").split()
+                angles = [k for k, w in enumerate(words) if w.startswith("a") and w[1:].isdigit()]
+                if angles:
+                    words[angles[0]] = "a" + str((int(words[angles[0]][1:]) + 45) % 360)
+                steps[i] = "(" + " ".join(words) + ")"
+            copies.append(tuple(steps))
+        for steps in copies:
+            expanded = check_plan(domain, task, steps, 120.0)
+            given = check_as_given(domain, task, steps, 120.0)
+            assert given is not None and expanded.valid == given.valid, (steps, expanded.reason, given.reason)
+            seen[expanded.valid] += 1
+    assert seen[True] >= 6 and seen[False] >= 6  # both verdicts seen often enough to mean something
