@@ -74,7 +74,7 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 if row["first_action_last_step"] is not None and row["accepted_before_answer"] >= \
                         row["first_action_last_step"]:
                     row["first_validated_action_s"] = row["seconds"]
-                timings = data.get("timings") or {}
+                timings = (data.get("timings") or {}) if answer["decision"] == "replan" else {}
                 row["stages_s"] = {k: round(float(timings[k]), 3) for k in STAGES if k in timings}
             else:
                 row["detail"] = str(r.json().get("detail", ""))[:160]
