@@ -40,7 +40,7 @@ import itertools
 import logging
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Iterator, Mapping, Sequence, Union
+from typing import Iterator, Mapping, Sequence
 
 from planhrc.model import EQUALITY, Atom, Literal, format_atom
 
@@ -766,5 +766,3 @@ class _Known:
                 true.add(atom)
         return _Known(frozenset(true), frozenset(false))
 
-
-Found = Union[Expansion, str, None]
