@@ -1,10 +1,15 @@
-"""`python -m planhrc.bench.large`: re-planning perceptions of large objects over HTTP, within the planning deadline?
+"""`python -m planhrc.bench.large`: re-planning perceptions of large objects over HTTP: the time to the first
+validated action.
 
 For each size (default 50 links x 36 and 200 x 12, absolute), a fresh `planhrc serve` (its planning pool on, the
-settings' deadline) gets one object with a random goal and `--runs` perceptions at random configurations, one
-after the other once the last plan's later VAL pieces have their verdicts. Per perception: the HTTP status, the
-wall time to the answer, the plan's length and how many of its steps VAL had accepted before the answer (the first
-motion, or the whole plan when it was checked in one piece) against how many it checked behind it. A 503 is the deadline passing; it is reported, never retried.
+planning deadline the settings', or `--deadline`) gets one object with a random goal and `--runs` perceptions at
+random configurations, one after the other once the last plan's later VAL pieces have their verdicts. Per
+perception: the HTTP status, the wall time to the answer, which is the time to the first validated action when the
+answer names one (a re-plan is answered once VAL accepted its first motion, and the store checked it), the plan's
+length and how many of its steps were checked before the answer (the first motion, or the whole plan when it was
+checked in one piece) against how many behind it, and the re-plan's stages as the service timed them (translate,
+plan, expected states: the replay of every step, which the store needs whole; VAL before the answer). A 503 is the
+deadline passing; it is reported, never retried.
 """
 from __future__ import annotations
 
@@ -33,10 +38,15 @@ def _size(text: str) -> tuple[int, int]:
     return int(links), int(k)
 
 
-def measure_size(links: int, orientations: int, formulation: str, runs: int, seed: int) -> dict[str, Any]:
+STAGES = ("translate", "plan", "expected_states", "validate")
+
+
+def measure_size(links: int, orientations: int, formulation: str, runs: int, seed: int,
+                 deadline_s: float | None = None) -> dict[str, Any]:
     rng = random.Random(seed)
     rows = []
-    with tempfile.TemporaryDirectory(prefix="planhrc-bench-large-") as tmp, running_service(Path(tmp)) as server, \
+    env = {"PLANHRC_PLANNING_DEADLINE_S": str(deadline_s)} if deadline_s is not None else None
+    with tempfile.TemporaryDirectory(prefix="planhrc-bench-large-") as tmp, running_service(Path(tmp), env) as server, \
             httpx.Client(base_url=server.url, timeout=120, headers={"Authorization": f"Bearer {TOKEN}"}) as client:
         ident = create_object(client, links, orientations, formulation, f"large-{links}x{orientations}")
         set_goal(client, ident, random_angles(rng, links, orientations))
@@ -61,6 +71,11 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                     steps = len(client.get(f"/objects/{ident}/plan").json()["steps"])
                     row["plan_steps"] = row["accepted_before_answer"] = steps
                 row["first_action_last_step"] = (answer.get("next_action") or {}).get("last_step")
+                if row["first_action_last_step"] is not None and row["accepted_before_answer"] >= \
+                        row["first_action_last_step"]:
+                    row["first_validated_action_s"] = row["seconds"]
+                timings = (data.get("timings") or {}) if answer["decision"] == "replan" else {}
+                row["stages_s"] = {k: round(float(timings[k]), 3) for k in STAGES if k in timings}
             else:
                 row["detail"] = str(r.json().get("detail", ""))[:160]
             rows.append(row)
@@ -71,21 +86,25 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
 def markdown(report: dict[str, Any]) -> str:
     m = report["machine"]
     lines = [f"machine: {m['cpu']}, {m['cores']} cores; planning deadline {report['deadline_s']} s; "
-             f"load average {report['load_at_start']} at the start", "",
-             "| object | perception | HTTP | seconds | decision | plan steps | VAL-accepted before the answer |",
-             "|---|---|---|---|---|---|---|"]
+             f"load average {report['load_at_start']} at the start, {report.get('load_at_end', '-')} at the end", "",
+             "| object | perception | HTTP | seconds | first validated action s | decision | plan steps | "
+             "checked before the answer | translate / plan / expected states / VAL s |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for size in report["sizes"]:
         for i, row in enumerate(size["rows"], start=1):
+            stages = row.get("stages_s") or {}
+            said = " / ".join(str(stages.get(k, "-")) for k in STAGES) if stages else "-"
             lines.append(f"| {size['links']} x {size['orientations']} {size['formulation']} | {i} | {row['status']} | "
-                         f"{row['seconds']} | {row.get('decision', row.get('detail', '-'))} | "
-                         f"{row.get('plan_steps', '-')} | {row.get('accepted_before_answer', '-')} |")
+                         f"{row['seconds']} | {row.get('first_validated_action_s', '-')} | "
+                         f"{row.get('decision', row.get('detail', '-'))} | {row.get('plan_steps', '-')} | "
+                         f"{row.get('accepted_before_answer', '-')} | {said} |")
     return "\n".join(lines)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     import os
 
-    from planhrc.cli_args import OneLineParser, positive_int, writable_dir
+    from planhrc.cli_args import OneLineParser, positive_float, positive_int, writable_dir
 
     parser = OneLineParser(prog="python -m planhrc.bench.large", description=__doc__,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -94,11 +113,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--formulation", choices=["relative", "absolute"], default="absolute")
     parser.add_argument("--runs", type=positive_int, default=3, help="perceptions per size")
     parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--deadline", type=positive_float, default=None,
+                        help="the service's planning deadline in seconds (default: the settings')")
     parser.add_argument("--out", type=writable_dir, default=None, help="folder for large.json and large.md")
     args = parser.parse_args(argv)
-    report: dict[str, Any] = {"machine": machine_info(), "deadline_s": make_settings().planning_deadline_s,
-              "load_at_start": round(os.getloadavg()[0], 2),
-              "sizes": [measure_size(links, k, args.formulation, args.runs, args.seed) for links, k in args.sizes]}
+    report: dict[str, Any] = {"machine": machine_info(),
+                              "deadline_s": args.deadline or make_settings().planning_deadline_s,
+                              "load_at_start": round(os.getloadavg()[0], 2),
+                              "sizes": [measure_size(links, k, args.formulation, args.runs, args.seed, args.deadline)
+                                        for links, k in args.sizes]}
+    report["load_at_end"] = round(os.getloadavg()[0], 2)
     table = markdown(report)
     print(table)
     if args.out:

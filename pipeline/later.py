@@ -6,7 +6,8 @@ checked once the plan is stored, while the answer is sent. Their VAL processes s
 write and run at a lower priority (nice `BACKGROUND_NICE` above the service's), so that the first motion's VAL
 processes, the write and the service's next requests come first: started beside the first motion instead (at the
 lower priority, or as soon as the first motion was accepted), they made the answer slower (see the docs' re-planning
-page).
+page). Each later piece has the store's checks of its steps (their actions and expected states: a `Precheck`, given
+with the recorder) before VAL: the answer checked only the first motion's, and a piece's verdict covers both.
 """
 from __future__ import annotations
 
@@ -27,6 +28,9 @@ log = logging.getLogger(__name__)
 BACKGROUND_NICE = 10  # the later pieces' VAL processes run this much nicer than the service
 
 Recorder = Callable[[PieceVerdict], None]
+# The checks of a piece's steps besides VAL (the store's, of their actions and expected states): None when they
+# pass, else the refusal in words. A piece they refuse is refused without VAL.
+Precheck = Callable[[int, int], "str | None"]
 
 
 class LaterPieces:
@@ -51,6 +55,7 @@ class LaterPieces:
         self._claimed: set[int] = set()
         self._done: set[int] = set()  # handed to the recorder (written, or failed to be)
         self._recorder: Recorder | None = None
+        self._precheck: Precheck | None = None
         self._groups: set[int] = set()
         self._cancelled = False
         self._started = False
@@ -79,12 +84,16 @@ class LaterPieces:
             self._run(index)
 
     def _run(self, index: int) -> None:
+        first, last = self.pieces[index]
         try:
-            result = self._check(self.domain, self._build(*self.pieces[index]), self.timeout_s, self.nice,
-                                 self._group)
+            refusal = self._precheck(first, last) if self._precheck is not None else None
+            if refusal is not None:
+                result = ValidationResult(False, refusal, 0.0)
+            else:
+                result = self._check(self.domain, self._build(first, last), self.timeout_s, self.nice, self._group)
         except Exception as exc:  # a verdict must come whatever happens: no verdict means "refused"
-            log.exception("VAL on a later piece failed")
-            result = ValidationResult(False, f"VAL could not run: {type(exc).__name__}: {exc}", 0.0)
+            log.exception("checking a later piece failed")
+            result = ValidationResult(False, f"the piece could not be checked: {type(exc).__name__}: {exc}", 0.0)
         with self._cond:
             if self._cancelled:
                 self._done.add(index)
@@ -100,10 +109,12 @@ class LaterPieces:
         if cancelled:
             _kill(pgid)
 
-    def attach(self, recorder: Recorder) -> None:
-        """From now on each verdict goes to `recorder` (those already known at once)."""
+    def attach(self, recorder: Recorder, precheck: Precheck | None = None) -> None:
+        """From now on each verdict goes to `recorder` (those already known at once); with `precheck`, each piece
+        not yet started has its steps checked by it first (see `Precheck`)."""
         with self._cond:
             self._recorder = recorder
+            self._precheck = precheck
             ready = list(self._results)
         for index in ready:
             self._record(index)

@@ -34,7 +34,7 @@ from planhrc.vocabulary import PlanningStatus
 from . import val_runs
 from .config import PlanningConfig, PlanOutcome, problem_name, time_left
 from .gate import PieceVerdict, Verdict
-from .later import LaterPieces, Recorder
+from .later import LaterPieces, Precheck, Recorder
 from .motion import step_text
 from .pieces import MIN_PIECE_STEPS, ValPiece, early_answer_first_piece, piece_bounds, piece_of
 
@@ -71,6 +71,8 @@ class VerdictHandle:
         self._deadline_at = deadline_at
         self._later = later
         self._final: PlanOutcome | None = None if self._checks else plan
+        # with the early answer: the steps checked before the answer (the first motion's), else None (every step)
+        self.steps_before_answer = later.accepted[-1][1] if later is not None and later.accepted else None
 
     @classmethod
     def settled(cls, outcome: PlanOutcome) -> VerdictHandle:
@@ -199,10 +201,11 @@ class Validator:
                              deadline_at=deadline_at, later=later)
 
     # -- plans behind the answer --------------------------------------------------------------------------------
-    def follow(self, object_id: str, plan_id: str | None, handle: VerdictHandle | None, record: Recorder) -> None:
+    def follow(self, object_id: str, plan_id: str | None, handle: VerdictHandle | None, record: Recorder,
+               precheck: Precheck | None = None) -> None:
         """The object's plan is now `plan_id` (None: it has none): stop checking the previous plan's later pieces;
-        when `handle`'s plan was adopted on its early answer, check its later pieces now, behind the answer, and
-        hand each verdict to `record`."""
+        when `handle`'s plan was adopted on its early answer, check its later pieces now, behind the answer (each
+        first by `precheck` when given, then by VAL), and hand each verdict to `record`."""
         later = handle._later if handle is not None and handle.early_answer() is not None else None
         with self._guard:
             previous = self._later.pop(object_id, None)
@@ -211,7 +214,7 @@ class Validator:
         if previous is not None and previous[1] is not later:
             previous[1].cancel()
         if later is not None and plan_id is not None:
-            later.attach(record)
+            later.attach(record, precheck)
             later.start()  # only now: the first motion's VAL and the write had the cores to themselves
 
     def stop(self, object_id: str) -> None:

@@ -110,13 +110,16 @@ class Infeasible(StrEnum):
 
 class PlanStatus(StrEnum):
     """How planning ended: "unsolvable" and "timeout" are results, not exceptions. A planner call answers one of
-    the first four; `invalid` is the pipeline's, for a plan that VAL or the replay refused."""
+    the first four; `invalid` is the pipeline's, for a plan that VAL or the replay refused; `unvalidated` the
+    fallback chain's, for a plan no validator gave a verdict on (not asked, or none finished in time): "solved"
+    from the chain means validated."""
 
     SOLVED = "solved"
     UNSOLVABLE = "unsolvable"
     TIMEOUT = "timeout"
     ERROR = "error"
     INVALID = "invalid"
+    UNVALIDATED = "unvalidated"
 
 
 # The pipeline's and the service's name for `PlanStatus` (the same enum), kept while they still say it.

@@ -5,9 +5,13 @@ plan VAL accepts end the chain.
 
 A planner's answer ends the chain when it is a plan VAL accepts against the domain and problem *as given* (not a
 normalised copy: VAL is the judge of the text the user gave) or a proof that there is none (status unsolvable).
-A plan VAL refuses is an attempt with status invalid and VAL's reason, and the task goes on to the next planner,
-as after an error (the task is outside what the planner takes, a crash) or a timeout. VAL's time comes out of the
-chain's: a plan VAL cannot check in the time left is an attempt that timed out.
+VAL checks the plan itself, or its expansion into the actions its macros stand for when the domain's macros are
+proved faithful (`planner.checking`: `PlanResult.checked_by` says which). A plan VAL refuses is an attempt with
+status invalid and VAL's reason, and the task goes on to the next planner, as after an error (the task is outside
+what the planner takes, a crash) or a timeout. VAL's time comes out of the chain's: a plan on which no validator
+gives a verdict in the time left (VAL did not finish, or ended without one) is an attempt with status unvalidated,
+its plan kept, and the task goes on; when no later planner ends the chain, that plan is the answer, with status
+`unvalidated` and the reason (never "timeout" for a task a planner solved).
 
 `validate=False` skips VAL, for speed: the answer then says so (`PlanResult.validated` is False). The returned
 `PlanResult` is the deciding planner's, with `seconds` covering the whole chain (VAL included) and `attempts`
@@ -28,7 +32,7 @@ from .errors import PlannerError
 from .inproc import parsed_domain
 from .registry import PLANNERS, get_planner
 from .result import PlannerAttempt, PlanResult, PlanStatus
-from .validate import validate_plan
+from .checking import check_plan
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +63,7 @@ def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeo
     start = time.perf_counter()
     attempts: list[PlannerAttempt] = []
     last: PlanResult | None = None
+    unvalidated: PlanResult | None = None  # the first plan no validator gave a verdict on
     for name in names:
         remaining = timeout_s - (time.perf_counter() - start)
         if remaining <= 0:
@@ -70,6 +75,8 @@ def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeo
             result = judged(result, validation_domain or domain, problem, timeout_s - (time.perf_counter() - start))
         attempts.append(PlannerAttempt(backend.name, result.status, result.message, result.seconds))
         last = result
+        if result.status is PlanStatus.UNVALIDATED and unvalidated is None:
+            unvalidated = result
         if result.status in FINAL_STATUSES:
             break
     elapsed = time.perf_counter() - start
@@ -79,6 +86,8 @@ def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeo
                           warnings=warnings)
     if last.status in FINAL_STATUSES:
         return replace(last, seconds=elapsed, attempts=tuple(attempts), warnings=warnings)
+    if unvalidated is not None:
+        return replace(unvalidated, seconds=elapsed, attempts=tuple(attempts), warnings=warnings)
     status = PlanStatus.TIMEOUT if any(a.status is PlanStatus.TIMEOUT for a in attempts) else PlanStatus.ERROR
     summary = "; ".join(f"{a.planner}: {a.status.value}" + (f" ({a.message})" if a.message else "") for a in attempts)
     return PlanResult(status, (), elapsed, last.planner, f"no planner produced a plan: {summary}", None,
@@ -86,28 +95,30 @@ def plan_with_fallback(domain: str, problem: str, planners: Sequence[str], timeo
 
 
 def judged(result: PlanResult, domain: str, problem: str, remaining_s: float) -> PlanResult:
-    """A solved result checked by VAL against the texts as given: validated, invalid with VAL's reason, or a
-    timeout when VAL cannot answer in the time left (the VAL time is added to the planner's)."""
+    """A solved result checked against the texts as given (`planner.checking.check_plan`: VAL on the plan, or on its
+    expansion into the actions its faithful macros stand for): validated, invalid with VAL's reason, or unvalidated
+    (the plan kept) when no validator gives a verdict in the time left. The check's time is added to the planner's."""
     start = time.perf_counter()
     if remaining_s <= 0:
-        return replace(result, status=PlanStatus.TIMEOUT, plan=(), optimal=None,
-                       message=f"{result.message + '; ' if result.message else ''}no time left for VAL")
+        return replace(result, status=PlanStatus.UNVALIDATED,
+                       message=f"{result.message + '; ' if result.message else ''}no time left for a validator")
     try:
-        check = validate_plan(domain, problem, result.plan, timeout_s=remaining_s)
+        check = check_plan(domain, problem, result.plan, timeout_s=remaining_s)
     except PlannerError as exc:  # VAL did not answer in the time left
-        return replace(result, status=PlanStatus.TIMEOUT, plan=(), optimal=None,
-                       seconds=result.seconds + time.perf_counter() - start, message=str(exc))
+        return replace(result, status=PlanStatus.UNVALIDATED, seconds=result.seconds + time.perf_counter() - start,
+                       message=f"no validator finished in the time left: {exc}")
     seconds = result.seconds + check.seconds
     if check.valid:
-        return replace(result, seconds=seconds, validated=True)
+        return replace(result, seconds=seconds, validated=True, checked_by=check.by.value, check_note=check.note)
     if val_crashed(check.reason):  # no verdict either way: not solved, and not said to be invalid
         log.warning("VAL ended without a verdict on the plan of %s: %s", result.planner, check.reason)
-        return replace(result, status=PlanStatus.ERROR, plan=(), optimal=None, seconds=seconds,
+        return replace(result, status=PlanStatus.UNVALIDATED, seconds=seconds,
                        message=f"VAL ended without a verdict on its plan of {len(result.plan)} step(s) "
                                f"({' '.join(check.reason.split())}: out of memory or killed)")
     log.warning("VAL rejected the plan of %s: %s", result.planner, check.reason)
     return replace(result, status=PlanStatus.INVALID, plan=(), optimal=None, seconds=seconds,
-                   message=f"VAL rejected its plan of {len(result.plan)} step(s): {check.reason}")
+                   message=f"VAL rejected its plan of {len(result.plan)} step(s): {check.reason}",
+                   checked_by=check.by.value, check_note=check.note)
 
 
 def val_crashed(reason: str) -> bool:

@@ -26,6 +26,8 @@ class PlanResult:
     fallback chain tried (the last one produced this result); it is empty for a single planner's call.
     `validated` is True once VAL accepted `plan` against the domain and problem as given (the fallback chain's
     check, `planner.chain`); a single planner's answer, or the chain's with `validate=False`, is unvalidated.
+    `checked_by` says which check gave the verdict (`planner.checking.CheckedBy`: VAL on the plan, or on its
+    expansion into the actions its macros stand for; "" when none did) and `check_note` why that one.
     `warnings` are the domain's reading notes (`planner.pddl.Domain.warnings`).
     """
 
@@ -38,6 +40,8 @@ class PlanResult:
     attempts: tuple[PlannerAttempt, ...] = ()
     validated: bool = False
     warnings: tuple[str, ...] = ()
+    checked_by: str = ""
+    check_note: str = ""
 
     @property
     def solved(self) -> bool:

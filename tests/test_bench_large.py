@@ -16,9 +16,12 @@ def test_a_size_that_is_not_links_x_k_is_refused_in_one_line(capsys, tmp_path):
 
 @pytest.mark.integration
 def test_a_small_absolute_object_is_answered_with_its_validated_first_motion(tmp_path):
-    assert main(["--sizes", "6x8", "--runs", "2", "--out", str(tmp_path)]) == 0
+    assert main(["--sizes", "6x8", "--runs", "2", "--deadline", "600", "--out", str(tmp_path)]) == 0
     report = json.loads((tmp_path / "large.json").read_text())
     rows = report["sizes"][0]["rows"]
+    assert report["deadline_s"] == 600
     assert [r["status"] for r in rows] == [200, 200] and rows[0]["decision"] == "replan"
     assert 1 <= rows[0]["accepted_before_answer"] <= rows[0]["plan_steps"]
+    assert rows[0]["first_validated_action_s"] == rows[0]["seconds"]  # the answer names a validated first motion
+    assert set(rows[0]["stages_s"]) >= {"translate", "plan", "expected_states"}
     assert "| 6 x 8 absolute | 1 | 200 |" in (tmp_path / "large.md").read_text()

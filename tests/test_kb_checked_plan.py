@@ -115,3 +115,26 @@ def test_a_plan_checked_ahead_has_its_journal_row_made_ahead_too(kb, monkeypatch
     monkeypatch.setattr(journal, "encode_body", made_inside)
     plan = kb.add_plan(problem.id, "inproc", checked.actions, checked.expected_states, checked)
     assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == list(states)
+
+
+def test_a_check_of_the_first_steps_leaves_the_later_ones_to_check_steps(kb):
+    """`check_plan(..., first_steps=n)` checks the first n actions and the states up to s^e_(n+1), nothing after (a
+    state of another object later in the plan passes it); `check_steps` then checks a later range and refuses that
+    state, naming its field; a range outside the plan is refused too. The plan so checked is written as given."""
+    a, b = make_object("obj1", "absolute", 3, 4), make_object("obj2", "absolute", 3, 4)
+    kb.create_object(a)
+    kb.create_object(b)
+    init = kb.add_state("obj1", "perceived", a.state([0, 90, 180]))
+    actions, states = plan_for(a, init.atoms, [(1, True), (2, False), (3, True)])
+    foreign = b.state([0, 0, 0])
+    bad = (*states[:3], foreign)  # s^e_4 (after a_3) belongs to obj2
+    checked = kb.check_plan("obj1", actions, bad, first_steps=2)
+    assert checked.checked_steps == 2 and checked.expected_states == bad
+    assert kb.check_plan("obj1", actions, states).checked_steps is None  # every step
+    kb.check_steps("obj1", actions, bad, 1, 2)
+    with pytest.raises(ValidationError, match=r"expected_states\[3\]"):
+        kb.check_steps("obj1", actions, bad, 3, 3)
+    with pytest.raises(ValidationError, match="steps: a_3..a_4"):
+        kb.check_steps("obj1", actions, states, 3, 4)
+    with pytest.raises(ValidationError, match=r"expected_states\[3\]"):
+        kb.check_plan("obj1", actions, bad)  # a whole check still finds it

@@ -50,7 +50,7 @@ def _parameters(method: object) -> str:
 
 
 def test_the_protocols_ask_for_what_the_service_calls():
-    service_calls = {"transaction", "add_perception", "check_plan", "add_plan", "get_state", "get_plan", "get_action",
+    service_calls = {"transaction", "add_perception", "check_plan", "check_steps", "add_plan", "get_state", "get_plan", "get_action",
                      "get_problem", "add_event", "list_events", "get_execution", "set_execution", "recall_response",
                      "remember_response", "new_object_id", "create_object", "get_object", "list_objects", "add_state",
                      "add_problem", "latest_plan", "latest_problem", "export", "export_lines", "settle",

@@ -244,16 +244,41 @@ def check_action(info: ObjectInfo, i: int, spec: Any) -> None:
 
 
 def check_plan(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_states: tuple[frozenset[Atom], ...],
-               deadline_at: float | None = None) -> CheckedPlan:
+               deadline_at: float | None = None, first_steps: int | None = None) -> CheckedPlan:
     """Every check a plan's write makes on its actions and expected states, stopped with a DeadlineError once
-    `deadline_at` (`time.monotonic()`) has passed: a caller's request deadline bounds the check of a huge plan."""
+    `deadline_at` (`time.monotonic()`) has passed: a caller's request deadline bounds the check of a huge plan.
+
+    With `first_steps`, only what the plan's first `first_steps` steps need: their actions and the expected states
+    s^e_1 .. s^e_(first_steps+1); the caller checks each later step (`check_steps`) before it uses it (the service
+    answers a long plan once its first motion is checked and gates each later motion on its checks)."""
     if len(expected_states) != len(actions) + 1:
         raise ValidationError(
             f"expected_states: a plan of {len(actions)} actions needs {len(actions) + 1} expected states "
             f"(s^e_1 .. s^e_N+1), got {len(expected_states)}"
         )
+    steps = len(actions) if first_steps is None else max(0, min(first_steps, len(actions)))
+    _check_actions(info, actions, 0, steps)
+    _check_states(info, expected_states, 0, steps + 1, deadline_at)
+    return CheckedPlan(info.obj.ident, actions, expected_states,
+                       checked_steps=None if steps == len(actions) else steps)
+
+
+def check_steps(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_states: tuple[frozenset[Atom], ...],
+                first: int, last: int) -> None:
+    """The checks of steps a_first .. a_last (1-based, inclusive) of a plan that `check_plan` checked up to a step
+    before them: their actions and the expected states they lead to, s^e_(first+1) .. s^e_(last+1)."""
+    if not 1 <= first <= last <= len(actions) or len(expected_states) != len(actions) + 1:
+        raise ValidationError(f"steps: a_{first}..a_{last} are not steps of a plan of {len(actions)} actions with "
+                              f"{len(expected_states)} expected states")
+    _check_actions(info, actions, first - 1, last)
+    _check_states(info, expected_states, first, last + 1, None)
+
+
+def _check_actions(info: ObjectInfo, actions: tuple[ActionSpec, ...], start: int, end: int) -> None:
+    """`check_action` on actions[start:end], each at most once per object (`ObjectInfo.valid_actions`)."""
     valid = info.valid_actions
-    for i, spec in enumerate(actions):
+    for i in range(start, end):
+        spec = actions[i]
         try:
             if spec in valid:
                 continue
@@ -264,12 +289,16 @@ def check_plan(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_state
         if len(valid) >= MAX_VALID_ACTIONS:
             valid.clear()
         valid.add(spec)
-    for i, atoms in enumerate(expected_states):
+
+
+def _check_states(info: ObjectInfo, expected_states: tuple[frozenset[Atom], ...], start: int, end: int,
+                  deadline_at: float | None) -> None:
+    """`check_state_atoms` on expected_states[start:end] (0-based), past `deadline_at` a DeadlineError."""
+    for i in range(start, end):
         if deadline_at is not None and time.monotonic() > deadline_at:
             raise DeadlineError(f"planning: the deadline passed while the store checked expected state {i + 1} of "
                                 f"{len(expected_states)}")
-        check_state_atoms(info, "expected", atoms, f"expected_states[{i}]")
-    return CheckedPlan(info.obj.ident, actions, expected_states)
+        check_state_atoms(info, "expected", expected_states[i], f"expected_states[{i}]")
 
 
 def is_checked(checked: CheckedPlan | None, object_id: str, actions: tuple[ActionSpec, ...],

@@ -14,7 +14,7 @@ from typing import Iterator, Protocol, Sequence
 from planhrc.model import ArticulatedObject, Atom, Perception
 
 from .cache import R, RecordCache
-from .checks import check_export, check_plan
+from .checks import check_export, check_plan, check_steps
 from .errors import NotFoundError, ValidationError
 from .execution import ExecutionCursor
 from .export import export_pieces
@@ -104,13 +104,19 @@ class StoreFacade:
             return self._writes.add_plan(problem_id, planner, actions, expected_states, checked)
 
     def check_plan(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
-                   deadline_at: float | None = None) -> CheckedPlan:
+                   deadline_at: float | None = None, first_steps: int | None = None) -> CheckedPlan:
         with self._guard:  # only to look the object up: the checks read nothing else
             info = self._records.info(object_id, "object_id")
-        checked = check_plan(info, tuple(actions), tuple(expected_states), deadline_at)
+        checked = check_plan(info, tuple(actions), tuple(expected_states), deadline_at, first_steps)
         # the journal row's body too, here, outside the store's lock: for a large plan the write would hold the
         # lock every object's write needs for most of a second making it (`journal.encode_body`)
         return replace(checked, journal_body=encode_body(checked.actions, checked.expected_states))
+
+    def check_steps(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
+                    first: int, last: int) -> None:
+        with self._guard:
+            info = self._records.info(object_id, "object_id")
+        check_steps(info, tuple(actions), tuple(expected_states), first, last)
 
     def _checked_execution(self, object_id: str, execution: Execution) -> str:
         """Check a new execution of an object (with the store's guard held); the object's id."""

@@ -126,10 +126,17 @@ class Reads(Protocol):
 @runtime_checkable
 class PlanChecks(Protocol):
     def check_plan(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
-                   deadline_at: float | None = None) -> CheckedPlan:
+                   deadline_at: float | None = None, first_steps: int | None = None) -> CheckedPlan:
         """Every check `add_plan` makes, without the store's lock and without writing: a caller runs it beside
         other work (the service: while VAL checks the plan). Past `deadline_at` (`time.monotonic()`) it raises
-        `DeadlineError`."""
+        `DeadlineError`. With `first_steps`, only the checks of the first steps (`checks.check_plan`): the caller
+        checks every later step with `check_steps` before it uses it."""
+        ...
+
+    def check_steps(self, object_id: str, actions: Sequence[ActionSpec], expected_states: Sequence[frozenset[Atom]],
+                    first: int, last: int) -> None:
+        """The checks of steps a_first .. a_last of a plan checked with `first_steps` (their actions and the expected
+        states after them): `ValidationError` naming the field when one fails."""
         ...
 
 

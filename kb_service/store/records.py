@@ -75,12 +75,15 @@ class Execution:
 class CheckedPlan:
     """A plan's actions and expected states, checked against their object (`check_plan`) before its write: the
     write (`add_plan(..., checked=...)`) given these very tuples does not check them again, and takes its journal
-    row's body from `journal_body` when there is one (made with the check, outside the store's lock)."""
+    row's body from `journal_body` when there is one (made with the check, outside the store's lock). A check of the
+    first steps only (`checked_steps`: their actions and the states up to s^e_(checked_steps+1)) leaves the later
+    steps to the caller (`check_steps`, before each is used)."""
 
     object_id: str
     actions: tuple[ActionSpec, ...]
     expected_states: tuple[frozenset[Atom], ...]
     journal_body: bytes | None = None
+    checked_steps: int | None = None  # None: every step
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,10 @@ import logging
 import time
 
 from planhrc.model import ArticulatedObject
-from planhrc.pipeline import gate
+from planhrc.pipeline import PieceVerdict, Verdict, gate
 from planhrc.planner.errors import PlannerError
 
-from ..store import DeadlineError, StoredAction, StoredPlan
+from ..store import DeadlineError, StoredAction, StoredPlan, ValidationError
 from .actions import last_step, merges
 from .context import Context
 from .log import record_verdict
@@ -56,6 +56,12 @@ def _recheck(context: Context, obj: ArticulatedObject, plan: StoredPlan, number:
     _, view = context.views.get(store, plan.id)
     assert view is not None
     actions = [a.spec for a in sorted(plan.actions, key=lambda a: a.step)]
+    try:  # the store's checks of the piece's steps first, as behind the answer (`perception._later_checks`)
+        store.check_steps(obj.ident, actions, view.expected_states, first, last)
+    except ValidationError as exc:
+        refused = Verdict(False, f"the store's check refused a_{first}..a_{last}: {exc}")
+        record_verdict(store, obj.ident, plan.id, PieceVerdict(number, first, last, refused, 0.0))
+        return
     try:
         piece = context.validator.recheck(obj, init.atoms, goal.atoms, actions, view.expected_states, number, first,
                                           last, deadline_at)

@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 from planhrc.cooperation import Decision, decide
 from planhrc.model import ArticulatedObject, ModelError, Perception, perceive as snap
 from planhrc.pipeline import PieceVerdict, PlannedTurn, PlanOutcome, deadline_from, plan_for_service
+from planhrc.pipeline.later import Precheck
 from planhrc.vocabulary import DecisionKind, PlanningStatus
 
 from ..store import DeadlineError, Execution, StoredPlan, StoredState, ValidationError
@@ -137,7 +138,7 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         try:
             if planned.outcome.status is PlanningStatus.TIMEOUT:
                 raise DeadlineError(f"planning: {planned.outcome.message}")
-            checked = _check_plan(context, obj, planned.outcome, deadline_at)
+            checked = _check_plan(context, obj, planned.outcome, deadline_at, planned.verdict.steps_before_answer)
             with context.observer.span("val"):
                 if not planned.verdict.read_in_write:
                     planned.verdict.outcome(None)  # VAL's verdict before the write: the store is not held meanwhile
@@ -167,7 +168,7 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
             record_verdict(store, obj.ident, plan_id, piece)
             context.observer.validated(piece.verdict.accepted, piece.seconds)
 
-        context.validator.follow(obj.ident, plan_id, planned.verdict, record)
+        context.validator.follow(obj.ident, plan_id, planned.verdict, record, _later_checks(context, obj, planned))
         return written.turn
 
 
@@ -204,17 +205,33 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
     return written
 
 
-def _check_plan(context: Context, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float
-                ) -> CheckedPlan | None:
-    """The store's checks of a new plan (outside the store's lock), while VAL checks it in its own processes."""
+def _check_plan(context: Context, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float,
+                first_steps: int | None) -> CheckedPlan | None:
+    """The store's checks of a new plan (outside the store's lock), while VAL checks it in its own processes: of
+    its first `first_steps` steps only when VAL checks only those before the answer (the rest: `_later_checks`)."""
     if not (outcome.solved and outcome.actions):
         return None
     try:
-        return context.store.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at)
+        return context.store.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at,
+                                        first_steps)
     except DeadlineError as exc:  # said as every other stage says it: with the deadline the settings give
         where = str(exc).removeprefix("planning: the deadline passed")
         raise DeadlineError(f"planning: planning deadline of {context.planning.deadline_s:g} s exceeded{where}") \
             from None
+
+
+def _later_checks(context: Context, obj: ArticulatedObject, planned: PlannedTurn) -> Precheck:
+    """The store's checks of a later piece's steps, run behind the answer before VAL on that piece."""
+    outcome = planned.outcome
+
+    def check(first: int, last: int) -> str | None:
+        try:
+            context.store.check_steps(obj.ident, outcome.actions, outcome.expected_states, first, last)
+        except ValidationError as exc:
+            return f"the store's check refused a_{first}..a_{last}: {exc}"
+        return None
+
+    return check
 
 
 def _incomplete(context: Context, obj: ArticulatedObject, request: PerceptionRequest, print_: str,
