@@ -8,6 +8,7 @@ steps given as JSON in argv[1] and prints every message it received as one JSON 
     {"publish": "feedback" | "give_up", "data": {...}}
     {"wait": TOPIC, "match": {"a.b": value, ...}, "timeout": S}   # a String topic's JSON with those values
     {"wait": TOPIC, "count": N, "timeout": S}                      # N messages on TOPIC
+    {"wait": TOPIC, "count": N, "fresh": true}                     # N messages on TOPIC received from now on
     {"sleep": S}
 
 TOPIC is a suffix under /planhrc/objects/<id>/ or "/diagnostics". A wait that times out exits 3.
@@ -110,9 +111,10 @@ def main() -> int:
             pubs[topic].publish(msg)
         elif "wait" in step:
             topic, match, count = step["wait"], step.get("match"), step.get("count", 1)
+            since = len(received) if step.get("fresh") else 0  # fresh: only what arrives from now on
 
             def ready() -> bool:
-                found = [r for r in received if r["topic"] == topic and (
+                found = [r for r in received[since:] if r["topic"] == topic and (
                     match is None or all(get_path(r["msg"], k) == v for k, v in match.items()))]
                 return len(found) >= count
 
