@@ -47,15 +47,18 @@ class Tracing:
         self._kinds: tuple[Any, Any] | None = None
         self._propagator: Any = None
         self._current: Any = None
+        self.attach: Any = None
+        self.detach: Any = None
+        self.in_context: Any = None
         if provider is not None:  # what every span needs, looked up once
-            from opentelemetry.trace import SpanKind
+            from opentelemetry.context import attach, detach
+            from opentelemetry.trace import SpanKind, get_current_span, set_span_in_context
             from opentelemetry.trace.propagation.tracecontext import TraceContextTextMapPropagator
-
-            from opentelemetry.trace import get_current_span
 
             self._kinds = (SpanKind.INTERNAL, SpanKind.SERVER)
             self._propagator = TraceContextTextMapPropagator()
             self._current = get_current_span
+            self.attach, self.detach, self.in_context = attach, detach, set_span_in_context
 
     @classmethod
     def off(cls) -> "Tracing":
@@ -70,9 +73,10 @@ class Tracing:
         from opentelemetry.exporter.otlp.proto.http.trace_exporter import OTLPSpanExporter
         from opentelemetry.sdk.resources import Resource
         from opentelemetry.sdk.trace import TracerProvider
-        from opentelemetry.sdk.trace.export import BatchSpanProcessor
 
         import planhrc
+
+        from .otlp import span_processor
 
         resource = Resource.create({"service.name": os.environ.get("OTEL_SERVICE_NAME", service_name),
                                     "service.version": planhrc.__version__})
@@ -83,7 +87,7 @@ class Tracing:
             sampler = ParentBased(TraceIdRatioBased(ratio))
         provider = TracerProvider(resource=resource, sampler=sampler)
         exporter = OTLPSpanExporter(endpoint=traces_url(endpoint)) if endpoint else OTLPSpanExporter()
-        provider.add_span_processor(BatchSpanProcessor(exporter))
+        provider.add_span_processor(span_processor(exporter))
         return cls(provider)
 
     @property
@@ -94,14 +98,12 @@ class Tracing:
              server: bool = False) -> AbstractContextManager[Any]:
         """A span around a block (the current span's child, or `parent`'s: a carrier from another process)."""
         if self._tracer is None:
-            return nullcontext()
+            return _NOTHING
         assert self._kinds is not None
         if parent is None and not server and not self._current().is_recording():
-            return nullcontext()  # inside a request not sampled (`--trace-ratio`): its stages are not either
+            return _NOTHING  # inside a request not sampled (`--trace-ratio`): its stages are not either
         context = self._propagator.extract(parent) if parent is not None else None
-        span: AbstractContextManager[Any] = self._tracer.start_as_current_span(
-            name, context=context, kind=self._kinds[server], attributes=attributes)
-        return span
+        return _Current(self, name, context, self._kinds[server], attributes)
 
     def carrier(self) -> dict[str, str]:
         """The current trace context as W3C headers (empty when off or outside a span)."""
@@ -119,6 +121,37 @@ class Tracing:
         """Send what is left and stop."""
         if self._provider is not None:
             self._provider.shutdown()
+
+
+class _Current:
+    """The span of a block, current inside it: what the SDK's `start_as_current_span` does (an exception leaving
+    the block is recorded on the span and sets its status), without its generator-based context managers."""
+
+    __slots__ = ("_tracing", "_name", "_context", "_kind", "_attributes", "_span", "_token")
+
+    def __init__(self, tracing: Tracing, name: str, context: Any, kind: Any,
+                 attributes: Mapping[str, Any] | None) -> None:
+        self._tracing, self._name, self._context, self._kind, self._attributes = \
+            tracing, name, context, kind, attributes
+
+    def __enter__(self) -> Any:
+        tracing = self._tracing
+        span = self._span = tracing._tracer.start_span(self._name, self._context, self._kind, self._attributes)
+        self._token = tracing.attach(tracing.in_context(span))
+        return span
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None, traceback: Any) -> None:
+        span = self._span
+        self._tracing.detach(self._token)
+        if isinstance(error, Exception) and span.is_recording():  # as `use_span`: errors, not GeneratorExit & co.
+            from opentelemetry.trace import Status, StatusCode
+
+            span.record_exception(error)
+            span.set_status(Status(StatusCode.ERROR, f"{type(error).__name__}: {error}"))
+        span.end()
+
+
+_NOTHING: AbstractContextManager[Any] = nullcontext()  # reusable: it keeps no state
 
 
 def current_trace_id() -> str | None:
