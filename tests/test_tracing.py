@@ -2,7 +2,7 @@
 (`Tracing.span`) behaves as the SDK's `start_as_current_span` (parents, the current span, an exception recorded),
 a request not sampled makes no stage spans and hands on a context that says so, and `otlp.encode_spans` writes the
 very message OpenTelemetry's own OTLP encoder builds (byte for byte), for spans with every kind of field, and the
-service's batches of encoded spans reach a collector over OTLP/HTTP as that message. The spans of a real service, across
+service's batches reach a collector over OTLP/HTTP as that message. The spans of a real service, across
 processes, are tests/test_observability.py's."""
 from __future__ import annotations
 
@@ -19,24 +19,34 @@ from opentelemetry.exporter.otlp.proto.common.trace_encoder import encode_spans 
 from opentelemetry.exporter.otlp.proto.http.trace_exporter import OTLPSpanExporter  # noqa: E402
 from opentelemetry.proto.collector.trace.v1.trace_service_pb2 import ExportTraceServiceRequest  # noqa: E402
 from opentelemetry.sdk.resources import Resource  # noqa: E402
-from opentelemetry.sdk.trace import SpanLimits, TracerProvider  # noqa: E402
+from opentelemetry.sdk.trace import SpanLimits, SpanProcessor, TracerProvider  # noqa: E402
 from opentelemetry.sdk.trace.export import SimpleSpanProcessor  # noqa: E402
 from opentelemetry.sdk.trace.export.in_memory_span_exporter import InMemorySpanExporter  # noqa: E402
-from opentelemetry.sdk.trace.sampling import ParentBased, TraceIdRatioBased  # noqa: E402
+from opentelemetry.sdk.trace.sampling import ALWAYS_ON, ParentBased, TraceIdRatioBased  # noqa: E402
 from opentelemetry.trace import Link, SpanContext, SpanKind, Status, StatusCode, TraceFlags, TraceState  # noqa: E402
 
-from planhrc.kb_service.otlp import EncodedBatches, encode_spans, span_processor  # noqa: E402
+from planhrc.kb_service.otlp import SpanBatches, encode_spans, span_processor  # noqa: E402
 from planhrc.kb_service.tracing import Tracing  # noqa: E402
 
 SERVER_SPAN = "POST /objects/{object_id}/perceptions"
 
 
-def kept(sampler: Any = None, schema_url: str = "") -> tuple[Tracing, InMemorySpanExporter]:
+class Counted(SpanProcessor):
+    """Counts the spans the SDK was asked to start (a span not recorded included)."""
+
+    def __init__(self) -> None:
+        self.started = 0
+
+    def on_start(self, span: Any, parent_context: Any = None) -> None:
+        self.started += 1
+
+
+def kept(sampler: Any = None, ratio: float | None = None) -> tuple[Tracing, InMemorySpanExporter]:
     memory = InMemorySpanExporter()
-    provider = TracerProvider(resource=Resource.create({"service.name": "planhrc-test", "service.version": "1"},
-                                                       schema_url=schema_url), sampler=sampler)
+    provider = TracerProvider(resource=Resource.create({"service.name": "planhrc-test", "service.version": "1"}),
+                              sampler=sampler)
     provider.add_span_processor(SimpleSpanProcessor(memory))
-    return Tracing(provider), memory
+    return Tracing(provider, ratio), memory
 
 
 def request(tracing: Tracing, fail: bool = False, parent: dict[str, str] | None = None) -> None:
@@ -98,6 +108,32 @@ def test_a_request_not_sampled_makes_no_stage_span_and_says_so_to_the_next_proce
     spans = memory.get_finished_spans()
     assert len(spans) == 5 and {format(s.context.trace_id, "032x") for s in spans} == {
         "0af7651916cd43dd8448eb211c80319c"}
+
+
+def test_with_a_ratio_a_request_is_traced_or_not_before_the_sdk_is_asked():
+    """`--trace-ratio`: the requests not drawn, and those whose client's context says "not sampled", make no span of
+    any kind (the SDK is not asked) and hand no context on; a client's sampled context is always followed."""
+    memory = InMemorySpanExporter()
+    started = Counted()
+    provider = TracerProvider(sampler=ParentBased(ALWAYS_ON))
+    provider.add_span_processor(started)
+    provider.add_span_processor(SimpleSpanProcessor(memory))
+    never, half = Tracing(provider, 0.0), Tracing(provider, 0.5)
+    for _ in range(20):
+        with never.span(SERVER_SPAN, server=True) as root, never.span("perceive") as stage:
+            assert root is None and stage is None and never.carrier() == {}
+    assert started.started == 0
+    unsampled = {"traceparent": "00-0af7651916cd43dd8448eb211c80319c-b7ad6b7169203331-00"}
+    request(Tracing(provider, 1.0), parent=unsampled)
+    assert started.started == 0
+    request(never, parent={"traceparent": "00-0af7651916cd43dd8448eb211c80319c-b7ad6b7169203331-01"})
+    request(never, parent={"traceparent": "not a trace context"})  # a request of its own: not drawn
+    assert started.started == 5 and len(memory.get_finished_spans()) == 5
+    for _ in range(400):
+        request(half)
+    traced = (len(memory.get_finished_spans()) - 5) // 5
+    assert 120 < traced < 280  # about half of 400 (the chance of leaving this band is below 1e-9)
+    assert started.started == 5 + 5 * traced
 
 
 def every_kind_of_span() -> list[Any]:
@@ -170,7 +206,7 @@ def test_batches_of_encoded_spans_reach_a_collector_over_otlp_http(monkeypatch):
     threading.Thread(target=server.serve_forever, daemon=True).start()
     try:
         processor = span_processor(OTLPSpanExporter(endpoint=f"http://127.0.0.1:{server.server_address[1]}/v1/traces"))
-        assert isinstance(processor, EncodedBatches)
+        assert isinstance(processor, SpanBatches)
         memory = InMemorySpanExporter()
         provider = TracerProvider(resource=Resource.create({"service.name": "planhrc-test"}))
         provider.add_span_processor(processor)
