@@ -66,8 +66,12 @@ class ServiceMetrics:
         self.event_streams = Gauge("planhrc_event_streams_open", "Server-Sent Events streams open now.", registry=r)
         self._queue = _QueueDepth()
         r.register(self._queue)
-        # each (route, method, status)'s series, found once: a request then costs two updates, no label lookup
+        # each label's series, found once (a label lookup cost more than the update): a request's figures then cost
+        # their updates only
         self._answers: dict[tuple[str, str, int], tuple[Any, Any]] = {}
+        self._stages: dict[str, Any] = {}
+        self._kinds: dict[str, Any] = {}
+        self._verdicts: dict[bool, Any] = {}
 
     def answered(self, route: str, method: str, status: int, seconds: float) -> None:
         """A request answered: its count and its time."""
@@ -81,20 +85,34 @@ class ServiceMetrics:
 
     # -- what the use cases and routes report (`usecases.Observer`) ---------------------------------------------
     def decided(self, kind: str, timings: Mapping[str, float] | None) -> None:
-        self.decisions.labels(kind).inc()
-        for stage, seconds in (timings or {}).items():
-            if stage in STAGES:
-                self.stage_seconds.labels(stage).observe(seconds)
-        if timings and "validate" in timings:
-            self.val_seconds.observe(timings["validate"])
+        counter = self._kinds.get(kind)
+        if counter is None:
+            counter = self._kinds.setdefault(kind, self.decisions.labels(kind))
+        counter.inc()
+        if timings:
+            for stage, seconds in timings.items():
+                if stage in STAGES:
+                    self._stage(stage).observe(seconds)
+            if "validate" in timings:
+                self.val_seconds.observe(timings["validate"])
 
     def validated(self, accepted: bool, seconds: float) -> None:
-        self.val_verdicts.labels("accepted" if accepted else "refused").inc()
+        counter = self._verdicts.get(accepted)
+        if counter is None:
+            counter = self._verdicts.setdefault(accepted, self.val_verdicts.labels("accepted" if accepted else
+                                                                                   "refused"))
+        counter.inc()
 
     def stored(self, seconds: float, replanned: bool) -> None:
         self.store_seconds.observe(seconds)
         if replanned:
-            self.stage_seconds.labels("store").observe(seconds)
+            self._stage("store").observe(seconds)
+
+    def _stage(self, stage: str) -> Any:
+        series = self._stages.get(stage)
+        if series is None:
+            series = self._stages.setdefault(stage, self.stage_seconds.labels(stage))
+        return series
 
     def watch_queue(self, depth: Callable[[], Mapping[str, int]] | None) -> None:
         """Report the planning queue's depth (read from the database at each scrape; None: no queue)."""
