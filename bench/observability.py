@@ -161,7 +161,9 @@ def _block(sink: str, samples: int, links: int, orientations: int, seed: int, ro
     """One block: fresh services, `samples` perceptions to each side, added to the run's counts; a scrape's CPU
     (measured when `time_scrape`, else nan) and the scrapes done."""
     with ExitStack() as stack:
-        sides, rngs, scrapes = {}, {}, {}
+        sides: dict[str, _Side] = {}
+        rngs: dict[str, random.Random] = {}
+        scrapes: dict[str, list[int]] = {}
         for name in (*SIDES, "paired"):
             environment = {k: v or sink for k, v in ENVIRONMENTS.get(name, ENVIRONMENTS["on"]).items()}
             folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="planhrc-sbench-")))
@@ -169,16 +171,16 @@ def _block(sink: str, samples: int, links: int, orientations: int, seed: int, ro
             client = stack.enter_context(_client(server, 120))
             if environment["PLANHRC_METRICS"] == "true":
                 scrapes[name] = stack.enter_context(scraping(server.url, dict(client.headers)))
-            for side in ((name,) if name != "paired" else PAIRED):
-                if side == "not traced":
+            for label in ((name,) if name != "paired" else PAIRED):
+                if label == "not traced":
                     client = stack.enter_context(_client(server, 120))
                     client.headers.update(NOT_SAMPLED)
-                rngs[side] = random.Random(seed)
+                rngs[label] = random.Random(seed)
                 obj = create_object(client, links, orientations, "relative", "observed")
-                set_goal(client, obj, random_angles(rngs[side], links, orientations))
+                set_goal(client, obj, random_angles(rngs[label], links, orientations))
                 # not measured: a process's and an object's first perceptions (caches filled, code paths warm)
                 replanning_latencies(client, obj, links, orientations, WARM_UP, random.Random(-seed))
-                sides[side] = _Side(server, client, obj, 0, [])
+                sides[label] = _Side(server, client, obj, 0, [])
         turn = 0
         while any(side.posted < samples for side in sides.values()):
             order = list(sides.items())

@@ -126,7 +126,7 @@ class Histograms(Collector):
 
     def __init__(self, name: str, documentation: str, labels: tuple[str, ...], registry: CollectorRegistry) -> None:
         self._name, self._documentation, self._labels = name, documentation, labels
-        self._les = [*(floatToGoString(bound) for bound in SECONDS), "+Inf"]
+        self._les = [*(str(floatToGoString(bound)) for bound in SECONDS), "+Inf"]  # type: ignore[no-untyped-call]
         self._lock = threading.Lock()
         self._series: dict[tuple[str, ...], list[float]] = {}  # label values -> a count per bucket, then the sum
         registry.register(self)

@@ -231,7 +231,7 @@ class SpanBatches(SpanProcessor):
         if self._thread is not None:
             self._thread.join(timeout=10)
         self._export()
-        self._exporter.shutdown()
+        self._exporter.shutdown()  # type: ignore[no-untyped-call]
 
     def _forget(self) -> None:
         """In a child this process forked: no thread, no lock held, nothing of the parent's to send."""

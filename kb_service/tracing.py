@@ -117,7 +117,7 @@ class Tracing:
         elif not parent and not self._current().is_recording():
             return _NOTHING  # a stage of a request not traced, or a job handed on by one
         context = self._propagator.extract(parent) if parent else None
-        return _Current(self, name, context, self._kinds[server], attributes)
+        return _Current(self, self._tracer, name, context, self._kinds[server], attributes)
 
     def _traced(self, headers: Mapping[str, str] | None) -> bool:
         """Whether a request with these headers is traced (see the class's note)."""
@@ -153,16 +153,16 @@ class _Current:
     """The span of a block, current inside it: what the SDK's `start_as_current_span` does (an exception leaving
     the block is recorded on the span and sets its status), without its generator-based context managers."""
 
-    __slots__ = ("_tracing", "_name", "_context", "_kind", "_attributes", "_span", "_token")
+    __slots__ = ("_tracing", "_tracer", "_name", "_context", "_kind", "_attributes", "_span", "_token")
 
-    def __init__(self, tracing: Tracing, name: str, context: Any, kind: Any,
+    def __init__(self, tracing: Tracing, tracer: Any, name: str, context: Any, kind: Any,
                  attributes: Mapping[str, Any] | None) -> None:
-        self._tracing, self._name, self._context, self._kind, self._attributes = \
-            tracing, name, context, kind, attributes
+        self._tracing, self._tracer, self._name, self._context, self._kind, self._attributes = \
+            tracing, tracer, name, context, kind, attributes
 
     def __enter__(self) -> Any:
         tracing = self._tracing
-        span = self._span = tracing._tracer.start_span(self._name, self._context, self._kind, self._attributes)
+        span = self._span = self._tracer.start_span(self._name, self._context, self._kind, self._attributes)
         self._token = tracing.attach(tracing.in_context(span))
         return span
 
