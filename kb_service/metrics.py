@@ -121,8 +121,8 @@ class Histograms(Collector):
     """Histograms of one name, one per label values, in `SECONDS`' buckets: what `prometheus_client.Histogram`
     exposes (less its `_created` series), at a fraction of its cost per observation (one lock and a binary search
     for however many values, where the library's takes two locks and a walk through the buckets for each, and a
-    lookup for each label values). A re-plan makes about ten observations: the library's cost it about a
-    hundredth of the re-plan (docs/operations.md)."""
+    lookup for each label values). A re-plan makes about ten observations (see docs/operations.md, "What it
+    costs")."""
 
     def __init__(self, name: str, documentation: str, labels: tuple[str, ...], registry: CollectorRegistry) -> None:
         self._name, self._documentation, self._labels = name, documentation, labels

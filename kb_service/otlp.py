@@ -1,10 +1,9 @@
 """Spans in OTLP's protobuf, and the batches that send them.
 
-`encode_span` writes a finished span straight to the bytes of OTLP's message (the `ExportTraceServiceRequest`
+`encode_spans` writes finished spans straight to the bytes of OTLP's message (the `ExportTraceServiceRequest`
 OpenTelemetry's own encoder builds, byte for byte: tests/test_tracing.py compares them), without a protobuf object
-per span, attribute and value on the way; `EncodedBatches` keeps each span as those bytes until its batch is sent.
-Together they take about two thirds off what the SDK's encoder and batches cost per span (docs/operations.md).
-Imported only when tracing is on (the `tracing` extra).
+per span, attribute and value on the way: about half the encoder's cost. `SpanBatches` sends them in batches, as
+the SDK's `BatchSpanProcessor` does. Imported only when tracing is on (the `tracing` extra).
 
 The message, by field number (opentelemetry-proto's trace.proto, common.proto, resource.proto):
 ExportTraceServiceRequest{1 resource_spans} ResourceSpans{1 resource, 2 scope_spans, 3 schema_url}
@@ -169,7 +168,7 @@ class SpanBatches(SpanProcessor):
     OTLP/HTTP exporter's client (its endpoint, headers, compression, timeout and retries). A finished span costs
     the request that made it an append; its batch is written at once, in one loop, where the encoder's code and
     data stay in the processor's caches (in a request, between the service's own work, writing one span took the
-    service three times as long)."""
+    service about twice as long)."""
 
     def __init__(self, exporter: OTLPSpanExporter) -> None:
         self._exporter = exporter
