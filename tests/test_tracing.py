@@ -136,6 +136,25 @@ def test_with_a_ratio_a_request_is_traced_or_not_before_the_sdk_is_asked():
     assert started.started == 5 + 5 * traced
 
 
+def test_a_job_handed_on_continues_its_request_s_trace_and_one_of_a_request_not_traced_makes_none():
+    """A planning job carries `carrier()` to another process (the planning pool, the PostgreSQL queue's worker),
+    whose `planning_job` span continues the request's trace; a job of a request not traced carries nothing and
+    makes no span there (the other process's sampler would have started a trace of its own)."""
+    provider = TracerProvider(sampler=ParentBased(ALWAYS_ON))
+    worker, worker_spans = kept()
+    carriers = []
+    for service in (Tracing(provider, 1.0), Tracing(provider, 0.0)):
+        with service.span(SERVER_SPAN, server=True) as root, service.span("plan"):
+            carriers.append((root, service.carrier()))
+    (root, carrier), (untraced, nothing) = carriers
+    assert untraced is None and nothing == {}
+    for handed in (carrier, nothing):
+        with worker.span("planning_job", {"queue": "pool"}, parent=handed):
+            pass
+    [job] = worker_spans.get_finished_spans()
+    assert job.context.trace_id == root.get_span_context().trace_id and job.parent.is_remote
+
+
 def every_kind_of_span() -> list[Any]:
     """Spans with every field OTLP has: attributes of each type, events, links, a remote parent, a trace state,
     statuses, counts of what the limits dropped, two instrumentation scopes."""
