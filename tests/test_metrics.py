@@ -1,6 +1,6 @@
-"""The service's histograms (`metrics.Histograms`, cheaper per observation than `prometheus_client.Histogram`)
-expose what the library's histogram exposes for the same observations, line for line (less the library's
-`_created` series): with labels and without, values on a bucket's bound, beyond the last, and from many threads at
+"""The service's histograms (`metrics.Histograms`, cheaper per observation and per scrape than
+`prometheus_client.Histogram`) expose what the library's histogram exposes for the same observations, line for line
+(less the library's `_created` series), through the library's exposition and through their own `text`: with labels and without, values on a bucket's bound, beyond the last, and from many threads at
 once; and what a re-plan reports lands in its series. Prometheus reading them is tests/test_observability.py's."""
 from __future__ import annotations
 
@@ -34,6 +34,7 @@ def test_the_same_observations_give_the_library_s_lines():
         alone.observe((), seconds)
         reference_alone.observe(seconds)
     assert exposed(ours) == exposed(theirs)
+    assert (staged.text() + alone.text()).splitlines() == exposed(theirs)  # as the service's /metrics writes them
 
 
 def test_threads_observing_at_once_lose_nothing():
@@ -63,6 +64,8 @@ def test_a_re_plan_s_figures_land_in_their_series():
     metrics.stored(0.002, replanned=True)
     metrics.decided("continue", None)
     text = metrics.text().decode()
+    assert len([line for line in text.splitlines() if line.startswith("# TYPE")]) == len(set(
+        line for line in text.splitlines() if line.startswith("# TYPE")))  # each family once
     for line in ('planhrc_http_requests_total{method="POST",route="/objects/{object_id}/perceptions",status="200"} 1.0',
                  'planhrc_http_request_seconds_count{method="POST",route="/objects/{object_id}/perceptions"} 1.0',
                  'planhrc_decisions_total{kind="replan"} 1.0', 'planhrc_decisions_total{kind="continue"} 1.0',
