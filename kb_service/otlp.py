@@ -22,6 +22,7 @@ import logging
 import os
 import struct
 import threading
+import weakref
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -183,7 +184,8 @@ class SpanBatches(SpanProcessor):
         self._dropped = 0
         self._thread: threading.Thread | None = None
         self._closed = False
-        os.register_at_fork(after_in_child=self._forget)
+        forget = weakref.WeakMethod(self._forget)  # the registration outlives this processor: it must not keep it
+        os.register_at_fork(after_in_child=lambda: _call(forget))
 
     def on_end(self, span: ReadableSpan) -> None:
         if self._closed or not span.context.trace_flags.sampled:
@@ -237,6 +239,12 @@ class SpanBatches(SpanProcessor):
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._spans, self._thread = [], None
+
+
+def _call(method: weakref.WeakMethod[Any]) -> None:
+    bound = method()
+    if bound is not None:
+        bound()
 
 
 def _setting(environ: Mapping[str, str], name: str, default: int) -> int:
