@@ -14,6 +14,7 @@ continues the trace (`span(..., parent=carrier)`).
 from __future__ import annotations
 
 import os
+import random
 from contextlib import AbstractContextManager, nullcontext
 from typing import Any, Mapping
 
@@ -39,23 +40,35 @@ def traces_url(endpoint: str) -> str:
 
 
 class Tracing:
-    """One process's spans: `Tracing.off()` or `Tracing.start(name, endpoint)`."""
+    """One process's spans: `Tracing.off()` or `Tracing.start(name, endpoint)`.
 
-    def __init__(self, provider: Any = None) -> None:
+    A request is traced or not from its start (`span(..., server=True)`), before the SDK is asked: with `ratio`
+    (`--trace-ratio`) a request without a trace context is traced with that chance, and whenever the sampler follows
+    its parent's decision (ours does, as OpenTelemetry's default does), one whose client's `traceparent` says "not
+    sampled" is not. A request not traced makes no span at all, neither for itself nor for its stages, and hands no
+    trace context on (a job's span in another process needs a traced parent), so it costs nothing here."""
+
+    def __init__(self, provider: Any = None, ratio: float | None = None) -> None:
         self._provider = provider
+        self._ratio = ratio
+        sampler = os.environ.get("OTEL_TRACES_SAMPLER", "").strip().lower()
+        self._follows_parent = ratio is not None or not sampler or sampler.startswith("parentbased_")
         self._tracer = provider.get_tracer("planhrc") if provider is not None else None
         self._kinds: tuple[Any, Any] | None = None
         self._propagator: Any = None
         self._current: Any = None
+        self.attach: Any = None
+        self.detach: Any = None
+        self.in_context: Any = None
         if provider is not None:  # what every span needs, looked up once
-            from opentelemetry.trace import SpanKind
+            from opentelemetry.context import attach, detach
+            from opentelemetry.trace import SpanKind, get_current_span, set_span_in_context
             from opentelemetry.trace.propagation.tracecontext import TraceContextTextMapPropagator
-
-            from opentelemetry.trace import get_current_span
 
             self._kinds = (SpanKind.INTERNAL, SpanKind.SERVER)
             self._propagator = TraceContextTextMapPropagator()
             self._current = get_current_span
+            self.attach, self.detach, self.in_context = attach, detach, set_span_in_context
 
     @classmethod
     def off(cls) -> "Tracing":
@@ -70,21 +83,22 @@ class Tracing:
         from opentelemetry.exporter.otlp.proto.http.trace_exporter import OTLPSpanExporter
         from opentelemetry.sdk.resources import Resource
         from opentelemetry.sdk.trace import TracerProvider
-        from opentelemetry.sdk.trace.export import BatchSpanProcessor
 
         import planhrc
+
+        from .otlp import span_processor
 
         resource = Resource.create({"service.name": os.environ.get("OTEL_SERVICE_NAME", service_name),
                                     "service.version": planhrc.__version__})
         sampler = None
-        if ratio is not None:
-            from opentelemetry.sdk.trace.sampling import ParentBased, TraceIdRatioBased
+        if ratio is not None:  # the share is drawn per request (`span`): what reaches the SDK is recorded
+            from opentelemetry.sdk.trace.sampling import ALWAYS_ON, ParentBased
 
-            sampler = ParentBased(TraceIdRatioBased(ratio))
+            sampler = ParentBased(ALWAYS_ON)
         provider = TracerProvider(resource=resource, sampler=sampler)
         exporter = OTLPSpanExporter(endpoint=traces_url(endpoint)) if endpoint else OTLPSpanExporter()
-        provider.add_span_processor(BatchSpanProcessor(exporter))
-        return cls(provider)
+        provider.add_span_processor(span_processor(exporter))
+        return cls(provider, ratio)
 
     @property
     def on(self) -> bool:
@@ -92,16 +106,30 @@ class Tracing:
 
     def span(self, name: str, attributes: Mapping[str, Any] | None = None, parent: Mapping[str, str] | None = None,
              server: bool = False) -> AbstractContextManager[Any]:
-        """A span around a block (the current span's child, or `parent`'s: a carrier from another process)."""
+        """A span around a block: a request's (`server`, continuing a client's `parent` headers), or a stage's (the
+        current span's child, or `parent`'s: a carrier from another process)."""
         if self._tracer is None:
-            return nullcontext()
+            return _NOTHING
         assert self._kinds is not None
-        if parent is None and not server and not self._current().is_recording():
-            return nullcontext()  # inside a request not sampled (`--trace-ratio`): its stages are not either
-        context = self._propagator.extract(parent) if parent is not None else None
-        span: AbstractContextManager[Any] = self._tracer.start_as_current_span(
-            name, context=context, kind=self._kinds[server], attributes=attributes)
-        return span
+        if server:
+            if not self._traced(parent):
+                return _NOTHING
+        elif not parent and not self._current().is_recording():
+            return _NOTHING  # a stage of a request not traced, or a job handed on by one
+        context = self._propagator.extract(parent) if parent else None
+        return _Current(self, self._tracer, name, context, self._kinds[server], attributes)
+
+    def _traced(self, headers: Mapping[str, str] | None) -> bool:
+        """Whether a request with these headers is traced (see the class's note)."""
+        header = headers.get("traceparent") if headers else None
+        if header is not None and self._follows_parent:
+            parts = header.strip().split("-")  # version-trace_id-parent_id-flags (W3C Trace Context)
+            if len(parts) >= 4 and len(parts[1]) == 32 and len(parts[2]) == 16 and len(parts[3]) == 2:
+                try:
+                    return bool(int(parts[3], 16) & 1)
+                except ValueError:
+                    pass  # not a trace context: the request starts its own
+        return self._ratio is None or random.random() < self._ratio
 
     def carrier(self) -> dict[str, str]:
         """The current trace context as W3C headers (empty when off or outside a span)."""
@@ -119,6 +147,37 @@ class Tracing:
         """Send what is left and stop."""
         if self._provider is not None:
             self._provider.shutdown()
+
+
+class _Current:
+    """The span of a block, current inside it: what the SDK's `start_as_current_span` does (an exception leaving
+    the block is recorded on the span and sets its status), without its generator-based context managers."""
+
+    __slots__ = ("_tracing", "_tracer", "_name", "_context", "_kind", "_attributes", "_span", "_token")
+
+    def __init__(self, tracing: Tracing, tracer: Any, name: str, context: Any, kind: Any,
+                 attributes: Mapping[str, Any] | None) -> None:
+        self._tracing, self._tracer, self._name, self._context, self._kind, self._attributes = \
+            tracing, tracer, name, context, kind, attributes
+
+    def __enter__(self) -> Any:
+        tracing = self._tracing
+        span = self._span = self._tracer.start_span(self._name, self._context, self._kind, self._attributes)
+        self._token = tracing.attach(tracing.in_context(span))
+        return span
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None, traceback: Any) -> None:
+        span = self._span
+        self._tracing.detach(self._token)
+        if isinstance(error, Exception) and span.is_recording():  # as `use_span`: errors, not GeneratorExit & co.
+            from opentelemetry.trace import Status, StatusCode
+
+            span.record_exception(error)
+            span.set_status(Status(StatusCode.ERROR, f"{type(error).__name__}: {error}"))
+        span.end()
+
+
+_NOTHING: AbstractContextManager[Any] = nullcontext()  # reusable: it keeps no state
 
 
 def current_trace_id() -> str | None:
