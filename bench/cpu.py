@@ -100,7 +100,7 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
     fork server and its runs, the armed ones) and `descendants_ms` (the planning workers) of those, and the
     answers' latency. A random perception now and then lets the plan go on (`decisions`): its CPU is reported apart
     (`other_ms`), and `per_perception_ms` averages every perception."""
-    from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
+    from planhrc.bench.service_calls import TOKEN, create_object, random_angles, running_service, set_goal
 
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-cpu-") as tmp, \

@@ -338,7 +338,8 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
 
     import httpx
 
-    from planhrc.bench.service import TOKEN, create_object, random_angles, replanning_latencies, running_service, set_goal
+    from planhrc.bench.service_calls import (TOKEN, create_object, random_angles, replanning_latencies,
+                                             running_service, set_goal)
 
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-http-") as tmp, running_service(Path(tmp)) as server, \

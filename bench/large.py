@@ -25,7 +25,7 @@ import httpx
 
 from planhrc.bench.cpu import Settle
 from planhrc.bench.grid import machine_info, write_json_and_table
-from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
+from planhrc.bench.service_calls import TOKEN, create_object, random_angles, running_service, set_goal
 from planhrc.settings import make_settings
 
 SIZES = ((50, 36), (200, 12))

@@ -27,9 +27,8 @@ import httpx
 
 from planhrc.stats import percentile
 
-from .service import (_client, _replanning_with_cpu, _Side, cpu_seconds, create_object, random_angles, rss_mb,
-                      running_service)
-from .service import set_goal, summary_ms
+from .service_calls import (Side, client_of, cpu_seconds, create_object, random_angles, replanning_with_cpu,
+                            rss_mb, running_service, set_goal, summary_ms)
 
 SCRAPE_S = 15.0  # Prometheus' usual scrape interval; a scrape's own cost is measured apart (`scrape_cpu_ms`)
 SCRAPES_TIMED = 20
@@ -103,20 +102,20 @@ def bench_observability(samples: int, links: int, orientations: int, seed: int,
         for name in SIDES:
             folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="planhrc-sbench-")))
             server = stack.enter_context(running_service(folder, environments[name]))
-            client = stack.enter_context(_client(server, 120))
+            client = stack.enter_context(client_of(server, 120))
             if environments[name]["PLANHRC_METRICS"] == "true":
                 scrapes[name] = stack.enter_context(scraping(server.url, dict(client.headers)))
             rngs[name] = random.Random(seed)
             obj = create_object(client, links, orientations, "relative", "observed")
             set_goal(client, obj, random_angles(rngs[name], links, orientations))
-            sides[name] = _Side(server, client, obj, 0, [])
+            sides[name] = Side(server, client, obj, 0, [])
         rounds: dict[str, list[float]] = {name: [] for name in sides}  # CPU ms per perception, round by round
         while any(side.posted < samples for side in sides.values()):
             for name, side in sides.items():
                 count = min(round_size, samples - side.posted)
                 if count <= 0:
                     continue
-                lat, cpu_ms = _replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
+                lat, cpu_ms = replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
                                                    count, rngs[name])
                 side.latencies += lat
                 side.cpu_s += cpu_ms * count / 1000
