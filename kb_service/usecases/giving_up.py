@@ -17,7 +17,7 @@ from planhrc.vocabulary import DecisionKind, ExecutionStatus
 
 from ..store import Execution, KnowledgeStore
 from .context import Context
-from .decide import whole_turn_deg
+from .refine import whole_turn_deg
 from .log import EventKind
 from .memory import ObjectMemo
 from .turns import help_data

@@ -29,7 +29,7 @@ from planhrc.vocabulary import DecisionKind, PlanningStatus
 
 from ..store import DeadlineError, Execution, StoredPlan, StoredState, ValidationError
 from ..store import CheckedPlan
-from . import decide as refine
+from . import refine
 from .context import Context
 from .idempotency import fingerprint, recall, remember
 from .inputs import check_count, check_finite, measured_base

@@ -18,7 +18,7 @@ from ..store import Execution, StoredPlan, StoredState
 from ..store import CheckedPlan
 from .actions import last_step, merges, next_action
 from .context import Context
-from .decide import Base, whole_turn_deg
+from .refine import Base, whole_turn_deg
 from .memory import ObjectMemo
 from .values import SkillRequest, Turn, skill_record
 
