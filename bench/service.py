@@ -34,13 +34,14 @@ from typing import Any, Callable
 import httpx
 
 from planhrc.cli_args import SubParsers
+from planhrc.service_process import RunningService as Server
 from planhrc.stats import cpu_model, percentile
 
 from .errors import BenchError
 from .knowledge import bench_knowledge, knowledge_markdown
 from .observability import bench_observability, observability_markdown
 from .scale_out import bench_scale_out, scale_out_markdown
-from .service_calls import (TOKEN, Server, Side, client_of, create_object, perceive, random_angles,
+from .service_calls import (TOKEN, Side, client_of, create_object, perceive, random_angles,
                             replanning_latencies, replanning_with_cpu, rss_mb, running_service, set_goal, summary_ms)
 
 READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")

@@ -13,7 +13,8 @@ import time
 from pathlib import Path
 from typing import TypeVar
 
-from .network import SettingsProblem, resolve_secrets
+from .command_settings import read_settings
+from .network import SettingsProblem
 from .store.backends import backend_of
 from .store.errors import KBError
 
@@ -47,28 +48,19 @@ def add_keys_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
 
 
 def run_keys(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError as SettingsError
-
-    from planhrc.cli_args import settings_error_line
-    from planhrc.settings import make_settings
-
     from .clients import ClientRegistry, open_table
     from .store.location import shown_location
 
-    options = {"db_path": "--db", "db_password_file": "--db-password-file"}
-    overrides = {k: v for k, v in {"db_path": args.db, "db_password_file": args.db_password_file}.items()
-                 if v is not None}
     command = f"planhrc keys {args.keys_command}"
     try:
-        settings = make_settings(**overrides)
-        settings = resolve_secrets(settings, set(overrides), lambda f: options.get(f, f"PLANHRC_{f.upper()}"), [])
-    except SettingsError as exc:
-        print(f"{command}: {settings_error_line(exc, {f: options[f] for f in overrides})}", file=sys.stderr)
-        return 2
+        read = read_settings({"db_path": ("--db", args.db),
+                              "db_password_file": ("--db-password-file", args.db_password_file)})
     except SettingsProblem as exc:
         print(f"{command}: {exc}", file=sys.stderr)
         return 2
-    db_option = "--db" if "db_path" in overrides else "PLANHRC_DB"
+    for warning in read.warnings:
+        print(f"{command}: warning: {warning}", file=sys.stderr)
+    settings, db_option = read.settings, read.name("db_path")
     db = settings.db_path
     if db in (None, "", ":memory:"):
         print(f"{command}: {db_option}: an in-memory store has no clients to manage; name its file or URL",

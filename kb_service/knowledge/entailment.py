@@ -271,7 +271,7 @@ def _matches(rule: Rule, facts: _Facts) -> list[Triple]:
 
     def join(i: int, binding: dict[str, Any]) -> None:
         if i == len(body):
-            s, o = (binding[t] if isinstance(t, str) else t for t in rule.head.terms)
+            s, o = (binding[t] if isinstance(t, str) else Literal(t) for t in rule.head.terms)
             out.append((s, head, o))
             return
         atom = body[i]
