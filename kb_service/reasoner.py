@@ -148,7 +148,8 @@ def reason_in_place(world: World, name: str, timeout_s: float,
         return consistent, time.perf_counter() - t0
 
 
-def run_reasoner(world_or_kb: Union[World, SqliteStore, KnowledgeStore], name: str, timeout_s: float = 120.0) -> ReasonerReport:
+def run_reasoner(world_or_kb: Union[World, SqliteStore, KnowledgeStore], name: str,
+                 timeout_s: float = 120.0) -> ReasonerReport:
     """Check consistency and classify a copy of the ontology; count the named classes and inferred facts."""
     if name not in REASONERS:
         raise ReasonerError(f"reasoner: must be one of {', '.join(REASONERS)}, got {name!r}")

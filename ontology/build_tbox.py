@@ -9,8 +9,8 @@ what this script writes. The TBox holds
 * the PDDL domain model of each formulation as individuals (DomainModel, ActionSchema, Variable,
   AtomPattern, ConditionalEffectPattern), so that the translator writes the PDDL domain from the TBox alone:
   relative and absolute here, and the bimanual one with the classes it adds (grippers, the centre) in `bimanual`;
-* SWRL rules (`rules.SWRL_RULES`) that derive the chain structure (which joint turns which link, which joints lie downstream,
-  hence the `Affected` facts) and relative joint angles from observed absolute link orientations.
+* SWRL rules (`rules.SWRL_RULES`) that derive the chain structure (which joint turns which link, which joints lie
+  downstream, hence the `Affected` facts) and relative joint angles from observed absolute link orientations.
 """
 from __future__ import annotations
 

@@ -7,10 +7,9 @@
 """
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
-from tests.test_layers import ALL
+from tests.test_layers import ALL, import_statements
 
 # Cycles left to the change now reshaping the robot's modules; each must still be a cycle (the test says when one
 # is gone, so that its entry goes too).
@@ -21,20 +20,11 @@ KNOWN: set[frozenset[str]] = {
 
 def imported(module: str, path: Path) -> set[str]:
     """The package's modules `module` imports (see the module's note)."""
-    is_package = path.name == "__init__.py"
     found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = module.split(".")
-                base = base[: len(base) - node.level + (1 if is_package else 0)]
-                source = ".".join(base + ([node.module] if node.module else []))
-            else:
-                source = node.module or ""
-            for alias in node.names:
-                found.add(f"{source}.{alias.name}" if f"{source}.{alias.name}" in ALL else source)
+    for source, names in import_statements(module, path.read_text(), path.name == "__init__.py"):
+        if not names:  # `import a.b`
+            found.add(source)
+        found.update(f"{source}.{name}" if f"{source}.{name}" in ALL else source for name in names)
     return {name for name in found if name in ALL and name != module}
 
 

@@ -22,7 +22,8 @@ from planhrc.kb_service.planning_pool import PlanningPool
 from planhrc.kb_service.store import SqliteStore
 from planhrc.kb_service.usecases import (Context, FeedbackRequest, GoalRequest, NewObject, PerceptionRequest,
                                         give_feedback, perceive, take_next_action)
-from planhrc.kb_service.usecases.log import piece_record_of
+from planhrc.event_log import DecisionData
+from planhrc.kb_service.usecases.log import piece_record_of, read_event
 from planhrc.pipeline import PieceRecord, Verdict, gate, later, stages
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
@@ -145,7 +146,10 @@ def test_a_later_piece_val_refuses_is_never_dispatched_and_leads_to_a_replan(tmp
         answer = perceived(cell, oid, START)
         plan_id = answer.plan_id
         assert answer.decision == "replan" and tampered
-        record = piece_record_of(plan_id, adoption(kb, oid, plan_id).data)
+        adopted = read_event(adoption(kb, oid, plan_id))
+        assert isinstance(adopted, DecisionData)
+        record = piece_record_of(adopted)
+        assert record is not None
         refused = record.covering(tampered[0], tampered[0])[0]
         first_refused = record.bounds(refused)[0]
         deadline = time.monotonic() + 60
