@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, TypeVar
 
-from .command_settings import CommandSettings, read_settings
+from .command_settings import CommandSettings, add_store_options, read_settings
 from .network import Name, SettingsProblem, check_exposure
 from .store.backends import backend_of
 from .store.errors import KBError
@@ -50,12 +50,8 @@ def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser
                               description="Run the planHRC knowledge-base service (FastAPI + uvicorn).")
     p.add_argument("--host", default=None, help="interface to bind (default 127.0.0.1, env PLANHRC_HOST)")
     p.add_argument("--port", type=port, default=None, help="TCP port (default 8000, env PLANHRC_PORT)")
-    p.add_argument("--db", default=None,
-                   help="the store: a SQLite file (default planhrc.sqlite3; ':memory:' for none) or a PostgreSQL URL "
-                   "postgresql://user@host:port/database (env PLANHRC_DB)")
-    p.add_argument("--db-password-file", default=None, metavar="FILE",
-                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE and "
-                   "PGPASSWORD work too)")
+    add_store_options(p, "a SQLite file (default planhrc.sqlite3; ':memory:' for none) or a PostgreSQL URL "
+                      "postgresql://user@host:port/database")
     p.add_argument("--token", default=None,
                    help="bearer token required for writes (env PLANHRC_TOKEN; default: no authentication); the "
                    "process list shows it: prefer --token-file")
@@ -286,10 +282,7 @@ def add_compact_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Pars
         description="Compact a store: keep each object's current records (goal, latest problem, current plan and "
         "what they refer to) and its last N perceived states, delete the rest of its history. Run it on a store "
         "no service is writing; a running service compacts its own store every PLANHRC_COMPACT_EVERY_S seconds.")
-    p.add_argument("--db", default=None,
-                   help="the store: a SQLite file (default planhrc.sqlite3) or a PostgreSQL URL (env PLANHRC_DB)")
-    p.add_argument("--db-password-file", default=None, metavar="FILE",
-                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE, or libpq's PGPASSFILE)")
+    add_store_options(p)
     p.add_argument("--keep", type=int, default=None,
                    help="perceived states kept per object (default 100, env PLANHRC_KEEP_PERCEIVED)")
     p.add_argument("--tbox", type=tbox_file, default=None, help="TBox OWL file (default: the repository's)")
@@ -348,11 +341,7 @@ def add_planning_worker_parser(subparsers: argparse._SubParsersAction[_Parser]) 
         "database queue (`planhrc serve --planning-queue`), one at a time, plan them (and check them with VAL when "
         "the service asks) by each task's deadline, and store the outcome for the service. Run as many as the "
         "hosts have cores; a killed worker's task is taken again by another once its lease expires.")
-    p.add_argument("--db", default=None, help="the store: a PostgreSQL URL postgresql://user@host:port/database "
-                   "(env PLANHRC_DB)")
-    p.add_argument("--db-password-file", default=None, metavar="FILE",
-                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE and "
-                   "PGPASSWORD work too)")
+    add_store_options(p, "a PostgreSQL URL postgresql://user@host:port/database")
     p.add_argument("--tbox", type=tbox_file, default=None,
                    help="TBox OWL file (default: the repository's ontology/planhrc.owl); the services' own")
     p.add_argument("--lease-s", type=float, default=None, metavar="SECONDS",

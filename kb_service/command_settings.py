@@ -6,6 +6,7 @@ else (a default) the command's option for it, or the variable where the command 
 """
 from __future__ import annotations
 
+import argparse
 import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Mapping
@@ -24,6 +25,15 @@ class CommandSettings:
     name: Name
     given: frozenset[str]  # the fields set on the command line
     warnings: tuple[str, ...]  # what the command may start with but should not (a secret on the command line...)
+
+
+def add_store_options(parser: argparse.ArgumentParser,
+                      store: str = "a SQLite file (default planhrc.sqlite3) or a PostgreSQL URL") -> None:
+    """The options naming a command's store, `--db` and `--db-password-file` (`store`: what `--db` may be)."""
+    parser.add_argument("--db", default=None, help=f"the store: {store} (env PLANHRC_DB)")
+    parser.add_argument("--db-password-file", default=None, metavar="FILE",
+                        help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE "
+                        "and PGPASSWORD work too)")
 
 
 def read_settings(options: Mapping[str, tuple[str, Any]]) -> CommandSettings:

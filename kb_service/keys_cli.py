@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import TypeVar
 
-from .command_settings import read_settings
+from .command_settings import add_store_options, read_settings
 from .network import SettingsProblem
 from .store.backends import backend_of
 from .store.errors import KBError
@@ -39,10 +39,7 @@ def add_keys_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     rotate = sub.add_parser("rotate", help="a new key for the client, printed alone; the old one stops working")
     rotate.add_argument("name")
     for action in (add, revoke, rotate, sub.choices["list"]):
-        action.add_argument("--db", default=None,
-                            help="the store: a SQLite file (default planhrc.sqlite3) or a PostgreSQL URL (env PLANHRC_DB)")
-        action.add_argument("--db-password-file", default=None, metavar="FILE",
-                            help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE)")
+        add_store_options(action)
     p.set_defaults(func=run_keys)
     return p
 
