@@ -9,6 +9,7 @@ from pydantic import BaseModel, Field
 
 from planhrc.event_log import (DATA, DecisionData, DispatchData, EventData, FeedbackData, GaveUpData, GoalSetData,
                                IncompleteData, ObjectCreatedData, ValVerdictData)
+from planhrc.model import Formulation
 from planhrc.vocabulary import Accepted, ActionOutcome, PlanningStatus
 
 from .schemas import schema_config
@@ -108,7 +109,7 @@ class EventFields(BaseModel):
 # One example of each record, and the kind and reason it comes with.
 _EXAMPLES: dict[type[EventData], tuple[str, str, EventData]] = {
     ObjectCreatedData: ("object_created", "object obj1 created",
-                        ObjectCreatedData(formulation="relative", links=5, orientations=8, base_point_xy=(0.6, 0.39))),
+                        ObjectCreatedData(formulation=Formulation.RELATIVE, links=5, orientations=8, base_point_xy=(0.6, 0.39))),
     GoalSetData: ("goal_set", "goal set; the next perception plans towards it",
                   GoalSetData(goal_state_id="obj1_state_1", problem_id=None)),
     DecisionData: ("replan", "the perceived state matches no expected state; new plan obj1_plan_1 of 2 actions",

@@ -24,7 +24,7 @@ from enum import StrEnum
 from typing import Any, Literal, Mapping
 
 from planhrc.json_record import JsonRecord, RecordError
-from planhrc.model import Atom
+from planhrc.model import Atom, Formulation
 from planhrc.ordering import HelpItem, RefusedMotion
 from planhrc.vocabulary import (Accepted, ActionOutcome, DecisionKind, FailureReason, Infeasible, PlanningStatus,
                                 Remedy, Skill)
@@ -68,7 +68,7 @@ class EventData(JsonRecord):
 class ObjectCreatedData(EventData):
     """An object created: its formulation, size and, when it was placed in the cell, its base point."""
 
-    formulation: str
+    formulation: Formulation
     """`relative`, `absolute` or `bimanual`."""
     links: int
     """How many links."""

@@ -51,6 +51,6 @@ def create_object(context: Context, request: NewObject) -> ObjectRead:
     with context.locks.hold(object_id), object_write(context, object_id):
         store.create_object(obj)
         log_event(store, object_id, EventKind.OBJECT_CREATED, f"object {object_id} created",
-                  ObjectCreatedData(formulation=obj.formulation.value, links=obj.n_links,
+                  ObjectCreatedData(formulation=obj.formulation, links=obj.n_links,
                                     orientations=obj.orientations, base_point_xy=base))
     return read_object(context, object_id)
