@@ -25,7 +25,8 @@ import httpx
 
 from planhrc.bench.cpu import Settle
 from planhrc.bench.grid import machine_info, write_json_and_table
-from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
+from planhrc.bench.service_calls import TOKEN, create_object, random_angles, running_service, set_goal
+from planhrc.event_log import DecisionData, data_of
 from planhrc.settings import make_settings
 
 SIZES = ((50, 36), (200, 12))
@@ -60,10 +61,11 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 answer = r.json()
                 row["decision"] = answer["decision"]
                 events = client.get(f"/objects/{ident}/events").json()
-                data: dict[str, Any] = next((e["data"] for e in reversed(events) if e["kind"] == "replan"
-                                             and e["data"].get("plan_id") == answer.get("plan_id")), {})
-                pieces = data.get("val_pieces") or []
-                accepted = [pieces[i - 1] for i in data.get("val_accepted") or []]
+                decisions = [data_of(e["kind"], e["data"]) for e in events if e["kind"] == "replan"]
+                data = next((d for d in reversed(decisions) if isinstance(d, DecisionData)
+                             and d.plan_id == answer.get("plan_id")), DecisionData())
+                pieces = data.val_pieces
+                accepted = [pieces[i - 1] for i in data.val_accepted]
                 if pieces:  # answered once VAL accepted the first pieces, the rest checked behind the answer
                     row["plan_steps"] = pieces[-1][1]
                     row["accepted_before_answer"] = accepted[-1][1] if accepted else 0
@@ -74,7 +76,7 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 if row["first_action_last_step"] is not None and row["accepted_before_answer"] >= \
                         row["first_action_last_step"]:
                     row["first_validated_action_s"] = row["seconds"]
-                timings = (data.get("timings") or {}) if answer["decision"] == "replan" else {}
+                timings = (data.timings or {}) if answer["decision"] == "replan" else {}
                 row["stages_s"] = {k: round(float(timings[k]), 3) for k in STAGES if k in timings}
             else:
                 row["detail"] = str(r.json().get("detail", ""))[:160]

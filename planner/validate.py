@@ -25,13 +25,10 @@ import time
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import IO, Callable, Protocol, Sequence
 
 from .errors import PlannerError
 from .process import installed_file, kill_group, renice, run_limited
-
-if TYPE_CHECKING:
-    from .valfork import ForkedProcess
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +52,24 @@ def val_env(binary: Path) -> dict[str, str]:
     return env
 
 
+class ForkedRun(Protocol):
+    """A run of VAL's fork server as a `ValRun` drives it (`planner.valfork.ForkedProcess`): a process it did not
+    start itself, whose exit code comes after its output (`settle`)."""
+
+    @property
+    def pid(self) -> int: ...
+
+    @property
+    def stdout(self) -> IO[bytes]: ...
+
+    @property
+    def returncode(self) -> int | None: ...
+
+    def settle(self, output: bytes) -> bytes: ...
+
+    def wait(self) -> int: ...
+
+
 class ValRun:
     """One VAL process checking one plan, running from the moment it is made (`start_validation`, an armed
     process fed its problem: `planner.armed`, or a run of VAL's fork server: `planner.valfork`).
@@ -64,7 +79,7 @@ class ValRun:
     (the process group is killed). `cancel()` kills the run; every way out removes the run's files (`files`:
     domain, problem, plan) and, when given, their folder `tmp`."""
 
-    def __init__(self, proc: subprocess.Popen[bytes] | ForkedProcess, files: Sequence[str], tmp: str | None, *,
+    def __init__(self, proc: subprocess.Popen[bytes] | ForkedRun, files: Sequence[str], tmp: str | None, *,
                  nice: int = 0, on_start: Callable[[int], None] | None = None, piped_problem: str | None = None
                  ) -> None:
         self._start = time.perf_counter()

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from planhrc.kb_service.store import ABOX_IRI, KnowledgeBase, KnowledgeStore
+from planhrc.kb_service.store import ABOX_IRI, KnowledgeStore, SqliteStore
 from planhrc.kb_service.store.abox import Abox
 from planhrc.kb_service.store.errors import DamagedStoreError, NotFoundError
 from planhrc.kb_service.store import journal
@@ -95,7 +95,7 @@ def test_a_failed_write_out_keeps_the_row_and_the_plan(tmp_path, monkeypatch):
     """The SQLite backend's writer fails to write a plan's triples (the disk full): the row stays, the plan is
     still answered, and the next write-out writes it."""
     path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb, "relative")
         original = Abox.flush
         monkeypatch.setattr(Abox, "flush", lambda self, batch: (_ for _ in ()).throw(OSError("disk full")))
@@ -127,7 +127,7 @@ def test_a_rolled_back_plan_leaves_nothing(place):
 
 
 def test_readers_of_the_triples_see_a_plan_just_adopted(place):
-    for make in (place.open, lambda: KnowledgeBase(None, TBOX)):  # every backend, and the SQLite store in memory
+    for make in (place.open, lambda: SqliteStore(None, TBOX)):  # every backend, and the SQLite store in memory
         with make() as kb:
             _, problem, actions, states = _object_with_problem(kb)
             plan = kb.add_plan(problem.id, "inproc", actions, states)
@@ -188,7 +188,7 @@ def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(t
     """An export of the whole history writes out every journalled plan, taking the store's lock once per plan; a
     request waiting for that lock gets it after the plan being written, not after every plan left (a lock released
     and taken again at once is not handed over)."""
-    with KnowledgeBase(str(tmp_path / "kb.sqlite3"), TBOX) as kb:
+    with SqliteStore(str(tmp_path / "kb.sqlite3"), TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb, "relative")
         plans = [kb.add_plan(problem.id, "inproc", actions, states) for _ in range(20)]
         exporting = threading.Thread(target=lambda: kb.export("nt", "all"))
@@ -209,14 +209,14 @@ def test_a_damaged_journal_row_refuses_the_store_and_leaves_no_thread_behind(tmp
     import sqlite3
 
     path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         _object_with_problem(kb)
     with sqlite3.connect(path) as conn:
         conn.execute("INSERT INTO planhrc_plan_journal VALUES ('obj1_plan_1', ?, 'obj1', 9, 12)",
                      (b"\x80\x05not a pickle",))
     before = {t.name for t in threading.enumerate()}
     with pytest.raises(DamagedStoreError, match="^plan journal: a row that does not read back"):
-        KnowledgeBase(path, TBOX)
+        SqliteStore(path, TBOX)
     deadline = time.monotonic() + 10
     while {t.name for t in threading.enumerate()} - before and time.monotonic() < deadline:
         time.sleep(0.02)
@@ -229,7 +229,7 @@ def test_a_journal_table_written_before_rows_named_their_states_is_read(tmp_path
     import sqlite3
 
     path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb)
         plan = kb.add_plan(problem.id, "inproc", actions, states)
     with sqlite3.connect(path) as conn:
@@ -237,7 +237,7 @@ def test_a_journal_table_written_before_rows_named_their_states_is_read(tmp_path
         conn.execute("DROP TABLE planhrc_plan_journal")
         conn.execute("CREATE TABLE planhrc_plan_journal (plan_id TEXT PRIMARY KEY, payload BLOB NOT NULL)")
         conn.execute("INSERT INTO planhrc_plan_journal VALUES (?, ?)", (plan.id, payload))
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         assert kb.plans_to_write() == 1
         assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == [frozenset(s) for s in states]
         assert kb.get_plan(plan.id) == plan
@@ -287,7 +287,7 @@ def test_plans_written_out_when_read_give_the_inferences_of_plans_written_at_onc
     monkeypatch.setattr(time, "time", lambda: 1_700_000_000.0)
     inferred = []
     for write_out in (False, True):
-        with KnowledgeBase(None, TBOX) as kb:
+        with SqliteStore(None, TBOX) as kb:
             _history_of_plans(kb, write_out)
             world = copy_world(kb)
             assert kb.plans_to_write() == 0

@@ -1,5 +1,5 @@
 """What every backend's store class does the same way (`StoreFacade`): each write handed to the shared writes
-(`writes.Writes`) and each read of a record to its cache, under the store's guard; the checks of a new execution;
+(`writes.RecordWriter`) and each read of a record to its cache, under the store's guard; the checks of a new execution;
 the export in every format from the backend's N-Triples lines.
 
 A backend's class (`knowledge_base.SqliteStore`, `postgres.PostgresStore`) subclasses it, gives it its guard, records
@@ -22,7 +22,7 @@ from .journal import encode_body
 from .names import ABOX_IRI, TBOX_IRI
 from .records import ActionSpec, CheckedPlan, Execution, StoredAction, StoredPlan, StoredProblem, StoredState
 from .unit import RecordsOfWrites
-from .writes import Writes
+from .writes import RecordWriter
 
 PREFIXES = {"planhrc": TBOX_IRI, "abox": ABOX_IRI, "owl": "http://www.w3.org/2002/07/owl#"}
 
@@ -41,7 +41,7 @@ class StoreFacade:
 
     _guard: AbstractContextManager[None]
     _records: RecordsOfStore
-    _writes: Writes
+    _writes: RecordWriter
 
     def _latest_id(self, object_id: str, noun: str) -> str | None:
         """The newest record of a kind of the object (its counter), or None: the backend's."""

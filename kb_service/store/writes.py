@@ -22,8 +22,8 @@ from .triples import object_triples, state_triples
 from .unit import AboxWriter, PlanAdopter, RecordsOfWrites
 
 
-class Writes:
-    """The writes of one ABox, whatever its backend."""
+class RecordWriter:
+    """The writes of one ABox, whatever its backend: what the `interface.Writes` of every store hands on."""
 
     def __init__(self, abox: AboxWriter[Any], records: RecordsOfWrites, backlog: PlanAdopter) -> None:
         self._abox = abox
