@@ -17,7 +17,8 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   replaced too. A job waits for a free worker (or one starting) only until its deadline.
 * **What comes back.** The outcome's expected states share most atoms (every state carries the object's static
   facts): a worker sends the first state once and, for each further state, the atoms it lacks and adds against
-  the one before it; the service builds each state as one set operation on the one before. The outcome travels
+  the one before it (the replay's own changes), and the service keeps them so (`transition.ExpectedStates`: a
+  state is made whole when something reads it, most of them behind the answer). The outcome travels
   in several frames (header, actions, states in chunks) so that no single unpickling holds the service's
   interpreter for long.
 * **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small

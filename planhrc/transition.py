@@ -13,11 +13,12 @@ import threading
 import time
 from functools import lru_cache
 from dataclasses import dataclass, replace
-from typing import AbstractSet, Any, Iterator, Mapping, Sequence, overload
+from typing import AbstractSet, Any, Callable, Iterator, Mapping, Sequence, overload
 
 from planhrc.errors import DeadlineExceeded, PlanhrcError
 from planhrc.grounding import holds, instantiate, substitute
-from planhrc.model import EQUALITY, ActionSchemaSpec, ActionSpec, Atom, CondEffect, DomainModelSpec, Literal, State
+from planhrc.model import (EQUALITY, ActionSchemaSpec, ActionSpec, Atom, CondEffect, ConditionalEffect,
+                           DomainModelSpec, Literal, State)
 
 
 class TransitionError(PlanhrcError):
@@ -204,6 +205,29 @@ class _JoinPlan:
         return found
 
 
+AtomMaker = Callable[[Mapping[str, str]], Atom]
+
+
+def _atom_maker(lit: Literal) -> AtomMaker:
+    """`instantiate(lit, binding)` as one call that picks the arguments' values at once (KeyError: one unbound)."""
+    predicate, args = lit.predicate, lit.args
+    if not args:
+        return lambda binding: (predicate,)
+    if len(args) == 1:
+        (only,) = args
+        return lambda binding: (predicate, binding[only])
+    pick = operator.itemgetter(*args)
+    return lambda binding: (predicate, *pick(binding))
+
+
+@lru_cache(maxsize=64)
+def _effect_makers(ce: ConditionalEffect) -> tuple[tuple[AtomMaker, ...], tuple[AtomMaker, ...], tuple[AtomMaker, ...]]:
+    """The atoms a ground conditional effect needs, deletes and adds, each as a maker of it from a binding."""
+    return (tuple(_atom_maker(lit) for lit in ce.when if lit.predicate != EQUALITY and not lit.negated),
+            tuple(_atom_maker(lit) for lit in ce.effects if lit.negated),
+            tuple(_atom_maker(lit) for lit in ce.effects if not lit.negated))
+
+
 @lru_cache(maxsize=64)
 def _join_plan(literals: tuple[Literal, ...], bound: frozenset[str]) -> _JoinPlan:
     return _JoinPlan(literals, bound)
@@ -237,14 +261,11 @@ def ground_action(domain: DomainModelSpec, step: str, state: Atoms, index: State
         for ce in schema.conditional_effects:
             variables = [v for v, _ in ce.variables]
             atoms = atoms or StateIndex(state)
-            needs = [lit for lit in ce.when if lit.predicate != EQUALITY and not lit.negated]
-            deletes = [lit for lit in ce.effects if lit.negated]
-            adds = [lit for lit in ce.effects if not lit.negated]
-            plan = _join_plan(ce.when, frozenset(binding))
-            for b in plan.bindings(binding, variables, atoms):
-                conds.append(CondEffect(when=frozenset([instantiate(lit, b) for lit in needs]),
-                                        eff_neg=frozenset([instantiate(lit, b) for lit in deletes]),
-                                        eff_pos=frozenset([instantiate(lit, b) for lit in adds])))
+            needs, deletes, adds = _effect_makers(ce)
+            for b in _join_plan(ce.when, frozenset(binding)).bindings(binding, variables, atoms):
+                conds.append(CondEffect(when=frozenset([make(b) for make in needs]),
+                                        eff_neg=frozenset([make(b) for make in deletes]),
+                                        eff_pos=frozenset([make(b) for make in adds])))
     except KeyError as exc:  # a schema's literal names a variable that is neither a parameter nor a forall's
         raise TransitionError(f"{step}: variable {exc.args[0]} of schema {name} is unbound") from None
     conds.sort(key=_cond_order)
