@@ -39,24 +39,45 @@ def parse_step(step: str) -> tuple[str, tuple[str, ...]]:
 
 class StateIndex:
     """The atoms of a state by predicate and by (predicate, argument position, value), for the joins of
-    `_bindings`; `moved` updates it by what one action changed instead of indexing the next state anew."""
+    `_bindings`; `moved` updates it by what one action changed instead of indexing the next state anew. A
+    (predicate, position) is indexed when a join first looks it up, and kept up to date from then on: a join reads
+    a few (an absolute step's: `affected` by its link, `hasorientation` by its joint, `orientationord` by its first
+    value), and every other position of 20,000 static facts and of each change was indexed for nothing."""
 
     def __init__(self, state: Atoms) -> None:
         self.state = state
         self._by_pred: dict[str, set[Atom]] = {}
         self._by_arg: dict[tuple[str, int, str], set[Atom]] = {}
+        self._positions: dict[str, tuple[int, ...]] = {}  # predicate -> its indexed positions
         for atom in state:
-            self._add(atom)
+            self._by_pred.setdefault(atom[0], set()).add(atom)
 
     def _add(self, atom: Atom) -> None:
         self._by_pred.setdefault(atom[0], set()).add(atom)
-        for pos, value in enumerate(atom[1:]):
-            self._by_arg.setdefault((atom[0], pos, value), set()).add(atom)
+        for pos in self._positions.get(atom[0], ()):
+            if pos + 1 < len(atom):
+                self._by_arg.setdefault((atom[0], pos, atom[pos + 1]), set()).add(atom)
 
     def _discard(self, atom: Atom) -> None:
         self._by_pred.get(atom[0], set()).discard(atom)
-        for pos, value in enumerate(atom[1:]):
-            self._by_arg.get((atom[0], pos, value), set()).discard(atom)
+        for pos in self._positions.get(atom[0], ()):
+            if pos + 1 < len(atom):
+                self._by_arg.get((atom[0], pos, atom[pos + 1]), set()).discard(atom)
+
+    def by_arg(self, predicate: str, pos: int, value: str) -> set[Atom] | None:
+        """The atoms of `predicate` whose argument `pos` (0-based) is `value` (None: none ever was)."""
+        if pos not in self._positions.get(predicate, ()):
+            self._index(predicate, pos)
+        return self._by_arg.get((predicate, pos, value))
+
+    def by_pred(self, predicate: str) -> set[Atom] | None:
+        return self._by_pred.get(predicate)
+
+    def _index(self, predicate: str, pos: int) -> None:
+        self._positions[predicate] = (*self._positions.get(predicate, ()), pos)
+        for atom in self._by_pred.get(predicate, ()):
+            if pos + 1 < len(atom):
+                self._by_arg.setdefault((predicate, pos, atom[pos + 1]), set()).add(atom)
 
     def moved(self, state: Atoms, change: "Change | None" = None) -> "StateIndex":
         """This index, changed in place to describe `state` (which differs from the old one by few atoms);
@@ -79,7 +100,7 @@ class StateIndex:
         best: set[Atom] | None = None
         for pos, var in enumerate(lit.args):
             if var in binding:
-                found = self._by_arg.get((lit.predicate, pos, binding[var]))
+                found = self.by_arg(lit.predicate, pos, binding[var])
                 if found is None:
                     return frozenset()
                 if best is None or len(found) < len(best):
@@ -162,7 +183,7 @@ class _JoinPlan:
     def bindings(self, binding: Mapping[str, str], variables: Sequence[str], index: StateIndex
                  ) -> list[dict[str, str]]:
         matches, others, state = self.matches, self.others, index.state
-        by_arg, by_pred = index._by_arg, index._by_pred
+        by_arg, by_pred = index.by_arg, index.by_pred
         current = dict(binding)  # extended and undone in place along the join
         last = len(matches)
         found: list[dict[str, str]] = []
@@ -179,7 +200,7 @@ class _JoinPlan:
                 if (predicate, *[current[var] for var in args]) in state:
                     extend(depth + 1)
                 return
-            atoms = by_pred.get(predicate) if key is None else by_arg.get((predicate, key[0], current[key[1]]))
+            atoms = by_pred(predicate) if key is None else by_arg(predicate, key[0], current[key[1]])
             if not atoms:
                 return
             for atom in atoms:  # the index does not change while a step is ground

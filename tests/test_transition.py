@@ -110,18 +110,34 @@ def test_indexed_join_finds_exactly_the_brute_force_bindings(seed):
                 assert sorted(fast, key=key) == sorted(slow, key=key) and slow
 
 
+def _every_position(index):
+    """The index with every (predicate, position) of its state indexed (as joins looking them all up would)."""
+    for atom in list(index.state):
+        for pos in range(len(atom) - 1):
+            index.by_arg(atom[0], pos, atom[pos + 1])
+    return index
+
+
+def _same_index(mine, fresh):
+    """Whether a moved index describes what a fresh one of its state does, on the positions it indexed."""
+    for predicate, positions in mine._positions.items():
+        for pos in positions:
+            fresh.by_arg(predicate, pos, "")
+    return all({k: v for k, v in a.items() if v} == {k: v for k, v in b.items() if v}
+               for a, b in ((mine._by_pred, fresh._by_pred), (mine._by_arg, fresh._by_arg)))
+
+
 def test_a_moved_index_equals_a_fresh_one_along_a_plan():
     obj = make_object("o", "absolute", 6, 8)
     domain = read_domain_model(default_tbox_path(), "absolute")
     steps = ["(rotateclockwise o_l3 o_l2 o_j3 deg_0 deg_45)", "(rotateclockwise o_l5 o_l4 o_j5 deg_45 deg_90)",
              "(rotateanticlockwise o_l2 o_l1 o_j2 deg_0 deg_315)"]
     _, states = replay(domain, obj.state([0] * 6), steps)
-    index = StateIndex(states[0])
+    index = _every_position(StateIndex(states[0]))
     for later in states[1:]:
         index.moved(later)
-        fresh = StateIndex(later)
-        for mine, theirs in ((index._by_pred, fresh._by_pred), (index._by_arg, fresh._by_arg)):
-            assert {k: v for k, v in mine.items() if v} == theirs
+        assert _same_index(index, StateIndex(later))
+    assert len(index._positions["hasorientation"]) == 2
     assert obj.joint_values_of(states[-1]) == {1: 0, 2: 315, 3: 0, 4: 0, 5: 45, 6: 45}
 
 
@@ -227,9 +243,7 @@ def test_a_step_of_a_large_absolute_object_grounds_in_its_state_as_a_fresh_one()
         steps.append(step)
     with pytest.raises(TransitionError, match="precondition"):
         grounder.ground(steps[-1], state)  # the last step again: its joint has moved on
-    fresh_index = StateIndex(state)
-    for mine, theirs in ((index._by_pred, fresh_index._by_pred), (index._by_arg, fresh_index._by_arg)):
-        assert {key: v for key, v in mine.items() if v} == theirs
+    assert index._positions and _same_index(index, StateIndex(state))
 
 
 # -- the replay against the generic one: every formulation, random plans ------------------------------------------
