@@ -327,3 +327,63 @@ def test_the_reasoning_service_infers_the_same_from_plans_written_out_when_read(
     assert results[0].inferred and set(results[0].inferred) == set(results[1].inferred)
     # the current plan's expected states were among what the reasoner read
     assert any(f"#{state}>" in line for state in plan.expected_state_ids for line in results[0].inferred)
+
+
+def test_a_plan_whose_states_are_kept_as_changes_is_stored_without_making_them_and_reads_the_same(place,
+                                                                                                  monkeypatch):
+    """A plan given with the replay's `ExpectedStates` and checked on its first steps: its write makes no state
+    whole past those (its row is the first state and the changes; each state's record is made when it is read), and
+    every state reads back as the replayed one, in this process and in another."""
+    from planhrc.transition import ExpectedStates, replay
+    from planhrc.translator.domain import read_domain_model
+
+    made: list[int] = []
+    real_make = ExpectedStates._make
+
+    def counted(self, k):
+        made.append(k)
+        return real_make(self, k)
+
+    monkeypatch.setattr(ExpectedStates, "_make", counted)
+    obj = make_object("obj1", "absolute", 8, 8)
+    domain = read_domain_model(TBOX, "absolute")
+    with place.open() as kb:
+        kb.create_object(obj)
+        start = kb.add_state("obj1", "perceived", obj.state([0] * 8))
+        plan_steps = [f"(rotateclockwise obj1_l{k} obj1_l{k - 1} obj1_j{k} deg_{45 * i} deg_{45 * (i + 1)})"
+                      for k in (8, 6, 4, 2) for i in range(3)]
+        actions, states = replay(domain, start.atoms, plan_steps)
+        whole = [frozenset(s) for s in states]
+        goal = kb.add_state("obj1", "goal", states[-1])
+        problem = kb.add_problem("obj1", start.id, goal.id)
+        made.clear()
+        checked = kb.check_plan("obj1", actions, states, first_steps=3)
+        plan = kb.add_plan(problem.id, "inproc", actions, states, checked)
+        assert sorted(set(made)) == [1, 2, 3]  # s^e_2 .. s^e_4 for the check of a_1 .. a_3, nothing for the write
+        assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == whole
+    with place.open() as again:
+        assert [again.get_state(s).atoms for s in plan.expected_state_ids[::-1]] == whole[::-1]
+
+
+def test_a_record_put_to_be_made_later_is_made_once_when_first_got():
+    from planhrc.kb_service.store.cache import RecordCache
+    from planhrc.kb_service.store.records import StoredState
+
+    calls: list[str] = []
+    cache = RecordCache("state", StoredState, lambda ident: None)
+
+    def make(ident):
+        def build():
+            calls.append(ident)
+            return StoredState(ident, "o", "expected", frozenset({("p",)}), 1.0)
+        return build
+
+    cache.put_later("o_state_1", make("o_state_1"))
+    cache.put_later("o_state_2", make("o_state_2"))
+    assert len(cache) == 2 and calls == []
+    assert cache.get("o_state_2").id == "o_state_2" and cache.get("o_state_2").id == "o_state_2"
+    assert calls == ["o_state_2"] and len(cache) == 2
+    cache.clear()
+    with pytest.raises(NotFoundError):
+        cache.get("o_state_1")
+    assert calls == ["o_state_2"]

@@ -12,6 +12,7 @@ from dataclasses import replace
 from typing import Iterator, Protocol, Sequence
 
 from planhrc.model import ArticulatedObject, Atom, Perception
+from planhrc.transition import frozen_states
 
 from .cache import R, RecordCache
 from .checks import check_export, check_plan, check_steps
@@ -107,7 +108,7 @@ class StoreFacade:
                    deadline_at: float | None = None, first_steps: int | None = None) -> CheckedPlan:
         with self._guard:  # only to look the object up: the checks read nothing else
             info = self._records.info(object_id, "object_id")
-        checked = check_plan(info, tuple(actions), tuple(expected_states), deadline_at, first_steps)
+        checked = check_plan(info, tuple(actions), frozen_states(expected_states), deadline_at, first_steps)
         # the journal row's body too, here, outside the store's lock: for a large plan the write would hold the
         # lock every object's write needs for most of a second making it (`journal.encode_body`)
         return replace(checked, journal_body=encode_body(checked.actions, checked.expected_states))
@@ -116,7 +117,7 @@ class StoreFacade:
                     first: int, last: int) -> None:
         with self._guard:
             info = self._records.info(object_id, "object_id")
-        check_steps(info, tuple(actions), tuple(expected_states), first, last)
+        check_steps(info, tuple(actions), frozen_states(expected_states), first, last)
 
     def _checked_execution(self, object_id: str, execution: Execution) -> str:
         """Check a new execution of an object (with the store's guard held); the object's id."""

@@ -11,6 +11,7 @@ import time
 from typing import Any, Sequence
 
 from planhrc.model import ArticulatedObject, Atom, Perception
+from planhrc.transition import frozen_states
 
 from .checks import (ObjectInfo, check_kind, check_observation, check_perception, check_plan, check_state_atoms,
                      is_checked)
@@ -146,7 +147,7 @@ class RecordWriter:
         if not isinstance(planner, str) or not planner:
             raise ValidationError("planner: must be a non-empty string")
         actions = tuple(actions)
-        expected_states = tuple(expected_states)
+        expected_states = frozen_states(expected_states)
         ident = info.obj.ident
         body = None
         if is_checked(checked, ident, actions, expected_states):
