@@ -11,13 +11,6 @@ from pathlib import Path
 
 from tests.test_layers import ALL, import_statements
 
-# Cycles left to the change now reshaping the robot's modules; each must still be a cycle (the test says when one
-# is gone, so that its entry goes too).
-KNOWN: set[frozenset[str]] = {
-    frozenset({"planhrc.robot_sim.grip", "planhrc.robot_sim.skills"}),  # grip names skills' `Robot` for mypy
-}
-
-
 def imported(module: str, path: Path) -> set[str]:
     """The package's modules `module` imports (see the module's note)."""
     found: set[str] = set()
@@ -86,12 +79,8 @@ def path_through(component: frozenset[str]) -> list[str]:
 
 
 def test_no_module_imports_itself_through_others():
-    found = [c for c in cycles(GRAPH) if c not in KNOWN]
+    found = cycles(GRAPH)
     assert found == [], "\n".join(" -> ".join(path_through(c)) for c in found)
-
-
-def test_each_cycle_let_off_is_still_there():
-    assert set(cycles(GRAPH)) >= KNOWN
 
 
 def test_the_search_finds_a_cycle_and_a_type_only_import(tmp_path):
