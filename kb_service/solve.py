@@ -2,7 +2,9 @@
 
 object -> translation -> planning -> VAL -> expected states (`planhrc.pipeline.solve`, values) -> the object, its initial
 and goal States, the Problem and the Plan with its expected States stored in the ABox in one write; prints the
-time of each stage and the plan with its expected states.
+time of each stage and the plan with its expected states. A plan VAL did not give a verdict on in time (or was not
+asked about: `--no-validate`) is printed with status `unvalidated` and the reason, exit code 3, and not stored: only
+validated plans are kept.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from typing import Any
 from planhrc.cli_args import int_in, positive_float, writable_file
 from planhrc.model import Formulation, ModelError
 from planhrc.pipeline import PlanningConfig, config_from_settings
+from planhrc.planner.cli import EXIT_NOT_SOLVED, EXIT_SOLVED, EXIT_UNVALIDATED
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.registry import PLANNERS
 from planhrc.settings import get_settings
@@ -59,7 +62,7 @@ def add_solve_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPar
                    help="planner backend (default: the settings' planner)")
     p.add_argument("--timeout", type=positive_float, default=None, metavar="S",
                    help="time limit of one planner call (default: the settings' planner_timeout_s)")
-    p.add_argument("--no-validate", action="store_true", help="skip VAL (not recommended)")
+    p.add_argument("--no-validate", action="store_true", help="skip VAL: the plan is printed `unvalidated` (exit 3) and not stored")
     p.add_argument("--db", type=writable_file, default=None, help="SQLite store (default: in memory)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run_solve)
@@ -86,7 +89,8 @@ def run_solve(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
     else:
         _print_report(result)
-    return 0 if result["status"] == "solved" else 1
+    # `planhrc plan`'s exit codes: validated, a plan no validator gave a verdict on, no plan (2: a usage error)
+    return {"solved": EXIT_SOLVED, "unvalidated": EXIT_UNVALIDATED}.get(result["status"], EXIT_NOT_SOLVED)
 
 
 def _print_report(result: dict[str, Any]) -> None:

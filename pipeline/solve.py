@@ -3,11 +3,12 @@ prints. Storing the result in the knowledge base is the service's job (`planhrc.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
 from planhrc.model import ActionSpec, ArticulatedObject, ModelError, State, make_object
-from planhrc.pipeline import PlanningConfig, PlanOutcome, merge_macro_steps, plan
+from planhrc.pipeline import PlanningConfig, PlanOutcome, deadline_from, merge_macro_steps, plan, validate
+from planhrc.vocabulary import PlanningStatus
 
 ANY = {"*", "_", "-", "?"}
 
@@ -61,8 +62,29 @@ def solve(request: SolveRequest, config: PlanningConfig, ident: str = "obj1") ->
     init = obj.state(obj.check_joint_values(request.init, field="init"))
     goal = obj.partial_configuration_atoms(request.goal, field="goal")
     timings = {"model": time.perf_counter() - t0}
-    outcome = plan(obj, init, goal, config)
+    deadline_at = deadline_from(config)
+    found = plan(obj, init, goal, config, defer_validation=True, deadline_at=deadline_at)
+    outcome = checked(obj, init, goal, config, found, deadline_at)
     return Solution(obj, init, goal, outcome, {**timings, **outcome.timings})
+
+
+def checked(obj: ArticulatedObject, init: State, goal: State, config: PlanningConfig, found: PlanOutcome,
+            deadline_at: float) -> PlanOutcome:
+    """The found plan with VAL's verdict. "solved" means validated: a plan no validator gave a verdict on (VAL not
+    asked, or not finished by the deadline) is kept `unvalidated` with the reason, never answered as a timeout; a
+    plan VAL refused goes to the next planners, as the pipeline does."""
+    if not found.solved or not found.actions:
+        return found
+    if not config.validate:
+        return replace(found, status=PlanningStatus.UNVALIDATED, message="not validated: VAL was not asked "
+                       "(--no-validate)")
+    outcome = validate(found, obj, config, deadline_at)
+    if outcome.status is PlanningStatus.INVALID:
+        return plan(obj, init, goal, config, deadline_at=deadline_at)
+    if outcome.status is PlanningStatus.TIMEOUT:
+        return replace(found, status=PlanningStatus.UNVALIDATED, message=f"not validated: {outcome.message}",
+                       timings=outcome.timings)
+    return outcome
 
 
 def report(solution: Solution, ids: Mapping[str, str | None], timings: Mapping[str, float]) -> dict[str, Any]:

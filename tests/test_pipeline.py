@@ -102,6 +102,37 @@ def test_solve_command_partial_goal_and_macro_steps(capsys):
                                       "held_link_index": 2, "delta_deg": 90}]
 
 
+def test_solve_command_prints_a_plan_val_did_not_finish_as_unvalidated_and_stores_none(capsys, monkeypatch,
+                                                                                         tmp_path):
+    """VAL (real) is given a deadline already past, on a plan it needs about a second for: the plan the planner found is printed `unvalidated` with VAL's
+    reason, exit 3, never `timeout`; the store keeps the object and its problem but no plan."""
+    import time
+
+    import planhrc.pipeline.solve as solve_module
+
+    real = solve_module.validate
+    monkeypatch.setattr(solve_module, "validate",
+                        lambda outcome, obj, config, deadline_at: real(outcome, obj, config, time.monotonic()))
+    db = tmp_path / "kb.sqlite3"
+    goal = [(90 + 10 * k) % 360 for k in range(12)]  # 12 x 36 absolute: VAL takes about a second on its plan
+    code = main(["solve", "--formulation", "absolute", "--orientations", "36", "--init", ",".join(["0"] * 12),
+                 "--goal", ",".join(map(str, goal)), "--json", "--db", str(db)])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 3 and report["status"] == "unvalidated", report
+    assert "not validated" in report["message"] and "VAL" in report["message"]
+    assert report["plan"] and report["expected_states"][-1] == goal and report["plan_id"] is None
+    with SqliteStore(db, default_tbox_path()) as kb:
+        assert kb.get_object(report["object_id"]) is not None and kb.latest_plan(report["object_id"]) is None
+
+
+def test_solve_command_without_val_says_unvalidated(capsys):
+    code = main(["solve", "--formulation", "relative", "--orientations", "8", "--init", "0,0,0",
+                 "--goal", "0,90,0", "--json", "--no-validate"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 3 and report["status"] == "unvalidated" and "--no-validate" in report["message"]
+    assert report["plan"] and report["plan_id"] is None
+
+
 @pytest.mark.parametrize("args,message", [
     (["--init", "0,45,0", "--goal", "0,0,0"], "init"),
     (["--init", "0,0,0", "--goal", "0,0"], "goal"),
