@@ -33,6 +33,7 @@ from typing import Any, Mapping
 
 import httpx
 
+from planhrc.event_log import DecisionData, ValVerdictData, data_of
 from planhrc.planner.registry import available_planners, get_planner
 from planhrc.stats import percentile
 from planhrc.translator.domain import get_domain
@@ -100,7 +101,7 @@ def measure_service_cpu(formulation: str, links: int = 20, orientations: int = 1
     fork server and its runs, the armed ones) and `descendants_ms` (the planning workers) of those, and the
     answers' latency. A random perception now and then lets the plan go on (`decisions`): its CPU is reported apart
     (`other_ms`), and `per_perception_ms` averages every perception."""
-    from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
+    from planhrc.bench.service_calls import TOKEN, create_object, random_angles, running_service, set_goal
 
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-cpu-") as tmp, \
@@ -197,13 +198,13 @@ class Settle:
         events = self.client.get(f"/objects/{self.ident}/events", params={"after_seq": self.seq}).json()
         for event in events:
             self.seq = int(event["seq"])
-            data = event.get("data") or {}
-            if event["kind"] == "val_verdict":
-                if data.get("plan_id") == self.plan_id:
+            record = data_of(event["kind"], event["data"])
+            if isinstance(record, ValVerdictData):
+                if record.plan_id == self.plan_id:
                     self.pending -= 1
-            elif data.get("plan_id") is not None and data.get("plan_id") != self.plan_id:
-                self.plan_id = data["plan_id"]
-                self.pending = len(data.get("val_pieces") or []) - len(data.get("val_accepted") or [])
+            elif isinstance(record, DecisionData) and record.plan_id is not None and record.plan_id != self.plan_id:
+                self.plan_id = record.plan_id
+                self.pending = len(record.val_pieces) - len(record.val_accepted)
         return self.pending <= 0 and to_write == self.to_write
 
     def wait(self, limit_s: float = SETTLE_LIMIT_S) -> int:

@@ -338,7 +338,8 @@ def measure_http(formulation: str, links: int = 20, orientations: int = 12, runs
 
     import httpx
 
-    from planhrc.bench.service import TOKEN, create_object, random_angles, replanning_latencies, running_service, set_goal
+    from planhrc.bench.service_calls import (TOKEN, create_object, random_angles, replanning_latencies,
+                                             running_service, set_goal)
 
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-http-") as tmp, running_service(Path(tmp)) as server, \
@@ -380,7 +381,7 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
     writes behind the answer."""
     import tempfile
 
-    from planhrc.kb_service.store import KnowledgeBase
+    from planhrc.kb_service.store import SqliteStore
     from planhrc.pipeline import config_from_settings, plan
     from planhrc.settings import make_settings
 
@@ -390,7 +391,7 @@ def measure_replan(formulation: str, links: int = 20, orientations: int = 12, ru
     n_values = links if formulation == "absolute" else links - 1
     out: dict[str, Any] = {"formulation": formulation, "links": links, "orientations": orientations}
     with tempfile.TemporaryDirectory(prefix="planhrc-bench-kb-") as tmp, \
-            KnowledgeBase(str(Path(tmp) / "kb.sqlite3"), tbox) as kb:
+            SqliteStore(str(Path(tmp) / "kb.sqlite3"), tbox) as kb:
         ident = kb.new_object_id()
         obj = make_object(ident, formulation, links, orientations)
         kb.create_object(obj)

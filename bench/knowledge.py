@@ -28,8 +28,8 @@ import httpx
 
 from planhrc.service_process import settled_health
 
-from .service import (_client, cpu_seconds, create_object, perceive, random_angles, running_service, set_goal,
-                      summary_ms)
+from .service_calls import (client_of, cpu_seconds, create_object, perceive, random_angles, running_service,
+                            set_goal, summary_ms)
 
 CURRENT_STATE_QUERY = """PREFIX planhrc: <http://planhrc.org/ontology/planhrc.owl#>
 SELECT ?object ?joint ?degrees WHERE {
@@ -129,7 +129,7 @@ def bench_knowledge(perceptions: int, samples: int, links: int, orientations: in
         after: dict[str, list[float]] = {}
         with ExitStack() as stack:
             server = stack.enter_context(running_service(work, {**env, "PLANHRC_SPARQL_ENGINE": "oxigraph"}))
-            client = stack.enter_context(_client(server, 300))
+            client = stack.enter_context(client_of(server, 300))
             others = []
             for n in range(OTHER_OBJECTS):
                 oid = create_object(client, links, orientations, "relative", f"other{n}")
@@ -143,7 +143,7 @@ def bench_knowledge(perceptions: int, samples: int, links: int, orientations: in
             settled_health(client, 120)  # nothing written behind any more: the next service opens the store as is
             # the earlier engine's service on the same store, read-only: both asked in turn
             old = stack.enter_context(running_service(work, {**env, "PLANHRC_SPARQL_ENGINE": "rdflib"}))
-            old_client = stack.enter_context(_client(old, 300))
+            old_client = stack.enter_context(client_of(old, 300))
             clients = {"oxigraph": client, "rdflib": old_client}
             for c in clients.values():
                 _query(c)  # the first query reads every object's current ABox
@@ -157,7 +157,7 @@ def bench_knowledge(perceptions: int, samples: int, links: int, orientations: in
                     cpu[name] += _tree_cpu(pids[name]) - before
             stack.pop_all().close()  # both services stop; rdflib's answers after a perception come below
             with running_service(work, {**env, "PLANHRC_SPARQL_ENGINE": "oxigraph"}) as server, \
-                    _client(server, 300) as client:
+                    client_of(server, 300) as client:
                 after["oxigraph"] = _after_perceptions(client, oid, samples, rng, links, orientations)
                 states = [f"{o}_state_{k}" for o in [oid, *others] for k in (1, 2, 3)]
                 states = [s for s in states if client.get(f"/states/{s}").status_code == 200]
@@ -176,7 +176,7 @@ def bench_knowledge(perceptions: int, samples: int, links: int, orientations: in
                               _reason(client, pid, "hermit", big, "states")]
                 java = _java_start(cache_home)
             with running_service(work, {**env, "PLANHRC_SPARQL_ENGINE": "rdflib"}) as server, \
-                    _client(server, 300) as client:
+                    client_of(server, 300) as client:
                 _query(client)
                 after["rdflib"] = _after_perceptions(client, oid, samples, rng, links, orientations)
     return {"perceptions": perceptions, "objects": OTHER_OBJECTS + 1, "links": links, "orientations": orientations,

@@ -10,6 +10,11 @@ length and how many of its steps were checked before the answer (the first motio
 checked in one piece) against how many behind it, and the re-plan's stages as the service timed them (translate,
 plan, expected states: the replay of every step, which the store needs whole; VAL before the answer). A 503 is the
 deadline passing; it is reported, never retried.
+
+With `--stage-cpu`, each size's re-plan stages on the answer's path are first run once in the bench's own process
+and their CPU seconds reported (`stage_cpu`: the planning worker's translation, planning, replay and packing, the
+service's unpacking, first VAL pieces' problems and journal row), which the machine's other work moves less than
+the answers' wall time.
 """
 from __future__ import annotations
 
@@ -25,7 +30,8 @@ import httpx
 
 from planhrc.bench.cpu import Settle
 from planhrc.bench.grid import machine_info, write_json_and_table
-from planhrc.bench.service import TOKEN, create_object, random_angles, running_service, set_goal
+from planhrc.bench.service_calls import TOKEN, create_object, random_angles, running_service, set_goal
+from planhrc.event_log import DecisionData, data_of
 from planhrc.settings import make_settings
 
 SIZES = ((50, 36), (200, 12))
@@ -60,10 +66,11 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 answer = r.json()
                 row["decision"] = answer["decision"]
                 events = client.get(f"/objects/{ident}/events").json()
-                data: dict[str, Any] = next((e["data"] for e in reversed(events) if e["kind"] == "replan"
-                                             and e["data"].get("plan_id") == answer.get("plan_id")), {})
-                pieces = data.get("val_pieces") or []
-                accepted = [pieces[i - 1] for i in data.get("val_accepted") or []]
+                decisions = [data_of(e["kind"], e["data"]) for e in events if e["kind"] == "replan"]
+                data = next((d for d in reversed(decisions) if isinstance(d, DecisionData)
+                             and d.plan_id == answer.get("plan_id")), DecisionData())
+                pieces = data.val_pieces
+                accepted = [pieces[i - 1] for i in data.val_accepted]
                 if pieces:  # answered once VAL accepted the first pieces, the rest checked behind the answer
                     row["plan_steps"] = pieces[-1][1]
                     row["accepted_before_answer"] = accepted[-1][1] if accepted else 0
@@ -74,7 +81,7 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 if row["first_action_last_step"] is not None and row["accepted_before_answer"] >= \
                         row["first_action_last_step"]:
                     row["first_validated_action_s"] = row["seconds"]
-                timings = (data.get("timings") or {}) if answer["decision"] == "replan" else {}
+                timings = (data.timings or {}) if answer["decision"] == "replan" else {}
                 row["stages_s"] = {k: round(float(timings[k]), 3) for k in STAGES if k in timings}
             else:
                 row["detail"] = str(r.json().get("detail", ""))[:160]
@@ -83,13 +90,73 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
     return {"links": links, "orientations": orientations, "formulation": formulation, "rows": rows}
 
 
+CPU_STAGES = ("translate and plan (the object's first)", "translate and plan (a later one)",
+              "expected states (the replay)", "the outcome packed (worker)", "the outcome unpacked (service)",
+              "the first VAL pieces' problems", "the journal row's body")
+
+
+def stage_cpu(links: int, orientations: int, seed: int) -> dict[str, Any]:
+    """The CPU seconds (`time.process_time()`) of an absolute re-plan's stages on the answer's path, each once, in this
+    process, without a service: what the planning worker and the service each spend of a random task of this size
+    (the garbage collector off, as the worker and the unpacking run). Less at the mercy of other work on the
+    machine than the answers' wall time."""
+    import gc
+    from dataclasses import replace
+
+    from planhrc.kb_service.planning_pool import pack_outcome, unpack_outcome
+    from planhrc.kb_service.store.journal import encode_body
+    from planhrc.model import HAS_ORIENTATION, make_object, perceive
+    from planhrc.pipeline import config_from_settings, stages
+    from planhrc.pipeline.pieces import early_answer_first_piece, piece_bounds, piece_of
+
+    rng = random.Random(seed)
+    obj = make_object("o1", "absolute", links, orientations)
+    goal = frozenset(a for a in perceive(obj, random_angles(rng, links, orientations)).atoms if a[0] == HAS_ORIENTATION)
+    init = perceive(obj, random_angles(rng, links, orientations)).atoms
+    config = replace(config_from_settings(make_settings()), validate=False, deadline_s=3600.0)
+    cpu: dict[str, float] = {}
+
+    def timed(stage: str, work: Any) -> Any:
+        started = time.process_time()
+        done = work()
+        cpu[stage] = round(time.process_time() - started, 3)
+        return done
+
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for stage in CPU_STAGES[:2]:
+            found = timed(stage, lambda: stages.find_plan(obj, init, goal, config, deadline_at=time.monotonic() + 3600))
+        if not isinstance(found, stages.Found):
+            return {"links": links, "orientations": orientations, "status": found.status.value, "cpu_s": cpu}
+        outcome = timed(CPU_STAGES[2], lambda: stages.expect(obj, init, goal, found, time.monotonic() + 3600))
+        frames = timed(CPU_STAGES[3], lambda: list(pack_outcome(outcome)))
+        back = timed(CPU_STAGES[4], lambda: unpack_outcome(iter(frames), init))
+        task, first = back.task, early_answer_first_piece(obj, back, True)
+        bounds = piece_bounds(len(back.steps), 2, first, 2, 2) if first is not None else []
+        timed(CPU_STAGES[5], lambda: [piece_of(obj, task.problem, back.steps, back.expected_states, a + 1, b,
+                                               task.validation_domain) for a, b in bounds if first and b <= first])
+        timed(CPU_STAGES[6], lambda: encode_body(back.actions, back.expected_states))
+    finally:
+        if enabled:
+            gc.enable()
+    return {"links": links, "orientations": orientations, "steps": len(outcome.actions), "cpu_s": cpu}
+
+
 def markdown(report: dict[str, Any]) -> str:
     m = report["machine"]
     lines = [f"machine: {m['cpu']}, {m['cores']} cores; planning deadline {report['deadline_s']} s; "
-             f"load average {report['load_at_start']} at the start, {report.get('load_at_end', '-')} at the end", "",
-             "| object | perception | HTTP | seconds | first validated action s | decision | plan steps | "
-             "checked before the answer | translate / plan / expected states / VAL s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"load average {report['load_at_start']} at the start, {report.get('load_at_end', '-')} at the end", ""]
+    if report.get("stage_cpu"):
+        lines += ["CPU seconds of an absolute re-plan's stages, in process (`stage_cpu`):", "",
+                  "| object | steps | " + " | ".join(CPU_STAGES) + " |", "|---|---|" + "---|" * len(CPU_STAGES)]
+        for row in report["stage_cpu"]:
+            lines.append(f"| {row['links']} x {row['orientations']} | {row.get('steps', row.get('status'))} | "
+                         + " | ".join(str(row["cpu_s"].get(k, "-")) for k in CPU_STAGES) + " |")
+        lines.append("")
+    lines += ["| object | perception | HTTP | seconds | first validated action s | decision | plan steps | "
+              "checked before the answer | translate / plan / expected states / VAL s |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for size in report["sizes"]:
         for i, row in enumerate(size["rows"], start=1):
             stages = row.get("stages_s") or {}
@@ -115,13 +182,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--deadline", type=positive_float, default=None,
                         help="the service's planning deadline in seconds (default: the settings')")
+    parser.add_argument("--stage-cpu", action="store_true",
+                        help="first, each size's absolute re-plan stages in this process: their CPU seconds")
     parser.add_argument("--out", type=writable_dir, default=None, help="folder for large.json and large.md")
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine": machine_info(),
                               "deadline_s": args.deadline or make_settings().planning_deadline_s,
-                              "load_at_start": round(os.getloadavg()[0], 2),
-                              "sizes": [measure_size(links, k, args.formulation, args.runs, args.seed, args.deadline)
-                                        for links, k in args.sizes]}
+                              "load_at_start": round(os.getloadavg()[0], 2)}
+    if args.stage_cpu:
+        report["stage_cpu"] = [stage_cpu(links, k, args.seed) for links, k in args.sizes]
+    report["sizes"] = [measure_size(links, k, args.formulation, args.runs, args.seed, args.deadline)
+                       for links, k in args.sizes]
     report["load_at_end"] = round(os.getloadavg()[0], 2)
     table = markdown(report)
     print(table)

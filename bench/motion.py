@@ -23,7 +23,7 @@ from planhrc.robot_sim.demo import RANDOM_FORMULATIONS, random_scenario
 
 
 def run(tasks: int = 20, seed: int = 1000, formulations: Sequence[str] = RANDOM_FORMULATIONS) -> dict[str, Any]:
-    rows = []
+    rows: list[dict[str, Any]] = []
     for formulation in formulations:
         for i in range(tasks):
             scenario = random_scenario(seed + i, formulation=formulation, interventions=0)
@@ -35,13 +35,13 @@ def run(tasks: int = 20, seed: int = 1000, formulations: Sequence[str] = RANDOM_
             cpu = time.process_time()
             work = plan_work(placement, alphabet_of(obj), target, obj.orientations, hands=hands, expansions=10**6)
             cpu = time.process_time() - cpu
-            found = isinstance(work, Work)
-            rows.append({"formulation": formulation, "seed": seed + i, "found": found,
-                         "exact": found and work.exact, "expansions": work.expansions, "cpu_s": round(cpu, 3),
-                         "turns": len(work.turns) if found else None, "slides": len(work.slides) if found else None,
-                         "robot_s": work.cost_s if found else None,
-                         "unconstrained_steps": work.unconstrained_steps if found else None})
-    summary = {}
+            row: dict[str, Any] = {"formulation": formulation, "seed": seed + i, "found": isinstance(work, Work),
+                                   "exact": False, "expansions": work.expansions, "cpu_s": round(cpu, 3)}
+            if isinstance(work, Work):
+                row.update(exact=work.exact, turns=len(work.turns), slides=len(work.slides), robot_s=work.cost_s,
+                           unconstrained_steps=work.unconstrained_steps)
+            rows.append(row)
+    summary: dict[str, Any] = {}
     for formulation in formulations:
         mine = [r for r in rows if r["formulation"] == formulation]
         summary[formulation] = {

@@ -32,9 +32,8 @@ import httpx
 
 from planhrc.stats import percentile
 
-from .service import (_client, _replanning_with_cpu, _Side, cpu_seconds, create_object, random_angles,
-                      replanning_latencies, rss_mb, running_service)
-from .service import set_goal, summary_ms
+from .service_calls import (Side, client_of, cpu_seconds, create_object, random_angles, replanning_latencies,
+                            replanning_with_cpu, rss_mb, running_service, set_goal, summary_ms)
 
 SCRAPE_S = 15.0  # Prometheus' usual scrape interval; a scrape's own cost is measured apart (`scrape_cpu_ms`)
 SCRAPES_TIMED = 20
@@ -161,26 +160,26 @@ def _block(sink: str, samples: int, links: int, orientations: int, seed: int, ro
     """One block: fresh services, `samples` perceptions to each side, added to the run's counts; a scrape's CPU
     (measured when `time_scrape`, else nan) and the scrapes done."""
     with ExitStack() as stack:
-        sides: dict[str, _Side] = {}
+        sides: dict[str, Side] = {}
         rngs: dict[str, random.Random] = {}
         scrapes: dict[str, list[int]] = {}
         for name in (*SIDES, "paired"):
             environment = {k: v or sink for k, v in ENVIRONMENTS.get(name, ENVIRONMENTS["on"]).items()}
             folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="planhrc-sbench-")))
             server = stack.enter_context(running_service(folder, environment))
-            client = stack.enter_context(_client(server, 120))
+            client = stack.enter_context(client_of(server, 120))
             if environment["PLANHRC_METRICS"] == "true":
                 scrapes[name] = stack.enter_context(scraping(server.url, dict(client.headers)))
             for label in ((name,) if name != "paired" else PAIRED):
                 if label == "not traced":
-                    client = stack.enter_context(_client(server, 120))
+                    client = stack.enter_context(client_of(server, 120))
                     client.headers.update(NOT_SAMPLED)
                 rngs[label] = random.Random(seed)
                 obj = create_object(client, links, orientations, "relative", "observed")
                 set_goal(client, obj, random_angles(rngs[label], links, orientations))
                 # not measured: a process's and an object's first perceptions (caches filled, code paths warm)
                 replanning_latencies(client, obj, links, orientations, WARM_UP, random.Random(-seed))
-                sides[label] = _Side(server, client, obj, 0, [])
+                sides[label] = Side(server, client, obj, 0, [])
         turn = 0
         while any(side.posted < samples for side in sides.values()):
             order = list(sides.items())
@@ -191,7 +190,7 @@ def _block(sink: str, samples: int, links: int, orientations: int, seed: int, ro
                 count = min(round_size, samples - side.posted)
                 if count <= 0:
                     continue
-                lat, cpu_ms = _replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
+                lat, cpu_ms = replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
                                                    count, rngs[name])
                 side.posted += count
                 latencies[name] += lat

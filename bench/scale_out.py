@@ -37,7 +37,7 @@ from planhrc.service_process import running_service as start_service
 from planhrc.stats import percentile
 
 from .errors import BenchError
-from .service import TOKEN, _client, create_object, random_angles, set_goal
+from .service_calls import TOKEN, client_of, create_object, random_angles, set_goal
 
 
 def process_cpu_s(pid: int) -> float:
@@ -132,7 +132,7 @@ def _configuration(db: str, backend: str, replicas: int, n_objects: int, n_clien
             stack.enter_context(start_service(location, args=("--log-level", "warning"), clean_env=True, cwd=folder,
                                               env={"PLANHRC_TOKEN": TOKEN, "PLANHRC_COMPACT_EVERY_S": "0"}))
             for _ in range(replicas)]
-        clients = [stack.enter_context(_client(server, 120)) for server in servers]
+        clients = [stack.enter_context(client_of(server, 120)) for server in servers]
         rng = random.Random(seed)
         objects = []
         for n in range(n_objects):

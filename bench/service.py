@@ -28,124 +28,23 @@ import sys
 import tempfile
 import threading
 import time
-from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import httpx
 
 from planhrc.cli_args import SubParsers
 from planhrc.service_process import RunningService as Server
-from planhrc.service_process import running_service as start_service
 from planhrc.stats import cpu_model, percentile
-from planhrc.vocabulary import DecisionKind
 
 from .errors import BenchError
+from .knowledge import bench_knowledge, knowledge_markdown
+from .observability import bench_observability, observability_markdown
+from .scale_out import bench_scale_out, scale_out_markdown
+from .service_calls import (TOKEN, Side, client_of, create_object, perceive, random_angles,
+                            replanning_latencies, replanning_with_cpu, rss_mb, running_service, set_goal, summary_ms)
 
-TOKEN = "service-bench-token"
 READ_ROUTES = ("object", "plan", "events", "pddl_problem", "ontology")
-
-
-def rss_mb(pid: int) -> float:
-    """Resident set size of a process in MiB (Linux /proc)."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return float("nan")
-
-
-def cpu_seconds(pid: int) -> float:
-    """CPU time (user + system) a process has used, in seconds (Linux /proc): what a request costs the server,
-    whatever else the machine runs."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
-        return float("nan")
-
-
-def _replanning_with_cpu(client: httpx.Client, server: Server, object_id: str, links: int, orientations: int,
-                         count: int, rng: random.Random, acting: bool = False) -> tuple[list[float], float]:
-    """`replanning_latencies`, and the server's CPU milliseconds per perception posted meanwhile (with `acting`,
-    the robot's calls between two perceptions included)."""
-    before = cpu_seconds(server.pid)
-    lat = replanning_latencies(client, object_id, links, orientations, count, rng, acting=acting)
-    return lat, round((cpu_seconds(server.pid) - before) / max(count, 1) * 1000, 2)
-
-
-@contextmanager
-def running_service(workdir: Path, extra_env: dict[str, str] | None = None) -> Iterator[Server]:
-    """`planhrc serve` on a fresh store in `workdir` with the bench's token (`planhrc.service_process`)."""
-    with start_service(workdir / "kb.sqlite3", args=("--log-level", "warning"), clean_env=True, cwd=workdir,
-                       env={"PLANHRC_TOKEN": TOKEN, **(extra_env or {})}) as server:
-        yield server
-
-
-def _client(server: Server, timeout: float) -> httpx.Client:
-    return httpx.Client(base_url=server.url, timeout=timeout, headers={"Authorization": f"Bearer {TOKEN}"})
-
-
-def create_object(client: httpx.Client, links: int, orientations: int, formulation: str, name: str) -> str:
-    r = client.post("/objects", json={"name": name, "links": links, "orientations": orientations,
-                                      "formulation": formulation})
-    r.raise_for_status()
-    return str(r.json()["id"])
-
-
-def random_angles(rng: random.Random, links: int, orientations: int) -> list[float]:
-    step = 360 // orientations
-    return [float(rng.randrange(orientations) * step) for _ in range(links)]
-
-
-def set_goal(client: httpx.Client, object_id: str, angles: list[float]) -> None:
-    client.put(f"/objects/{object_id}/goal", json={"link_orientations_deg": angles}).raise_for_status()
-
-
-def perceive(client: httpx.Client, object_id: str, angles: list[float]) -> tuple[float, str]:
-    """Post one perception; the wall time and the decision."""
-    t = time.perf_counter()
-    r = client.post(f"/objects/{object_id}/perceptions", json={"link_orientations_deg": angles})
-    seconds = time.perf_counter() - t
-    r.raise_for_status()
-    return seconds, str(r.json()["decision"])
-
-
-def act(client: httpx.Client, object_id: str) -> None:
-    """The robot's part between two perceptions: take the next action, if there is one, and report it done."""
-    r = client.post(f"/objects/{object_id}/actions/next")
-    r.raise_for_status()
-    action = r.json()
-    if action:
-        client.post(f"/objects/{object_id}/actions/{action['id']}/feedback",
-                    json={"outcome": "succeeded"}).raise_for_status()
-
-
-def replanning_latencies(client: httpx.Client, object_id: str, links: int, orientations: int, count: int,
-                         rng: random.Random, pause_s: float = 0.0, acting: bool = False) -> list[float]:
-    """Seconds of the perceptions, of `count` random configurations far from the plan, that forced a new plan,
-    `pause_s` apart (0: back to back). With `acting` the robot executes the next action before each perception
-    (`act`): a bimanual plan begins with grasps, which no link orientation prevents, so without acting every
-    perception lets the plan go on (the cooperation model's continue) and none re-plans."""
-    out = []
-    for _ in range(count):
-        if pause_s:
-            time.sleep(pause_s)
-        if acting:
-            act(client, object_id)
-        seconds, decision = perceive(client, object_id, random_angles(rng, links, orientations))
-        if decision == DecisionKind.REPLAN:
-            out.append(seconds)
-    return out
-
-
-def summary_ms(values: list[float]) -> dict[str, float]:
-    return {"n": len(values), "p50_ms": round(percentile(values, 0.5) * 1000, 2),
-            "p95_ms": round(percentile(values, 0.95) * 1000, 2),
-            "max_ms": round(max(values) * 1000, 2) if values else float("nan")}
 
 
 # -- parts ----------------------------------------------------------------------------------------------------
@@ -153,7 +52,7 @@ def bench_objects(counts: list[int], samples: int, links: int, orientations: int
     rng = random.Random(seed)
     rows = []
     with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server, \
-            _client(server, 120) as client:
+            client_of(server, 120) as client:
         stored = 0
         probe = create_object(client, links, orientations, "relative", "probe")
         set_goal(client, probe, random_angles(rng, links, orientations))
@@ -162,7 +61,7 @@ def bench_objects(counts: list[int], samples: int, links: int, orientations: int
             while stored < count:
                 create_object(client, links, orientations, "relative", f"filler{stored}")
                 stored += 1
-            lat, cpu_ms = _replanning_with_cpu(client, server, probe, links, orientations, samples, rng)
+            lat, cpu_ms = replanning_with_cpu(client, server, probe, links, orientations, samples, rng)
             rows.append({"objects": count, **summary_ms(lat), "server_cpu_ms": cpu_ms,
                          "rss_mb": round(rss_mb(server.pid), 1)})
             print(f"[service-bench] objects={count}: {rows[-1]}", file=sys.stderr, flush=True)
@@ -224,7 +123,7 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
     rng = random.Random(seed)
     rows = []
     with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server, \
-            _client(server, read_timeout) as client:
+            client_of(server, read_timeout) as client:
         obj = create_object(client, links, orientations, formulation, "history")
         set_goal(client, obj, random_angles(rng, links, orientations))
         sent = last_seq = 0
@@ -232,7 +131,7 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
             while sent < checkpoint - samples:
                 perceive(client, obj, random_angles(rng, links, orientations))
                 sent += 1
-            lat, cpu_ms = _replanning_with_cpu(client, server, obj, links, orientations, samples, rng,
+            lat, cpu_ms = replanning_with_cpu(client, server, obj, links, orientations, samples, rng,
                                                acting=formulation == "bimanual")
             sent += samples
             last_seq = _last_seq(client, obj, last_seq)
@@ -262,19 +161,6 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
     return rows
 
 
-@dataclass
-class _Side:
-    """One service of the side-by-side part and what was measured on it."""
-
-    server: Server
-    client: httpx.Client
-    object_id: str
-    history: int
-    latencies: list[float]
-    cpu_s: float = 0.0
-    posted: int = 0
-
-
 def bench_history_side_by_side(short: int, long: int, samples: int, links: int, orientations: int,
                                formulation: str, seed: int, round_size: int = 20) -> dict[str, Any]:
     """The history part's growth figure with the machine's load taken out: two services side by side, one object
@@ -284,20 +170,20 @@ def bench_history_side_by_side(short: int, long: int, samples: int, links: int, 
     with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp_a, \
             tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp_b, \
             running_service(Path(tmp_a)) as server_a, running_service(Path(tmp_b)) as server_b, \
-            _client(server_a, 120) as client_a, _client(server_b, 120) as client_b:
+            client_of(server_a, 120) as client_a, client_of(server_b, 120) as client_b:
         sides = []
         for server, client, history in ((server_a, client_a, short), (server_b, client_b, long)):
             obj = create_object(client, links, orientations, formulation, "history")
             set_goal(client, obj, random_angles(rng, links, orientations))
             for _ in range(history):
                 perceive(client, obj, random_angles(rng, links, orientations))
-            sides.append(_Side(server, client, obj, history, []))
+            sides.append(Side(server, client, obj, history, []))
         while any(side.posted < samples for side in sides):
             for side in sides:
                 count = min(round_size, samples - side.posted)
                 if count <= 0:
                     continue
-                lat, cpu_ms = _replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
+                lat, cpu_ms = replanning_with_cpu(side.client, side.server, side.object_id, links, orientations,
                                                    count, rng, acting=formulation == "bimanual")
                 side.latencies += lat
                 side.cpu_s += cpu_ms * count / 1000
@@ -317,7 +203,7 @@ def bench_contention(big_links: int, big_orientations: int, small_samples: int, 
     rng = random.Random(seed)
     env = {} if planning_workers is None else {"PLANHRC_PLANNING_WORKERS": str(planning_workers)}
     with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp), env) as server, \
-            _client(server, 600) as client:
+            client_of(server, 600) as client:
         small = create_object(client, 8, 12, "relative", "small")
         set_goal(client, small, random_angles(rng, 8, 12))
         big = create_object(client, big_links, big_orientations, "absolute", "big")
@@ -328,7 +214,7 @@ def bench_contention(big_links: int, big_orientations: int, small_samples: int, 
         def plan_big() -> None:
             """The large object's perception, whatever it answers (a service with a planning deadline refuses a
             task it cannot plan in time: 503 with the reason)."""
-            with _client(server, 600) as c:
+            with client_of(server, 600) as c:
                 t = time.perf_counter()
                 r = c.post(f"/objects/{big}/perceptions",
                            json={"link_orientations_deg": random_angles(rng, big_links, big_orientations)})
@@ -338,7 +224,7 @@ def bench_contention(big_links: int, big_orientations: int, small_samples: int, 
         health: list[float] = []
 
         def poll_health() -> None:
-            with _client(server, 600) as c:
+            with client_of(server, 600) as c:
                 c.get("/health").raise_for_status()  # a new connection's first answer is not the service's
                 while thread.is_alive():
                     t = time.perf_counter()
@@ -477,20 +363,14 @@ def run_service_bench(args: argparse.Namespace) -> int:
             report["contention"] = bench_contention(args.big_links, args.big_orientations, args.samples, args.seed,
                                                     args.planning_workers)
         if "knowledge" in parts:
-            from .knowledge import bench_knowledge  # it builds on this module's helpers
-
             report["knowledge"] = bench_knowledge(max(args.checkpoints), args.samples, args.links, args.orientations,
                                                   args.seed)
         if "scale-out" in parts:
-            from .scale_out import bench_scale_out
-
             report["scale_out"] = bench_scale_out(
                 args.db, args.scale_replicas, args.scale_objects, args.scale_clients, args.scale_seconds,
                 args.scale_size[0], args.scale_size[-1], args.seed,
                 log=lambda line: print(f"[service-bench] {line}", file=sys.stderr, flush=True))
         if "observability" in parts:
-            from .observability import bench_observability
-
             report["observability"] = bench_observability(args.samples, args.links, args.orientations, args.seed)
     except (RuntimeError, httpx.HTTPError, BenchError) as exc:
         print(f"planhrc service-bench: {exc}", file=sys.stderr)
@@ -538,16 +418,10 @@ def markdown(report: dict[str, Any]) -> str:
                   f"| {r['rss_mb']} MB |" for r in sbs["rows"]]
         lines.append("")
     if "knowledge" in report:
-        from .knowledge import knowledge_markdown
-
         lines += knowledge_markdown(report["knowledge"])
     if "scale_out" in report:
-        from .scale_out import scale_out_markdown
-
         lines += scale_out_markdown(report["scale_out"])
     if "observability" in report:
-        from .observability import observability_markdown
-
         lines += observability_markdown(report["observability"])
     lines += [f"* {line}" for line in targets(report)] + [""]
     if "contention" in report:

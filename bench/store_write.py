@@ -33,7 +33,7 @@ from planhrc.vocabulary import ExecutionStatus
 
 
 def make_task(formulation: Formulation, links: int, orientations: int, seed: int
-              ) -> tuple[ArticulatedObject, Perception, State, tuple[Any, ...], tuple[State, ...]]:
+              ) -> tuple[ArticulatedObject, Perception, State, tuple[Any, ...], Sequence[State]]:
     """An object, a perception of a random configuration, a random goal, and the plan's actions and states."""
     obj = make_object("obj1", formulation, links, orientations)
     rng = random.Random(seed)

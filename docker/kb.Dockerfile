@@ -5,7 +5,7 @@
 FROM python:3.11-slim-bookworm
 
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1 \
-    PLANHRC_DB_PATH=/data/planhrc.sqlite3
+    PLANHRC_DB=/data/planhrc.sqlite3
 # libgomp1: OpenMP runtime of the planner binaries. Debian's point releases replace package versions, so the
 # package is not pinned (the image's base tag pins the distribution).
 # hadolint ignore=DL3008

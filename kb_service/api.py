@@ -29,8 +29,8 @@ from .guard import OPEN, READ, access
 from .events import counted_stream, stream_events
 from .store import MAX_EVENTS_PAGE, ConflictError, DeadlineError, NotFoundError, UnavailableError, ValidationError
 from .health import usecases_ready
-from .record_schemas import (ErrorPublic, EventPublic, HealthPublic, LivePublic, PlanPublic, ProblemPublic, ReadyPublic,
-                             StatePublic)
+from .record_schemas import (ErrorPublic, EventFields, EventPublic, HealthPublic, LivePublic, PlanPublic, ProblemPublic,
+                             ReadyPublic, StatePublic, event_public, event_stream_schema)
 from .schemas import (
     DecisionPublic,
     FeedbackCreate,
@@ -219,7 +219,8 @@ async def create_feedback(
     `measured_deg` when it did not succeed (both stored in the feedback event)."""
     request = usecases.FeedbackRequest(object_id, action_id, body.outcome, body.message, idempotency_key,
                                        body.reason, body.measured_deg,
-                                       body.refusal.model_dump(mode="json") if body.refusal is not None else None)
+                                       usecases.RefusalFact.of_data(body.refusal.model_dump(mode="json"))
+                                       if body.refusal is not None else None)
     result = await run_in_threadpool(usecases.give_feedback, context, request)
     return FeedbackPublic.model_validate(result, from_attributes=True)
 
@@ -302,16 +303,18 @@ def list_events(
     context: Ctx,
     after_seq: Annotated[int, Query(ge=0, le=SQLITE_MAX_INT, description="Return events after this seq."), QUERY_INTEGRAL] = 0,
     limit: Annotated[int, Query(ge=1, le=MAX_EVENTS_PAGE, description="At most this many events."), QUERY_INTEGRAL] = MAX_EVENTS_PAGE,
-) -> list[EventPublic]:
-    """A page of the object's log, oldest first: every decision with its reason, goals, dispatches and feedback.
-    The next page starts after the last `seq` returned (`after_seq`); a page never holds more than
-    `MAX_EVENTS_PAGE` events, so its cost does not grow with the history."""
-    return [EventPublic.model_validate(e, from_attributes=True)
-            for e in usecases.list_events(context, object_id, after_seq, limit)]
+) -> list[EventFields]:
+    """A page of the object's log, oldest first: every decision with its reason, goals, dispatches and feedback,
+    each kind with its own record as `data` (its schema: the variant of the event's `kind`). The next page starts
+    after the last `seq` returned (`after_seq`); a page never holds more than `MAX_EVENTS_PAGE` events, so its cost
+    does not grow with the history."""
+    return [event_public(e) for e in usecases.list_events(context, object_id, after_seq, limit)]
 
 
 @router.get("/objects/{object_id}/events/stream", tags=["events"], openapi_extra=READS,
-            responses={200: {"content": {"text/event-stream": {}}, "description": "Server-Sent Events."}})
+            responses={200: {"content": {"text/event-stream": {"schema": event_stream_schema()}},
+                             "description": "Server-Sent Events: `id: <seq>`, `event: <kind>` and `data:` one event "
+                             "as `GET /objects/{object_id}/events` lists it (the schema of that line)."}})
 def stream_object_events(
     object_id: str,
     request: Request,

@@ -92,7 +92,7 @@ def freeze_heap() -> None:
 
 def create_app(settings: Settings | None = None,
                open_store: Callable[[Settings], KnowledgeStore] = open_knowledge_base) -> FastAPI:
-    """The planHRC knowledge-base service: a KnowledgeBase is opened at start-up (`open_store`, by default the
+    """The planHRC knowledge-base service: a SqliteStore is opened at start-up (`open_store`, by default the
     one the settings name) and closed at shutdown."""
     settings = settings or get_settings()
 

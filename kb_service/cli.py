@@ -15,7 +15,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, TypeVar
 
-from .network import SettingsProblem, check_exposure, resolve_secrets
+from .command_settings import CommandSettings, add_store_options, read_settings
+from .network import Name, SettingsProblem, check_exposure
 from .store.backends import backend_of
 from .store.errors import KBError
 
@@ -49,12 +50,8 @@ def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser
                               description="Run the planHRC knowledge-base service (FastAPI + uvicorn).")
     p.add_argument("--host", default=None, help="interface to bind (default 127.0.0.1, env PLANHRC_HOST)")
     p.add_argument("--port", type=port, default=None, help="TCP port (default 8000, env PLANHRC_PORT)")
-    p.add_argument("--db", default=None,
-                   help="the store: a SQLite file (default planhrc.sqlite3; ':memory:' for none) or a PostgreSQL URL "
-                   "postgresql://user@host:port/database (env PLANHRC_DB or PLANHRC_DB_PATH)")
-    p.add_argument("--db-password-file", default=None, metavar="FILE",
-                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE and "
-                   "PGPASSWORD work too)")
+    add_store_options(p, "a SQLite file (default planhrc.sqlite3; ':memory:' for none) or a PostgreSQL URL "
+                      "postgresql://user@host:port/database")
     p.add_argument("--token", default=None,
                    help="bearer token required for writes (env PLANHRC_TOKEN; default: no authentication); the "
                    "process list shows it: prefer --token-file")
@@ -123,22 +120,27 @@ def check_otlp_endpoint(settings: Settings, name: Callable[[str], str]) -> None:
                                   "needs OpenTelemetry: pip install 'planhrc[tracing]'") from None
 
 
-def check_serve_settings(settings: Settings, given: set[str], warnings: list[str] | None = None) -> Settings:
+def serve_settings(args: argparse.Namespace) -> CommandSettings:
+    """`planhrc serve`'s settings: the environment with its options on top (`command_settings`)."""
+    given = {"host": args.host, "port": args.port, "db_path": args.db, "db_password_file": args.db_password_file,
+             "token": args.token, "token_file": args.token_file, "read_token": args.read_token,
+             "read_token_file": args.read_token_file, "protect_reads": args.protect_reads, "insecure": args.insecure,
+             "ssl_certfile": args.ssl_certfile, "ssl_keyfile": args.ssl_keyfile, "tbox_path": args.tbox,
+             "planner": args.planner, "log_level": args.log_level, "planning_queue": args.planning_queue,
+             "log_format": args.log_format, "otlp_endpoint": args.otlp_endpoint, "metrics": args.metrics,
+             "trace_ratio": args.trace_ratio}
+    return read_settings({field: (SERVE_OPTIONS[field], value) for field, value in given.items()})
+
+
+def check_serve_settings(settings: Settings, name: Name, warnings: list[str] | None = None) -> None:
     """Refuse, before anything starts, settings the service would only trip over later (a planner name, the
     TBox, the store's folder or server, a busy port, a service open to the network without a token, TLS files that
-    do not load). Raises SettingsProblem naming the option or `PLANHRC_*` variable; returns the settings with the
-    secrets read from their files, and adds to `warnings` what it can start with but should not."""
+    do not load). Raises SettingsProblem naming the option or `PLANHRC_*` variable (`name`); adds to `warnings`
+    what it can start with but should not."""
     from uvicorn.config import LOG_LEVELS
 
     from planhrc.cli_args import tbox_problem, writable_dir
     from planhrc.planner.registry import PLANNERS, available_planners
-
-    def name(field: str) -> str:
-        if field in given:
-            return SERVE_OPTIONS[field]
-        if field == "db_path" and os.environ.get("PLANHRC_DB"):  # the store's variable has two names
-            return "PLANHRC_DB"
-        return f"PLANHRC_{field.upper()}"
 
     if settings.planner not in PLANNERS:
         raise SettingsProblem(f"{name('planner')}: unknown planner {settings.planner!r}; "
@@ -147,7 +149,7 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
         raise SettingsProblem(f"{name('planner')}: {settings.planner!r} cannot run here "
                               f"(usable: {', '.join(available_planners())})")
     if settings.fallback_planner and settings.fallback_planner not in PLANNERS:
-        raise SettingsProblem(f"PLANHRC_FALLBACK_PLANNER: unknown planner {settings.fallback_planner!r}; "
+        raise SettingsProblem(f"{name('fallback_planner')}: unknown planner {settings.fallback_planner!r}; "
                               f"choose from {', '.join(PLANNERS)} or empty for none")
     if settings.log_level.lower() not in LOG_LEVELS:
         raise SettingsProblem(f"{name('log_level')}: unknown level {settings.log_level!r}; "
@@ -156,7 +158,6 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
         raise SettingsProblem(f"{name('tbox_path')}: {problem}")
     check_otlp_endpoint(settings, name)
     warnings = [] if warnings is None else warnings
-    settings = resolve_secrets(settings, given, name, warnings)
     check_exposure(settings, name, warnings, has_clients=store_has_clients(settings))
     if settings.planning_queue and backend_of(settings.db_path) != "postgresql":
         raise SettingsProblem(f"{name('planning_queue')}: the planning job queue is a PostgreSQL store's; give "
@@ -178,7 +179,6 @@ def check_serve_settings(settings: Settings, given: set[str], warnings: list[str
         except OSError as exc:
             raise SettingsProblem(f"{name('port')}/{name('host')}: cannot listen on {settings.host}:{settings.port} "
                                   f"({exc.strerror or exc})") from None
-    return settings
 
 
 def store_has_clients(settings: Settings) -> bool:
@@ -223,32 +223,17 @@ def check_store_server(settings: Settings, option: str) -> None:
 
 
 def run_serve(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError
-
-    from planhrc.cli_args import settings_error_line
-    from planhrc.settings import make_settings
-
     from .app import create_app
     from .server import serve
 
-    overrides = {key: value for key, value in {
-        "host": args.host, "port": args.port, "db_path": args.db, "db_password_file": args.db_password_file,
-        "token": args.token, "token_file": args.token_file, "read_token": args.read_token,
-        "read_token_file": args.read_token_file, "protect_reads": args.protect_reads, "insecure": args.insecure,
-        "ssl_certfile": args.ssl_certfile, "ssl_keyfile": args.ssl_keyfile,
-        "tbox_path": args.tbox, "planner": args.planner, "log_level": args.log_level,
-        "planning_queue": args.planning_queue, "log_format": args.log_format, "otlp_endpoint": args.otlp_endpoint,
-        "metrics": args.metrics, "trace_ratio": args.trace_ratio,
-    }.items() if value is not None}
-    warnings: list[str] = []
     try:
-        settings = check_serve_settings(make_settings(**overrides), set(overrides), warnings)
-    except ValidationError as exc:
-        print(f"planhrc serve: {settings_error_line(exc, {f: SERVE_OPTIONS[f] for f in overrides})}", file=sys.stderr)
-        return 2
+        read = serve_settings(args)
+        warnings = list(read.warnings)
+        check_serve_settings(read.settings, read.name, warnings)
     except SettingsProblem as exc:
         print(f"planhrc serve: {exc}", file=sys.stderr)
         return 2
+    settings = read.settings
     for warning in warnings:  # at every start, whatever the log level
         print(f"planhrc serve: warning: {warning}", file=sys.stderr, flush=True)
     from .logs import configure_logging
@@ -297,10 +282,7 @@ def add_compact_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Pars
         description="Compact a store: keep each object's current records (goal, latest problem, current plan and "
         "what they refer to) and its last N perceived states, delete the rest of its history. Run it on a store "
         "no service is writing; a running service compacts its own store every PLANHRC_COMPACT_EVERY_S seconds.")
-    p.add_argument("--db", default=None,
-                   help="the store: a SQLite file (default planhrc.sqlite3) or a PostgreSQL URL (env PLANHRC_DB)")
-    p.add_argument("--db-password-file", default=None, metavar="FILE",
-                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE, or libpq's PGPASSFILE)")
+    add_store_options(p)
     p.add_argument("--keep", type=int, default=None,
                    help="perceived states kept per object (default 100, env PLANHRC_KEEP_PERCEIVED)")
     p.add_argument("--tbox", type=tbox_file, default=None, help="TBox OWL file (default: the repository's)")
@@ -312,29 +294,19 @@ def add_compact_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Pars
 
 
 def run_compact(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError
-
-    from planhrc.cli_args import settings_error_line
-    from planhrc.settings import make_settings
-
     from .store import KBError, SqliteStore, open_store
     from .store.location import shown_location
 
-    options = {"db_path": "--db", "db_password_file": "--db-password-file", "keep_perceived": "--keep",
-               "tbox_path": "--tbox"}
-    overrides = {key: value for key, value in {"db_path": args.db, "db_password_file": args.db_password_file,
-                                               "keep_perceived": args.keep, "tbox_path": args.tbox}.items()
-                 if value is not None}
     try:
-        settings = make_settings(**overrides)
-        settings = resolve_secrets(settings, set(overrides), lambda f: options.get(f, f"PLANHRC_{f.upper()}"), [])
-    except ValidationError as exc:
-        print(f"planhrc compact: {settings_error_line(exc, {f: options[f] for f in overrides})}", file=sys.stderr)
-        return 2
+        read = read_settings({"db_path": ("--db", args.db), "db_password_file": ("--db-password-file",
+                              args.db_password_file), "keep_perceived": ("--keep", args.keep),
+                              "tbox_path": ("--tbox", args.tbox)})
     except SettingsProblem as exc:
         print(f"planhrc compact: {exc}", file=sys.stderr)
         return 2
-    db_option = "--db" if "db_path" in overrides else "PLANHRC_DB"
+    for warning in read.warnings:
+        print(f"planhrc compact: warning: {warning}", file=sys.stderr)
+    settings, db_option = read.settings, read.name("db_path")
     sqlite = backend_of(settings.db_path) == "sqlite"
     if sqlite and (settings.db_path in (None, "", ":memory:") or not Path(settings.db_path).is_file()):
         print(f"planhrc compact: {db_option}: no store file {settings.db_path!r}", file=sys.stderr)
@@ -369,11 +341,7 @@ def add_planning_worker_parser(subparsers: argparse._SubParsersAction[_Parser]) 
         "database queue (`planhrc serve --planning-queue`), one at a time, plan them (and check them with VAL when "
         "the service asks) by each task's deadline, and store the outcome for the service. Run as many as the "
         "hosts have cores; a killed worker's task is taken again by another once its lease expires.")
-    p.add_argument("--db", default=None, help="the store: a PostgreSQL URL postgresql://user@host:port/database "
-                   "(env PLANHRC_DB)")
-    p.add_argument("--db-password-file", default=None, metavar="FILE",
-                   help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE and "
-                   "PGPASSWORD work too)")
+    add_store_options(p, "a PostgreSQL URL postgresql://user@host:port/database")
     p.add_argument("--tbox", type=tbox_file, default=None,
                    help="TBox OWL file (default: the repository's ontology/planhrc.owl); the services' own")
     p.add_argument("--lease-s", type=float, default=None, metavar="SECONDS",
@@ -394,39 +362,18 @@ def add_planning_worker_parser(subparsers: argparse._SubParsersAction[_Parser]) 
 def run_planning_worker(args: argparse.Namespace) -> int:
     import threading
 
-    from pydantic import ValidationError
-
-    from planhrc.cli_args import settings_error_line
-    from planhrc.settings import make_settings
-
-    options = {"db_path": "--db", "db_password_file": "--db-password-file", "tbox_path": "--tbox",
-               "planning_lease_s": "--lease-s", "log_format": "--log-format", "otlp_endpoint": "--otlp-endpoint"}
-    overrides = {key: value for key, value in {"db_path": args.db, "db_password_file": args.db_password_file,
-                                               "tbox_path": args.tbox, "planning_lease_s": args.lease_s,
-                                               "log_format": args.log_format,
-                                               "otlp_endpoint": args.otlp_endpoint}.items()
-                 if value is not None}
-
-    def name(field: str) -> str:
-        if field in overrides:
-            return options[field]
-        if field == "db_path":  # the store's variable has two names, and a worker has no default store
-            given = [v for v in ("PLANHRC_DB", "PLANHRC_DB_PATH") if os.environ.get(v)]
-            return given[0] if given else "--db"
-        return f"PLANHRC_{field.upper()}"
-
-    warnings: list[str] = []
     try:
-        settings = resolve_secrets(make_settings(**overrides), set(overrides), name, warnings)
+        read = read_settings({"db_path": ("--db", args.db), "db_password_file": ("--db-password-file",
+                              args.db_password_file), "tbox_path": ("--tbox", args.tbox),
+                              "planning_lease_s": ("--lease-s", args.lease_s),
+                              "log_format": ("--log-format", args.log_format),
+                              "otlp_endpoint": ("--otlp-endpoint", args.otlp_endpoint)})
+        settings, name, warnings = read.settings, read.name, read.warnings
         if backend_of(settings.db_path) != "postgresql" or not settings.db_path:
             raise SettingsProblem(f"{name('db_path')}: a planning worker serves the job queue of a PostgreSQL store: "
                                   "give its URL, postgresql://user@host:port/database")
         check_store_server(settings, name("db_path"))
         check_otlp_endpoint(settings, name)
-    except ValidationError as exc:
-        print(f"planhrc planning-worker: {settings_error_line(exc, {f: options[f] for f in overrides})}",
-              file=sys.stderr)
-        return 2
     except SettingsProblem as exc:
         print(f"planhrc planning-worker: {exc}", file=sys.stderr)
         return 2

@@ -14,18 +14,17 @@ was committed meanwhile.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import asdict
 from typing import Any, AsyncIterator, Awaitable, Callable, ContextManager, Iterator, Protocol, Sequence
 
 import anyio
 
+from .record_schemas import event_public
 from .store import EventFeed, StoredEvent, UnavailableError
-from .usecases.reads import event_read
+from .usecases.log import event_read
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +34,7 @@ LEFT_CHECK_S = 1.0  # how often a stream waiting for news asks whether its clien
 
 
 def format_sse(event: StoredEvent) -> str:
-    payload = json.dumps(asdict(event_read(event)), separators=(",", ":"))
+    payload = event_public(event_read(event)).model_dump_json()
     return f"id: {event.seq}\nevent: {event.kind}\ndata: {payload}\n\n"
 
 

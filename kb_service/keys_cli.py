@@ -13,7 +13,8 @@ import time
 from pathlib import Path
 from typing import TypeVar
 
-from .network import SettingsProblem, resolve_secrets
+from .command_settings import add_store_options, read_settings
+from .network import SettingsProblem
 from .store.backends import backend_of
 from .store.errors import KBError
 
@@ -38,37 +39,25 @@ def add_keys_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     rotate = sub.add_parser("rotate", help="a new key for the client, printed alone; the old one stops working")
     rotate.add_argument("name")
     for action in (add, revoke, rotate, sub.choices["list"]):
-        action.add_argument("--db", default=None,
-                            help="the store: a SQLite file (default planhrc.sqlite3) or a PostgreSQL URL (env PLANHRC_DB)")
-        action.add_argument("--db-password-file", default=None, metavar="FILE",
-                            help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE)")
+        add_store_options(action)
     p.set_defaults(func=run_keys)
     return p
 
 
 def run_keys(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError as SettingsError
-
-    from planhrc.cli_args import settings_error_line
-    from planhrc.settings import make_settings
-
     from .clients import ClientRegistry, open_table
     from .store.location import shown_location
 
-    options = {"db_path": "--db", "db_password_file": "--db-password-file"}
-    overrides = {k: v for k, v in {"db_path": args.db, "db_password_file": args.db_password_file}.items()
-                 if v is not None}
     command = f"planhrc keys {args.keys_command}"
     try:
-        settings = make_settings(**overrides)
-        settings = resolve_secrets(settings, set(overrides), lambda f: options.get(f, f"PLANHRC_{f.upper()}"), [])
-    except SettingsError as exc:
-        print(f"{command}: {settings_error_line(exc, {f: options[f] for f in overrides})}", file=sys.stderr)
-        return 2
+        read = read_settings({"db_path": ("--db", args.db),
+                              "db_password_file": ("--db-password-file", args.db_password_file)})
     except SettingsProblem as exc:
         print(f"{command}: {exc}", file=sys.stderr)
         return 2
-    db_option = "--db" if "db_path" in overrides else "PLANHRC_DB"
+    for warning in read.warnings:
+        print(f"{command}: warning: {warning}", file=sys.stderr)
+    settings, db_option = read.settings, read.name("db_path")
     db = settings.db_path
     if db in (None, "", ":memory:"):
         print(f"{command}: {db_option}: an in-memory store has no clients to manage; name its file or URL",

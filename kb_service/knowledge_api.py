@@ -26,7 +26,8 @@ from planhrc.vocabulary import ReasoningScope
 from .api import ERRORS, OPERATOR, READS
 from .knowledge.reasoning_jobs import BusyError
 from .knowledge.service import KnowledgeService
-from .knowledge.sparql import GRAPH_TYPES, RESULT_TYPES, EngineError, QueryError, SparqlRequest
+from .knowledge.query_engine import EngineError, QueryError
+from .knowledge.sparql import GRAPH_TYPES, RESULT_TYPES, SparqlRequest
 
 SPARQL_QUERY = "application/sparql-query"
 SPARQL_UPDATE = "application/sparql-update"

@@ -17,7 +17,8 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   replaced too. A job waits for a free worker (or one starting) only until its deadline.
 * **What comes back.** The outcome's expected states share most atoms (every state carries the object's static
   facts): a worker sends the first state once and, for each further state, the atoms it lacks and adds against
-  the one before it; the service builds each state as one set operation on the one before. The outcome travels
+  the one before it (the replay's own changes), and the service keeps them so (`transition.ExpectedStates`: a
+  state is made whole when something reads it, most of them behind the answer). The outcome travels
   in several frames (header, actions, states in chunks) so that no single unpickling holds the service's
   interpreter for long.
 * **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small
@@ -61,12 +62,12 @@ import time
 from contextlib import contextmanager
 from dataclasses import replace
 from multiprocessing.connection import Connection
-from typing import Callable, Iterator, Mapping
+from typing import Callable, Iterator, Mapping, Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
 from planhrc.pipeline.replan import PlanningJob
-from planhrc.transition import changes_along
+from planhrc.transition import Change, ExpectedStates, changes_of
 from planhrc.vocabulary import PlanningStatus
 
 from .tracing import Tracing
@@ -96,9 +97,9 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
     """The outcome as frames: a header (the outcome without actions and states, and how many frames follow),
     the actions in chunks, the first expected state, then each further state as (missing, added) atoms against
     the one before it, in chunks of about `ATOMS_PER_FRAME` atoms. A solved outcome's states are its actions'
-    replay (`PlanOutcome`), so each difference is what the state's action changes (`transition.changes_along`: a few
-    hundred atoms looked at, where comparing two states whole looks at all their static facts); an outcome
-    without one action per step, or whose sizes do not add up, has its states compared whole."""
+    replay (`PlanOutcome`), kept as what each step changes (`transition.ExpectedStates`): those changes are sent as
+    they are, and no state is made whole here (`transition.changes_of`; states given whole are compared step by
+    step, `changes_along`)."""
     states, actions = outcome.expected_states, outcome.actions
     action_chunks: list[list[ActionSpec]] = []
     weight = EFFECTS_PER_FRAME
@@ -114,7 +115,7 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
         base = states[0]
         chunk: list[tuple[frozenset[Atom], frozenset[Atom]]] = []
         size = 0
-        for diff in changes_along(states, actions):
+        for diff in changes_of(states, actions):
             chunk.append(diff)
             size += len(diff[0]) + len(diff[1]) + 1
             if size >= ATOMS_PER_FRAME:
@@ -132,9 +133,10 @@ def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
 
 
 def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOutcome:
-    """The outcome `pack_outcome` sent, each state one set operation on the one before. With `init` (the job's initial
-    state, which the first expected state equals), the states are made on it: their static facts are then the
-    service's own atoms, which the store's checks of those states find by identity instead of comparing copies."""
+    """The outcome `pack_outcome` sent, its states as the first one and the changes (`transition.ExpectedStates`: a
+    state is made whole when something reads it, not here). With `init` (the job's initial state, which the first
+    expected state equals), the states are made on it: their static facts are then the service's own atoms, which
+    the store's checks of those states find by identity instead of comparing copies."""
     header: tuple[PlanOutcome, int, bool, int, int] = pickle.loads(next(frames))
     bare, n_actions, has_states, n_base, n_states = header
     actions: list[ActionSpec] = []
@@ -143,14 +145,15 @@ def unpack_outcome(frames: Iterator[bytes], init: State | None = None) -> PlanOu
     base_atoms: list[Atom] = []
     for _ in range(n_base):
         base_atoms.extend(pickle.loads(next(frames)))
-    states: list[State] = [frozenset(base_atoms)] if has_states else []
-    if states and init is not None and states[0] == init:
-        states[0] = init if isinstance(init, frozenset) else frozenset(init)
+    changes: list[Change] = []
     for _ in range(n_states):
-        changes: list[tuple[State, State]] = pickle.loads(next(frames))
-        for missing, added in changes:
-            states.append((states[-1] - missing) | added)
-    return replace(bare, actions=tuple(actions), expected_states=tuple(states))
+        changes.extend(pickle.loads(next(frames)))
+    if not has_states:
+        return replace(bare, actions=tuple(actions), expected_states=())
+    first = frozenset(base_atoms)
+    if init is not None and first == init:
+        first = init if isinstance(init, frozenset) else frozenset(init)
+    return replace(bare, actions=tuple(actions), expected_states=ExpectedStates(first, changes))
 
 
 # -- the pool (in the service) --------------------------------------------------------------------------------
@@ -260,7 +263,7 @@ class PlanningPool:
             header = next(frames)  # the worker's answer has come: the rest follows at once
             with self._pause:
                 outcome = unpack_outcome(itertools.chain((header,), frames), job.init)
-                if sum(map(len, outcome.expected_states)) >= FREEZE_ATOMS:
+                if _atoms_in(outcome.expected_states) >= FREEZE_ATOMS:
                     gc.freeze()  # see the module's note: kept out of the collector's full passes
             healthy = True
             return outcome
@@ -340,6 +343,11 @@ class _CollectorPause:
             self._inside -= 1
             if self._inside == 0 and self._was_enabled:
                 gc.enable()
+
+
+def _atoms_in(states: Sequence[State]) -> int:
+    """How many atoms the states hold, about (each holds the first one's static facts), without making them whole."""
+    return len(states[0]) * len(states) if states else 0
 
 
 class _Overrun(Exception):

@@ -26,7 +26,7 @@ from owlready2.rule import BuiltinAtom
 from planhrc.model import AFFECTED, Atom
 from planhrc.service_process import die_with_parent
 
-from .store import ABOX_IRI, TBOX_IRI, KnowledgeBase, KnowledgeStore
+from .store import ABOX_IRI, TBOX_IRI, KnowledgeStore, SqliteStore
 from .store.errors import ReasonerError
 from .store.owl import facts_in, iri_pairs, reasoner_subprocess_kwargs
 
@@ -71,10 +71,10 @@ def _configure_java() -> None:
     owlready2.JAVA_EXE = str(java)
 
 
-def copy_world(source: Union[World, KnowledgeBase, KnowledgeStore]) -> World:
+def copy_world(source: Union[World, SqliteStore, KnowledgeStore]) -> World:
     """A fresh in-memory world holding every ontology of `source` (TBox, ABox, ...), one by one; a store of
     another backend is read back from its export (`world_from_export`)."""
-    if isinstance(source, KnowledgeBase):
+    if isinstance(source, SqliteStore):
         with source.lock:
             return copy_world(source.world)
     if not isinstance(source, World):
@@ -148,7 +148,8 @@ def reason_in_place(world: World, name: str, timeout_s: float,
         return consistent, time.perf_counter() - t0
 
 
-def run_reasoner(world_or_kb: Union[World, KnowledgeBase, KnowledgeStore], name: str, timeout_s: float = 120.0) -> ReasonerReport:
+def run_reasoner(world_or_kb: Union[World, SqliteStore, KnowledgeStore], name: str,
+                 timeout_s: float = 120.0) -> ReasonerReport:
     """Check consistency and classify a copy of the ontology; count the named classes and inferred facts."""
     if name not in REASONERS:
         raise ReasonerError(f"reasoner: must be one of {', '.join(REASONERS)}, got {name!r}")
@@ -173,10 +174,10 @@ def run_reasoner(world_or_kb: Union[World, KnowledgeBase, KnowledgeStore], name:
         world.close()
 
 
-def _object_copy(kb: KnowledgeBase, object_id: str) -> KnowledgeBase:
+def _object_copy(kb: SqliteStore, object_id: str) -> SqliteStore:
     """An in-memory knowledge base holding the TBox and one object of `kb` (same IRIs)."""
     obj = kb.get_object(object_id)
-    copy = KnowledgeBase(None, kb.tbox_path)
+    copy = SqliteStore(None, kb.tbox_path)
     copy.create_object(obj)
     return copy
 
@@ -188,7 +189,7 @@ def _pairs(world: World, prop: str) -> list[tuple[str, str]]:
             if s.startswith(ABOX_IRI) and o.startswith(ABOX_IRI)]
 
 
-def derive_chain_facts(kb: KnowledgeBase, object_id: str, timeout_s: float = 120.0) -> frozenset[Atom]:
+def derive_chain_facts(kb: SqliteStore, object_id: str, timeout_s: float = 120.0) -> frozenset[Atom]:
     """The Affected atoms Pellet derives with the TBox's SWRL rules from the object's chain (Connected + nextLink).
 
     turns(j, l) names the link that turns about j; affectsJoint(j, k) the joints that change with it; each pair
@@ -214,7 +215,7 @@ def derive_chain_facts(kb: KnowledgeBase, object_id: str, timeout_s: float = 120
         copy.close()
 
 
-def derive_relative_orientations(kb: KnowledgeBase, state_id: str, timeout_s: float = 120.0) -> tuple[int, ...]:
+def derive_relative_orientations(kb: SqliteStore, state_id: str, timeout_s: float = 120.0) -> tuple[int, ...]:
     """Relative joint angles of a perceived state, derived by Pellet's SWRL rule from its observed link angles.
 
     Returns, for K = 2..N, the relativeOrientation (degrees) of link K's observation with respect to link K-1.

@@ -3,11 +3,17 @@ Every schema and every field has a description and examples, as in `schemas` (th
 """
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, Field
 
+from planhrc.event_log import (DATA, DecisionData, DispatchData, EventData, FeedbackData, GaveUpData, GoalSetData,
+                               IncompleteData, ObjectCreatedData, ValVerdictData)
+from planhrc.model import Formulation
+from planhrc.vocabulary import Accepted, ActionOutcome, PlanningStatus
+
 from .schemas import schema_config
+from .usecases.log import EventRead
 
 
 class StatePublic(BaseModel):
@@ -85,28 +91,95 @@ class PlanPublic(BaseModel):
     created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
 
 
-class EventPublic(BaseModel):
-    model_config = schema_config(
-        "One entry of an object's log: a decision with its reason, a goal, a dispatch or a feedback.",
-        {"seq": 4, "object_id": "obj1", "kind": "continue", "reason": "the perceived state is subsumed by s^e_2",
-         "data": {"perceived_state_id": "obj1_state_2", "next_step": 2}, "created_at": 1.7e9, "client": "baxter-1"},
-    )
+class EventFields(BaseModel):
+    """What every event of an object's log holds; each kind's `kind` and `data` are its variant's (`EventPublic`)."""
 
     seq: int = Field(description="Position in the log (increasing).", examples=[4])
     object_id: str = Field(description="Object the event is about.", examples=["obj1"])
-    kind: str = Field(description="A decision kind (goal_reached, continue, resume, replan, no_plan, "
-                      "human_help_requested, incomplete_perception), or goal_set, dispatched, feedback, "
-                      "worker_gave_up, object_created, val_verdict (VAL's verdict on a piece of a plan checked "
-                      "after the answer), dispatch_withheld (a step not dispatched: VAL refused or has not decided "
-                      "on its piece).",
-                      examples=["continue"])
+    kind: str = Field(description="The event's kind.", examples=["continue"])
     reason: str = Field(description="Why, in words.", examples=["the perceived state is subsumed by s^e_2"])
-    data: dict[str, Any] = Field(description="Ids and numbers of the event.", examples=[{"next_step": 2}])
+    data: Any = Field(description="The kind's record.")
     created_at: float = Field(description="Unix time of storage.", examples=[1.7e9])
     client: str | None = Field(default=None, description="The client (API key's name) whose request caused the "
                                "event; `token` for the --token shortcut; null when no key was needed or the service "
                                "wrote it on its own (VAL's verdicts checked after the answer).",
                                examples=["baxter-1"])
+
+
+# One example of each record, and the kind and reason it comes with.
+_EXAMPLES: dict[type[EventData], tuple[str, str, EventData]] = {
+    ObjectCreatedData: ("object_created", "object obj1 created",
+                        ObjectCreatedData(formulation=Formulation.RELATIVE, links=5, orientations=8, base_point_xy=(0.6, 0.39))),
+    GoalSetData: ("goal_set", "goal set; the next perception plans towards it",
+                  GoalSetData(goal_state_id="obj1_state_1", problem_id=None)),
+    DecisionData: ("replan", "the perceived state matches no expected state; new plan obj1_plan_1 of 2 actions",
+                   DecisionData(perceived_state_id="obj1_state_2", plan_id="obj1_plan_1", next_step=1,
+                                next_action_id="obj1_plan_1_a1", goal_state_id="obj1_state_1",
+                                planning_status=PlanningStatus.SOLVED, problem_id="obj1_problem_1",
+                                timings={"plan": 0.012, "validate": 0.004})),
+    IncompleteData: ("incomplete_perception", "links 3 and 5 were not seen: look again",
+                     IncompleteData(unseen_links=(3, 5), link_orientations_deg=(90.0, 90.0, None, 90.0, None))),
+    DispatchData: ("dispatched", "a_1 (rotateclockwise) dispatched",
+                   DispatchData(plan_id="obj1_plan_1", action_id="obj1_plan_1_a1", step=1)),
+    FeedbackData: ("feedback", "a_1 succeeded: the next perception checks s^e_2",
+                   FeedbackData(action_id="obj1_plan_1_a1", step=1, outcome=ActionOutcome.SUCCEEDED,
+                                accepted=Accepted.CURRENT, joint_index=4, turned_link_index=5)),
+    GaveUpData: ("worker_gave_up", "the worker gave up (repeated_failure): a_1 failed three times",
+                 GaveUpData(reason="repeated_failure", message="a_1 failed three times", plan_id="obj1_plan_1")),
+    ValVerdictData: ("val_verdict", "VAL accepted piece 3 of plan obj1_plan_1: a_5..a_18",
+                     ValVerdictData(plan_id="obj1_plan_1", piece=3, first_step=5, last_step=18, verdict="accepted",
+                                    reason="Plan valid", seconds=0.21)),
+}
+
+
+def _event_model(record: type[EventData], kinds: tuple[str, ...]) -> type[EventFields]:
+    """The variant of `EventPublic` whose data is `record`, for `kinds`."""
+    kind, reason, data = _EXAMPLES[record]
+    name = record.__name__.removesuffix("Data") + "EventPublic"
+    description = f"An event of kind {', '.join(kinds)}: {(record.__doc__ or '').strip()}"
+    example = {"seq": 4, "object_id": "obj1", "kind": kind, "reason": reason, "data": data.to_data(defaults=True),
+               "created_at": 1.7e9, "client": "baxter-1"}
+    namespace = {
+        "__module__": __name__, "__doc__": description,
+        "__annotations__": {"kind": Literal[kinds], "data": record},
+        "model_config": schema_config(description, example),
+        "kind": Field(description=f"{' or '.join(kinds)}.", examples=[kind]),
+        "data": Field(description=f"The event's record: {(record.__doc__ or '').strip()}", examples=[example["data"]]),
+    }
+    return type(name, (EventFields,), namespace)
+
+
+def _event_models() -> dict[type[EventData], type[EventFields]]:
+    kinds: dict[type[EventData], list[str]] = {}
+    for kind, record in DATA.items():
+        kinds.setdefault(record, []).append(str(kind))
+    return {record: _event_model(record, tuple(names)) for record, names in kinds.items()}
+
+
+EVENT_MODELS = _event_models()  # record -> its variant of EventPublic
+# An event of the log, one schema per record (its `kind` tells which): what GET /objects/{id}/events lists and the
+# Server-Sent Events stream sends.
+EventPublic: Any = Annotated[Union[tuple(EVENT_MODELS.values())], Field(discriminator="kind")]
+
+
+def event_public(event: EventRead) -> EventFields:
+    """An event as the API shows it: the variant of its data's record."""
+    return EVENT_MODELS[type(event.data)].model_validate(event, from_attributes=True)
+
+
+def event_stream_schema() -> dict[str, Any]:
+    """The schema of one Server-Sent Event of the stream: `id` the event's seq, `event` its kind, `data` the event as
+    JSON, one of the variants of `EventPublic` (by reference)."""
+    refs = {record: f"#/components/schemas/{model.__name__}" for record, model in EVENT_MODELS.items()}
+    event = {"oneOf": [{"$ref": ref} for ref in refs.values()],
+             "discriminator": {"propertyName": "kind",
+                               "mapping": {str(kind): refs[record] for kind, record in DATA.items()}}}
+    return {"type": "object", "required": ["id", "event", "data"], "properties": {
+        "id": {"type": "string", "description": "The event's `seq` (send it back as `Last-Event-ID`).",
+               "examples": ["4"]},
+        "event": {"type": "string", "description": "The event's `kind`.", "examples": ["continue"]},
+        "data": {"type": "string", "contentMediaType": "application/json", "contentSchema": event,
+                 "description": "The event as `GET /objects/{object_id}/events` lists it."}}}
 
 
 class HealthPublic(BaseModel):

@@ -22,10 +22,10 @@ from planhrc.settings import get_settings
 from planhrc.pipeline.solve import SolveRequest, parse_angles, report, solve
 from planhrc.translator.errors import TranslationError
 
-from .store import KBError, KnowledgeBase
+from .store import KBError, SqliteStore
 
 
-def solve_and_store(request: SolveRequest, kb: KnowledgeBase, config: PlanningConfig) -> dict[str, Any]:
+def solve_and_store(request: SolveRequest, kb: SqliteStore, config: PlanningConfig) -> dict[str, Any]:
     """Plan one request and store the object, its states, the problem and the plan in one write; the report."""
     t0 = time.perf_counter()
     ident = kb.new_object_id()
@@ -77,7 +77,7 @@ def run_solve(args: argparse.Namespace) -> int:
         config = replace(config, planner=args.planner or config.planner,
                          timeout_s=config.timeout_s if args.timeout is None else args.timeout,
                          validate=config.validate and not args.no_validate)
-        with KnowledgeBase(args.db, config.tbox_path) as kb:
+        with SqliteStore(args.db, config.tbox_path) as kb:
             result = solve_and_store(request, kb, config)
     except (ModelError, KBError, TranslationError, PlannerError) as exc:
         print(f"planhrc solve: {exc}", file=sys.stderr)

@@ -9,8 +9,8 @@ what this script writes. The TBox holds
 * the PDDL domain model of each formulation as individuals (DomainModel, ActionSchema, Variable,
   AtomPattern, ConditionalEffectPattern), so that the translator writes the PDDL domain from the TBox alone:
   relative and absolute here, and the bimanual one with the classes it adds (grippers, the centre) in `bimanual`;
-* SWRL rules that derive the chain structure (which joint turns which link, which joints lie downstream,
-  hence the `Affected` facts) and relative joint angles from observed absolute link orientations.
+* SWRL rules (`rules.SWRL_RULES`) that derive the chain structure (which joint turns which link, which joints lie
+  downstream, hence the `Affected` facts) and relative joint angles from observed absolute link orientations.
 """
 from __future__ import annotations
 
@@ -35,6 +35,7 @@ from owlready2 import (
 
 from planhrc.ontology.bimanual import build_bimanual_model, declare_bimanual
 from planhrc.ontology.patterns import Patterns
+from planhrc.ontology.rules import SWRL_RULES
 
 IRI = "http://planhrc.org/ontology/planhrc.owl#"
 OUT = Path(__file__).resolve().parent / "planhrc.owl"
@@ -359,18 +360,7 @@ def build(path: Path = OUT) -> Path:
             domain = [LinkOrientation]
             range = [Orientation]
 
-        rules = [
-            "Connected(?c), arg1(?c, ?j), arg2(?c, ?l), Connected(?d), arg1(?d, ?j), arg2(?d, ?u), nextLink(?u, ?l)"
-            " -> turns(?j, ?l)",
-            "turns(?j, ?l), nextLink(?l, ?m), turns(?k, ?m) -> nextJoint(?j, ?k)",
-            "turns(?j, ?l), downstreamJoint(?j, ?k) -> affectsJoint(?j, ?k)",
-            "turns(?j, ?l) -> affectsJoint(?j, ?j)",
-            "State(?s), includesStaticFacts(?s, true), stateOf(?s, ?x), staticFactOf(?p, ?x) -> madeof(?s, ?p)",
-            "PerceivedState(?s), observes(?s, ?p), observes(?s, ?q), arg1(?p, ?a), arg1(?q, ?b), nextLink(?a, ?b),"
-            " arg2(?p, ?oa), arg2(?q, ?ob), degrees(?oa, ?x), degrees(?ob, ?y), subtract(?d, ?y, ?x),"
-            " add(?e, ?d, 360), mod(?r, ?e, 360), Orientation(?o), degrees(?o, ?r) -> relativeOrientation(?q, ?o)",
-        ]
-        for text in rules:
+        for text in SWRL_RULES:
             Imp().set_as_rule(text)
 
         # ---- the PDDL domain model of both formulations -----------------------------------------------------

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, State
 from planhrc.motion_search import Slide
@@ -46,7 +46,7 @@ class PlanOutcome:
     """What one run of the pipeline produced.
 
     When solved, `actions` are the ground actions a_1 .. a_N and `expected_states` the states s^e_1 .. s^e_{N+1}
-    (s^e_1 is the initial state); both are empty when the initial state already satisfies the goal or when
+    (s^e_1 is the initial state; the replay's `ExpectedStates`, each state made whole when read); both are empty when the initial state already satisfies the goal or when
     nothing was solved. `task` is the PDDL the planner saw (None when no planner ran)."""
 
     status: PlanningStatus
@@ -54,7 +54,7 @@ class PlanOutcome:
     planner: str
     optimal: bool | None = None
     actions: tuple[ActionSpec, ...] = ()
-    expected_states: tuple[State, ...] = ()
+    expected_states: Sequence[State] = ()
     timings: Mapping[str, float] = field(default_factory=dict)
     task: PddlTask | None = None
     attempts: tuple[PlannerAttempt, ...] = ()

@@ -39,7 +39,7 @@ class PlanningJob:
     deadline_at: float  # time.monotonic()
 
 
-class PlanningPool(Protocol):
+class LargeTaskPlanning(Protocol):
     """Where large tasks are planned (the service's worker processes, `kb_service.planning_pool`)."""
 
     def takes(self, obj: ArticulatedObject) -> bool: ...
@@ -70,14 +70,14 @@ class PlannedTurn:
 
 
 def plan_for_service(request: ReplanRequest, config: PlanningConfig, validator: Validator,
-                     pool: PlanningPool | None = None) -> PlannedTurn:
+                     pool: LargeTaskPlanning | None = None) -> PlannedTurn:
     """The new plan and VAL on it (see the module's note). A failing stage ends in an `error` outcome, never an
     exception: the perception still gets a decision."""
     outcome, started = _planned(request, config, validator, pool)
     return PlannedTurn(outcome, validator.check(request.obj, outcome, request.deadline_at, started))
 
 
-def _planned(request: ReplanRequest, config: PlanningConfig, validator: Validator, pool: PlanningPool | None
+def _planned(request: ReplanRequest, config: PlanningConfig, validator: Validator, pool: LargeTaskPlanning | None
              ) -> tuple[PlanOutcome, ValCheck | None]:
     obj, init, goal, deadline_at = request.obj, request.init, request.goal, request.deadline_at
     if request.moves is not None:

@@ -146,9 +146,9 @@ def expect(obj: ArticulatedObject, init: State, goal: State, found: Found, deadl
                            result.planner, timings=timings, task=found.task)
     timings["expected_states"] = time.perf_counter() - t
     timings["pipeline"] = time.perf_counter() - found.started
-    return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, tuple(actions),
-                       tuple(states), timings, found.task, result.attempts, tuple(result.plan),
-                       ordering=found.ordering, slide=found.slide)
+    return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, actions, states,
+                       timings, found.task, result.attempts, tuple(result.plan), ordering=found.ordering,
+                       slide=found.slide)
 
 
 def plan_moves(obj: ArticulatedObject, init: State, goal: State, moves: Sequence[Move],
@@ -184,7 +184,7 @@ def plan_moves(obj: ArticulatedObject, init: State, goal: State, moves: Sequence
         return PlanOutcome(PlanningStatus.INVALID, "the composed plan's last state is not subsumed by the goal",
                            planner, timings=timings, task=task)
     timings["pipeline"] = time.perf_counter() - t0
-    return replace(outcome, actions=tuple(actions), expected_states=tuple(states), timings=timings)
+    return replace(outcome, actions=tuple(actions), expected_states=states, timings=timings)
 
 
 

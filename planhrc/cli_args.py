@@ -213,10 +213,12 @@ def float_tuple(text: str) -> tuple[float, ...]:
 
 def settings_error_line(exc: Exception, cli_names: dict[str, str] | None = None) -> str:
     """A pydantic ValidationError of the settings as one line naming the option or `PLANHRC_*` variable."""
+    from planhrc.settings import env_name  # pydantic's import only where settings are read
+
     cli_names = cli_names or {}
     parts = []
     for error in exc.errors():  # type: ignore[attr-defined]
         field = str(error["loc"][0]) if error.get("loc") else "?"
-        name = cli_names.get(field, f"PLANHRC_{field.upper()}")
+        name = cli_names.get(field, env_name(field))
         parts.append(f"{name}: {error['msg']}, got {error.get('input')!r}")
     return "; ".join(parts)

@@ -25,9 +25,11 @@ cannot reach the links at all, the human is asked (`human_help_requested`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 from planhrc.errors import PlanhrcError
 from planhrc.model import State, is_subsumed
+from planhrc.transition import matching_states
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Remedy
 
 # Reasons that say the motion itself failed (a retry of the same motion would fail the same way); a turn the
@@ -44,7 +46,7 @@ class CooperationError(PlanhrcError, ValueError):
 class PlanView:
     """What the cooperation model needs of a plan: ``s^e_1 .. s^e_{N+1}`` and ``pre(a_1) .. pre(a_N)``."""
 
-    expected_states: tuple[State, ...]
+    expected_states: Sequence[State]  # a tuple, or the replay's `ExpectedStates` (each state made when read)
     preconditions: tuple[State, ...]
 
     def __post_init__(self) -> None:
@@ -126,9 +128,7 @@ def decide(
                 f"execute a_{next_step}",
             )
 
-    for i in range(n + 1, 0, -1):  # the latest expected state first
-        if not is_subsumed(perceived, plan.expected_states[i - 1]):
-            continue
+    for i in (k + 1 for k in matching_states(perceived, plan.expected_states)):  # the latest expected state first
         if i == n + 1:
             # A valid plan's last state satisfies the goal, which was checked above: the plan is stale.
             return Decision(

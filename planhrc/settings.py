@@ -1,4 +1,5 @@
-"""Settings of the service and the pipeline, read from `PLANHRC_*` environment variables.
+"""Settings of the service and the pipeline, read from `PLANHRC_*` environment variables: one variable a setting
+(`env_name`), `PLANHRC_` and the field's name but for the store's, `PLANHRC_DB`.
 
 Nothing is read or created at import time: `get_settings()` builds the process-wide settings on first use
 (cached), and tests build their own with `make_settings(**overrides)`.
@@ -8,7 +9,7 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any, Literal
 
-from pydantic import AliasChoices, Field, SecretStr
+from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from planhrc.paths import default_tbox_path
@@ -22,10 +23,10 @@ class Settings(BaseSettings):
 
     db_path: str | None = Field(
         default="planhrc.sqlite3",
-        validation_alias=AliasChoices("PLANHRC_DB", "PLANHRC_DB_PATH"),
+        validation_alias="PLANHRC_DB",
         description="Where the store lives: a SQLite file of the ABox, relative to the current directory (':memory:' "
         "or None for a throwaway store, tests), or a PostgreSQL URL `postgresql://user@host:port/database` "
-        "(environment PLANHRC_DB or PLANHRC_DB_PATH).",
+        "(environment PLANHRC_DB).",
     )
     db_password_file: str | None = Field(
         default=None,
@@ -199,6 +200,19 @@ class Settings(BaseSettings):
         description="POST /reasoning waits this long for its job: a job done by then is answered with its result "
         "(200), a longer one with 202 and the job's location.",
     )
+
+
+# Variables no longer read, each with the one read in its place (a command refuses to start while one is set).
+RENAMED = {"PLANHRC_DB_PATH": "PLANHRC_DB"}
+
+
+def env_name(field: str) -> str:
+    """The environment variable of a setting (a field's name, or the variable itself as pydantic may name it)."""
+    if field.startswith("PLANHRC_"):
+        return field
+    info = Settings.model_fields.get(field)
+    alias = info.validation_alias if info is not None else None
+    return alias if isinstance(alias, str) else f"PLANHRC_{field.upper()}"
 
 
 @lru_cache

@@ -3,22 +3,30 @@
 `ground_action` instantiates a schema with a plan step's arguments in a given state: pre, eff-, eff+ and the
 conditional effects whose `forall` variables have a binding satisfying `when` in that state.
 `apply` is eq. (statetransitioncond): s' = (s \\ (eff- ∪ C-)) ∪ (eff+ ∪ C+). `replay` gives the expected states
-s^e_1 .. s^e_{N+1} of a plan. Inputs are never changed: states are frozensets.
+s^e_1 .. s^e_{N+1} of a plan (`ExpectedStates`: the first state and what each step changes, each state made whole
+when it is first read). Inputs are never changed: states are frozensets.
 """
 from __future__ import annotations
 
+import operator
+import threading
 import time
 from functools import lru_cache
 from dataclasses import dataclass, replace
-from typing import Iterator, Mapping, Sequence
+from typing import AbstractSet, Any, Callable, Iterator, Mapping, Sequence, overload
 
 from planhrc.errors import DeadlineExceeded, PlanhrcError
 from planhrc.grounding import holds, instantiate, substitute
-from planhrc.model import EQUALITY, ActionSchemaSpec, ActionSpec, Atom, CondEffect, DomainModelSpec, Literal, State
+from planhrc.model import (EQUALITY, ActionSchemaSpec, ActionSpec, Atom, CondEffect, ConditionalEffect,
+                           DomainModelSpec, Literal, State)
 
 
 class TransitionError(PlanhrcError):
     """A plan step does not match a schema or is not applicable in the state it is applied to."""
+
+
+# The atoms of a state as grounding reads them: a `State`, or the one set `replay` changes in place step by step.
+Atoms = AbstractSet[Atom]
 
 
 def parse_step(step: str) -> tuple[str, tuple[str, ...]]:
@@ -31,28 +39,50 @@ def parse_step(step: str) -> tuple[str, tuple[str, ...]]:
 
 class StateIndex:
     """The atoms of a state by predicate and by (predicate, argument position, value), for the joins of
-    `_bindings`; `moved` updates it by what one action changed instead of indexing the next state anew."""
+    `_bindings`; `moved` updates it by what one action changed instead of indexing the next state anew. A
+    (predicate, position) is indexed when a join first looks it up, and kept up to date from then on: a join reads
+    a few (an absolute step's: `affected` by its link, `hasorientation` by its joint, `orientationord` by its first
+    value), and every other position of 20,000 static facts and of each change was indexed for nothing."""
 
-    def __init__(self, state: State) -> None:
+    def __init__(self, state: Atoms) -> None:
         self.state = state
         self._by_pred: dict[str, set[Atom]] = {}
         self._by_arg: dict[tuple[str, int, str], set[Atom]] = {}
+        self._positions: dict[str, tuple[int, ...]] = {}  # predicate -> its indexed positions
         for atom in state:
-            self._add(atom)
+            self._by_pred.setdefault(atom[0], set()).add(atom)
 
     def _add(self, atom: Atom) -> None:
         self._by_pred.setdefault(atom[0], set()).add(atom)
-        for pos, value in enumerate(atom[1:]):
-            self._by_arg.setdefault((atom[0], pos, value), set()).add(atom)
+        for pos in self._positions.get(atom[0], ()):
+            if pos + 1 < len(atom):
+                self._by_arg.setdefault((atom[0], pos, atom[pos + 1]), set()).add(atom)
 
     def _discard(self, atom: Atom) -> None:
         self._by_pred.get(atom[0], set()).discard(atom)
-        for pos, value in enumerate(atom[1:]):
-            self._by_arg.get((atom[0], pos, value), set()).discard(atom)
+        for pos in self._positions.get(atom[0], ()):
+            if pos + 1 < len(atom):
+                self._by_arg.get((atom[0], pos, atom[pos + 1]), set()).discard(atom)
 
-    def moved(self, state: State, change: "Change | None" = None) -> "StateIndex":
+    def by_arg(self, predicate: str, pos: int, value: str) -> set[Atom] | None:
+        """The atoms of `predicate` whose argument `pos` (0-based) is `value` (None: none ever was)."""
+        if pos not in self._positions.get(predicate, ()):
+            self._index(predicate, pos)
+        return self._by_arg.get((predicate, pos, value))
+
+    def by_pred(self, predicate: str) -> set[Atom] | None:
+        return self._by_pred.get(predicate)
+
+    def _index(self, predicate: str, pos: int) -> None:
+        self._positions[predicate] = (*self._positions.get(predicate, ()), pos)
+        for atom in self._by_pred.get(predicate, ()):
+            if pos + 1 < len(atom):
+                self._by_arg.setdefault((predicate, pos, atom[pos + 1]), set()).add(atom)
+
+    def moved(self, state: Atoms, change: "Change | None" = None) -> "StateIndex":
         """This index, changed in place to describe `state` (which differs from the old one by few atoms);
-        `change` (from `apply_change`) says by which, instead of comparing two whole states."""
+        `change` (from `apply_change`) says by which, instead of comparing two whole states (and must, when `state`
+        is the indexed set itself, changed in place)."""
         removed, added = (self.state - state, state - self.state) if change is None else change
         for atom in removed:
             self._discard(atom)
@@ -70,7 +100,7 @@ class StateIndex:
         best: set[Atom] | None = None
         for pos, var in enumerate(lit.args):
             if var in binding:
-                found = self._by_arg.get((lit.predicate, pos, binding[var]))
+                found = self.by_arg(lit.predicate, pos, binding[var])
                 if found is None:
                     return frozenset()
                 if best is None or len(found) < len(best):
@@ -114,6 +144,116 @@ def _bindings(
     yield from extend(tuple(range(len(positives))), dict(binding))
 
 
+class _JoinPlan:
+    """How `ground_action` enumerates the bindings of a conditional effect's `when` (the `_bindings` of it), fixed
+    once per condition and set of variables bound at the start (the schema's parameters): the positive literals in
+    an order that takes next the one with the most arguments bound so far (a tie: the earlier), each matched through
+    the index on its first bound argument, checked on its other bound ones, binding the rest; then the negative and
+    equality literals checked. It enumerates the same bindings as `_bindings` (any order of the join enumerates
+    exactly the satisfying bindings, each once), without choosing the order anew at every step of the join: the
+    joins of a replay of a large absolute plan (hundreds of bindings a step) were most of its time."""
+
+    def __init__(self, literals: Sequence[Literal], bound: frozenset[str]) -> None:
+        positives = [lit for lit in literals if not lit.negated and lit.predicate != EQUALITY]
+        self.others = tuple(lit for lit in literals if lit.negated or lit.predicate == EQUALITY)
+        known = set(bound)
+        matches = []
+        while positives:
+            lit = max(positives, key=lambda p: sum(1 for var in p.args if var in known))
+            positives.remove(lit)
+            key = next(((pos, var) for pos, var in enumerate(lit.args) if var in known), None)
+            checks: list[tuple[int, str]] = []
+            binds: list[tuple[str, int]] = []
+            repeats: list[tuple[int, str]] = []
+            for pos, var in enumerate(lit.args, start=1):
+                if key is not None and pos == key[0] + 1:
+                    continue  # the index's key: matched by the look-up
+                if var in known:
+                    checks.append((pos, var))
+                elif any(var == other for other, _ in binds):
+                    repeats.append((pos, var))
+                else:
+                    binds.append((var, pos))
+            known.update(lit.args)
+            matches.append((lit.predicate, len(lit.args) + 1, key, tuple(checks), tuple(binds), tuple(repeats),
+                            lit.args))
+        self.matches = tuple(matches)
+        self.binds_all = set(bound) | known  # every variable a binding has once the join is through
+
+    def bindings(self, binding: Mapping[str, str], variables: Sequence[str], index: StateIndex
+                 ) -> list[dict[str, str]]:
+        matches, others, state = self.matches, self.others, index.state
+        by_arg, by_pred = index.by_arg, index.by_pred
+        current = dict(binding)  # extended and undone in place along the join
+        last = len(matches)
+        found: list[dict[str, str]] = []
+
+        def extend(depth: int) -> None:
+            if depth == last:
+                for lit in others:
+                    if not holds(lit, current, state):
+                        return
+                found.append(dict(current))
+                return
+            predicate, arity, key, checks, binds, repeats, args = matches[depth]
+            if not binds:  # every argument bound: one atom, in the state or not
+                if (predicate, *[current[var] for var in args]) in state:
+                    extend(depth + 1)
+                return
+            atoms = by_pred(predicate) if key is None else by_arg(predicate, key[0], current[key[1]])
+            if not atoms:
+                return
+            for atom in atoms:  # the index does not change while a step is ground
+                if len(atom) != arity:
+                    continue
+                for pos, var in checks:
+                    if atom[pos] != current[var]:
+                        break
+                else:
+                    for var, pos in binds:
+                        current[var] = atom[pos]
+                    for pos, var in repeats:
+                        if atom[pos] != current[var]:
+                            break
+                    else:
+                        extend(depth + 1)
+            for var, _ in binds:
+                current.pop(var, None)
+
+        if any(v not in self.binds_all for v in variables):
+            return []  # a variable no literal binds: no binding of every one of them
+        extend(0)
+        return found
+
+
+AtomMaker = Callable[[Mapping[str, str]], Atom]
+
+
+def _atom_maker(lit: Literal) -> AtomMaker:
+    """`instantiate(lit, binding)` as one call that picks the arguments' values at once (KeyError: one unbound)."""
+    predicate, args = lit.predicate, lit.args
+    if not args:
+        return lambda binding: (predicate,)
+    if len(args) == 1:
+        (only,) = args
+        return lambda binding: (predicate, binding[only])
+    pick = operator.itemgetter(*args)
+    return lambda binding: (predicate, *pick(binding))
+
+
+@lru_cache(maxsize=64)
+def _effect_makers(ce: ConditionalEffect) -> tuple[tuple[AtomMaker, ...], tuple[AtomMaker, ...], tuple[AtomMaker, ...]]:
+    """The atoms a ground conditional effect needs, deletes and adds, each as a maker of it from a binding."""
+    return (tuple(_atom_maker(lit) for lit in ce.when if lit.predicate != EQUALITY and not lit.negated),
+            tuple(_atom_maker(lit) for lit in ce.effects if lit.negated),
+            tuple(_atom_maker(lit) for lit in ce.effects if not lit.negated))
+
+
+@lru_cache(maxsize=64)
+def _join_plan(literals: tuple[Literal, ...], bound: frozenset[str]) -> _JoinPlan:
+    return _JoinPlan(literals, bound)
+
+
 def find_schema(domain: DomainModelSpec, name: str) -> ActionSchemaSpec:
     for schema in domain.actions:
         if schema.name == name:
@@ -121,7 +261,7 @@ def find_schema(domain: DomainModelSpec, name: str) -> ActionSchemaSpec:
     raise TransitionError(f"action {name!r} is not a schema of domain {domain.name}")
 
 
-def ground_action(domain: DomainModelSpec, step: str, state: State, index: StateIndex | None = None) -> ActionSpec:
+def ground_action(domain: DomainModelSpec, step: str, state: Atoms, index: StateIndex | None = None) -> ActionSpec:
     """The ground action of a plan step in `state`; raises TransitionError when it is not applicable.
     `index` (of this very state) saves indexing it again, e.g. along a plan (`replay`)."""
     name, args = parse_step(step)
@@ -142,15 +282,11 @@ def ground_action(domain: DomainModelSpec, step: str, state: State, index: State
         for ce in schema.conditional_effects:
             variables = [v for v, _ in ce.variables]
             atoms = atoms or StateIndex(state)
-            for b in _bindings(ce.when, variables, binding, atoms):
-                conds.append(
-                    CondEffect(
-                        when=frozenset(instantiate(lit, b) for lit in ce.when
-                                       if lit.predicate != EQUALITY and not lit.negated),
-                        eff_neg=frozenset(instantiate(lit, b) for lit in ce.effects if lit.negated),
-                        eff_pos=frozenset(instantiate(lit, b) for lit in ce.effects if not lit.negated),
-                    )
-                )
+            needs, deletes, adds = _effect_makers(ce)
+            for b in _join_plan(ce.when, frozenset(binding)).bindings(binding, variables, atoms):
+                conds.append(CondEffect(when=frozenset([make(b) for make in needs]),
+                                        eff_neg=frozenset([make(b) for make in deletes]),
+                                        eff_pos=frozenset([make(b) for make in adds])))
     except KeyError as exc:  # a schema's literal names a variable that is neither a parameter nor a forall's
         raise TransitionError(f"{step}: variable {exc.args[0]} of schema {name} is unbound") from None
     conds.sort(key=_cond_order)
@@ -183,7 +319,7 @@ def apply_change(state: State, action: ActionSpec) -> tuple[State, Change]:
     return frozenset((state - removed) | added), (removed, added)
 
 
-def change_of(state: State, action: ActionSpec) -> Change:
+def change_of(state: Atoms, action: ActionSpec) -> Change:
     """What `apply(state, action)` removes from `state` and adds to it, without making the new state (for a
     state of many static facts, a copy of them all)."""
     neg = set(action.eff_neg)
@@ -215,6 +351,11 @@ def changes_along(states: Sequence[State], actions: Sequence[ActionSpec]) -> tup
     return tuple(change_between(before, after, step) for before, after, step in zip(states, states[1:], steps))
 
 
+def changes_of(states: Sequence[State], actions: Sequence[ActionSpec]) -> tuple[Change, ...]:
+    """What each step of a plan changes: the replay's own changes (`ExpectedStates`), else `changes_along`."""
+    return states.changes if isinstance(states, ExpectedStates) else changes_along(states, actions)
+
+
 @dataclass(frozen=True)
 class _Conditional:
     """A step of a schema with conditional effects, ground once for the static facts it was ground with: its
@@ -236,7 +377,9 @@ class Grounder:
     a step seen before costs a look-up and a check of its precondition, not a grounding. A step with conditional
     effects is ground once per set of static facts (predicates no action changes): the bindings of its `forall`
     variables the static facts allow are kept, and in each state only their fluent conditions are checked (on
-    the absolute 20 x 12 task a step's one `when` ranges over 20 joints x 12 x 12 orientations). Either way the
+    the absolute 20 x 12 task a step's one `when` ranges over 20 joints x 12 x 12 orientations). A step is kept from
+    its second grounding on: keeping costs several groundings, and most steps of one long plan are ground once (the
+    600 steps of an absolute 200 x 12 plan), while a re-planning object's steps come back plan after plan. Either way the
     action is the one `ground_action` gives; a step whose precondition fails takes `ground_action`'s path (for its
     message), and so does a conditional effect whose variables the static facts do not all bind. Get one per
     domain from `grounder(domain)`; it holds at most `LIMIT` steps.
@@ -258,14 +401,15 @@ class Grounder:
             for lit in s.effects + tuple(e for ce in s.conditional_effects for e in ce.effects))
         self._seen: dict[str, tuple[ActionSpec, frozenset[Atom], frozenset[Atom]]] = {}
         self._conditional: dict[str, _Conditional | None] = {}  # None: not cacheable, always `ground_action`
+        self._once: set[str] = set()  # conditional steps ground once so far (kept from their second grounding on)
         self._static_index: StateIndex | None = None
 
-    def statics(self, state: State) -> frozenset[Atom]:
+    def statics(self, state: Atoms) -> frozenset[Atom]:
         """The atoms of `state` no action of the domain changes (the same along a plan)."""
         fluent = self._fluent
         return frozenset(a for a in state if a[0] not in fluent)
 
-    def ground(self, step: str, state: State, index: StateIndex | None = None,
+    def ground(self, step: str, state: Atoms, index: StateIndex | None = None,
                statics: frozenset[Atom] | None = None) -> ActionSpec:
         """`ground_action(domain, step, state, index)`; `statics` (`self.statics(state)`, when the caller has it)
         saves working it out for a step with conditional effects."""
@@ -280,11 +424,16 @@ class Grounder:
         action = ground_action(self.domain, step, state, index)
         if action.name in self._plain:
             self._remember(step, action)
+        elif step not in self._once:
+            if len(self._once) >= self.LIMIT:
+                self._once.clear()
+            self._once.add(step)
         elif len(self._conditional) < self.LIMIT:
+            self._once.discard(step)
             self._conditional[step] = self._compile(action, self.statics(state) if statics is None else statics)
         return action
 
-    def _ground_conditional(self, step: str, state: State, index: StateIndex | None,
+    def _ground_conditional(self, step: str, state: Atoms, index: StateIndex | None,
                             statics: frozenset[Atom] | None) -> ActionSpec:
         entry = self._conditional[step]
         statics = self.statics(state) if statics is None and entry is not None else statics
@@ -364,24 +513,146 @@ def grounder(domain: DomainModelSpec) -> Grounder:
     return Grounder(domain)
 
 
+class ExpectedStates(Sequence[State]):
+    """A plan's expected states s^e_1 .. s^e_{N+1}, kept as the first one and what each step changes (`Change`s, in
+    order): a state is made whole only when it is read.
+
+    A state of a large object is mostly static facts: the 600 states of an absolute 200 x 12 plan are 12 million
+    atoms, and making them whole (a copy of 20,700 atoms each) was most of a re-plan's time, twice (the planning
+    worker's replay and the service's unpacking), before anything read more than the first few; kept, they were
+    600 MB that every full pass of the garbage collector walked. Read as a sequence, it is the tuple of those
+    states (equal to it, item by item); pickled, it is the first state and the changes.
+
+    Reading is made for a reader that goes forward (the checks of a plan's steps, one piece after another): one set
+    follows the reads, changed in place by the changes between two of them, and each state read is one copy of it;
+    the last few states read are kept (`KEPT`), the first and the last always (the last as given, the replay's, or
+    made once). A reader that asks which states a state subsumes asks `matching_states`, which makes none whole."""
+
+    KEPT = 4
+
+    def __init__(self, first: State, changes: Sequence[Change], last: State | None = None) -> None:
+        self.first = first if isinstance(first, frozenset) else frozenset(first)
+        self.changes = tuple(changes)
+        self._last = last if last is not None or self.changes else self.first
+        self._recent: dict[int, State] = {}
+        self._cursor: set[Atom] | None = None  # the state at `_at`, changed in place as reads go forward
+        self._at = 0
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self.changes) + 1
+
+    @overload
+    def __getitem__(self, i: int) -> State: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> tuple[State, ...]: ...
+
+    def __getitem__(self, i: int | slice) -> State | tuple[State, ...]:
+        if isinstance(i, slice):
+            return tuple(self[k] for k in range(*i.indices(len(self))))
+        k = operator.index(i)
+        k = k + len(self) if k < 0 else k
+        if not 0 <= k < len(self):
+            raise IndexError(f"expected state {i} of {len(self)}")
+        if k == 0:
+            return self.first
+        if k == len(self.changes) and self._last is not None:
+            return self._last
+        return self._make(k)
+
+    def __iter__(self) -> Iterator[State]:
+        for k in range(len(self)):
+            yield self[k]
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, ExpectedStates) and other.first == self.first and other.changes == self.changes:
+            return True
+        return (isinstance(other, Sequence) and not isinstance(other, str) and len(other) == len(self)
+                and all(a == b for a, b in zip(self, other)))
+
+    __hash__ = None  # type: ignore[assignment]  # equal to a tuple of the same states, whose hash it cannot give
+
+    def __repr__(self) -> str:
+        return f"ExpectedStates({len(self)} states of {len(self.first)} atoms at first)"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return ExpectedStates, (self.first, self.changes)
+
+    def _make(self, k: int) -> State:
+        """State k whole: the cursor moved to it (from the nearest state kept before it when it is past k)."""
+        with self._lock:
+            kept = self._recent.get(k)
+            if kept is not None:
+                return kept
+            if self._cursor is None or self._at > k:
+                self._at = max((j for j in self._recent if j < k), default=0)
+                self._cursor = set(self._recent[self._at] if self._at else self.first)
+            cursor = self._cursor
+            for removed, added in self.changes[self._at:k]:
+                cursor -= removed
+                cursor |= added
+            self._at = k
+            state = frozenset(cursor)
+            if k == len(self.changes):
+                self._last = state
+            else:
+                if len(self._recent) >= self.KEPT:
+                    del self._recent[next(iter(self._recent))]
+                self._recent[k] = state
+            return state
+
+
+def frozen_states(states: Sequence[State]) -> Sequence[State]:
+    """States as an immutable value: a tuple or `ExpectedStates` as it is (the same object), anything else as a
+    tuple (`tuple(...)` on `ExpectedStates` would make every state whole)."""
+    return states if isinstance(states, (tuple, ExpectedStates)) else tuple(states)
+
+
+def matching_states(perceived: State, states: Sequence[State]) -> Iterator[int]:
+    """The indices of the states that `perceived` is subsumed by (`is_subsumed(perceived, state)`: every atom of the
+    state is perceived), the latest first. For `ExpectedStates` no state is made whole: the atoms of each state that
+    are not perceived follow from the first state's by the changes (those a step removes are no longer missing,
+    those it adds and are not perceived are)."""
+    if not isinstance(states, ExpectedStates):
+        for i in range(len(states) - 1, -1, -1):
+            if states[i] <= perceived:
+                yield i
+        return
+    missing = set(states.first - perceived)
+    subsumed = [not missing]
+    for removed, added in states.changes:
+        missing -= removed
+        missing.update(a for a in added if a not in perceived)
+        subsumed.append(not missing)
+    for i in range(len(subsumed) - 1, -1, -1):
+        if subsumed[i]:
+            yield i
+
+
 def replay(domain: DomainModelSpec, init: State, plan: Sequence[str], deadline_at: float | None = None
-           ) -> tuple[tuple[ActionSpec, ...], tuple[State, ...]]:
+           ) -> tuple[tuple[ActionSpec, ...], ExpectedStates]:
     """Ground every step in turn and return the actions and the expected states s^e_1 .. s^e_{N+1}; past
     `deadline_at` (`time.monotonic()`) `DeadlineExceeded` is raised instead (the plan is neither accepted nor
-    refused)."""
-    states = [frozenset(init)]
-    actions = []
+    refused). The states are one set changed in place by each step's change (`change_of`, what `apply` removes and
+    adds), kept as those changes: `ExpectedStates` makes a state whole only when it is read."""
+    first = frozenset(init)
+    state = set(first)  # the state the next step applies in
+    actions: list[ActionSpec] = []
+    changes: list[Change] = []
     conditional = any(s.conditional_effects for s in domain.actions)
-    index = StateIndex(states[0]) if conditional else None
+    index = StateIndex(state) if conditional else None
     g = grounder(domain)
-    statics = g.statics(states[0]) if conditional else None  # no action changes them: the same in every state
+    statics = g.statics(first) if conditional else None  # no action changes them: the same in every state
     for k, step in enumerate(plan, 1):
         if deadline_at is not None and time.monotonic() > deadline_at:
             raise DeadlineExceeded(f"replay stopped at its deadline after {k - 1} of {len(plan)} steps")
-        action = g.ground(step, states[-1], index, statics)
+        action = g.ground(step, state, index, statics)
         actions.append(action)
-        state, change = apply_change(states[-1], action)
-        states.append(state)
+        removed, added = change = change_of(state, action)
+        state -= removed
+        state |= added
+        changes.append(change)
         if index is not None:
             index.moved(state, change)
-    return tuple(actions), tuple(states)
+    return tuple(actions), ExpectedStates(first, changes, frozenset(state))

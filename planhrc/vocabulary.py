@@ -4,6 +4,7 @@ as plain JSON strings and appear as enums in the service's OpenAPI schemas.
 * `DecisionKind`: what the cooperation model decides after a perception;
 * `ExecutionStatus`: where the execution of an object's plan stands;
 * `ActionOutcome`: what a worker reports about an action it executed;
+* `Accepted`: how the service took a worker's feedback;
 * `FailureReason`: why an action that did not succeed failed (machine-readable; the feedback's sentence says the
   rest);
 * `Skill`: a robot skill the service asks for besides the plan's rotations;
@@ -51,6 +52,13 @@ class ActionOutcome(StrEnum):
     SUCCEEDED = "succeeded"
     FAILED = "failed"
     PARTIAL = "partial"
+
+
+class Accepted(StrEnum):
+    """How a feedback was taken."""
+
+    CURRENT = "current"  # it moved the execution on
+    LATE = "late"  # a perception had already moved the execution: it is only recorded
 
 
 class FailureReason(StrEnum):

@@ -58,6 +58,11 @@ class _Scope:
     reach: dict[str, dict[str, _Reach]]  # action -> type -> how a step reaches its objects
     predicates: frozenset[str]  # the static predicates the reach reads
 
+    @property
+    def prefixes(self) -> tuple[str, ...]:
+        """How a fact of those predicates starts, as the problem writes it."""
+        return tuple(f"    ({name} " for name in sorted(self.predicates))
+
 
 def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
     """`problem` without the objects of quantified types that `steps` cannot reach, or `problem` itself when
@@ -78,12 +83,8 @@ def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
         names, dash, kind = line.rpartition(" - ")
         if dash:
             objects[kind.strip()] = names.split()
-    init = {_atom(line) for line in init_text.splitlines() if line.strip()}
-    statics: dict[tuple[str, int, tuple[str, ...]], set[str]] = {}
-    for atom in init:
-        if atom and atom[0] in scope.predicates:
-            for pos in range(1, len(atom)):
-                statics.setdefault((atom[0], pos, atom[1:pos] + atom[pos + 1:]), set()).add(atom[pos])
+    init_lines = init_text.splitlines()
+    statics = _statics_of("\n".join(line for line in init_lines if line.startswith(scope.prefixes)))
     reached: dict[str, set[str]] = {kind: set() for kind in scope.types}
     for step in steps:
         name, *args = step.strip().strip("()").lower().split()
@@ -105,6 +106,9 @@ def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
     if not dropped:
         return problem
     goal_lines = goal_and_tail.splitlines(keepends=True)
+    goal_prefixes = tuple({"    " + line.strip().removeprefix("(not ").split(" ", 1)[0] + " " for line in goal_lines
+                           if line.startswith("    (")})
+    init = {_atom(line) for line in init_lines if line.startswith(goal_prefixes)}  # the init a goal may name
     for line in goal_lines:
         text = line.strip()
         negated = text.startswith("(not ")
@@ -120,6 +124,19 @@ def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
                         or dropped.isdisjoint(_atom(line.strip().removeprefix("(not ").removesuffix(")"))[1:]))
     return (head + _OBJECTS + kept_objects + _CLOSE + between + _INIT + kept_init + _CLOSE + middle + _GOAL
             + kept_goal)
+
+
+@lru_cache(maxsize=8)
+def _statics_of(lines: str) -> dict[tuple[str, int, tuple[str, ...]], frozenset[str]]:
+    """The static facts of the reach's predicates (`lines`, as the problem writes them), by predicate, a position
+    and the other arguments: the values at that position. Kept for the last few problems: the pieces of a plan,
+    and an object's re-plans, share their static facts (20,000 lines of an absolute 200-link problem)."""
+    found: dict[tuple[str, int, tuple[str, ...]], set[str]] = {}
+    for line in lines.splitlines():
+        atom = _atom(line)
+        for pos in range(1, len(atom)):
+            found.setdefault((atom[0], pos, atom[1:pos] + atom[pos + 1:]), set()).add(atom[pos])
+    return {key: frozenset(values) for key, values in found.items()}
 
 
 def _atom(text: str) -> tuple[str, ...]:

@@ -26,13 +26,10 @@ import time
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import IO, Callable, Protocol, Sequence
 
 from .errors import PlannerError
 from .process import installed_file, kill_group, renice, run_limited
-
-if TYPE_CHECKING:
-    from .valfork import ForkedProcess
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +60,27 @@ def val_env(binary: Path) -> dict[str, str]:
     return env
 
 
+class ForkedRun(Protocol):
+    """A run of VAL's fork server as a `ValRun` drives it (`planner.valfork.ForkedProcess`): a process it did not
+    start itself, whose exit code and CPU come after its output (`settle`)."""
+
+    @property
+    def pid(self) -> int: ...
+
+    @property
+    def stdout(self) -> IO[bytes]: ...
+
+    @property
+    def returncode(self) -> int | None: ...
+
+    @property
+    def cpu_s(self) -> float | None: ...
+
+    def settle(self, output: bytes) -> bytes: ...
+
+    def wait(self) -> int: ...
+
+
 class ValRun:
     """One VAL process checking one plan, running from the moment it is made (`start_validation`, an armed
     process fed its problem: `planner.armed`, or a run of VAL's fork server: `planner.valfork`).
@@ -79,7 +97,7 @@ class ValRun:
     server is reaped by the server, which writes its CPU after its output (from its fork on: VAL's start-up was
     the server's, once). A refused plan's second, verbose run (for the reason) is not counted."""
 
-    def __init__(self, proc: subprocess.Popen[bytes] | ForkedProcess, files: Sequence[str], tmp: str | None, *,
+    def __init__(self, proc: subprocess.Popen[bytes] | ForkedRun, files: Sequence[str], tmp: str | None, *,
                  nice: int = 0, on_start: Callable[[int], None] | None = None, piped_problem: str | None = None,
                  spent_s: float | None = 0.0) -> None:
         self._start = time.perf_counter()

@@ -3,15 +3,19 @@ touches the link, and an arm driven through its joint motors on the physics cloc
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Sequence
+from typing import Protocol, Sequence
 
 import numpy as np
 import pybullet
 
 from planhrc.robot_sim.scene import Scene, arm_joints, drive_gripper, hold_arm
 
-if TYPE_CHECKING:  # the robot's description lives with the skills that plan with it
-    from planhrc.robot_sim.skills import Robot
+
+class Robot(Protocol):
+    """What the grip needs of the robot the skills describe: its hands' links and its pace."""
+
+    hand_links: dict[str, tuple[int, ...]]
+    realtime_s: float
 
 
 class Hands:

@@ -26,10 +26,11 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
 from planhrc.client import KBClient, ProtocolError
+from planhrc.event_log import DecisionData
 from planhrc.vocabulary import DecisionKind
 
 from . import topics
-from .convert import (DECISION_KINDS, JointReading, decision_from_event, decision_key, decision_text,
+from .convert import (DECISION_KINDS, JointReading, decision_from_event, decision_key, decision_of, decision_text,
                       goal_orientations, read_feedback, read_give_up, read_joint_state, stamp_id, turn_target)
 from .errors import Ros2Error
 from .markers import LINE_STRIP, NAMESPACES, object_shapes
@@ -167,8 +168,13 @@ class ObjectChannel:
         kind = str(event.get("kind"))
         with self.lock:
             if kind in DECISION_KINDS:
-                data = event.get("data") or {}
-                key = decision_key(kind, data.get("perceived_state_id"), str(event.get("reason", "")))
+                try:
+                    record = decision_of(event)
+                except Ros2Error as exc:  # not a decision this bridge can read: the others still go out
+                    log.warning("%s: %s", self.object_id, exc)
+                    return
+                perceived = record.perceived_state_id if isinstance(record, DecisionData) else None
+                key = decision_key(kind, perceived, str(event.get("reason", "")))
                 if self.answered[key] > 0:  # the bridge's own answer, published already
                     self.answered[key] -= 1
                     return
@@ -186,9 +192,10 @@ class ObjectChannel:
 
     def publish_event_decision(self, event: dict[str, Any]) -> None:
         """Publish a decision from the log (another caller's, or the latest at start-up). Holds the lock."""
-        data = event.get("data") or {}
         try:
-            step = self._plan_step(data.get("plan_id"), data.get("next_action_id"))
+            record = decision_of(event)
+            decided = record if isinstance(record, DecisionData) else DecisionData()
+            step = self._plan_step(decided.plan_id, decided.next_action_id)
             answer = decision_from_event(event, step)
             self.pub["decision"].publish(String(data=decision_text(answer, None, int(event["seq"]))))
             perceived = None
@@ -197,7 +204,7 @@ class ObjectChannel:
                 values = state.get("link_orientations_deg")
                 perceived = JointReading(tuple(values)) if values and len(values) == self.n_links else None
             self._after_decision(answer, perceived, None, "")
-        except ProtocolError as exc:
+        except (ProtocolError, Ros2Error) as exc:
             log.warning("%s: decision %s not published in full (%s)", self.object_id, event.get("seq"), exc)
 
     # -- what follows a decision ----------------------------------------------------------------------------

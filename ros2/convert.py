@@ -12,9 +12,11 @@ from __future__ import annotations
 import json
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any, Mapping, Sequence
 
+from planhrc.event_log import DecisionData, IncompleteData, data_of
+from planhrc.json_record import RecordError
 from planhrc.model import absolute_from_relative
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, one_of
 
@@ -116,19 +118,32 @@ def decision_text(answer: Mapping[str, Any], perception_stamp: tuple[int, int] |
     return json.dumps(body, separators=(",", ":"))
 
 
+def decision_of(event: Mapping[str, Any]) -> DecisionData | IncompleteData:
+    """The record of a decision's event as the service's stream and log send it (`planhrc.event_log`)."""
+    try:
+        record = data_of(str(event.get("kind")), event.get("data") or {})
+    except RecordError as exc:
+        raise Ros2Error(f"event {event.get('seq')}: {exc}") from None
+    if not isinstance(record, (DecisionData, IncompleteData)):
+        raise Ros2Error(f"event {event.get('seq')}: {event.get('kind')!r} is not a decision")
+    return record
+
+
 def decision_from_event(event: Mapping[str, Any], plan_step: Mapping[str, Any] | None) -> dict[str, Any]:
     """The answer body of a decision another caller caused, rebuilt from its event; `next_action` is the plan's
     step as GET /plans/{id} lists it (without the merging of macro steps, which the dispatch does)."""
-    data = event.get("data") or {}
+    record = decision_of(event)
+    decided = record if isinstance(record, DecisionData) else DecisionData()
     action = None
     if plan_step is not None:
         action = {key: plan_step[key] for key in ("id", "name", "params", "step", "joint_index", "turned_link_index",
                                                    "held_link_index", "delta_deg") if key in plan_step}
-        action["plan_id"] = data.get("plan_id")
-    return {"decision": event["kind"], "plan_id": data.get("plan_id"),
-            "perceived_state_id": data.get("perceived_state_id"), "next_action": action,
-            "matched_expected_step": data.get("matched_expected_step"), "reason": event.get("reason", ""),
-            "help": data.get("help"), "unseen_links": data.get("unseen_links")}
+        action["plan_id"] = decided.plan_id
+    return {"decision": event["kind"], "plan_id": decided.plan_id, "perceived_state_id": decided.perceived_state_id,
+            "next_action": action, "matched_expected_step": decided.matched_expected_step,
+            "reason": event.get("reason", ""),
+            "help": [asdict(h) for h in decided.help] if decided.help is not None else None,
+            "unseen_links": list(record.unseen_links) if isinstance(record, IncompleteData) else None}
 
 
 # -- the next action ------------------------------------------------------------------------------------------

@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from planhrc.bench.large import main
+from planhrc.bench.large import CPU_STAGES, main
 
 
 def test_a_size_that_is_not_links_x_k_is_refused_in_one_line(capsys, tmp_path):
@@ -16,8 +16,10 @@ def test_a_size_that_is_not_links_x_k_is_refused_in_one_line(capsys, tmp_path):
 
 @pytest.mark.integration
 def test_a_small_absolute_object_is_answered_with_its_validated_first_motion(tmp_path):
-    assert main(["--sizes", "6x8", "--runs", "2", "--deadline", "600", "--out", str(tmp_path)]) == 0
+    assert main(["--sizes", "6x8", "--runs", "2", "--deadline", "600", "--stage-cpu", "--out", str(tmp_path)]) == 0
     report = json.loads((tmp_path / "large.json").read_text())
+    cpu = report["stage_cpu"][0]
+    assert cpu["steps"] > 0 and set(cpu["cpu_s"]) == set(CPU_STAGES) and all(v >= 0 for v in cpu["cpu_s"].values())
     rows = report["sizes"][0]["rows"]
     assert report["deadline_s"] == 600
     assert [r["status"] for r in rows] == [200, 200] and rows[0]["decision"] == "replan"

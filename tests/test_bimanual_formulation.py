@@ -10,7 +10,7 @@ import sys
 import pytest
 
 from planhrc.kb_service.check import check_ontology
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import PlanningConfig, plan
@@ -80,7 +80,7 @@ def test_planhrc_solve_takes_the_bimanual_formulation():
 @pytest.mark.parametrize("reasoner", ["pellet", "hermit"])
 def test_a_stored_bimanual_object_is_consistent(tmp_path, reasoner):
     db = tmp_path / "kb.sqlite3"
-    with KnowledgeBase(str(db), TBOX) as kb:
+    with SqliteStore(str(db), TBOX) as kb:
         obj = make_object("obj1", "bimanual", 4, 8)
         kb.create_object(obj)
         kb.add_state("obj1", "perceived", obj.state([45, 90, 90]), [0.0, 45.0, 90.0, 90.0])

@@ -29,7 +29,13 @@ CASES = [
     (["serve"], {"PLANHRC_PLANNER": "bogus"}, "PLANHRC_PLANNER"),
     (["serve"], {"PLANHRC_FALLBACK_PLANNER": "bogus"}, "PLANHRC_FALLBACK_PLANNER"),
     (["serve"], {"PLANHRC_TBOX_PATH": NOT_OWL}, "PLANHRC_TBOX_PATH"),
-    (["serve"], {"PLANHRC_DB_PATH": "/proc/nope/kb.sqlite3"}, "PLANHRC_DB_PATH"),
+    (["serve"], {"PLANHRC_DB": "/proc/nope/kb.sqlite3"}, "PLANHRC_DB: "),
+    (["serve"], {"PLANHRC_DB_PATH": "kb.sqlite3"}, "PLANHRC_DB_PATH: no longer read; set PLANHRC_DB instead"),
+    (["compact"], {"PLANHRC_DB_PATH": "kb.sqlite3"}, "PLANHRC_DB_PATH: no longer read"),
+    (["keys", "list"], {"PLANHRC_DB_PATH": "kb.sqlite3"}, "PLANHRC_DB_PATH: no longer read"),
+    (["planning-worker"], {"PLANHRC_DB_PATH": "kb.sqlite3"}, "PLANHRC_DB_PATH: no longer read"),
+    (["keys", "list"], {"PLANHRC_DB": "no-such.sqlite3"}, "PLANHRC_DB: no store file"),
+    (["keys", "list", "--db-password-file", "/proc/nope/pw"], {}, "--db-password-file"),
     (["serve", "--tbox", NOT_OWL], {}, "--tbox"),
     (["serve", "--tbox", "no-such.owl"], {}, "--tbox"),
     (["serve", "--planner", "bogus"], {}, "--planner"),
@@ -201,6 +207,23 @@ def test_a_busy_port_is_refused_before_the_service_starts(clean_env, capfd):
     err = capfd.readouterr().err.strip()
     assert code == 2
     assert "\n" not in err and "--port" in err and str(port) in err
+
+
+def test_each_setting_has_one_variable_and_every_command_reads_it(clean_env, capfd, tmp_path):
+    from planhrc.cli import main
+    from planhrc.settings import Settings, env_name, make_settings
+
+    for field, info in Settings.model_fields.items():
+        assert info.validation_alias is None or isinstance(info.validation_alias, str), field  # one name, no choices
+    assert env_name("db_path") == "PLANHRC_DB" and env_name("keep_perceived") == "PLANHRC_KEEP_PERCEIVED"
+    clean_env.setenv("PLANHRC_DB", str(tmp_path / "kb.sqlite3"))
+    assert make_settings().db_path == str(tmp_path / "kb.sqlite3")
+    assert make_settings(db_path="other.sqlite3").db_path == "other.sqlite3"  # an option over the variable
+    for args in (["compact"], ["keys", "list"]):  # the same variable, the same name in the message
+        assert main(args) == 2
+        assert capfd.readouterr().err.strip().endswith(f"PLANHRC_DB: no store file '{tmp_path / 'kb.sqlite3'}'"
+                                                       + (" (a service makes it when it first starts)"
+                                                          if args[0] == "keys" else ""))
 
 
 def test_version():

@@ -127,3 +127,29 @@ def test_a_turn_that_would_leave_the_table_is_not_retried_the_same_way():
     tried = FailureHistory(joint=1, turned=2, reason=FailureReason.LEFT_TABLE, failures=3,
                            tried=(Remedy.OTHER_WAY, Remedy.REPLAN))
     assert escalate(retry, tried, (1, 2)).kind is DecisionKind.HUMAN_HELP_REQUESTED
+
+
+def test_a_plan_whose_states_are_kept_as_changes_decides_as_one_of_whole_states():
+    """A plan view holding the replay's `ExpectedStates` (each state made only when read; which states subsume the
+    perceived one is worked out from the changes) decides exactly as the same view with every state whole, on
+    perceived states along the plan, off it, and at every next step."""
+    import random
+
+    from planhrc.paths import default_tbox_path
+    from planhrc.transition import replay
+    from planhrc.translator.domain import read_domain_model
+
+    obj = make_object("o", "absolute", 6, 8)
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    plan = [f"(rotateclockwise o_l{k} o_l{k - 1} o_j{k} deg_{45 * i} deg_{45 * (i + 1)})"
+            for k in (5, 3) for i in range(3)]
+    actions, states = replay(domain, obj.state([0] * 6), plan)
+    goal = obj.configuration_atoms(obj.link_orientations_of(states[-1]))
+    lazy = PlanView(expected_states=states, preconditions=tuple(a.pre for a in actions))
+    whole = PlanView(expected_states=tuple(states), preconditions=lazy.preconditions)
+    rng = random.Random(2)
+    perceived = list(states) + [obj.state([rng.choice(obj.orientation_degrees) for _ in range(6)]) for _ in range(8)]
+    for seen in perceived:
+        for next_step in (None, 1, 3, len(plan)):
+            assert decide(seen, goal, lazy, next_step) == decide(seen, goal, whole, next_step)
+    assert decide(states[3], goal, lazy, 1).kind == "resume"

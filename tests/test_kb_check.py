@@ -6,7 +6,7 @@ import argparse
 import pytest
 
 from planhrc.kb_service.check import add_ontology_parser, check_ontology
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 
@@ -33,7 +33,7 @@ def test_check_with_missing_db_fails(tmp_path, capsys):
 @pytest.mark.parametrize("reasoner", ["pellet", "hermit"])
 def test_check_stored_kb(tmp_path, capsys, reasoner):
     db = tmp_path / "kb.sqlite3"
-    with KnowledgeBase(str(db), default_tbox_path()) as kb:
+    with SqliteStore(str(db), default_tbox_path()) as kb:
         obj = make_object("obj1", "absolute", 3, 4)
         kb.create_object(obj)
         kb.add_state("obj1", "perceived", obj.state([0, 90, 180]), [0.0, 90.0, 180.0])

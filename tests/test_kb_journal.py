@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from planhrc.kb_service.store import ABOX_IRI, KnowledgeBase, KnowledgeStore
+from planhrc.kb_service.store import ABOX_IRI, KnowledgeStore, SqliteStore
 from planhrc.kb_service.store.abox import Abox
 from planhrc.kb_service.store.errors import DamagedStoreError, NotFoundError
 from planhrc.kb_service.store import journal
@@ -95,7 +95,7 @@ def test_a_failed_write_out_keeps_the_row_and_the_plan(tmp_path, monkeypatch):
     """The SQLite backend's writer fails to write a plan's triples (the disk full): the row stays, the plan is
     still answered, and the next write-out writes it."""
     path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb, "relative")
         original = Abox.flush
         monkeypatch.setattr(Abox, "flush", lambda self, batch: (_ for _ in ()).throw(OSError("disk full")))
@@ -127,7 +127,7 @@ def test_a_rolled_back_plan_leaves_nothing(place):
 
 
 def test_readers_of_the_triples_see_a_plan_just_adopted(place):
-    for make in (place.open, lambda: KnowledgeBase(None, TBOX)):  # every backend, and the SQLite store in memory
+    for make in (place.open, lambda: SqliteStore(None, TBOX)):  # every backend, and the SQLite store in memory
         with make() as kb:
             _, problem, actions, states = _object_with_problem(kb)
             plan = kb.add_plan(problem.id, "inproc", actions, states)
@@ -188,7 +188,7 @@ def test_a_request_waiting_for_the_store_gets_it_between_two_plans_written_out(t
     """An export of the whole history writes out every journalled plan, taking the store's lock once per plan; a
     request waiting for that lock gets it after the plan being written, not after every plan left (a lock released
     and taken again at once is not handed over)."""
-    with KnowledgeBase(str(tmp_path / "kb.sqlite3"), TBOX) as kb:
+    with SqliteStore(str(tmp_path / "kb.sqlite3"), TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb, "relative")
         plans = [kb.add_plan(problem.id, "inproc", actions, states) for _ in range(20)]
         exporting = threading.Thread(target=lambda: kb.export("nt", "all"))
@@ -209,14 +209,14 @@ def test_a_damaged_journal_row_refuses_the_store_and_leaves_no_thread_behind(tmp
     import sqlite3
 
     path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         _object_with_problem(kb)
     with sqlite3.connect(path) as conn:
         conn.execute("INSERT INTO planhrc_plan_journal VALUES ('obj1_plan_1', ?, 'obj1', 9, 12)",
                      (b"\x80\x05not a pickle",))
     before = {t.name for t in threading.enumerate()}
     with pytest.raises(DamagedStoreError, match="^plan journal: a row that does not read back"):
-        KnowledgeBase(path, TBOX)
+        SqliteStore(path, TBOX)
     deadline = time.monotonic() + 10
     while {t.name for t in threading.enumerate()} - before and time.monotonic() < deadline:
         time.sleep(0.02)
@@ -229,7 +229,7 @@ def test_a_journal_table_written_before_rows_named_their_states_is_read(tmp_path
     import sqlite3
 
     path = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         _, problem, actions, states = _object_with_problem(kb)
         plan = kb.add_plan(problem.id, "inproc", actions, states)
     with sqlite3.connect(path) as conn:
@@ -237,7 +237,7 @@ def test_a_journal_table_written_before_rows_named_their_states_is_read(tmp_path
         conn.execute("DROP TABLE planhrc_plan_journal")
         conn.execute("CREATE TABLE planhrc_plan_journal (plan_id TEXT PRIMARY KEY, payload BLOB NOT NULL)")
         conn.execute("INSERT INTO planhrc_plan_journal VALUES (?, ?)", (plan.id, payload))
-    with KnowledgeBase(path, TBOX) as kb:
+    with SqliteStore(path, TBOX) as kb:
         assert kb.plans_to_write() == 1
         assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == [frozenset(s) for s in states]
         assert kb.get_plan(plan.id) == plan
@@ -287,7 +287,7 @@ def test_plans_written_out_when_read_give_the_inferences_of_plans_written_at_onc
     monkeypatch.setattr(time, "time", lambda: 1_700_000_000.0)
     inferred = []
     for write_out in (False, True):
-        with KnowledgeBase(None, TBOX) as kb:
+        with SqliteStore(None, TBOX) as kb:
             _history_of_plans(kb, write_out)
             world = copy_world(kb)
             assert kb.plans_to_write() == 0
@@ -327,3 +327,63 @@ def test_the_reasoning_service_infers_the_same_from_plans_written_out_when_read(
     assert results[0].inferred and set(results[0].inferred) == set(results[1].inferred)
     # the current plan's expected states were among what the reasoner read
     assert any(f"#{state}>" in line for state in plan.expected_state_ids for line in results[0].inferred)
+
+
+def test_a_plan_whose_states_are_kept_as_changes_is_stored_without_making_them_and_reads_the_same(place,
+                                                                                                  monkeypatch):
+    """A plan given with the replay's `ExpectedStates` and checked on its first steps: its write makes no state
+    whole past those (its row is the first state and the changes; each state's record is made when it is read), and
+    every state reads back as the replayed one, in this process and in another."""
+    from planhrc.transition import ExpectedStates, replay
+    from planhrc.translator.domain import read_domain_model
+
+    made: list[int] = []
+    real_make = ExpectedStates._make
+
+    def counted(self, k):
+        made.append(k)
+        return real_make(self, k)
+
+    monkeypatch.setattr(ExpectedStates, "_make", counted)
+    obj = make_object("obj1", "absolute", 8, 8)
+    domain = read_domain_model(TBOX, "absolute")
+    with place.open() as kb:
+        kb.create_object(obj)
+        start = kb.add_state("obj1", "perceived", obj.state([0] * 8))
+        plan_steps = [f"(rotateclockwise obj1_l{k} obj1_l{k - 1} obj1_j{k} deg_{45 * i} deg_{45 * (i + 1)})"
+                      for k in (8, 6, 4, 2) for i in range(3)]
+        actions, states = replay(domain, start.atoms, plan_steps)
+        whole = [frozenset(s) for s in states]
+        goal = kb.add_state("obj1", "goal", states[-1])
+        problem = kb.add_problem("obj1", start.id, goal.id)
+        made.clear()
+        checked = kb.check_plan("obj1", actions, states, first_steps=3)
+        plan = kb.add_plan(problem.id, "inproc", actions, states, checked)
+        assert sorted(set(made)) == [1, 2, 3]  # s^e_2 .. s^e_4 for the check of a_1 .. a_3, nothing for the write
+        assert [kb.get_state(s).atoms for s in plan.expected_state_ids] == whole
+    with place.open() as again:
+        assert [again.get_state(s).atoms for s in plan.expected_state_ids[::-1]] == whole[::-1]
+
+
+def test_a_record_put_to_be_made_later_is_made_once_when_first_got():
+    from planhrc.kb_service.store.cache import RecordCache
+    from planhrc.kb_service.store.records import StoredState
+
+    calls: list[str] = []
+    cache = RecordCache("state", StoredState, lambda ident: None)
+
+    def make(ident):
+        def build():
+            calls.append(ident)
+            return StoredState(ident, "o", "expected", frozenset({("p",)}), 1.0)
+        return build
+
+    cache.put_later("o_state_1", make("o_state_1"))
+    cache.put_later("o_state_2", make("o_state_2"))
+    assert len(cache) == 2 and calls == []
+    assert cache.get("o_state_2").id == "o_state_2" and cache.get("o_state_2").id == "o_state_2"
+    assert calls == ["o_state_2"] and len(cache) == 2
+    cache.clear()
+    with pytest.raises(NotFoundError):
+        cache.get("o_state_1")
+    assert calls == ["o_state_2"]

@@ -83,17 +83,17 @@ def test_reads_of_a_few_individuals_cost_the_same_however_full_their_context(rea
 def test_a_new_store_file_gets_small_pages_and_an_old_one_keeps_its_own(tmp_path):
     """A store this adapter creates has `PAGE_SIZE` pages (owlready2 makes 32 KiB ones); a file made before with
     owlready2's pages opens as it is (its page size is fixed once it is in WAL mode) and still works."""
-    from planhrc.kb_service.store import KnowledgeBase
+    from planhrc.kb_service.store import SqliteStore
     from planhrc.paths import default_tbox_path
 
-    with KnowledgeBase(str(tmp_path / "new.sqlite3"), default_tbox_path()) as kb:
+    with SqliteStore(str(tmp_path / "new.sqlite3"), default_tbox_path()) as kb:
         assert kb._abox.q.page_size() == owl.PAGE_SIZE == 4096
         kb.create_object(_object(kb))
     old = tmp_path / "old.sqlite3"
     world = owl.World(filename=str(old), exclusive=False)
     world.save()
     world.close()
-    with KnowledgeBase(str(old), default_tbox_path()) as kb:
+    with SqliteStore(str(old), default_tbox_path()) as kb:
         assert kb._abox.q.page_size() == 32768
         kb.create_object(_object(kb))
         assert [o.ident for o in kb.list_objects()] == ["obj1"]
@@ -113,13 +113,13 @@ def test_a_replanning_perception_writes_little_to_the_log_however_long_the_histo
     import random
 
     from planhrc.kb_service import usecases
-    from planhrc.kb_service.store import KnowledgeBase
+    from planhrc.kb_service.store import SqliteStore
     from planhrc.paths import default_tbox_path
     from planhrc.settings import make_settings
 
     tbox = default_tbox_path()
     rng = random.Random(3)
-    with KnowledgeBase(str(tmp_path / "kb.sqlite3"), tbox) as kb:
+    with SqliteStore(str(tmp_path / "kb.sqlite3"), tbox) as kb:
         context = usecases.open_context(kb, make_settings(tbox_path=str(tbox), planner="inproc"))
         ident = usecases.create_object(context, usecases.NewObject("bar", 8, 12, "relative")).id
         usecases.set_goal(context, usecases.GoalRequest(ident, tuple(rng.randrange(12) * 30 for _ in range(8))))

@@ -17,7 +17,7 @@ import pytest
 import rdflib
 from rdflib.compare import isomorphic
 
-from planhrc.kb_service.store import TBOX_IRI, KBError, KnowledgeBase, KnowledgeStore, open_store
+from planhrc.kb_service.store import TBOX_IRI, KBError, KnowledgeStore, SqliteStore, open_store
 from planhrc.kb_service.store.records import Execution
 from planhrc.model import make_object, snap_angle
 from planhrc.paths import default_tbox_path
@@ -88,7 +88,7 @@ def test_the_literals_take_owlready2s_forms():
 
 
 def test_the_same_history_gives_the_same_export_on_both_backends(pg_url, tmp_path):
-    with KnowledgeBase(str(tmp_path / "kb.sqlite3"), TBOX) as sqlite, open_store(pg_url, TBOX) as pg:
+    with SqliteStore(str(tmp_path / "kb.sqlite3"), TBOX) as sqlite, open_store(pg_url, TBOX) as pg:
         for kb in (sqlite, pg):
             _history(kb)
         for history in ("current", "all"):
@@ -115,7 +115,7 @@ def test_the_reasoners_read_the_postgresql_store_as_owl(pg_url):
     and the SWRL derivations work on it."""
     from planhrc.kb_service.reasoner import derive_chain_facts, derive_relative_orientations, run_reasoner
 
-    with KnowledgeBase(None, TBOX) as sqlite, open_store(pg_url, TBOX) as pg:
+    with SqliteStore(None, TBOX) as sqlite, open_store(pg_url, TBOX) as pg:
         reports = []
         for kb in (sqlite, pg):
             obj = make_object("obj1", "absolute", 4, 4)

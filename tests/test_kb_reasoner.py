@@ -13,7 +13,7 @@ from planhrc.kb_service.reasoner import (
     derive_relative_orientations,
     run_reasoner,
 )
-from planhrc.kb_service.store import TBOX_IRI, KnowledgeBase
+from planhrc.kb_service.store import TBOX_IRI, SqliteStore
 from planhrc.kb_service.subsumption import describe_state, dl_subsumption, subsumes_fast
 from planhrc.model import is_subsumed, make_object, relative_from_absolute, snap_angle
 from planhrc.paths import default_tbox_path
@@ -59,7 +59,7 @@ def test_tbox_is_consistent(name):
 
 @pytest.mark.reasoner
 def test_stored_abox_is_consistent_and_world_untouched():
-    with KnowledgeBase(None, TBOX) as kb:
+    with SqliteStore(None, TBOX) as kb:
         obj = make_object("obj1", "absolute", 4, 4)
         kb.create_object(obj)
         raw = [0.0, 91.0, 180.0, 269.0]
@@ -98,7 +98,7 @@ def test_unknown_reasoner_raises_reasoner_error():
 @pytest.mark.reasoner
 @pytest.mark.parametrize("links", [2, 5, 9])
 def test_swrl_derives_the_affected_facts(links):
-    with KnowledgeBase(None, TBOX) as kb:
+    with SqliteStore(None, TBOX) as kb:
         obj = make_object("obj1", "absolute", links, 4)
         kb.create_object(obj)
         assert derive_chain_facts(kb, "obj1") == obj.affected_atoms()
@@ -106,7 +106,7 @@ def test_swrl_derives_the_affected_facts(links):
 
 @pytest.mark.reasoner
 def test_swrl_derives_relative_orientations_of_a_perceived_state():
-    with KnowledgeBase(None, TBOX) as kb:
+    with SqliteStore(None, TBOX) as kb:
         obj = make_object("obj1", "relative", 6, 12)
         kb.create_object(obj)
         raw = [10.0, 95.0, 200.0, 359.0, 44.0, 181.0]
@@ -121,7 +121,7 @@ def test_swrl_completes_the_madeof_links_of_a_compact_state():
     from planhrc.kb_service.reasoner import _pairs, reason_in_place
     from planhrc.kb_service.store import atom_fragment
 
-    with KnowledgeBase(None, TBOX) as kb:
+    with SqliteStore(None, TBOX) as kb:
         obj = make_object("obj1", "absolute", 3, 4)
         kb.create_object(obj)
         state = kb.add_state("obj1", "expected", obj.state([0, 90, 180]))

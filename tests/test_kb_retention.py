@@ -13,7 +13,7 @@ with warnings.catch_warnings():
     from fastapi.testclient import TestClient
 
 from planhrc.kb_service.app import create_app
-from planhrc.kb_service.store import KnowledgeBase, ValidationError
+from planhrc.kb_service.store import SqliteStore, ValidationError
 from planhrc.settings import make_settings
 
 NT = {"Accept": "application/n-triples"}
@@ -61,7 +61,7 @@ def test_compaction_keeps_the_current_abox_and_the_last_perceptions(tmp_path):
         with pytest.raises(ValidationError, match="keep_perceived"):
             kb.compact(keep_perceived=0)
         final = client.get("/health").json()["triples"]
-    with KnowledgeBase(db, make_settings().tbox_path) as kb:  # a scan of the tables agrees with the counters
+    with SqliteStore(db, make_settings().tbox_path) as kb:  # a scan of the tables agrees with the counters
         assert kb.triple_count() == final
 
 
@@ -97,7 +97,7 @@ def test_planhrc_compact_vacuum_gives_an_old_store_small_pages_and_its_space_bac
     old.close()
     size = os.path.getsize(db)
     argv = [sys.executable, "-m", "planhrc.cli", "compact", "--db", db, "--keep", "1", "--vacuum"]
-    with KnowledgeBase(db, make_settings().tbox_path):  # a process that has the file open: refused, in one line
+    with SqliteStore(db, make_settings().tbox_path):  # a process that has the file open: refused, in one line
         busy = subprocess.run(argv, capture_output=True, text=True, timeout=120)
     assert busy.returncode == 1 and "Traceback" not in busy.stderr, busy.stderr
     assert busy.stderr.strip().splitlines() == ["planhrc compact: store: another process has the file open (a "

@@ -13,7 +13,7 @@ from rdflib.compare import isomorphic
 from planhrc.kb_service.store.errors import ConflictError, KBError, NotFoundError, ValidationError
 from planhrc.kb_service.store.journal import JournalTable
 from planhrc.kb_service.store.records import ActionSpec, Execution
-from planhrc.kb_service.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeBase, KnowledgeStore
+from planhrc.kb_service.store import ABOX_IRI, PREDICATES, TBOX_IRI, KnowledgeStore, SqliteStore
 from planhrc.model import make_object, snap_angle
 from planhrc.paths import default_tbox_path
 
@@ -266,7 +266,7 @@ def test_a_write_refused_inside_a_transaction_takes_the_transaction_with_it(kb):
 
 def test_failure_inside_a_write_rolls_everything_back():
     """A write that fails half-way in the SQLite backend (its journal row written, then the disk full)."""
-    with KnowledgeBase(None, TBOX) as kb:
+    with SqliteStore(None, TBOX) as kb:
         w = _fill(kb)
         before = _snapshot(kb, w)
         a = w["objects"][0]
@@ -294,7 +294,7 @@ def test_a_file_that_is_no_store_is_refused_in_one_line(tmp_path):
                         (tmp_path / "no" / "such" / "kb.sqlite3", f"no folder {tmp_path / 'no' / 'such'}"),
                         (tmp_path, "it is a folder")):
         with pytest.raises(KBError) as info:
-            KnowledgeBase(str(path), TBOX)
+            SqliteStore(str(path), TBOX)
         assert str(info.value) == f"db: {path} cannot be opened as a store ({cause})"
     assert (tmp_path / "notes.txt").read_text().startswith("shopping list")  # left as it was
 

@@ -7,10 +7,11 @@ import pytest
 from owlready2 import World
 from rdflib import RDF, Graph, URIRef
 
-from planhrc.kb_service.knowledge.entailment import DERIVED, RULES, Vocabulary, entail
+from planhrc.kb_service.knowledge.entailment import DERIVED, Vocabulary, entail
+from planhrc.ontology.rules import SWRL_RULES
 from planhrc.kb_service.knowledge.graph import parse_lines
 from planhrc.kb_service.knowledge.reasoning import ReasoningRequest, reason
-from planhrc.kb_service.store import ABOX_IRI, TBOX_IRI, KnowledgeBase
+from planhrc.kb_service.store import ABOX_IRI, TBOX_IRI, SqliteStore
 from owlready2.base import rdfs_subclassof as SUBCLASS_OF
 
 from planhrc.kb_service.store.owl import RDF_TYPE as RDF_TYPE_SID
@@ -30,8 +31,8 @@ def vocab() -> Vocabulary:
     return Vocabulary.of(g)
 
 
-def store_with(formulation: str, links: int, raw: list[float] | None, orientations: int = 4) -> KnowledgeBase:
-    kb = KnowledgeBase(None, TBOX)
+def store_with(formulation: str, links: int, raw: list[float] | None, orientations: int = 4) -> SqliteStore:
+    kb = SqliteStore(None, TBOX)
     obj = make_object("obj1", formulation, links, orientations)
     kb.create_object(obj)
     if raw is not None:
@@ -41,7 +42,7 @@ def store_with(formulation: str, links: int, raw: list[float] | None, orientatio
     return kb
 
 
-def abox_triples(kb: KnowledgeBase) -> set:
+def abox_triples(kb: SqliteStore) -> set:
     return parse_lines(line for line in kb.export_lines("current", ["obj1"]) if line.startswith("<" + ABOX_IRI))
 
 
@@ -49,7 +50,7 @@ def test_the_rules_are_the_tboxs():
     world = World()
     with open(TBOX, "rb") as f:
         world.get_ontology(T).load(fileobj=f)
-    assert sorted(str(rule) for rule in world.rules()) == sorted(RULES)
+    assert sorted(str(rule) for rule in world.rules()) == sorted(SWRL_RULES)
 
 
 def test_a_perceived_state_is_a_state_and_the_chain_is_derived(vocab):
@@ -73,7 +74,7 @@ def test_relative_angles_follow_the_observations(vocab):
     assert [rel[str(k)] for k in range(2, 6)] == list(relative_from_absolute(snapped))
 
 
-def pellet_view(kb: KnowledgeBase) -> tuple[set, set]:
+def pellet_view(kb: SqliteStore) -> tuple[set, set]:
     """(individual, named class) and (s, p, o) of the derived properties that Pellet finds in the current ABox."""
     world = World()
     try:
@@ -97,7 +98,7 @@ def pellet_view(kb: KnowledgeBase) -> tuple[set, set]:
         world.close()
 
 
-def our_view(kb: KnowledgeBase, vocab: Vocabulary) -> tuple[set, set]:
+def our_view(kb: SqliteStore, vocab: Vocabulary) -> tuple[set, set]:
     asserted = abox_triples(kb)
     facts = asserted | entail(asserted, vocab)
     types = {(str(s), str(o)) for s, p, o in facts if p == RDF.type and str(s).startswith(ABOX_IRI)

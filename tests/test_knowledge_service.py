@@ -14,7 +14,7 @@ import pytest
 import rdflib
 
 from planhrc.bench.knowledge import CURRENT_STATE_QUERY
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.kb_service.store.owl import RDF_TYPE
 from planhrc.model import is_subsumed
 from planhrc.paths import default_tbox_path
@@ -140,7 +140,7 @@ def test_an_inconsistent_abox_is_named(tmp_path):
         with token_client(base) as client:
             oid = client.post("/objects", json={"name": "rod", "links": 3, "orientations": 4,
                                                 "formulation": "relative"}).json()["id"]
-    with KnowledgeBase(str(db), default_tbox_path()) as kb:  # a fact no write of the service accepts
+    with SqliteStore(str(db), default_tbox_path()) as kb:  # a fact no write of the service accepts
         abox = kb._abox
         with kb.lock:
             abox.q.insert_objs(abox.c, [(abox.sid(f"{oid}_l2"), RDF_TYPE, abox.t["Joint"])])

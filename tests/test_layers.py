@@ -3,7 +3,8 @@
     0 model        planhrc.model, .control, .vocabulary, .grounding, .transition, .cooperation, .paths, .settings,
                    .geometry, .ordering, .stats, .errors, .judge and .motion_search (the one judge of a
                    turn, the search for the robot's plans that fit the table),
-                   .cli_args (argument checks every command shares), planhrc.ontology
+                   .cli_args (argument checks every command shares), .json_record and .event_log (the records of
+                   an object's event log, which the service writes and its clients read), planhrc.ontology
     0.5 client     planhrc.client, planhrc.service_process (layer 0 and httpx only: the service's HTTP client,
                    `planhrc serve` as a child process)
     1 translator   planhrc.translator
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import ast
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
@@ -35,7 +37,7 @@ LAYERS: dict[str, float] = {
     "planhrc.model": 0, "planhrc.control": 0, "planhrc.vocabulary": 0, "planhrc.grounding": 0, "planhrc.transition": 0,
     "planhrc.cooperation": 0, "planhrc.paths": 0, "planhrc.settings": 0, "planhrc.geometry": 0, "planhrc.ordering": 0,
     "planhrc.stats": 0, "planhrc.errors": 0, "planhrc.judge": 0, "planhrc.motion_search": 0,
-    "planhrc.cli_args": 0, "planhrc.ontology": 0,
+    "planhrc.cli_args": 0, "planhrc.ontology": 0, "planhrc.json_record": 0, "planhrc.event_log": 0,
     "planhrc.client": 0.5, "planhrc.service_process": 0.5,
     "planhrc.translator": 1,
     "planhrc.planner": 2,
@@ -70,13 +72,13 @@ def modules() -> dict[str, Path]:
     return out
 
 
-def imports_of(module: str, source: str, is_package: bool = False) -> set[str]:
-    """Every planhrc module `module` imports, at the top or inside functions (TYPE_CHECKING blocks included).
-    The package `planhrc` itself is left out (its facade is lazy); a name taken from it is not."""
-    found = set()
+def import_statements(module: str, source: str, is_package: bool = False) -> Iterator[tuple[str, list[str]]]:
+    """Each import of `module`, at the top or inside functions (TYPE_CHECKING blocks included), as (the module
+    imported from, the names imported): `import a.b` is ("a.b", []), `from .x import y` ("<package>.x", ["y"])."""
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
+            for alias in node.names:
+                yield alias.name, []
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = module.split(".")
@@ -84,8 +86,16 @@ def imports_of(module: str, source: str, is_package: bool = False) -> set[str]:
                 target = ".".join(base + ([node.module] if node.module else []))
             else:
                 target = node.module or ""
-            found.add(target)
-            found.update(f"{target}.{alias.name}" for alias in node.names)  # `from pkg import module`
+            yield target, [alias.name for alias in node.names]
+
+
+def imports_of(module: str, source: str, is_package: bool = False) -> set[str]:
+    """Every planhrc module `module` imports (`import_statements`).
+    The package `planhrc` itself is left out (its facade is lazy); a name taken from it is not."""
+    found = set()
+    for target, names in import_statements(module, source, is_package):
+        found.add(target)
+        found.update(f"{target}.{name}" for name in names)  # `from pkg import module`
     return {name for name in found if name.startswith("planhrc.")}
 
 

@@ -24,7 +24,7 @@ from planhrc.kb_service import usecases
 from planhrc.kb_service.metrics import SECONDS, Histograms, ServiceMetrics
 from planhrc.kb_service.observe import Observation
 from planhrc.kb_service.planning_pool import PlanningPool
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.kb_service.tracing import Tracing
 from planhrc.paths import default_tbox_path
 from planhrc.settings import make_settings
@@ -174,10 +174,10 @@ def test_val_s_cpu_is_what_the_kernel_counted_for_val_s_runs(tmp_path):
 
 @contextlib.contextmanager
 def observed(db: Path, metrics: ServiceMetrics, pool: PlanningPool | None = None, **settings: Any
-             ) -> Iterator[tuple[KnowledgeBase, usecases.Context]]:
+             ) -> Iterator[tuple[SqliteStore, usecases.Context]]:
     """The service's use cases in process on a store file, reporting to `metrics`."""
     tbox = default_tbox_path()
-    with KnowledgeBase(str(db), tbox) as kb:
+    with SqliteStore(str(db), tbox) as kb:
         cell = usecases.open_context(kb, make_settings(tbox_path=str(tbox), **settings), pool=pool,
                                      observer=Observation(metrics, Tracing.off()))
         try:

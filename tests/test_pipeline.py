@@ -6,7 +6,7 @@ import pytest
 
 from planhrc import pipeline
 from planhrc.cli import main
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.model import is_subsumed, make_object
 from planhrc.paths import default_tbox_path
 from planhrc.pipeline import config_from_settings, plan
@@ -52,7 +52,7 @@ def test_plan_returns_a_value_with_expected_states(config, formulation, name):
 def test_the_value_is_stored_in_one_write_and_reads_back_equal(config, tmp_path):
     sc = SCENARIOS[sorted(SCENARIOS)[0]]
     db = str(tmp_path / "kb.sqlite3")
-    with KnowledgeBase(db, default_tbox_path()) as kb:
+    with SqliteStore(db, default_tbox_path()) as kb:
         ident = kb.new_object_id()
         obj, init, goal = _setup("absolute", sc.links, sc.orientations, sc.init_links_deg, (90,) * sc.links, ident)
         outcome = plan(obj, init, goal, config)
@@ -61,7 +61,7 @@ def test_the_value_is_stored_in_one_write_and_reads_back_equal(config, tmp_path)
             problem = kb.add_problem(ident, kb.add_state(ident, "initial", init).id,
                                      kb.add_state(ident, "goal", goal).id)
             stored = kb.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states)
-    with KnowledgeBase(db, default_tbox_path()) as kb:  # read back from the database, not from a cache
+    with SqliteStore(db, default_tbox_path()) as kb:  # read back from the database, not from a cache
         again = kb.get_plan(stored.id)
         assert tuple(a.spec for a in again.actions) == outcome.actions
         assert tuple(kb.get_state(s).atoms for s in again.expected_state_ids) == outcome.expected_states

@@ -158,8 +158,10 @@ def test_a_stream_reads_the_log_when_the_feed_names_its_object_and_only_then(db)
     another object wakes no read; a write to its object wakes one, at once."""
     import anyio
 
+    from planhrc.event_log import EventKind, GoalSetData
     from planhrc.kb_service.events import EventBell, stream_events
     from planhrc.kb_service.store import open_store
+    from planhrc.kb_service.usecases.log import log_event
     from planhrc.model import make_object
     from planhrc.paths import default_tbox_path
 
@@ -191,10 +193,12 @@ def test_a_stream_reads_the_log_when_the_feed_names_its_object_and_only_then(db)
                     while not reads:  # the stream has read the log once, and waits
                         await anyio.sleep(0.05)
                 await anyio.sleep(0.5)
-                await anyio.to_thread.run_sync(lambda: other.add_event("obj2", "goal_set", "elsewhere", {}))
+                await anyio.to_thread.run_sync(lambda: log_event(other, "obj2", EventKind.GOAL_SET, "elsewhere",
+                                                                   GoalSetData(goal_state_id="obj2_state_1")))
                 await anyio.sleep(1.0)
                 assert len(reads) == 1, reads  # idle, and news of another object: no read
-                await anyio.to_thread.run_sync(lambda: other.add_event("obj1", "goal_set", "here", {}))
+                await anyio.to_thread.run_sync(lambda: log_event(other, "obj1", EventKind.GOAL_SET, "here",
+                                                                   GoalSetData(goal_state_id="obj1_state_1")))
 
             async with anyio.create_task_group() as tasks:
                 tasks.start_soon(consume)

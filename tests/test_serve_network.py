@@ -14,10 +14,10 @@ from pathlib import Path
 import httpx
 import pytest
 
-from planhrc.kb_service.cli import SettingsProblem, check_serve_settings
+from planhrc.kb_service.cli import SERVE_OPTIONS, SettingsProblem, check_serve_settings
+from planhrc.kb_service.command_settings import read_settings
 from planhrc.kb_service.network import is_loopback
 from planhrc.service_process import die_with_parent, free_port, serve_command, stop_process_group
-from planhrc.settings import make_settings
 from tests.servers import serve_env, served
 
 PASSWORD = "correct horse battery staple"
@@ -28,9 +28,11 @@ def _check(given: dict, env: dict | None = None, monkeypatch: pytest.MonkeyPatch
     for key, value in (env or {}).items():
         assert monkeypatch is not None
         monkeypatch.setenv(key, value)
-    warnings: list[str] = []
-    settings = check_serve_settings(make_settings(port=free_port(), **given), set(given), warnings)
-    return settings, warnings
+    read = read_settings({field: (SERVE_OPTIONS[field], value) for field, value in
+                          {"port": free_port(), **given}.items()})
+    warnings = list(read.warnings)
+    check_serve_settings(read.settings, read.name, warnings)
+    return read.settings, warnings
 
 
 def _secret_file(folder: Path, name: str, text: str, mode: int = 0o600) -> str:

@@ -14,7 +14,7 @@ with warnings.catch_warnings():
 from planhrc.kb_service.usecases import perception
 from planhrc.pipeline import val_runs
 from planhrc.kb_service.app import create_app
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.planner.validate import ValidationResult
 from planhrc.settings import make_settings
 from tests.servers import timed_beside
@@ -163,13 +163,13 @@ def _timed_val(monkeypatch, seconds: float, verdict: ValidationResult | None = N
 
 
 def _write_starts(monkeypatch) -> list[float]:
-    starts, real = [], KnowledgeBase.add_perception
+    starts, real = [], SqliteStore.add_perception
 
     def add_perception(self, perception):
         starts.append(time.monotonic())
         return real(self, perception)
 
-    monkeypatch.setattr(KnowledgeBase, "add_perception", add_perception)
+    monkeypatch.setattr(SqliteStore, "add_perception", add_perception)
     return starts
 
 

@@ -10,7 +10,7 @@ with warnings.catch_warnings():
     from fastapi.testclient import TestClient
 
 from planhrc.kb_service.app import create_app
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.kb_service.store.knowledge_base import MAX_EVENTS_PAGE, MAX_SEQ
 from planhrc.settings import make_settings
 from tests.servers import settled_health, timed_beside
@@ -45,7 +45,7 @@ def test_health_counts_are_kept_by_commits_and_match_a_fresh_scan(client, db):
     after = settled_health(client)
     assert after["objects"] == before["objects"] + 1 and after["triples"] > before["triples"]
     client.app.state.kb.close()
-    with KnowledgeBase(db, make_settings().tbox_path) as kb:  # counted by a scan of the tables
+    with SqliteStore(db, make_settings().tbox_path) as kb:  # counted by a scan of the tables
         assert (kb.object_count(), kb.triple_count()) == (after["objects"], after["triples"])
 
 

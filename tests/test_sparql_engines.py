@@ -19,7 +19,8 @@ from rdflib.compare import isomorphic
 from planhrc.kb_service.app import create_app
 from planhrc.kb_service.knowledge.graph import KnowledgeGraph
 from planhrc.kb_service.knowledge.query_text import read_query_text
-from planhrc.kb_service.knowledge.sparql import ENGINES, PREFIXES, QueryError, SparqlEndpoint, SparqlRequest
+from planhrc.kb_service.knowledge.query_engine import QueryError
+from planhrc.kb_service.knowledge.sparql import ENGINES, PREFIXES, SparqlEndpoint, SparqlRequest
 from planhrc.settings import make_settings
 from planhrc.vocabulary import SparqlEngineName
 from tests.test_knowledge_api import CURRENT

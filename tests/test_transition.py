@@ -110,18 +110,34 @@ def test_indexed_join_finds_exactly_the_brute_force_bindings(seed):
                 assert sorted(fast, key=key) == sorted(slow, key=key) and slow
 
 
+def _every_position(index):
+    """The index with every (predicate, position) of its state indexed (as joins looking them all up would)."""
+    for atom in list(index.state):
+        for pos in range(len(atom) - 1):
+            index.by_arg(atom[0], pos, atom[pos + 1])
+    return index
+
+
+def _same_index(mine, fresh):
+    """Whether a moved index describes what a fresh one of its state does, on the positions it indexed."""
+    for predicate, positions in mine._positions.items():
+        for pos in positions:
+            fresh.by_arg(predicate, pos, "")
+    return all({k: v for k, v in a.items() if v} == {k: v for k, v in b.items() if v}
+               for a, b in ((mine._by_pred, fresh._by_pred), (mine._by_arg, fresh._by_arg)))
+
+
 def test_a_moved_index_equals_a_fresh_one_along_a_plan():
     obj = make_object("o", "absolute", 6, 8)
     domain = read_domain_model(default_tbox_path(), "absolute")
     steps = ["(rotateclockwise o_l3 o_l2 o_j3 deg_0 deg_45)", "(rotateclockwise o_l5 o_l4 o_j5 deg_45 deg_90)",
              "(rotateanticlockwise o_l2 o_l1 o_j2 deg_0 deg_315)"]
     _, states = replay(domain, obj.state([0] * 6), steps)
-    index = StateIndex(states[0])
+    index = _every_position(StateIndex(states[0]))
     for later in states[1:]:
         index.moved(later)
-        fresh = StateIndex(later)
-        for mine, theirs in ((index._by_pred, fresh._by_pred), (index._by_arg, fresh._by_arg)):
-            assert {k: v for k, v in mine.items() if v} == theirs
+        assert _same_index(index, StateIndex(later))
+    assert len(index._positions["hasorientation"]) == 2
     assert obj.joint_values_of(states[-1]) == {1: 0, 2: 315, 3: 0, 4: 0, 5: 45, 6: 45}
 
 
@@ -227,6 +243,126 @@ def test_a_step_of_a_large_absolute_object_grounds_in_its_state_as_a_fresh_one()
         steps.append(step)
     with pytest.raises(TransitionError, match="precondition"):
         grounder.ground(steps[-1], state)  # the last step again: its joint has moved on
-    fresh_index = StateIndex(state)
-    for mine, theirs in ((index._by_pred, fresh_index._by_pred), (index._by_arg, fresh_index._by_arg)):
-        assert {key: v for key, v in mine.items() if v} == theirs
+    assert index._positions and _same_index(index, StateIndex(state))
+
+
+# -- the replay against the generic one: every formulation, random plans ------------------------------------------
+def _generic_ground(domain, step, state):
+    """The ground action of a step as the transition equations define it, with nothing of the replay's: the
+    schema's literals bound by the step's arguments, each conditional effect's bindings enumerated by the generic
+    join (`_bindings`, on a fresh index of the state), the effects instantiated, in `ground_action`'s order."""
+    from planhrc.grounding import holds, instantiate
+    from planhrc.model import EQUALITY, CondEffect
+    from planhrc.transition import _cond_order, find_schema, parse_step
+
+    name, args = parse_step(step)
+    schema = find_schema(domain, name)
+    binding = {var: value for (var, _), value in zip(schema.parameters, args)}
+    if not all(holds(lit, binding, state) for lit in schema.precondition):
+        raise TransitionError(f"{step}: not applicable")
+    conds = [CondEffect(frozenset(instantiate(lit, b) for lit in ce.when if lit.predicate != EQUALITY and not lit.negated),
+                        frozenset(instantiate(lit, b) for lit in ce.effects if lit.negated),
+                        frozenset(instantiate(lit, b) for lit in ce.effects if not lit.negated))
+             for ce in schema.conditional_effects
+             for b in _bindings(ce.when, [v for v, _ in ce.variables], binding, StateIndex(state))]
+    return ActionSpec(name, args,
+                      frozenset(instantiate(lit, binding) for lit in schema.precondition
+                                if lit.predicate != EQUALITY and not lit.negated),
+                      frozenset(instantiate(lit, binding) for lit in schema.effects if lit.negated),
+                      frozenset(instantiate(lit, binding) for lit in schema.effects if not lit.negated),
+                      tuple(sorted(conds, key=_cond_order)))
+
+
+def _generic_replay(domain, init, plan):
+    """Eq. (statetransitioncond) step by step, every state made whole: `apply` on the generic ground action."""
+    states, actions = [frozenset(init)], []
+    for step in plan:
+        actions.append(_generic_ground(domain, step, states[-1]))
+        states.append(apply(states[-1], actions[-1]))
+    return tuple(actions), tuple(states)
+
+
+def _random_turns(obj, rng, n):
+    """A random plan of `n` single-step turns of an absolute or relative object, each applicable in the state the
+    ones before it lead to (an absolute turn moves the joints downstream too)."""
+    domain = read_domain_model(default_tbox_path(), obj.formulation.value)
+    init = state = obj.state([rng.choice(obj.orientation_degrees) for _ in range(obj.n_joints)])
+    step = 360 // obj.orientations
+    plan = []
+    for _ in range(n):
+        k = rng.choice(obj.joint_indices)
+        now = obj.joint_values_of(state)[k]
+        clockwise = rng.random() < 0.5
+        then = (now + (step if clockwise else -step)) % 360
+        name = "rotateclockwise" if clockwise else "rotateanticlockwise"
+        turned, held = (k, k - 1) if obj.formulation.value == "absolute" else (k + 1, k)
+        plan.append(f"({name} {obj.ident}_l{turned} {obj.ident}_l{held} {obj.ident}_j{k} deg_{now} deg_{then})")
+        state = apply(state, _generic_ground(domain, plan[-1], state))
+    return init, plan
+
+
+@pytest.mark.parametrize("formulation", ["absolute", "relative", "bimanual"])
+def test_the_replay_is_the_generic_replay_on_random_plans(formulation):
+    """`replay` (its join fixed per condition, the steps kept by `Grounder`, one state changed in place and kept
+    as changes) gives the actions and expected states of the generic replay (a fresh join per binding, `apply`
+    making each state whole) on random plans of every formulation: random turns of absolute and relative objects,
+    and the planner's plans of bimanual ones (grasps, moves to the centre and turns). Each plan is replayed twice:
+    the second time its steps come from what `Grounder` kept the first time."""
+    from planhrc import pipeline
+    from planhrc.pipeline.config import config_from_settings
+    from planhrc.settings import get_settings
+
+    domain = read_domain_model(default_tbox_path(), formulation)
+    rng = random.Random({"absolute": 1, "relative": 2, "bimanual": 3}[formulation])
+    cases = []
+    for links, k in ((3, 4), (5, 8), (9, 12), (4, 24)):
+        obj = make_object("r", formulation, links, k)
+        if formulation == "bimanual":
+            config = config_from_settings(get_settings())
+            for _ in range(2):
+                init = obj.state([rng.choice(obj.orientation_degrees) for _ in range(obj.n_joints)])
+                goal = obj.configuration_atoms([rng.choice(obj.orientation_degrees) for _ in range(obj.n_joints)])
+                outcome = pipeline.plan(obj, init, goal, config, defer_validation=True)
+                if outcome.solved and outcome.steps:
+                    cases.append((init, outcome.steps))
+        else:
+            cases += [_random_turns(obj, rng, 3 * links) for _ in range(2)]
+    assert len(cases) >= 6
+    for init, plan in cases:
+        expected_actions, expected_states = _generic_replay(domain, init, plan)
+        for _ in range(2):
+            actions, states = replay(domain, init, plan)
+            assert actions == expected_actions
+            assert len(states) == len(expected_states) and list(states) == list(expected_states)
+            assert states[-1] == expected_states[-1] and states == expected_states
+
+
+def test_expected_states_read_in_any_order_are_the_replayed_states_and_pickle_as_changes():
+    """`ExpectedStates` read forwards, backwards, at random and by slices gives the states of the generic replay;
+    pickled, it is far smaller than its states whole; `matching_states` gives the states a perceived state is
+    subsumed by, latest first, as a check of every state whole does (perceived states on and off the plan)."""
+    import pickle
+
+    from planhrc.transition import ExpectedStates, matching_states
+
+    obj = make_object("o", "absolute", 12, 12)
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    rng = random.Random(5)
+    init, plan = _random_turns(obj, rng, 40)
+    _, whole = _generic_replay(domain, init, plan)
+    _, states = replay(domain, init, plan)
+    assert isinstance(states, ExpectedStates) and len(states) == len(whole) == 41
+    order = list(range(41)) + list(range(40, -1, -1)) + [rng.randrange(41) for _ in range(60)]
+    assert all(states[i] == whole[i] for i in order) and states[-3:] == whole[-3:]
+    again = pickle.loads(pickle.dumps(states))
+    assert again == whole and list(again) == list(whole)
+    assert len(pickle.dumps(states)) < 0.6 * len(pickle.dumps(whole))
+    perceived = [whole[i] | {("hasorientation", "deg_0", "o_j1")} for i in (0, 7, 40)] + list(whole[::5]) + [
+        obj.state([rng.choice(obj.orientation_degrees) for _ in range(12)]) for _ in range(5)]
+    for seen in perceived:
+        brute = [i for i in range(40, -1, -1) if whole[i] <= seen]
+        assert list(matching_states(seen, states)) == list(matching_states(seen, whole)) == brute
+    fresh = ExpectedStates(states.first, states.changes)  # no last state given: made alone, then the others
+    assert fresh[40] == whole[40] and list(fresh) == list(whole)
+    with pytest.raises(IndexError):
+        states[41]

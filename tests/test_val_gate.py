@@ -19,10 +19,11 @@ import pytest
 from planhrc import pipeline
 from planhrc.kb_service import usecases
 from planhrc.kb_service.planning_pool import PlanningPool
-from planhrc.kb_service.store import KnowledgeBase
+from planhrc.kb_service.store import SqliteStore
 from planhrc.kb_service.usecases import (Context, FeedbackRequest, GoalRequest, NewObject, PerceptionRequest,
                                         give_feedback, perceive, take_next_action)
-from planhrc.kb_service.usecases.log import piece_record_of
+from planhrc.event_log import DecisionData
+from planhrc.kb_service.usecases.log import piece_record_of, read_event
 from planhrc.pipeline import PieceRecord, Verdict, gate, later, stages
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
@@ -35,9 +36,9 @@ GOAL = [180, 0, 180, 0, 180, 0, 180, 0, 180, 0]
 
 
 @contextlib.contextmanager
-def service(db: Path, pool: PlanningPool | None = None, **overrides) -> Iterator[tuple[KnowledgeBase, Context]]:
+def service(db: Path, pool: PlanningPool | None = None, **overrides) -> Iterator[tuple[SqliteStore, Context]]:
     tbox = default_tbox_path()
-    with KnowledgeBase(str(db), tbox) as kb:
+    with SqliteStore(str(db), tbox) as kb:
         context = usecases.open_context(kb, make_settings(tbox_path=str(tbox), **overrides), pool=pool)
         try:
             yield kb, context
@@ -59,11 +60,11 @@ def succeeded(cell: Context, oid: str, action: usecases.NextAction) -> None:
     give_feedback(cell, FeedbackRequest(oid, action.id, "succeeded"))
 
 
-def kinds(kb: KnowledgeBase, oid: str, kind: str) -> list:
+def kinds(kb: SqliteStore, oid: str, kind: str) -> list:
     return [e for e in kb.list_events(oid) if e.kind == kind]
 
 
-def adoption(kb: KnowledgeBase, oid: str, plan_id: str):
+def adoption(kb: SqliteStore, oid: str, plan_id: str):
     return next(e for e in kb.list_events(oid) if e.kind == "replan" and e.data.get("plan_id") == plan_id)
 
 
@@ -145,7 +146,10 @@ def test_a_later_piece_val_refuses_is_never_dispatched_and_leads_to_a_replan(tmp
         answer = perceived(cell, oid, START)
         plan_id = answer.plan_id
         assert answer.decision == "replan" and tampered
-        record = piece_record_of(plan_id, adoption(kb, oid, plan_id).data)
+        adopted = read_event(adoption(kb, oid, plan_id))
+        assert isinstance(adopted, DecisionData)
+        record = piece_record_of(adopted)
+        assert record is not None
         refused = record.covering(tampered[0], tampered[0])[0]
         first_refused = record.bounds(refused)[0]
         deadline = time.monotonic() + 60

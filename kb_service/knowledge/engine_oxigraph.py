@@ -24,7 +24,7 @@ from rdflib import BNode, Literal, URIRef
 from .entailment import Triple
 from .graph import DEFAULT, GRAPHS, NAMED, Change
 from .oxigraph_worker import one_line
-from .sparql import CheckedQuery, EngineError, QueryError, timed_out
+from .query_engine import CheckedQuery, EngineError, QueryError, timed_out
 
 log = logging.getLogger(__name__)
 

@@ -24,7 +24,7 @@ from rdflib.plugins.stores.memory import Memory
 
 from .entailment import Triple
 from .graph import DEFAULT, DEFAULT_NAMES, GRAPHS, NAMED, Change
-from .sparql import CheckedQuery, QueryError, timed_out
+from .query_engine import CheckedQuery, QueryError, timed_out
 
 PREPARED_KEPT = 256  # parsed queries kept (a console or a client sends the same few again and again)
 

@@ -7,10 +7,10 @@ Two parts, run to a fixed point:
   (a perceived state is a `State`), the domain and range of each property (whatever `stateOf` points from is a
   `State`), every superproperty of a property (`nextJoint` is a `downstreamJoint`) and the closure of each
   transitive property (`downstreamJoint`);
-* the TBox's six SWRL rules (`RULES`, the rule texts as the TBox states them; a test checks that the TBox still
-  holds exactly these): which link turns about each joint, the joints downstream of it, which joints each turn
-  affects (the chain and the `Affected` facts), the `madeof` links of a state that includes its object's static
-  facts, and the relative angle of each observed link of a perceived state.
+* the TBox's six SWRL rules, read from their texts (`ontology.rules.SWRL_RULES`, which the TBox builder states;
+  `read_rule`), each joined over the facts atom by atom: which link turns about each joint, the joints downstream
+  of it, which joints each turn affects (the chain and the `Affected` facts), the `madeof` links of a state that
+  includes its object's static facts, and the relative angle of each observed link of a perceived state.
 
 What Pellet derives from the same ABox and TBox, restricted to named classes and these properties, is exactly this
 (tests/test_knowledge_entailment.py, `reasoner`-marked). Individuals are entailed only from facts of their own
@@ -18,41 +18,31 @@ object, so each object's entailment is computed alone and kept until its current
 """
 from __future__ import annotations
 
+import re
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Iterable
+from functools import lru_cache
+from typing import Any, Callable, Iterable
 
-from rdflib import OWL, RDF, RDFS, XSD, Graph, Literal, URIRef
+from rdflib import OWL, RDF, RDFS, Graph, Literal, URIRef
 from rdflib.term import Node
+
+from planhrc.ontology.rules import SWRL_RULES
 
 from ..store import TBOX_IRI
 
 Triple = tuple[Node, Node, Node]
-
-RULES = (
-    "Connected(?c), arg1(?c, ?j), arg2(?c, ?l), Connected(?d), arg1(?d, ?j), arg2(?d, ?u), nextLink(?u, ?l)"
-    " -> turns(?j, ?l)",
-    "turns(?j, ?l), nextLink(?l, ?m), turns(?k, ?m) -> nextJoint(?j, ?k)",
-    "turns(?j, ?l), downstreamJoint(?j, ?k) -> affectsJoint(?j, ?k)",
-    "turns(?j, ?l) -> affectsJoint(?j, ?j)",
-    "State(?s), includesStaticFacts(?s, true), stateOf(?s, ?x), staticFactOf(?p, ?x) -> madeof(?s, ?p)",
-    "PerceivedState(?s), observes(?s, ?p), observes(?s, ?q), arg1(?p, ?a), arg1(?q, ?b), nextLink(?a, ?b),"
-    " arg2(?p, ?oa), arg2(?q, ?ob), degrees(?oa, ?x), degrees(?ob, ?y), subtract(?d, ?y, ?x),"
-    " add(?e, ?d, 360), mod(?r, ?e, 360), Orientation(?o), degrees(?o, ?r) -> relativeOrientation(?q, ?o)",
-)
 
 
 def _t(name: str) -> URIRef:
     return URIRef(TBOX_IRI + name)
 
 
-CONNECTED, STATE, PERCEIVED, ORIENTATION = _t("Connected"), _t("State"), _t("PerceivedState"), _t("Orientation")
-ARG1, ARG2, NEXT_LINK, TURNS, NEXT_JOINT = _t("arg1"), _t("arg2"), _t("nextLink"), _t("turns"), _t("nextJoint")
-DOWNSTREAM, AFFECTS, MADEOF, STATE_OF = _t("downstreamJoint"), _t("affectsJoint"), _t("madeof"), _t("stateOf")
-STATIC_FACT_OF, INCLUDES_STATIC, OBSERVES = _t("staticFactOf"), _t("includesStaticFacts"), _t("observes")
-DEGREES, RELATIVE = _t("degrees"), _t("relativeOrientation")
+TYPE = RDF.type
+DOWNSTREAM = _t("downstreamJoint")  # transitive: what the rules' `nextJoint` facts add up to
 # The properties the rules derive: what the agreement test with Pellet compares, besides the types.
-DERIVED = (TURNS, NEXT_JOINT, DOWNSTREAM, AFFECTS, MADEOF, RELATIVE)
+DERIVED = tuple(_t(name) for name in ("turns", "nextJoint", "affectsJoint", "madeof", "relativeOrientation")) + (
+    DOWNSTREAM,)
 
 
 @dataclass(frozen=True)
@@ -108,18 +98,43 @@ class _Facts:
     def __init__(self, triples: Iterable[Triple]) -> None:
         self.all: set[Triple] = set()
         self.by_p: dict[Node, set[tuple[Node, Node]]] = defaultdict(set)
+        # made when a rule first looks a property up, and again after the property gained a triple
+        self._by_subject: dict[Node, dict[Node, set[Node]]] = {}  # p -> s -> objects
+        self._by_value: dict[Node, dict[Any, set[Node]]] = {}  # p -> `_value` of an object -> subjects
         for t in triples:
             self.add(t)
 
     def add(self, t: Triple) -> bool:
         if t in self.all:
             return False
+        p = t[1]
         self.all.add(t)
-        self.by_p[t[1]].add((t[0], t[2]))
+        self.by_p[p].add((t[0], t[2]))
+        if p in self._by_subject:
+            del self._by_subject[p]
+        if p in self._by_value:
+            del self._by_value[p]
         return True
 
     def pairs(self, p: Node) -> set[tuple[Node, Node]]:
         return self.by_p.get(p, set())
+
+    def objects(self, p: Node, s: Node) -> set[Node]:
+        index = self._by_subject.get(p)
+        if index is None:
+            index = self._by_subject[p] = defaultdict(set)
+            for subject, o in self.pairs(p):
+                index[subject].add(o)
+        return index.get(s, set())
+
+    def subjects(self, p: Node, value: Any) -> set[Node]:
+        """The subjects of `p` whose object is `value` (a node, or a literal's `_value`)."""
+        index = self._by_value.get(p)
+        if index is None:
+            index = self._by_value[p] = defaultdict(set)
+            for subject, o in self.pairs(p):
+                index[_value(o) if isinstance(o, Literal) else o].add(subject)
+        return index.get(value, set())
 
     def of(self, p: Node) -> dict[Node, set[Node]]:
         out: dict[Node, set[Node]] = defaultdict(set)
@@ -128,7 +143,7 @@ class _Facts:
         return out
 
     def typed(self, cls: Node) -> set[Node]:
-        return {s for s, o in self.pairs(RDF.type) if o == cls}
+        return self.subjects(TYPE, cls)
 
 
 def entail(asserted: Iterable[Triple], vocab: Vocabulary) -> set[Triple]:
@@ -148,11 +163,11 @@ def _rdfs(facts: _Facts, vocab: Vocabulary, todo: list[Triple]) -> None:
         while todo:
             s, p, o = todo.pop()
             new = [(s, q, o) for q in vocab.superproperties.get(p, ()) if q != p]
-            new += [(s, RDF.type, c) for c in vocab.domains.get(p, ())]
+            new += [(s, TYPE, c) for c in vocab.domains.get(p, ())]
             if isinstance(o, URIRef):
-                new += [(o, RDF.type, c) for c in vocab.ranges.get(p, ())]
-            if p == RDF.type:
-                new += [(s, RDF.type, c) for c in vocab.superclasses.get(o, ()) if c != o]
+                new += [(o, TYPE, c) for c in vocab.ranges.get(p, ())]
+            if p == TYPE:
+                new += [(s, TYPE, c) for c in vocab.superclasses.get(o, ()) if c != o]
             todo += [t for t in new if facts.add(t)]
         for p in vocab.transitive:
             succ = facts.of(p)
@@ -160,70 +175,164 @@ def _rdfs(facts: _Facts, vocab: Vocabulary, todo: list[Triple]) -> None:
             todo += [t for s, objs in reach.items() for o in objs - {s} if facts.add(t := (s, p, o))]
 
 
+# -- the SWRL rules, read from their text ---------------------------------------------------------------------
+Term = str | int | bool  # in a rule: a variable ("?x"), or a constant (`true`, a whole number)
+BUILTINS: dict[str, Callable[[Any, Any], Any]] = {  # swrlb:name(?result, ?a, ?b): result = a op b
+    "subtract": lambda a, b: a - b, "add": lambda a, b: a + b, "mod": lambda a, b: a % b}
+
+
+@dataclass(frozen=True)
+class RuleAtom:
+    """One atom of a rule: a class (one term), a property (two) or a built-in (`BUILTINS`: three)."""
+
+    name: str
+    terms: tuple[Term, ...]
+
+    @property
+    def iri(self) -> URIRef:
+        return _t(self.name)
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A rule's body, in the order it is joined (the atoms with the most terms known first), and its head."""
+
+    body: tuple[RuleAtom, ...]
+    head: RuleAtom
+
+
+def read_rule(text: str) -> Rule:
+    """A rule as `ontology.rules` writes it: `A(?x), p(?x, ?y), subtract(?d, ?y, ?x) -> q(?x, ?d)`."""
+    body_text, head_text = text.split("->")
+    body = [_atom(m) for m in re.finditer(r"(\w+)\(([^)]*)\)", body_text)]
+    head = [_atom(m) for m in re.finditer(r"(\w+)\(([^)]*)\)", head_text)]
+    if len(head) != 1 or not body:
+        raise ValueError(f"a rule with one head atom and a body expected: {text!r}")
+    return Rule(_join_order(body), head[0])
+
+
+def _atom(match: re.Match[str]) -> RuleAtom:
+    def term(word: str) -> Term:
+        word = word.strip()
+        if word.startswith("?"):
+            return word
+        if word in ("true", "false"):
+            return word == "true"
+        return int(word)
+
+    return RuleAtom(match.group(1), tuple(term(w) for w in match.group(2).split(",")))
+
+
+def _join_order(atoms: list[RuleAtom]) -> tuple[RuleAtom, ...]:
+    """The atoms in the order a join reads them cheaply: each time the one whose terms are most known already (a
+    check before a lookup before a scan; a built-in once its inputs are known, a class scan before a property's)."""
+    known: set[Term] = set()
+    order: list[RuleAtom] = []
+    left = list(atoms)
+
+    def cost(atom: RuleAtom) -> float:
+        bound = [not isinstance(t, str) or t in known for t in atom.terms]
+        if atom.name in BUILTINS:
+            return 0.0 if all(bound[1:]) else 9.0
+        if len(atom.terms) == 1:
+            return 1.0 if bound[0] else 4.0
+        return {(True, True): 1.0, (True, False): 2.0, (False, True): 3.0}.get((bound[0], bound[1]), 5.0)
+
+    while left:
+        atom = min(left, key=cost)
+        left.remove(atom)
+        order.append(atom)
+        known.update(t for t in atom.terms if isinstance(t, str))
+    return tuple(order)
+
+
+@lru_cache(maxsize=1)
+def tbox_rules() -> tuple[Rule, ...]:
+    return tuple(read_rule(text) for text in SWRL_RULES)
+
+
 def _rules(facts: _Facts) -> list[Triple]:
-    """Apply the six rules once; the triples that are new."""
+    """Apply the TBox's rules once; the triples that are new."""
     new: list[Triple] = []
-    connected = facts.typed(CONNECTED)
-    arg1, arg2 = facts.of(ARG1), facts.of(ARG2)
-    links_at: dict[Node, set[Node]] = defaultdict(set)  # joint -> links Connected to it
-    for c in connected:
-        for j in arg1.get(c, ()):
-            links_at[j] |= arg2.get(c, set())
-    next_link = facts.pairs(NEXT_LINK)
-    for j, links in links_at.items():  # rule 1: the downstream one of the two links at a joint turns
-        new += [(j, TURNS, link) for u, link in next_link if u in links and link in links]
-    turns = facts.pairs(TURNS)
-    turned_by: dict[Node, set[Node]] = defaultdict(set)
-    for j, link in turns:
-        turned_by[link].add(j)
-    for j, link in turns:
-        new.append((j, AFFECTS, j))  # rule 4
-        new += [(j, NEXT_JOINT, k) for l0, m in next_link if l0 == link for k in turned_by.get(m, ())]  # rule 2
-    downstream = facts.of(DOWNSTREAM)
-    new += [(j, AFFECTS, k) for j, _ in turns for k in downstream.get(j, ())]  # rule 3
-    state_of, static_of = facts.of(STATE_OF), facts.of(STATIC_FACT_OF)
-    statics: dict[Node, set[Node]] = defaultdict(set)
-    for p, objs in static_of.items():
-        for x in objs:
-            statics[x].add(p)
-    for s in facts.typed(STATE):  # rule 5
-        if any(_is_true(v) for v in facts.of(INCLUDES_STATIC).get(s, ())):
-            new += [(s, MADEOF, p) for x in state_of.get(s, ()) for p in statics.get(x, ())]
-    new += _relative_orientations(facts, arg1, arg2)  # rule 6
+    for rule in tbox_rules():
+        new += _matches(rule, facts)
     return [t for t in new if facts.add(t)]
 
 
-def _relative_orientations(facts: _Facts, arg1: dict[Node, set[Node]], arg2: dict[Node, set[Node]]) -> list[Triple]:
-    degrees = {s: _int(v) for s, vs in facts.of(DEGREES).items() for v in vs}
-    at_degrees: dict[int, set[Node]] = defaultdict(set)
-    for o in facts.typed(ORIENTATION):
-        d = degrees.get(o)
-        if d is not None:
-            at_degrees[d].add(o)
-    next_link = facts.pairs(NEXT_LINK)
-    observes = facts.of(OBSERVES)
+def _matches(rule: Rule, facts: _Facts) -> list[Triple]:
+    """The head of `rule` for every way its body holds in `facts` (a nested-loop join in the rule's order)."""
     out: list[Triple] = []
-    for s in facts.typed(PERCEIVED):
-        seen = observes.get(s, set())
-        for p in seen:
-            for q in seen:
-                if not any((a, b) in next_link for a in arg1.get(p, ()) for b in arg1.get(q, ())):
-                    continue
-                for oa in arg2.get(p, ()):
-                    for ob in arg2.get(q, ()):
-                        x, y = degrees.get(oa), degrees.get(ob)
-                        if x is None or y is None:
-                            continue
-                        out += [(q, RELATIVE, o) for o in at_degrees.get((y - x + 360) % 360, ())]
+    body = rule.body
+    iris = [atom.iri for atom in body]
+    head = rule.head.iri
+
+    def known(term: Term, binding: dict[str, Any]) -> Any:
+        return binding.get(term) if isinstance(term, str) else term
+
+    def join(i: int, binding: dict[str, Any]) -> None:
+        if i == len(body):
+            s, o = (binding[t] if isinstance(t, str) else Literal(t) for t in rule.head.terms)
+            out.append((s, head, o))
+            return
+        atom = body[i]
+        if atom.name in BUILTINS:
+            result, a, b = (known(t, binding) for t in atom.terms)
+            a, b = _value(a), _value(b)
+            if not isinstance(a, (int, float)) or not isinstance(b, (int, float)):
+                return
+            value = BUILTINS[atom.name](a, b)
+            if result is None:
+                join(i + 1, {**binding, str(atom.terms[0]): value})
+            elif _value(result) == value:
+                join(i + 1, binding)
+            return
+        if len(atom.terms) == 1:
+            var, cls = atom.terms[0], iris[i]
+            subject = known(var, binding)
+            if subject is not None:
+                if (subject, TYPE, cls) in facts.all:
+                    join(i + 1, binding)
+                return
+            for node in facts.typed(cls):
+                join(i + 1, {**binding, str(var): node})
+            return
+        prop = iris[i]
+        s_term, o_term = atom.terms
+        subject, obj = known(s_term, binding), known(o_term, binding)
+        if subject is not None:
+            pairs: Iterable[tuple[Node, Node]] = ((subject, o) for o in facts.objects(prop, subject))
+        elif obj is not None:
+            pairs = ((s, obj) for s in facts.subjects(prop, _value(obj)))
+        else:
+            pairs = facts.pairs(prop)
+        for s_node, o_node in pairs:
+            if obj is not None and _value(o_node) != _value(obj):
+                continue
+            grown = binding
+            if subject is None or obj is None:
+                grown = dict(binding)
+                if subject is None:
+                    grown[str(s_term)] = s_node
+                if obj is None:
+                    grown[str(o_term)] = o_node
+            join(i + 1, grown)
+
+    join(0, {})
     return out
 
 
-def _int(value: Node) -> int | None:
-    number = value.toPython() if isinstance(value, Literal) else None
-    if isinstance(number, bool) or not isinstance(number, (int, float)):
-        return None
-    return int(number) if float(number).is_integer() else None
-
-
-def _is_true(value: Node) -> bool:
-    return isinstance(value, Literal) and value.datatype in (XSD.boolean, None) and value.toPython() is True
+def _value(node: Any) -> Any:
+    """What a rule compares: a literal's number (whole numbers as int) or boolean, a variable's computed number, or
+    the node itself. A boolean is kept apart from the numbers 0 and 1."""
+    if isinstance(node, Literal):
+        value = node.toPython()
+        if isinstance(value, bool):
+            return ("boolean", value)
+        if isinstance(value, (int, float)):
+            return int(value) if float(value).is_integer() else float(value)
+        return node
+    if isinstance(node, bool):
+        return ("boolean", node)
+    if isinstance(node, float) and node.is_integer():
+        return int(node)
+    return node

@@ -1,9 +1,9 @@
 """SPARQL 1.1 queries over the knowledge graph (`graph.KnowledgeGraph`), read-only, with a time and a result-size
 limit, answered in the format the client accepts.
 
-This module decides what a query may read; an engine (`ENGINES`) evaluates it on its copy of the graphs. The
-default graph is the union of the graphs the request names (`default-graph-uri`, or `FROM` in the query), else of
-the TBox, the current ABox and the entailed facts; the four graphs are also named graphs
+This module decides what a query may read; an engine (`ENGINES`, each a `query_engine.QueryEngine`) evaluates it on
+its copy of the graphs. The default graph is the union of the graphs the request names (`default-graph-uri`, or
+`FROM` in the query), else of the TBox, the current ABox and the entailed facts; the four graphs are also named graphs
 (`GRAPH <http://planhrc.org/graph/inferred> {…}`). Nothing is ever fetched from elsewhere: `FROM` may name only
 these graphs and `SERVICE` is refused (`query_text`), so a query can make the service open no connection and read
 no file. Updates (`INSERT`, `DELETE`, `LOAD`, `CLEAR`, …) are refused with a message that says the endpoint is
@@ -13,15 +13,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable, Mapping, Protocol, Sequence
+from typing import Callable, Mapping, Sequence
 
 from rdflib import Graph
 
 from planhrc.vocabulary import SparqlEngineName
 
-from ..store import DeadlineError, KBError
-from .entailment import Triple
-from .graph import DEFAULT, DEFAULT_NAMES, GRAPHS, Change, KnowledgeGraph
+from ..store import DeadlineError
+from .graph import DEFAULT, DEFAULT_NAMES, GRAPHS, KnowledgeGraph
+from .query_engine import CheckedQuery, QueryEngine, QueryError
 from .query_text import read_query_text
 
 # Media types of the answers: SELECT and ASK (SPARQL results), CONSTRUCT and DESCRIBE (RDF); the first is the
@@ -37,16 +37,6 @@ READ_ONLY = ("query: this endpoint is read-only; SPARQL Update (INSERT, DELETE, 
              "refused")
 
 
-class QueryError(KBError):
-    """The request is not a query this endpoint answers: malformed, an update, a SERVICE call, a graph it does not
-    have, or an answer over the result-size limit (the message says which and what to do)."""
-
-
-class EngineError(KBError):
-    """The engine failed other than by the query's fault (its process could not start, or it died); the next
-    query tries again."""
-
-
 @dataclass(frozen=True)
 class SparqlRequest:
     """A query as the SPARQL protocol carries it."""
@@ -58,42 +48,11 @@ class SparqlRequest:
 
 
 @dataclass(frozen=True)
-class CheckedQuery:
-    """A query the endpoint answers, as an engine gets it."""
-
-    text: str
-    defaults: tuple[str, ...]  # the default graph: DEFAULT, or names of NAMED to unite
-    fmt: str  # a value of RESULT_TYPES or GRAPH_TYPES
-    prefixes: Mapping[str, str]  # known without a PREFIX line
-
-
-@dataclass(frozen=True)
 class SparqlAnswer:
     body: bytes
     media_type: str
     rows: int  # solutions, triples of a graph, or 1 for ASK
     seconds: float
-
-
-class QueryEngine(Protocol):
-    """Evaluates checked queries on its own copy of the graphs."""
-
-    def loaded(self) -> bool:
-        """Whether the engine holds the graphs (else `load` them before a query)."""
-
-    def load(self, contents: Mapping[str, frozenset[Triple]]) -> None: ...
-
-    def parse(self, query: CheckedQuery) -> None:
-        """QueryError for a query the engine cannot read, without the graphs: a syntax error is answered at once,
-        also while the graphs are being (re)loaded."""
-
-    def apply(self, changes: Sequence[Change]) -> None: ...
-
-    def run(self, query: CheckedQuery, deadline: float, max_results: int) -> tuple[bytes, int]:
-        """The answer's bytes and its rows; DeadlineError past `deadline` (`time.monotonic()`), QueryError for a
-        query it cannot evaluate or an answer over `max_results`."""
-
-    def close(self) -> None: ...
 
 
 def _oxigraph(limit_s: float) -> QueryEngine:
@@ -118,11 +77,6 @@ def known_prefixes() -> dict[str, str]:
     out = {prefix: str(iri) for prefix, iri in Graph().namespace_manager.namespaces() if prefix}
     out.update(PREFIXES)
     return out
-
-
-def timed_out(limit_s: float) -> DeadlineError:
-    return DeadlineError(f"query: no answer within {limit_s:g} s (the service's sparql_timeout_s); ask for less, "
-                         "e.g. with more specific patterns or a LIMIT")
 
 
 class SparqlEndpoint:

@@ -10,7 +10,7 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 | `cache` | the one cached get of records (cache -> load -> `NotFoundError`) |
 | `backends`, `location` | the backends by name; `open_store(db, tbox)` opens the one a location names; a location as it may be shown (no password) |
 | `unit`, `facade` | what the shared writes ask of a backend's unit of work; what every backend's store class does alike |
-| `knowledge_base` | `SqliteStore` (alias `KnowledgeBase`): the SQLite backend, the parts below in one database |
+| `knowledge_base` | `SqliteStore`: the SQLite backend, the parts below in one database |
 | `abox` | the SQLite ABox's unit of work: the owlready2 world, names of individuals, counters, `transaction()` |
 | `reads`, `writes`, `triples` | records read back from triples, the writes, and what each record is as triples |
 | `journal`, `backlog` | a new plan's journal row (the plan, read from it), written out as triples when a reader of the triples needs them |
@@ -24,7 +24,7 @@ from .errors import (ConflictError, DamagedStoreError, DeadlineError, KBError, N
                      UnavailableError, ValidationError)
 from .interface import (MAX_EVENTS_PAGE, MAX_SEQ, EventFeed, EventFeeding, Export, Inferences, KnowledgeStore,
                         ObjectLocking, PlanChecks, PlanJournal, Reads, Retention, Writes)
-from .knowledge_base import KnowledgeBase, SqliteStore
+from .knowledge_base import SqliteStore
 from .names import ABOX_IRI, PREDICATES, TBOX_IRI, atom_fragment
 from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffect, Execution, StoredAction,
                       StoredEvent, StoredPlan, StoredProblem, StoredState)
@@ -32,7 +32,7 @@ from .records import (STATE_KINDS, ActionSpec, CheckedPlan, Compaction, CondEffe
 __all__ = [
     "ABOX_IRI", "BACKENDS", "MAX_EVENTS_PAGE", "MAX_SEQ", "PREDICATES", "STATE_KINDS", "TBOX_IRI", "ActionSpec",
     "CheckedPlan", "Compaction", "CondEffect", "ConflictError", "DamagedStoreError", "DeadlineError", "EventFeed",
-    "EventFeeding", "Execution", "Export", "Inferences", "KBError", "KnowledgeBase", "KnowledgeStore",
+    "EventFeeding", "Execution", "Export", "Inferences", "KBError", "KnowledgeStore",
     "NotFoundError", "ObjectLocking", "PlanChecks", "PlanJournal", "Reads", "ReasonerError", "Retention",
     "SqliteStore", "StoredAction", "StoredEvent", "StoredPlan", "StoredProblem", "StoredState", "UnavailableError",
     "ValidationError", "Writes", "atom_fragment", "open_store",

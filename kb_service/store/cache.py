@@ -23,13 +23,14 @@ R = TypeVar("R", bound=Record)
 
 
 class RecordCache(Generic[R]):
-    """Records of one kind by id."""
+    """Records of one kind by id; a record may be put as the way to make it (`put_later`), made when first got."""
 
     def __init__(self, noun: str, kind: type[R], load: Callable[[str], R | None]) -> None:
         self.noun = noun
         self._kind = kind
         self._load = load
         self._records: dict[str, R] = {}
+        self._later: dict[str, Callable[[], R]] = {}
 
     def get(self, ident: str) -> R:
         """The record `ident`; NotFoundError naming the field `<noun>_id` when there is none."""
@@ -37,7 +38,8 @@ class RecordCache(Generic[R]):
             raise NotFoundError(f"{self.noun}_id: no {self.noun} {ident!r}")
         record = self._records.get(ident)
         if record is None:
-            record = self._load(ident)
+            make = self._later.pop(ident, None)
+            record = make() if make is not None else self._load(ident)
             if record is None:
                 raise NotFoundError(f"{self.noun}_id: no {self.noun} {ident!r}")
             self._records[ident] = record
@@ -45,12 +47,20 @@ class RecordCache(Generic[R]):
 
     def put(self, record: R) -> None:
         self._records[record.id] = record
+        self._later.pop(record.id, None)
+
+    def put_later(self, ident: str, make: Callable[[], R]) -> None:
+        """The record `ident`, made by `make()` when it is first got (a plan's expected state, made whole only
+        then)."""
+        self._records.pop(ident, None)
+        self._later[ident] = make
 
     def clear(self) -> None:
         self._records.clear()
+        self._later.clear()
 
     def __len__(self) -> int:
-        return len(self._records)
+        return len(self._records) + len(self._later)
 
 
 def object_info(objects: dict[str, ObjectInfo], load: Callable[[str], ArticulatedObject | None], object_id: str,

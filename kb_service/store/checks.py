@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from functools import cached_property
-from typing import Any
+from typing import Any, Sequence
 
 from planhrc.control import check_control, possible_control
 from planhrc.model import (
@@ -243,7 +243,7 @@ def check_action(info: ObjectInfo, i: int, spec: Any) -> None:
             _check_atoms(info, atoms, f"{field}.cond_eff[{c}].{part}")
 
 
-def check_plan(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_states: tuple[frozenset[Atom], ...],
+def check_plan(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_states: Sequence[frozenset[Atom]],
                deadline_at: float | None = None, first_steps: int | None = None) -> CheckedPlan:
     """Every check a plan's write makes on its actions and expected states, stopped with a DeadlineError once
     `deadline_at` (`time.monotonic()`) has passed: a caller's request deadline bounds the check of a huge plan.
@@ -263,7 +263,7 @@ def check_plan(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_state
                        checked_steps=None if steps == len(actions) else steps)
 
 
-def check_steps(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_states: tuple[frozenset[Atom], ...],
+def check_steps(info: ObjectInfo, actions: tuple[ActionSpec, ...], expected_states: Sequence[frozenset[Atom]],
                 first: int, last: int) -> None:
     """The checks of steps a_first .. a_last (1-based, inclusive) of a plan that `check_plan` checked up to a step
     before them: their actions and the expected states they lead to, s^e_(first+1) .. s^e_(last+1)."""
@@ -291,7 +291,7 @@ def _check_actions(info: ObjectInfo, actions: tuple[ActionSpec, ...], start: int
         valid.add(spec)
 
 
-def _check_states(info: ObjectInfo, expected_states: tuple[frozenset[Atom], ...], start: int, end: int,
+def _check_states(info: ObjectInfo, expected_states: Sequence[frozenset[Atom]], start: int, end: int,
                   deadline_at: float | None) -> None:
     """`check_state_atoms` on expected_states[start:end] (0-based), past `deadline_at` a DeadlineError."""
     for i in range(start, end):
@@ -302,7 +302,7 @@ def _check_states(info: ObjectInfo, expected_states: tuple[frozenset[Atom], ...]
 
 
 def is_checked(checked: CheckedPlan | None, object_id: str, actions: tuple[ActionSpec, ...],
-               expected_states: tuple[frozenset[Atom], ...]) -> bool:
+               expected_states: Sequence[frozenset[Atom]]) -> bool:
     """Whether `checked` is the check of exactly these objects (the same tuples, not equal ones: a caller that
     built new ones may have changed them since)."""
     return (checked is not None and checked.object_id == object_id and checked.actions is actions

@@ -1,5 +1,5 @@
 """What every backend's store class does the same way (`StoreFacade`): each write handed to the shared writes
-(`writes.Writes`) and each read of a record to its cache, under the store's guard; the checks of a new execution;
+(`writes.RecordWriter`) and each read of a record to its cache, under the store's guard; the checks of a new execution;
 the export in every format from the backend's N-Triples lines.
 
 A backend's class (`knowledge_base.SqliteStore`, `postgres.PostgresStore`) subclasses it, gives it its guard, records
@@ -12,6 +12,7 @@ from dataclasses import replace
 from typing import Iterator, Protocol, Sequence
 
 from planhrc.model import ArticulatedObject, Atom, Perception
+from planhrc.transition import frozen_states
 
 from .cache import R, RecordCache
 from .checks import check_export, check_plan, check_steps
@@ -22,7 +23,7 @@ from .journal import encode_body
 from .names import ABOX_IRI, TBOX_IRI
 from .records import ActionSpec, CheckedPlan, Execution, StoredAction, StoredPlan, StoredProblem, StoredState
 from .unit import RecordsOfWrites
-from .writes import Writes
+from .writes import RecordWriter
 
 PREFIXES = {"planhrc": TBOX_IRI, "abox": ABOX_IRI, "owl": "http://www.w3.org/2002/07/owl#"}
 
@@ -41,7 +42,7 @@ class StoreFacade:
 
     _guard: AbstractContextManager[None]
     _records: RecordsOfStore
-    _writes: Writes
+    _writes: RecordWriter
 
     def _latest_id(self, object_id: str, noun: str) -> str | None:
         """The newest record of a kind of the object (its counter), or None: the backend's."""
@@ -107,7 +108,7 @@ class StoreFacade:
                    deadline_at: float | None = None, first_steps: int | None = None) -> CheckedPlan:
         with self._guard:  # only to look the object up: the checks read nothing else
             info = self._records.info(object_id, "object_id")
-        checked = check_plan(info, tuple(actions), tuple(expected_states), deadline_at, first_steps)
+        checked = check_plan(info, tuple(actions), frozen_states(expected_states), deadline_at, first_steps)
         # the journal row's body too, here, outside the store's lock: for a large plan the write would hold the
         # lock every object's write needs for most of a second making it (`journal.encode_body`)
         return replace(checked, journal_body=encode_body(checked.actions, checked.expected_states))
@@ -116,7 +117,7 @@ class StoreFacade:
                     first: int, last: int) -> None:
         with self._guard:
             info = self._records.info(object_id, "object_id")
-        check_steps(info, tuple(actions), tuple(expected_states), first, last)
+        check_steps(info, tuple(actions), frozen_states(expected_states), first, last)
 
     def _checked_execution(self, object_id: str, execution: Execution) -> str:
         """Check a new execution of an object (with the store's guard held); the object's id."""

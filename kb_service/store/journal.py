@@ -20,11 +20,13 @@ from __future__ import annotations
 import logging
 import pickle
 from dataclasses import dataclass
-from typing import Any
+from functools import partial
+from typing import Any, Sequence
 
 from planhrc.model import Atom
-from planhrc.transition import changes_along
+from planhrc.transition import ExpectedStates, changes_of
 
+from .cache import RecordCache
 from .errors import DamagedStoreError
 from .names import action_name, record_name
 from .owl import QuadStore
@@ -55,7 +57,7 @@ class JournalEntry:
     created_at: float
     first_state: int  # the counter of its first expected state: state i is <object>_state_<first_state + i - 1>
     actions: tuple[ActionSpec, ...]
-    expected_states: tuple[frozenset[Atom], ...]
+    expected_states: Sequence[frozenset[Atom]]  # a tuple, or `ExpectedStates` (each state made whole when read)
 
     @property
     def last_state(self) -> int:
@@ -66,18 +68,33 @@ class JournalEntry:
         """The name of expected state `step` (1-based)."""
         return record_name(self.object_id, "state", self.first_state + step - 1)
 
-    def records(self) -> tuple[StoredPlan, tuple[StoredState, ...]]:
-        """The plan's record (with its actions) and its expected states', as the store hands them out."""
+    def plan_record(self) -> StoredPlan:
+        """The plan's record (with its actions), as the store hands it out."""
         actions = tuple(StoredAction(action_name(self.plan_id, step), step, spec)
                         for step, spec in enumerate(self.actions, start=1))
-        states = tuple(StoredState(self.state_id(step), self.object_id, "expected", frozenset(atoms), self.created_at)
-                       for step, atoms in enumerate(self.expected_states, start=1))
-        plan = StoredPlan(self.plan_id, self.object_id, self.problem_id, self.planner, actions,
-                          tuple(s.id for s in states), self.created_at)
-        return plan, states
+        return StoredPlan(self.plan_id, self.object_id, self.problem_id, self.planner, actions,
+                          tuple(self.state_id(step) for step in range(1, len(self.expected_states) + 1)),
+                          self.created_at)
+
+    def state_record(self, step: int) -> StoredState:
+        """Expected state `step`'s record (1-based), as the store hands it out."""
+        return StoredState(self.state_id(step), self.object_id, "expected", frozenset(self.expected_states[step - 1]),
+                           self.created_at)
+
+    def cache(self, plans: RecordCache[StoredPlan], actions: RecordCache[StoredAction],
+              states: RecordCache[StoredState]) -> StoredPlan:
+        """The plan's records put in a store's caches: the plan and its actions, and each expected state's record
+        to be made when it is first read (a plan's states are made whole only when read: `ExpectedStates`)."""
+        plan = self.plan_record()
+        plans.put(plan)
+        for action in plan.actions:
+            actions.put(action)
+        for step, state_id in enumerate(plan.expected_state_ids, start=1):
+            states.put_later(state_id, partial(self.state_record, step))
+        return plan
 
 
-def encode_body(actions: tuple[ActionSpec, ...], expected_states: tuple[frozenset[Atom], ...]) -> bytes:
+def encode_body(actions: tuple[ActionSpec, ...], expected_states: Sequence[frozenset[Atom]]) -> bytes:
     """The row's body: the actions, and the expected states as the first one and, for each next one, the atoms it
     drops and adds. An action changes a few atoms of a state, so the body is a fraction of the plan's states written
     whole. It names nothing the transaction gives (the plan's name, its states' counters), so it is made before the
@@ -88,7 +105,7 @@ def encode_body(actions: tuple[ActionSpec, ...], expected_states: tuple[frozense
     rows = [(a.name, tuple(a.params), a.pre, a.eff_neg, a.eff_pos,
              tuple((c.when, c.eff_neg, c.eff_pos) for c in a.cond_eff)) for a in actions]
     first = frozenset(expected_states[0]) if expected_states else frozenset()
-    changes = changes_along(expected_states, actions)  # a plan's states are its actions' replay
+    changes = changes_of(expected_states, actions)  # a plan's states are its actions' replay
     return pickle.dumps((_pieces(rows, _action_atoms), len(expected_states), _pieces(tuple(first), lambda a: 1),
                          _pieces(changes, lambda c: len(c[0]) + len(c[1]))), protocol=5)
 
@@ -153,16 +170,15 @@ def decode(payload: bytes) -> JournalEntry:
 
 
 def _replayed(count: int, first: frozenset[Atom], changes: tuple[tuple[frozenset[Atom], frozenset[Atom]], ...]
-              ) -> tuple[frozenset[Atom], ...]:
-    """The expected states from the first one and each next one's dropped and added atoms."""
+              ) -> Sequence[frozenset[Atom]]:
+    """The expected states from the first one and each next one's dropped and added atoms (`ExpectedStates`: each
+    made whole when it is read)."""
     if count == 0:
         return ()
-    states = [frozenset(first)]
-    for dropped, added in changes:
-        states.append((states[-1] - dropped) | added)
-    if len(states) != count:
-        raise DamagedStoreError(f"plan journal: a row holds {len(states)} expected states, its header says {count}")
-    return tuple(states)
+    if len(changes) + 1 != count:
+        raise DamagedStoreError(f"plan journal: a row holds {len(changes) + 1} expected states, its header says "
+                                f"{count}")
+    return ExpectedStates(frozenset(first), changes)
 
 
 class JournalTable:

@@ -1,4 +1,4 @@
-"""The SQLite backend of the knowledge base (`SqliteStore`, also known as `KnowledgeBase`): the ABox (`abox`,
+"""The SQLite backend of the knowledge base (`SqliteStore`): the ABox (`abox`,
 `reads`, `writes`, `backlog`) with the event log (`events`), the execution cursor (`execution`) and idempotent
 responses (`responses`) in the same SQLite database, retention (`retention`) and the RDF export (`export`). It
 implements `interface.KnowledgeStore`; what every backend does alike (the writes and reads of records) is
@@ -37,9 +37,9 @@ from .records import Compaction, Execution, StoredEvent
 from .responses import ResponseMemory
 from .retention import compact_object
 from .roots import SQLITE, current_roots
-from .writes import Writes
+from .writes import RecordWriter
 
-__all__ = ["MAX_EVENTS_PAGE", "MAX_SEQ", "KnowledgeBase", "SqliteStore"]
+__all__ = ["MAX_EVENTS_PAGE", "MAX_SEQ", "SqliteStore"]
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +58,7 @@ class SqliteStore(StoreFacade):
             self._records = Records(abox, journal)
             self._backlog = PlanBacklog(abox, self._records, journal)
             abox.listen(self._backlog, self._records)
-            self._writes = Writes(abox, self._records, self._backlog)
+            self._writes = RecordWriter(abox, self._records, self._backlog)
             self._events = EventLog(abox.q)
             self._execution = ExecutionCursor(abox.q)
             self._responses = ResponseMemory(abox.q)
@@ -235,9 +235,6 @@ class SqliteStore(StoreFacade):
     def inferred_lines(self) -> Iterator[str]:
         with self._guard:
             return iter(list(self._inferred.lines()))
-
-
-KnowledgeBase = SqliteStore  # the name every caller used before the store had an interface
 
 
 def _file_bytes(path: str) -> int:

@@ -55,13 +55,7 @@ class Records:
 
     def put_entry(self, entry: JournalEntry) -> StoredPlan:
         """Cache a journalled plan's records (its actions and expected states); the plan's."""
-        plan, states = entry.records()
-        self.plans.put(plan)
-        for action in plan.actions:
-            self.actions.put(action)
-        for state in states:
-            self.states.put(state)
-        return plan
+        return entry.cache(self.plans, self.actions, self.states)
 
     # -- objects --------------------------------------------------------------------------------------------
     def info(self, object_id: str, field: str | None = None) -> ObjectInfo:

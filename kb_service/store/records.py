@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 from planhrc.model import ActionSpec, Atom, CondEffect
 from planhrc.vocabulary import ExecutionStatus
@@ -81,7 +81,7 @@ class CheckedPlan:
 
     object_id: str
     actions: tuple[ActionSpec, ...]
-    expected_states: tuple[frozenset[Atom], ...]
+    expected_states: Sequence[frozenset[Atom]]  # a tuple, or the replay's `ExpectedStates` (made whole when read)
     journal_body: bytes | None = None
     checked_steps: int | None = None  # None: every step
 

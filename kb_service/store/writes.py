@@ -11,6 +11,7 @@ import time
 from typing import Any, Sequence
 
 from planhrc.model import ArticulatedObject, Atom, Perception
+from planhrc.transition import frozen_states
 
 from .checks import (ObjectInfo, check_kind, check_observation, check_perception, check_plan, check_state_atoms,
                      is_checked)
@@ -22,8 +23,8 @@ from .triples import object_triples, state_triples
 from .unit import AboxWriter, PlanAdopter, RecordsOfWrites
 
 
-class Writes:
-    """The writes of one ABox, whatever its backend."""
+class RecordWriter:
+    """The writes of one ABox, whatever its backend: what the `interface.Writes` of every store hands on."""
 
     def __init__(self, abox: AboxWriter[Any], records: RecordsOfWrites, backlog: PlanAdopter) -> None:
         self._abox = abox
@@ -146,7 +147,7 @@ class Writes:
         if not isinstance(planner, str) or not planner:
             raise ValidationError("planner: must be a non-empty string")
         actions = tuple(actions)
-        expected_states = tuple(expected_states)
+        expected_states = frozen_states(expected_states)
         ident = info.obj.ident
         body = None
         if is_checked(checked, ident, actions, expected_states):

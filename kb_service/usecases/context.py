@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from planhrc.pipeline import PlanningConfig, Validator, config_from_settings
-from planhrc.pipeline.replan import PlanningPool
+from planhrc.pipeline.replan import LargeTaskPlanning
 from planhrc.settings import Settings
 
 from ..locks import ObjectLocks
@@ -24,12 +24,12 @@ class Context:
     validator: Validator  # every VAL run: new plans, the later pieces behind an answer, the dispatch gate's
     memory: Memory  # what each object's event log says
     views: PlanViews  # the cooperation model's view of each object's plan
-    pool: PlanningPool | None = None  # large tasks are planned there (`planning_pool`), the rest in this process
+    pool: LargeTaskPlanning | None = None  # large tasks are planned there (`planning_pool`), the rest in this process
     observer: Observer = QUIET  # metrics and spans (`observe`)
 
 
 def open_context(store: KnowledgeStore, settings: Settings, locks: ObjectLocks | None = None,
-                 pool: PlanningPool | None = None, observer: Observer = QUIET) -> Context:
+                 pool: LargeTaskPlanning | None = None, observer: Observer = QUIET) -> Context:
     planning = config_from_settings(settings)
     validator = Validator(planning, early_answer=settings.val_early_answer,
                           merge_macro_steps=settings.merge_macro_steps,

@@ -7,6 +7,7 @@ once: one marks it dispatched, the other then finds it dispatched and answers th
 when the first one's gate withheld it (`unit_of_work`: the second decides again on what the first wrote)."""
 from __future__ import annotations
 
+from planhrc.event_log import DispatchData, EventKind
 from planhrc.pipeline import deadline_from
 from planhrc.vocabulary import ExecutionStatus
 
@@ -14,7 +15,7 @@ from ..store import DeadlineError, Execution
 from .actions import merges, next_action
 from .context import Context
 from .gate import val_gate
-from .log import EventKind
+from .log import log_event
 from .unit_of_work import object_write, read_mark, serialized
 from .values import NextAction
 
@@ -42,20 +43,20 @@ def _take(context: Context, object_id: str) -> NextAction | None:
         merge = merges(context.settings.merge_macro_steps, context.memory.of(store, object_id).split_plans, plan.id)
         if execution.status == DISPATCHED and execution.dispatched_action_id == action.id:
             return next_action(merge, obj, plan, action)
-        data = {"plan_id": plan.id, "action_id": action.id, "step": action.step}
+        data = DispatchData(plan_id=plan.id, action_id=action.id, step=action.step)
         try:
             refusal = val_gate(context, obj, plan, action, deadline_from(context.planning))
         except DeadlineError as exc:  # nothing dispatched; the next call or perception asks again
             with object_write(context, object_id):
-                store.add_event(object_id, EventKind.DISPATCH_WITHHELD, f"a_{action.step} not dispatched: {exc}", data)
+                log_event(store, object_id, EventKind.DISPATCH_WITHHELD, f"a_{action.step} not dispatched: {exc}", data)
             return None
         if refusal is not None:  # the next perception re-plans (the gate refuses this step again)
             with object_write(context, object_id, mark):
                 store.set_execution(object_id, Execution(plan.id, execution.next_step, ExecutionStatus.IDLE, None))
-                store.add_event(object_id, EventKind.DISPATCH_WITHHELD,
-                                f"a_{action.step} not dispatched: {refusal}; the next perception re-plans", data)
+                log_event(store, object_id, EventKind.DISPATCH_WITHHELD,
+                          f"a_{action.step} not dispatched: {refusal}; the next perception re-plans", data)
             return None
         with object_write(context, object_id, mark):
             store.set_execution(object_id, Execution(plan.id, execution.next_step, DISPATCHED, action.id))
-            store.add_event(object_id, EventKind.DISPATCHED, f"a_{action.step} ({action.spec.name}) dispatched", data)
+            log_event(store, object_id, EventKind.DISPATCHED, f"a_{action.step} ({action.spec.name}) dispatched", data)
         return next_action(merge, obj, plan, action)

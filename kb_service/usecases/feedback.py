@@ -6,20 +6,35 @@ the next perceived states hold beside the perceived orientations."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any, Mapping
+from typing import Mapping
 
 from planhrc.control import control_after
+from planhrc.event_log import EventKind, FeedbackData, RefusalData
+from planhrc.json_record import JsonRecord
 from planhrc.pipeline import action_motion
-from planhrc.vocabulary import ActionOutcome, ExecutionStatus, FailureReason
+from planhrc.vocabulary import Accepted, ActionOutcome, ExecutionStatus, FailureReason, Infeasible
 
 from ..store import ConflictError, Execution, StoredAction
 from .actions import last_step, merges
 from .context import Context
 from .idempotency import fingerprint, recall, remember
 from .inputs import action_outcome, failure_reason, finite_or_none
-from .log import EventKind
+from .log import log_event
 from .unit_of_work import object_write, read_mark, serialized
-from .values import Accepted, FeedbackResult, feedback_of, feedback_record
+from .values import FeedbackResult
+
+
+@dataclass(frozen=True, kw_only=True)
+class RefusalFact(JsonRecord):
+    """What a worker says of a turn it refused before it moved (`schemas.RefusalFactPublic`): which link, against
+    what, how far, and the pose it judged from (None: the latest perception's)."""
+
+    code: Infeasible
+    link: int
+    against: str = ""
+    distance_m: float = 0.0
+    from_deg: tuple[float, ...] | None = None
+    base_point_xy: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -34,7 +49,7 @@ class FeedbackRequest:
     idempotency_key: str | None = None
     reason: str | None = None
     measured_deg: float | None = None
-    refusal: Mapping[str, Any] | None = None  # a turn refused before it moved: the geometric fact (schemas)
+    refusal: RefusalFact | None = None  # a turn refused before it moved: the geometric fact
 
 
 def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
@@ -54,10 +69,11 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
                              if failure is None and measured_deg is None else
                              {"feedback": [action_id, outcome, message, failure, measured_deg]}
                              if request.refusal is None else
-                             {"feedback": [action_id, outcome, message, failure, measured_deg, dict(request.refusal)]})
-        recalled = recall(store, object_id, request.idempotency_key, print_)
+                             {"feedback": [action_id, outcome, message, failure, measured_deg,
+                                           request.refusal.to_data(defaults=True)]})
+        recalled = recall(store, object_id, request.idempotency_key, print_, FeedbackResult)
         if recalled is not None:
-            return feedback_of(recalled)
+            return recalled
         action = store.get_action(action_id)
         execution = store.get_execution(object_id)
         if execution.dispatched_action_id != action_id:
@@ -87,18 +103,17 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
         motion = action_motion(obj, action)
         refused = (refusal_data(context, object_id, request.refusal, motion)
                    if outcome == ActionOutcome.FAILED and failure in REFUSALS else None)
-        data: dict[str, Any] = {"action_id": action_id, "step": action.step, "outcome": outcome, "accepted": accepted,
-                "reason": failure, "measured_deg": measured_deg, "message": message,
-                "joint_index": motion["joint_index"], "turned_link_index": motion["turned_link_index"],
-                **({"refusal": refused} if refused is not None else {})}
+        control = None
         if obj.grippers:  # bimanual: what the robot's grippers hold and where the centre is now (`planhrc.control`)
-            control = control_after(memo.control or obj.initial_control(), [a.spec for a in done],
-                                    outcome == ActionOutcome.SUCCEEDED)
-            data["control"] = [list(atom) for atom in sorted(control)]
+            control = tuple(sorted(control_after(memo.control or obj.initial_control(), [a.spec for a in done],
+                                                 outcome == ActionOutcome.SUCCEEDED)))
+        data = FeedbackData(action_id=action_id, step=action.step, outcome=outcome, accepted=accepted, reason=failure,
+                            measured_deg=measured_deg, message=message, joint_index=motion["joint_index"],
+                            turned_link_index=motion["turned_link_index"], refusal=refused, control=control)
         with object_write(context, object_id, mark):
             store.set_execution(object_id, new)
-            store.add_event(object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""), data)
-            remember(store, object_id, request.idempotency_key, print_, feedback_record(result))
+            log_event(store, object_id, EventKind.FEEDBACK, text + why + (f" ({message})" if message else ""), data)
+            remember(store, object_id, request.idempotency_key, print_, result)
         return result
 
 
@@ -107,19 +122,21 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
 REFUSALS = frozenset({FailureReason.LEFT_TABLE, FailureReason.COLLISION, FailureReason.UNREACHABLE})
 
 
-def refusal_data(context: Context, object_id: str, fact: Mapping[str, Any] | None, motion: Mapping[str, int]
-                 ) -> dict[str, Any] | None:
+def refusal_data(context: Context, object_id: str, fact: RefusalFact | None, motion: Mapping[str, int]
+                 ) -> RefusalData | None:
     """What the feedback event keeps of a refused turn: the turn (link turned and held, direction), the pose it was
     refused from (the worker's, else the latest perception's and measured base point) and the fact; None when there
     is no pose to remember it by."""
-    fact = dict(fact or {})
     memo = context.memory.of(context.store, object_id)
-    pose = fact.get("from_deg")
+    pose = fact.from_deg if fact is not None else None
     if pose is None and memo.perceived_state_id is not None:
         pose = context.store.get_state(memo.perceived_state_id).link_orientations_deg
-    base = fact.get("base_point_xy") or memo.where
+    base = (fact.base_point_xy if fact is not None else None) or memo.where
     if not pose or base is None:
         return None
-    return {**fact, "from_deg": [float(v) for v in pose], "base_point_xy": [float(v) for v in base],
-            "turned": motion["turned_link_index"], "held": motion["held_link_index"],
-            "direction": 1 if motion["delta_deg"] > 0 else -1}
+    code, link, against, distance = ((fact.code, fact.link, fact.against, fact.distance_m) if fact is not None
+                                     else (None, None, "", 0.0))
+    return RefusalData(from_deg=tuple(float(v) for v in pose), base_point_xy=(float(base[0]), float(base[1])),
+                       turned=motion["turned_link_index"], held=motion["held_link_index"],
+                       direction=1 if motion["delta_deg"] > 0 else -1, code=code, link=link, against=against,
+                       distance_m=distance)

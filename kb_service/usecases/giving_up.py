@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from planhrc.event_log import DecisionData, EventKind, GaveUpData
 from planhrc.geometry import ObjectGeometry
 from planhrc.model import ArticulatedObject, Formulation, ModelError, State, snap_angle
 from planhrc.ordering import HelpItem, Placement, final_configuration, help_for
@@ -17,10 +18,9 @@ from planhrc.vocabulary import DecisionKind, ExecutionStatus
 
 from ..store import Execution, KnowledgeStore
 from .context import Context
-from .decide import whole_turn_deg
-from .log import EventKind
+from .refine import whole_turn_deg
+from .log import log_event
 from .memory import ObjectMemo
-from .turns import help_data
 from .unit_of_work import object_write, read_mark, serialized
 from .values import GaveUp
 
@@ -56,15 +56,14 @@ def _give_up(context: Context, request: GiveUpRequest) -> GaveUp:
         asking = bool(items) or unseen
         with object_write(context, object_id, mark):
             store.set_execution(object_id, Execution(execution.plan_id, None, ExecutionStatus.IDLE, None))
-            event = store.add_event(object_id, EventKind.WORKER_GAVE_UP,
-                                    f"the worker gave up ({request.reason}): {request.message}",
-                                    {"reason": request.reason, "message": request.message,
-                                     "plan_id": execution.plan_id, "dropped_action_id": execution.dispatched_action_id})
+            event = log_event(store, object_id, EventKind.WORKER_GAVE_UP,
+                              f"the worker gave up ({request.reason}): {request.message}",
+                              GaveUpData(reason=request.reason, message=request.message, plan_id=execution.plan_id,
+                                         dropped_action_id=execution.dispatched_action_id))
             if asking:
-                store.add_event(object_id, DecisionKind.HUMAN_HELP_REQUESTED, reason,
-                                {"perceived_state_id": memo.perceived_state_id, "plan_id": execution.plan_id,
-                                 "next_step": None, "next_action_id": None, "matched_expected_step": None,
-                                 "help": help_data(items), "gave_up": request.reason})
+                log_event(store, object_id, DecisionKind.HUMAN_HELP_REQUESTED, reason,
+                          DecisionData(perceived_state_id=memo.perceived_state_id, plan_id=execution.plan_id,
+                                       help=items, gave_up=request.reason))
         return GaveUp(event.seq, DecisionKind.HUMAN_HELP_REQUESTED if asking else None, reason, items)
 
 

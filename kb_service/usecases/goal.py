@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from planhrc.event_log import EventKind, GoalSetData
 from planhrc.geometry import PLANNING, Cell, ObjectGeometry, configuration_feasible
 from planhrc.model import ArticulatedObject, Formulation, State, snap_angle
 from planhrc.motion_search import room_for_goal
@@ -13,7 +14,7 @@ from planhrc.vocabulary import ExecutionStatus
 from ..store import Execution, ValidationError
 from .context import Context
 from .inputs import allowed, check_count, check_finite
-from .log import EventKind
+from .log import log_event
 from .memory import ObjectMemo
 from .unit_of_work import object_write, read_mark, serialized
 from .values import GoalSet
@@ -51,11 +52,10 @@ def _set_goal(context: Context, request: GoalRequest) -> GoalSet:
                 problem = store.add_problem(object_id, memo.perceived_state_id, goal.id)
             store.set_execution(object_id, Execution(None, None, ExecutionStatus.IDLE, None))
             context.validator.stop(object_id)
-            store.add_event(object_id, EventKind.GOAL_SET,
-                            "goal set; the next perception plans towards it"
-                            + (f" ({'; '.join(warnings)})" if warnings else ""),
-                            {"goal_state_id": goal.id, "problem_id": problem.id if problem else None,
-                             "warnings": warnings})
+            said = f" ({'; '.join(warnings)})" if warnings else ""
+            log_event(store, object_id, EventKind.GOAL_SET, f"goal set; the next perception plans towards it{said}",
+                      GoalSetData(goal_state_id=goal.id, problem_id=problem.id if problem else None,
+                                  warnings=tuple(warnings)))
         return GoalSet(goal.id, problem.id if problem else None, tuple(warnings))
 
 

@@ -5,18 +5,21 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any
+from typing import Any, TypeVar
 
-from ..store import ConflictError
-from ..store import KnowledgeStore
+from planhrc.json_record import JsonRecord, RecordError
+
+from ..store import ConflictError, DamagedStoreError, KnowledgeStore
+
+R = TypeVar("R", bound=JsonRecord)
 
 
 def fingerprint(body: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
 
 
-def recall(store: KnowledgeStore, object_id: str, key: str | None, print_: str) -> dict[str, Any] | None:
-    """The answer remembered under `key` for the same request (fingerprint `print_`), or None."""
+def recall(store: KnowledgeStore, object_id: str, key: str | None, print_: str, answer: type[R]) -> R | None:
+    """The answer (an `answer`) remembered under `key` for the same request (fingerprint `print_`), or None."""
     if not key:
         return None
     stored = store.recall_response(object_id, key)
@@ -24,10 +27,13 @@ def recall(store: KnowledgeStore, object_id: str, key: str | None, print_: str) 
         return None
     if stored.get("fingerprint") != print_:
         raise ConflictError(f"Idempotency-Key: {key!r} was already used with a different request")
-    answer: dict[str, Any] = stored["response"]
-    return answer
+    try:
+        return answer.of_data(stored["response"])
+    except RecordError as exc:
+        raise DamagedStoreError(f"the answer remembered under Idempotency-Key {key!r}: {exc}") from None
 
 
-def remember(store: KnowledgeStore, object_id: str, key: str | None, print_: str, answer: dict[str, Any]) -> None:
+def remember(store: KnowledgeStore, object_id: str, key: str | None, print_: str, answer: JsonRecord) -> None:
+    """Remember `answer` under `key` with the request's fingerprint (inside the request's write)."""
     if key:
-        store.remember_response(object_id, key, {"fingerprint": print_, "response": answer})
+        store.remember_response(object_id, key, {"fingerprint": print_, "response": answer.to_data()})

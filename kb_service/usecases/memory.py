@@ -9,20 +9,18 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, replace
-from typing import Any, Mapping
 
 from planhrc.cooperation import FailureHistory, PlanView
+from planhrc.event_log import (DecisionData, EventData, EventKind, FeedbackData, GoalSetData, ObjectCreatedData,
+                               ValVerdictData)
 from planhrc.model import Atom
 from planhrc.pipeline import PieceRecord
 from planhrc.ordering import RefusedMotion
-from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, Infeasible, Remedy
+from planhrc.vocabulary import Accepted, ActionOutcome, DecisionKind, Remedy
 
-from ..store import StoredEvent, StoredPlan
-from .log import EventKind, piece_record_of, verdict_of
-from ..store import KnowledgeStore
-from .values import Accepted
+from ..store import KnowledgeStore, StoredPlan
+from .log import piece_record_of, read_event, verdict_of
 
-DECISIONS = frozenset(DecisionKind)
 MAX_REFUSED = 200  # refused turns remembered per object: the latest
 
 
@@ -71,86 +69,55 @@ class Memory:
             return memo
         for event in events:
             changed = memo.changed_seq if event.kind == EventKind.VAL_VERDICT else max(memo.changed_seq, event.seq)
-            memo = _read(replace(memo, seq=max(memo.seq, event.seq), changed_seq=changed), event)
+            memo = _read(replace(memo, seq=max(memo.seq, event.seq), changed_seq=changed), event.kind,
+                         read_event(event))
         with self._guard:
             self._memos[object_id] = memo
         return memo
 
 
-def _read(memo: ObjectMemo, event: StoredEvent) -> ObjectMemo:
-    """The memo after one more event."""
-    data = event.data
-    if event.kind == EventKind.OBJECT_CREATED:
-        return replace(memo, base_point_xy=base_of(data), step_deg=step_of(data))
-    if event.kind == EventKind.GOAL_SET:
-        return replace(memo, goal_state_id=data.get("goal_state_id"), failure=None, slides=0, slide_from_xy=None)
-    if event.kind == DecisionKind.INCOMPLETE_PERCEPTION:
-        return memo  # it stored no state and decided nothing: the last feedback still informs the next decision
-    if event.kind == EventKind.FEEDBACK:
-        outcome = data.get("outcome")
-        control = data.get("control")
+def _read(memo: ObjectMemo, kind: str, data: EventData) -> ObjectMemo:
+    """The memo after one more event (an incomplete perception, a dispatch, a give-up change none of it)."""
+    if isinstance(data, ObjectCreatedData):
+        return replace(memo, base_point_xy=data.base_point_xy, step_deg=data.step_deg)
+    if isinstance(data, GoalSetData):
+        return replace(memo, goal_state_id=data.goal_state_id, failure=None, slides=0, slide_from_xy=None)
+    if isinstance(data, FeedbackData):
         refused = memo.refused
-        if data.get("refusal"):
-            refused = (refused + (refused_motion(data["refusal"], memo.step_deg, data.get("message") or ""),)
-                       )[-MAX_REFUSED:]
-        return replace(memo, last_outcome=ActionOutcome(outcome) if outcome else None,
-                       failure=next_failure(memo.failure, data), refused=refused,
-                       control=frozenset(tuple(a) for a in control) if control is not None else memo.control)
-    if event.kind == EventKind.VAL_VERDICT:
-        if memo.val is not None and memo.val.plan_id == data.get("plan_id"):
-            return replace(memo, val=memo.val.with_verdict(int(data["piece"]), verdict_of(data)))
+        if data.refusal is not None:
+            refused = (refused + (data.refusal.motion(memo.step_deg, data.message),))[-MAX_REFUSED:]
+        return replace(memo, last_outcome=data.outcome, failure=next_failure(memo.failure, data), refused=refused,
+                       control=frozenset(data.control) if data.control is not None else memo.control)
+    if isinstance(data, ValVerdictData):
+        if memo.val is not None and memo.val.plan_id == data.plan_id:
+            return replace(memo, val=memo.val.with_verdict(data.piece, verdict_of(data)))
         return memo
-    if event.kind in DECISIONS:
-        remedy, plan_id = data.get("remedy"), data.get("plan_id")
+    if isinstance(data, DecisionData):
         failure = memo.failure
-        if event.kind == DecisionKind.ROBOT_SKILL:
-            memo = replace(memo, slides=memo.slides + 1, slide_from_xy=base_of(data) or memo.where)
-        if remedy and failure is not None:
-            failure = replace(failure, tried=failure.tried + (Remedy(remedy),))
+        if kind == DecisionKind.ROBOT_SKILL:
+            memo = replace(memo, slides=memo.slides + 1, slide_from_xy=data.base_point_xy or memo.where)
+        if data.remedy and failure is not None:
+            failure = replace(failure, tried=failure.tried + (data.remedy,))
+        split = memo.split_plans | {data.plan_id} if data.remedy == Remedy.SPLIT and data.plan_id else None
         return replace(
-            memo,
-            val=piece_record_of(data["plan_id"], data) if data.get("val_pieces") else memo.val,
-            perceived_state_id=data.get("perceived_state_id") or memo.perceived_state_id,
-            measured_base_xy=base_of(data) or memo.measured_base_xy,
-            last_outcome=None, last_decision=event.kind, failure=failure,
-            split_plans=memo.split_plans | {plan_id} if remedy == Remedy.SPLIT and plan_id else memo.split_plans)
+            memo, val=piece_record_of(data) or memo.val,
+            perceived_state_id=data.perceived_state_id or memo.perceived_state_id,
+            measured_base_xy=data.base_point_xy or memo.measured_base_xy,
+            last_outcome=None, last_decision=kind, failure=failure, split_plans=split or memo.split_plans)
     return memo
 
 
-def next_failure(failure: FailureHistory | None, data: Mapping[str, Any]) -> FailureHistory | None:
+def next_failure(failure: FailureHistory | None, data: FeedbackData) -> FailureHistory | None:
     """The failure record after one feedback event: cleared by a success, counted for the same motion, started
     anew for another; a failure without a reason is not a motion's failure."""
-    if data.get("outcome") == ActionOutcome.SUCCEEDED or data.get("accepted") == Accepted.LATE:
-        return None if data.get("outcome") == ActionOutcome.SUCCEEDED else failure
-    reason, joint, turned = data.get("reason"), data.get("joint_index"), data.get("turned_link_index")
+    if data.outcome == ActionOutcome.SUCCEEDED or data.accepted == Accepted.LATE:
+        return None if data.outcome == ActionOutcome.SUCCEEDED else failure
+    reason, joint, turned = data.reason, data.joint_index, data.turned_link_index
     if reason is None or joint is None or turned is None:
         return None
     if failure is not None and (failure.joint, failure.turned) == (joint, turned):
-        return replace(failure, reason=FailureReason(reason), failures=failure.failures + 1)
-    return FailureHistory(int(joint), int(turned), FailureReason(reason))
-
-
-def refused_motion(data: Mapping[str, Any], step_deg: int, message: str) -> RefusedMotion:
-    """A refused turn as the feedback event keeps it (`feedback.refusal_data`)."""
-    step = step_deg or 1
-    state = tuple(int(round(float(v) / step)) * step % 360 for v in data["from_deg"])
-    code = data.get("code")
-    return RefusedMotion(state, (float(data["base_point_xy"][0]), float(data["base_point_xy"][1])),
-                         int(data["turned"]), int(data["held"]), int(data["direction"]), step,
-                         Infeasible(code) if code else Infeasible.OUT_OF_REACH, int(data.get("link") or data["turned"]),
-                         message or "refused")
-
-
-def step_of(data: Mapping[str, Any]) -> int:
-    """The orientation step an object_created event names (0 when it does not)."""
-    orientations = data.get("orientations")
-    return 360 // int(orientations) if orientations else 0
-
-
-def base_of(data: Mapping[str, Any]) -> tuple[float, float] | None:
-    """The base point an event keeps (None when it has none)."""
-    base = data.get("base_point_xy")
-    return (float(base[0]), float(base[1])) if base else None
+        return replace(failure, reason=reason, failures=failure.failures + 1)
+    return FailureHistory(joint, turned, reason)
 
 
 class PlanViews:

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from planhrc.event_log import EventKind, ObjectCreatedData
 from planhrc.geometry import GeometryError, ObjectGeometry
 from planhrc.model import make_object
 
 from ..store import ValidationError
 from .context import Context
-from .log import EventKind
+from .log import log_event
 from .reads import read_object
 from .unit_of_work import object_write
 from .values import ObjectRead
@@ -49,8 +50,7 @@ def create_object(context: Context, request: NewObject) -> ObjectRead:
     obj = make_object(object_id, request.formulation, request.links, request.orientations, request.name)
     with context.locks.hold(object_id), object_write(context, object_id):
         store.create_object(obj)
-        store.add_event(object_id, EventKind.OBJECT_CREATED, f"object {object_id} created",
-                        {"formulation": obj.formulation.value, "links": obj.n_links,
-                         "orientations": obj.orientations,
-                         "base_point_xy": list(base) if base is not None else None})
+        log_event(store, object_id, EventKind.OBJECT_CREATED, f"object {object_id} created",
+                  ObjectCreatedData(formulation=obj.formulation, links=obj.n_links,
+                                    orientations=obj.orientations, base_point_xy=base))
     return read_object(context, object_id)

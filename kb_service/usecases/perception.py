@@ -22,6 +22,7 @@ import time
 from dataclasses import dataclass, replace
 
 from planhrc.cooperation import Decision, decide
+from planhrc.event_log import IncompleteData
 from planhrc.model import ArticulatedObject, ModelError, Perception, perceive as snap
 from planhrc.pipeline import PieceVerdict, PlannedTurn, PlanOutcome, deadline_from, plan_for_service
 from planhrc.pipeline.later import Precheck
@@ -29,15 +30,15 @@ from planhrc.vocabulary import DecisionKind, PlanningStatus
 
 from ..store import DeadlineError, Execution, StoredPlan, StoredState, ValidationError
 from ..store import CheckedPlan
-from . import decide as refine
+from . import refine
 from .context import Context
 from .idempotency import fingerprint, recall, remember
 from .inputs import check_count, check_finite, measured_base
-from .log import record_verdict
+from .log import log_event, record_verdict
 from .memory import ObjectMemo
 from .turns import Written, adopt, decision_data, follow
 from .unit_of_work import object_write, read_mark, serialized
-from .values import Turn, turn_of, turn_record
+from .values import Turn
 
 log = logging.getLogger(__name__)
 
@@ -99,9 +100,9 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         mark = read_mark(context, obj.ident)  # before the remembered answer and the state are read
         print_ = fingerprint({"perception": list(links)} if measured is None else
                              {"perception": list(links), "base_point_xy": list(measured)})
-        recalled = recall(store, obj.ident, key, print_)
+        recalled = recall(store, obj.ident, key, print_, Turn)
         if recalled is not None:
-            return turn_of(recalled)
+            return recalled
         if any(v is None for v in links):
             return _incomplete(context, obj, request, print_, measured, mark)
 
@@ -200,8 +201,8 @@ def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, ch
         turn = written.turn
         data = decision_data(written, goal.id if goal is not None else None,
                              decision.remedy if decision is not None else None, seen.measured)
-        store.add_event(obj.ident, turn.decision, turn.reason, data)
-        remember(store, obj.ident, seen.key, seen.fingerprint, turn_record(turn))
+        log_event(store, obj.ident, turn.decision, turn.reason, data)
+        remember(store, obj.ident, seen.key, seen.fingerprint, turn)
     context.observer.stored(time.perf_counter() - started, replanned=planned is not None)
     return written
 
@@ -251,10 +252,8 @@ def _incomplete(context: Context, obj: ArticulatedObject, request: PerceptionReq
               "look again")
     turn = Turn(DecisionKind.INCOMPLETE_PERCEPTION, None, None, None, None, reason, unseen_links=tuple(unseen))
     store = context.store
-    with object_write(context, obj.ident, mark):
-        data: dict[str, object] = {"unseen_links": unseen, "link_orientations_deg": list(links)}
-        if measured is not None:  # recorded, not used: an incomplete perception changes nothing
-            data["base_point_xy"] = list(measured)
-        store.add_event(obj.ident, DecisionKind.INCOMPLETE_PERCEPTION, reason, data)
-        remember(store, obj.ident, request.idempotency_key, print_, turn_record(turn))
+    with object_write(context, obj.ident, mark):  # the base point recorded, not used: it changes nothing
+        log_event(store, obj.ident, DecisionKind.INCOMPLETE_PERCEPTION, reason,
+                  IncompleteData(unseen_links=tuple(unseen), link_orientations_deg=links, base_point_xy=measured))
+        remember(store, obj.ident, request.idempotency_key, print_, turn)
     return turn

@@ -11,7 +11,8 @@ from planhrc.translator import PddlTask, domain_text, read_domain_model, transla
 from ..store import NotFoundError, StoredEvent, StoredPlan, StoredProblem, StoredState
 from ..store import MAX_EVENTS_PAGE
 from .context import Context
-from .values import EventRead, Health, LinkRead, ObjectRead, PlanRead, PlanStepRead, StateRead
+from .log import EventRead, event_read
+from .values import Health, LinkRead, ObjectRead, PlanRead, PlanStepRead, StateRead
 
 
 def read_object(context: Context, object_id: str) -> ObjectRead:
@@ -101,11 +102,6 @@ def state_read(state: StoredState) -> StateRead:
     joints = {a[2]: int(a[1].split("_", 1)[1]) for a in state.atoms if a[0] == HAS_ORIENTATION and len(a) == 3}
     return StateRead(state.id, state.object_id, state.kind, atoms_read(state.atoms), dict(sorted(joints.items())),
                      tuple(state.link_orientations_deg) if state.link_orientations_deg else None, state.created_at)
-
-
-def event_read(event: StoredEvent) -> EventRead:
-    return EventRead(event.seq, event.object_id, event.kind, event.reason, dict(event.data), event.created_at,
-                     event.client)
 
 
 def _plan_read(context: Context, plan: StoredPlan) -> PlanRead:

@@ -1,16 +1,17 @@
 """What a decision writes, inside the perception's one write: `follow` moves the execution within the current plan
 (goal reached, continue, resume) or asks the human for the next motion; `adopt` stores a re-plan's problem and, when
 VAL accepted it, its plan with its expected states. Each returns what it wrote (`Written`): the perception's
-`Turn` and what the decision's event keeps besides. `decision_data` is that event's data."""
+`Turn` and what the decision's event keeps besides. `decision_data` is that event's data (`log.DecisionData`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Mapping
 
 from planhrc.cooperation import Decision, PlanView
+from planhrc.event_log import DecisionData, SkillRequest
 from planhrc.geometry import ObjectGeometry
 from planhrc.model import ArticulatedObject, snap_angle
-from planhrc.ordering import HelpItem, Placement, help_for
+from planhrc.ordering import Placement, help_for
 from planhrc.pipeline import EarlyAnswer, PlanOutcome, move_of
 from planhrc.vocabulary import DecisionKind, ExecutionStatus, PlanningStatus, Remedy, Skill
 
@@ -18,9 +19,9 @@ from ..store import Execution, StoredPlan, StoredState
 from ..store import CheckedPlan
 from .actions import last_step, merges, next_action
 from .context import Context
-from .decide import Base, whole_turn_deg
 from .memory import ObjectMemo
-from .values import SkillRequest, Turn, skill_record
+from .refine import Base, whole_turn_deg
+from .values import Turn
 
 IDLE, READY, DISPATCHED = ExecutionStatus.IDLE, ExecutionStatus.READY, ExecutionStatus.DISPATCHED
 
@@ -119,39 +120,23 @@ def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal
 
 
 def decision_data(written: Written, goal_state_id: str | None, remedy: Remedy | None,
-                  measured: tuple[float, float] | None) -> dict[str, Any]:
+                  measured: tuple[float, float] | None) -> DecisionData:
     """The data of a decision's event: the answer's ids, and what a restarted service reads back (the measured
-    base point, the goal, the remedy, a re-plan's pieces under VAL...)."""
-    turn = written.turn
+    base point, kept with the perception's event: a restarted service checks there too; the goal, the remedy, a
+    re-plan's pieces under VAL...)."""
+    turn, early = written.turn, written.early
     action = turn.next_action
-    data: dict[str, Any] = {
-        "perceived_state_id": turn.perceived_state_id, "plan_id": turn.plan_id,
-        "next_step": action.step if action else None, "next_action_id": action.id if action else None,
-        "matched_expected_step": turn.matched_expected_step,
-    }
-    if measured is not None:  # kept with the perception's event: a restarted service checks there too
-        data["base_point_xy"] = list(measured)
-    if goal_state_id is not None:
-        data["goal_state_id"] = goal_state_id
-    if remedy is not None:
-        data["remedy"] = remedy
-    if written.early is not None:
-        data["val_pieces"] = [[a, b] for a, b in written.early.pieces]
-        data["val_accepted"] = list(range(1, written.early.accepted + 1))
-    if written.planning_status is not None:
-        data.update({"planning_status": written.planning_status, "problem_id": written.problem_id,
-                     "timings": {k: round(v, 6) for k, v in (written.timings or {}).items()}})
-    if written.ordering:
-        data["ordering"] = written.ordering
-    if turn.help is not None:
-        data["help"] = help_data(turn.help)
-    if turn.skill is not None:
-        data["skill"] = skill_record(turn.skill)
-    return data
-
-
-def help_data(items: tuple[HelpItem, ...]) -> list[dict[str, Any]]:
-    return [{"link": h.link, "to_deg": h.to_deg, "sentence": h.sentence} for h in items]
+    return DecisionData(
+        perceived_state_id=turn.perceived_state_id, plan_id=turn.plan_id,
+        next_step=action.step if action else None, next_action_id=action.id if action else None,
+        matched_expected_step=turn.matched_expected_step, base_point_xy=measured, goal_state_id=goal_state_id,
+        remedy=remedy, val_pieces=early.pieces if early is not None else (),
+        val_accepted=tuple(range(1, early.accepted + 1)) if early is not None else (),
+        planning_status=written.planning_status,
+        problem_id=written.problem_id if written.planning_status is not None else None,
+        timings={k: round(v, 6) for k, v in (written.timings or {}).items()}
+        if written.planning_status is not None else None,
+        ordering=written.ordering, help=turn.help, skill=turn.skill)
 
 
 def _failure_words(memo: ObjectMemo) -> str | None:

@@ -12,7 +12,7 @@ optional dependency (`planhrc[postgresql]`): nothing here is imported unless a `
 | `replicas` | what several processes on one store need: the per-object lock, the event feed |
 | `store` | `PostgresStore`, the parts above behind `interface.KnowledgeStore` |
 """
-from .replicas import EVENT_CHANNEL, EventFeed, ObjectLocking
+from .replicas import EVENT_CHANNEL, ObjectLocking, PgEventFeed
 from .store import PostgresStore
 
-__all__ = ["EVENT_CHANNEL", "EventFeed", "ObjectLocking", "PostgresStore"]
+__all__ = ["EVENT_CHANNEL", "ObjectLocking", "PgEventFeed", "PostgresStore"]

@@ -58,13 +58,7 @@ class PgRecords:
 
     def put_entry(self, entry: JournalEntry) -> StoredPlan:
         """Cache a journalled plan's records (its actions and expected states); the plan's."""
-        plan, states = entry.records()
-        self.plans.put(plan)
-        for action in plan.actions:
-            self.actions.put(action)
-        for state in states:
-            self.states.put(state)
-        return plan
+        return entry.cache(self.plans, self.actions, self.states)
 
     def _journalled(self, sql: str, params: tuple[Any, ...]) -> JournalEntry | None:
         row = self.session.execute("SELECT payload FROM planhrc_plan_journal WHERE " + sql, params).fetchone()

@@ -5,7 +5,7 @@ works across processes, and a channel that says which object has a new event.
   use case takes it first thing in its `transaction()` block; another process's perception of the same object
   waits for the commit, so each object's writes are one at a time across processes (its event counter's row lock
   orders its events as well). It is released by the commit or the rollback, also when the process dies.
-- `EventFeed`: a connection of its own that `LISTEN`s on `EVENT_CHANNEL`; every committed event is announced
+- `PgEventFeed`: a connection of its own that `LISTEN`s on `EVENT_CHANNEL`; every committed event is announced
   there as `<object_id> <seq>` (`pg_notify` in the event's transaction: announced once it commits, never before).
   A process that streams events waits on the feed instead of polling, then reads the log as usual.
 """
@@ -20,10 +20,10 @@ LOCK_NAMESPACE = "planhrc-object:"  # hashed with the object id into the advisor
 LOCK_OBJECT = "SELECT pg_advisory_xact_lock(hashtextextended(%s, 0))"  # with LOCK_NAMESPACE + the object's id
 
 
-__all__ = ["EVENT_CHANNEL", "LOCK_NAMESPACE", "LOCK_OBJECT", "EventFeed", "ObjectLocking"]  # the protocol: `interface`
+__all__ = ["EVENT_CHANNEL", "LOCK_NAMESPACE", "LOCK_OBJECT", "ObjectLocking", "PgEventFeed"]  # protocols: `interface`
 
 
-class EventFeed:
+class PgEventFeed:
     """Which objects have new events, as they commit (`wait`); close it when done."""
 
     def __init__(self, db: str, password: str | None) -> None:
@@ -49,7 +49,7 @@ class EventFeed:
     def close(self) -> None:
         self._conn.close()
 
-    def __enter__(self) -> EventFeed:
+    def __enter__(self) -> PgEventFeed:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -36,12 +36,12 @@ from ..owl import QuadStore, ntriple_lines
 from ..records import Compaction, Execution, StoredEvent
 from ..responses import ResponseMemory
 from ..roots import POSTGRESQL, current_roots
-from ..writes import Writes
+from ..writes import RecordWriter
 from .history import abox_lines, compact_object
 from .inferred import PgInferred
 from .journal import PgJournal
 from .records import PgRecords
-from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, LOCK_OBJECT, EventFeed
+from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, LOCK_OBJECT, PgEventFeed
 from ..acting import acting_client
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
@@ -50,7 +50,7 @@ log = logging.getLogger(__name__)
 
 
 # An event in one round trip: the object's next seq (its counter's row lock orders the object's events, across
-# processes too), the row, and its announcement to the feed (`replicas.EventFeed`), sent when the transaction commits.
+# processes too), the row, and its announcement to the feed (`replicas.PgEventFeed`), sent when the transaction commits.
 _APPEND_EVENT = (
     "WITH c AS (INSERT INTO planhrc_counter AS c (name, value) VALUES (%s, 1) ON CONFLICT (name) "
     "DO UPDATE SET value = c.value + 1 RETURNING value), "
@@ -83,7 +83,7 @@ class PostgresStore(StoreFacade):
             self._records = PgRecords(session)
             self._journal = PgJournal(session, self._records)
             session.listen(self._records)
-            self._writes = Writes(session, self._records, self._journal)
+            self._writes = RecordWriter(session, self._records, self._journal)
             self._inferred = PgInferred(session)
             self._journal.check()  # before anything is served
         except BaseException:
@@ -141,10 +141,10 @@ class PostgresStore(StoreFacade):
                 raise KBError("internal: lock_object outside a transaction() (it would be released at once)")
             self._session.execute(LOCK_OBJECT, (LOCK_NAMESPACE + object_id,))
 
-    def event_feed(self) -> EventFeed:
-        """A feed of the events every process commits (`replicas.EventFeed`); the caller closes it."""
+    def event_feed(self) -> PgEventFeed:
+        """A feed of the events every process commits (`replicas.PgEventFeed`); the caller closes it."""
         self._session.check_open()
-        return EventFeed(self._session.db, self._password)
+        return PgEventFeed(self._session.db, self._password)
 
     # -- writes (the rest: `facade.StoreFacade`) ------------------------------------------------------------
     def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
