@@ -8,20 +8,7 @@ task planned by the service's planning pool or by a `planhrc planning-worker` co
 (`PlanOutcome.timings`), which the service observes when it answers. A `planhrc planning-worker` also serves its own
 `/metrics` (`WorkerMetrics`: the jobs it planned, the leases it took over).
 
-| name | kind | labels | what |
-|---|---|---|---|
-| `planhrc_http_requests_total` | counter | route, method, status | requests answered (a refusal too) |
-| `planhrc_http_request_seconds` | histogram | route, method | time to the response's start |
-| `planhrc_decisions_total` | counter | kind | perceptions decided, by decision |
-| `planhrc_replan_stage_seconds` | histogram | stage | a re-plan's stages: translate, plan, order, expected_states, pipeline, validate, store |
-| `planhrc_val_verdicts_total` | counter | verdict | VAL's verdicts on new plans and on later pieces |
-| `planhrc_val_seconds` | histogram | | VAL's time per verdict |
-| `planhrc_store_transaction_seconds` | histogram | | a perception's one write (the unit of work) |
-| `planhrc_event_streams_open` | gauge | | Server-Sent Events streams open now |
-| `planhrc_planning_queue_depth` | gauge | state | the database's planning jobs, queued or running (the same on every replica: take `max`) |
-| `planhrc_planning_jobs_total` | counter | status | jobs a planning worker finished (worker) |
-| `planhrc_planning_leases_taken_over_total` | counter | | jobs a worker took from a worker whose lease expired (worker) |
-| `planhrc_planning_job_seconds` | histogram | stage | a worker's pipeline stages (worker) |
+The series, each with one line on what it measures, are in docs/operations.md ("Metrics").
 """
 from __future__ import annotations
 
@@ -65,6 +52,9 @@ class ServiceMetrics:
         self.val_verdicts = Counter("planhrc_val_verdicts", "VAL's verdicts on plans and pieces of plans.",
                                     ("verdict",), registry=r)
         self.val_seconds = Histograms("planhrc_val_seconds", "VAL's time per verdict.", ())
+        self.val_cpu_seconds = Histograms("planhrc_val_cpu_seconds", "The CPU (user + system) of VAL's runs per "
+                                          "verdict, wherever they ran (this process's VAL, its planning pool's or a "
+                                          "planning worker's).", ())
         self.store_seconds = Histograms("planhrc_store_transaction_seconds", "A perception's one write to the store "
                                         "(the unit of work).", ())
         self.event_streams = Gauge("planhrc_event_streams_open", "Server-Sent Events streams open now.", registry=r)
@@ -94,15 +84,17 @@ class ServiceMetrics:
         if timings:
             self.stage_seconds.observe_all([((stage,), seconds) for stage, seconds in timings.items()
                                             if stage in STAGES])
-            if "validate" in timings:
-                self.val_seconds.observe((), timings["validate"])
 
-    def validated(self, accepted: bool, seconds: float) -> None:
+    def validated(self, accepted: bool, seconds: float, cpu_s: float | None) -> None:
+        """A verdict of VAL (on a new plan or a later piece): counted, its time and, when known, its CPU."""
         counter = self._verdicts.get(accepted)
         if counter is None:
             counter = self._verdicts.setdefault(accepted, self.val_verdicts.labels("accepted" if accepted else
                                                                                    "refused"))
         counter.inc()
+        self.val_seconds.observe((), seconds)
+        if cpu_s is not None:
+            self.val_cpu_seconds.observe((), cpu_s)
 
     def stored(self, seconds: float, replanned: bool) -> None:
         self.store_seconds.observe((), seconds)
@@ -116,7 +108,8 @@ class ServiceMetrics:
     def text(self) -> bytes:
         """`/metrics`: the library's metrics as it writes them, then the histograms (written by themselves: most of
         the lines, at a fraction of the library's cost per line)."""
-        histograms = (self.request_seconds, self.stage_seconds, self.val_seconds, self.store_seconds)
+        histograms = (self.request_seconds, self.stage_seconds, self.val_seconds, self.val_cpu_seconds,
+                      self.store_seconds)
         return generate_latest(self.registry) + "".join(h.text() for h in histograms).encode()
 
 

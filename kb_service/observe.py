@@ -34,9 +34,9 @@ class Observation:
         if self.metrics is not None:
             self.metrics.decided(kind, timings)
 
-    def validated(self, accepted: bool, seconds: float) -> None:
+    def validated(self, accepted: bool, seconds: float, cpu_s: float | None) -> None:
         if self.metrics is not None:
-            self.metrics.validated(accepted, seconds)
+            self.metrics.validated(accepted, seconds, cpu_s)
 
     def stored(self, seconds: float, replanned: bool) -> None:
         if self.metrics is not None:

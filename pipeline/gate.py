@@ -22,13 +22,15 @@ class Verdict:
 
 @dataclass(frozen=True)
 class PieceVerdict:
-    """VAL's verdict on piece `number` (1-based) of a plan, steps a_first .. a_last, and VAL's seconds."""
+    """VAL's verdict on piece `number` (1-based) of a plan, steps a_first .. a_last, VAL's seconds and CPU seconds
+    (None: not known, or no VAL run)."""
 
     number: int
     first: int
     last: int
     verdict: Verdict
     seconds: float
+    cpu_s: float | None = None
 
 
 @dataclass(frozen=True)

@@ -128,7 +128,7 @@ class LaterPieces:
         first, last = self.pieces[index]
         verdict = Verdict(result.valid, "Plan valid" if result.valid else result.reason)
         try:
-            recorder(PieceVerdict(self.number(index), first, last, verdict, result.seconds))
+            recorder(PieceVerdict(self.number(index), first, last, verdict, result.seconds, result.cpu_s))
         except Exception:  # the gate finds no verdict in the log and asks VAL again
             log.exception("recording the verdict of a later piece failed")
         with self._cond:

@@ -17,7 +17,7 @@ from planhrc.model import ArticulatedObject
 from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.fast_downward import has_conditional_effects
-from planhrc.planner.validate import ValidationResult, start_validation, validate_plan
+from planhrc.planner.validate import ValidationResult, start_validation, total_cpu, validate_plan
 from planhrc.translator.translate import PddlTask
 from planhrc.vocabulary import PlanningStatus
 
@@ -115,14 +115,16 @@ def judge(outcome: PlanOutcome, checks: Sequence[ValCheck], config: PlanningConf
             _stop(checks)
             return val_timeout(outcome, config, what, "VAL did not answer in time", time.perf_counter() - t)
         if not verdict.valid:
-            _stop(checks)
+            _stop(checks)  # the runs still going are stopped: their CPU is not counted
             i = len(verdicts) + 1
             reason = verdict.reason if len(checks) == 1 else f"piece {i} of {len(checks)}: {verdict.reason}"
-            return _judged(outcome, ValidationResult(False, reason, verdict.seconds), lambda: outcome, what)
+            refused = ValidationResult(False, reason, verdict.seconds, total_cpu([*verdicts, verdict]))
+            return _judged(outcome, refused, lambda: outcome, what)
         verdicts.append(verdict)
     _stop(checks)  # every run answered: only their files are left to clean up
     seconds = max(v.seconds for v in verdicts)
-    return _judged(outcome, ValidationResult(True, "Plan valid", seconds), lambda: accepted, what)
+    return _judged(outcome, ValidationResult(True, "Plan valid", seconds, total_cpu(verdicts)), lambda: accepted,
+                   what)
 
 
 def check_piece(domain: str, piece: ValPiece, timeout_s: float, nice: int = 0,
@@ -153,8 +155,10 @@ def _wait_verdict(check: ValCheck, until: float) -> ValidationResult | None:
 def _judged(outcome: PlanOutcome, check: ValidationResult, accepted: Callable[[], PlanOutcome], what: str
             ) -> PlanOutcome:
     """The outcome VAL's answer makes of a plan: `accepted()` when VAL accepted it, else invalid with VAL's
-    reason (the time VAL took in the timings)."""
+    reason (the time VAL took in the timings, and when known the CPU its runs used: `validate_cpu`)."""
     timings = {**outcome.timings, "validate": check.seconds}
+    if check.cpu_s is not None:
+        timings["validate_cpu"] = check.cpu_s
     if check.valid:
         return replace(accepted(), timings=timings)
     log.warning("plan of %s rejected by VAL: %s", outcome.planner, check.reason)

@@ -248,7 +248,7 @@ class Validator:
             raise PlannerError("no time left for VAL")
         result = val_runs.check_piece(task.validation_domain, piece, left, raising=True)
         verdict = Verdict(result.valid, "Plan valid" if result.valid else result.reason)
-        return PieceVerdict(number, first, last, verdict, result.seconds)
+        return PieceVerdict(number, first, last, verdict, result.seconds, result.cpu_s)
 
 
 def _error(outcome: PlanOutcome, exc: Exception) -> PlanOutcome:

@@ -98,8 +98,10 @@ class _Armed:
         return False
 
     def feed(self, problem: str, plan: Sequence[str], nice: int) -> ValRun:
-        """Give VAL its plan and problem: from now on the run is an ordinary `ValRun`."""
+        """Give VAL its plan and problem: from now on the run is an ordinary `ValRun`, whose CPU leaves out what
+        VAL spent before (its start-up and the domain, done ahead of the request)."""
         assert self.fifo_fd is not None
+        spent = cpu_so_far(self.proc.pid)  # VAL waits on the FIFO: nothing more until the problem comes
         write_file(self.files[2], plan_text(plan))  # a plain file, complete before VAL opens it (after the problem)
         data = memoryview(problem.encode())
         fd, self.fifo_fd = self.fifo_fd, None
@@ -108,7 +110,7 @@ class _Armed:
                 data = data[os.write(fd, data):]
         finally:
             os.close(fd)  # the only writer gone: VAL reads end-of-file after the problem
-        return ValRun(self.proc, self.files, None, nice=nice, piped_problem=problem)
+        return ValRun(self.proc, self.files, None, nice=nice, piped_problem=problem, spent_s=spent)
 
     def discard(self) -> None:
         """Stop the process (if any) and remove the files."""
@@ -122,6 +124,18 @@ class _Armed:
         if proc is not None and proc.stdout is not None:
             proc.stdout.close()
         remove_files(self.files, None)
+
+
+def cpu_so_far(pid: int) -> float | None:
+    """The CPU seconds process `pid` (one thread) has run, to the nanosecond (Linux: /proc/PID/schedstat's first
+    field, the count `wait4` later reports in user + system); None when it cannot be read, or reads 0 (a kernel
+    without scheduler statistics), for a process that has certainly run."""
+    try:
+        with open(f"/proc/{pid}/schedstat", "rb") as f:
+            ns = int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+    return ns / 1e9 if ns > 0 else None
 
 
 class ArmedValidators:

@@ -35,7 +35,7 @@ from .validate import VAL_ADDRESS_SPACE_BYTES, cap_address_space, val_env, valid
 log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("valfork.c")
-TRAILER = b"\nplanhrc-valfork-status "  # the server writes it, and the run's status, after a run's output
+TRAILER = b"\nplanhrc-valfork-status "  # the server writes it, the run's status and CPU, after a run's output
 START_TIMEOUT_S = 5.0  # how long the server may take to be ready
 REPLY_TIMEOUT_S = 5.0  # how long a request may wait for the run's pid
 COMPILE_TIMEOUT_S = 60.0
@@ -75,21 +75,24 @@ def library(folder: Path | None = None) -> Path | None:
 
 class ForkedProcess:
     """A run of the server, standing for the `subprocess.Popen` of a cold run: its pid (it leads its own process
-    group), its output (standard output and error), and its exit code once `settle` has read it from the end of the
-    output. The server waits for it, not this process."""
+    group), its output (standard output and error), and its exit code and CPU once `settle` has read them from the
+    end of the output. The server waits for it, not this process."""
 
     def __init__(self, pid: int, stdout_fd: int) -> None:
         self.pid = pid
         self.stdout = os.fdopen(stdout_fd, "rb", buffering=0)
         self.returncode: int | None = None
+        self.cpu_s: float | None = None  # user + system, from the fork on (VAL's start-up was the server's)
 
     def settle(self, output: bytes) -> bytes:
-        """The run's own output, its exit code (`returncode`) taken from the status after it; a run killed before
-        it ended has none: -SIGKILL."""
+        """The run's own output, its exit code (`returncode`) and CPU seconds (`cpu_s`) taken from the status
+        after it; a run killed before it ended has none: -SIGKILL, CPU unknown."""
         head, found, status = output.rpartition(TRAILER)
-        code = status.strip()
-        if found and code.lstrip(b"-").isdigit() and status.endswith(b"\n"):
-            self.returncode = int(code)
+        fields = status.split()
+        if found and status.endswith(b"\n") and len(fields) == 2 and fields[0].lstrip(b"-").isdigit() \
+                and fields[1].isdigit():
+            self.returncode = int(fields[0])
+            self.cpu_s = int(fields[1]) / 1e6
             return head
         self.returncode = -signal.SIGKILL
         return output

@@ -6,7 +6,8 @@ output pipe (no thread, so nothing in this process competes with the caller for 
 runs). `validate_plan` is start-and-wait. The texts are written to a fresh temporary directory (in memory where
 there is one) that is removed with the run. A first, quiet run decides validity; only a failed plan is checked
 again verbosely to extract VAL's reason (the failing step, "Goal not satisfied", and its plan repair advice),
-so valid plans cost one quick call.
+so valid plans cost one quick call. A verdict says the CPU its VAL run used (`ValidationResult.cpu_s`, from the
+kernel's count when the run is reaped: see `ValRun`).
 
 `validate_pieces` checks several (problem, plan) pairs against one domain with one VAL process each, all at
 once: the pipeline cuts a long plan into pieces, each from an expected state to the next piece's start as an
@@ -38,6 +39,13 @@ class ValidationResult:
     valid: bool
     reason: str
     seconds: float
+    cpu_s: float | None = None  # VAL's CPU (user + system) on this verdict; None: not known (see `ValRun`)
+
+
+def total_cpu(results: Sequence[ValidationResult]) -> float | None:
+    """The CPU of several verdicts' runs together; None when one of them is not known."""
+    spent = [r.cpu_s for r in results]
+    return None if any(cpu is None for cpu in spent) else sum(cpu for cpu in spent if cpu is not None)
 
 
 @lru_cache(maxsize=1)
@@ -54,7 +62,7 @@ def val_env(binary: Path) -> dict[str, str]:
 
 class ForkedRun(Protocol):
     """A run of VAL's fork server as a `ValRun` drives it (`planner.valfork.ForkedProcess`): a process it did not
-    start itself, whose exit code comes after its output (`settle`)."""
+    start itself, whose exit code and CPU come after its output (`settle`)."""
 
     @property
     def pid(self) -> int: ...
@@ -64,6 +72,9 @@ class ForkedRun(Protocol):
 
     @property
     def returncode(self) -> int | None: ...
+
+    @property
+    def cpu_s(self) -> float | None: ...
 
     def settle(self, output: bytes) -> bytes: ...
 
@@ -77,13 +88,21 @@ class ValRun:
     `verdict(t)` waits up to t seconds (None: until VAL answers) and gives the result, or None while VAL still
     runs; it may be asked again. `result(t)` waits and raises PlannerError when VAL does not answer in time
     (the process group is killed). `cancel()` kills the run; every way out removes the run's files (`files`:
-    domain, problem, plan) and, when given, their folder `tmp`."""
+    domain, problem, plan) and, when given, their folder `tmp`.
+
+    The verdict's `cpu_s` is the CPU (user + system) the run used on this check, as the kernel counted it when the
+    run was reaped: a process of this one is reaped here with `os.wait4` (the same wait as `Popen.wait`, with the
+    child's resource usage), less the CPU it had used before it was given this check (`spent_s`: an armed process's
+    start-up and domain, read when it was fed; None: not known, and so neither is the verdict's); a run of the fork
+    server is reaped by the server, which writes its CPU after its output (from its fork on: VAL's start-up was
+    the server's, once). A refused plan's second, verbose run (for the reason) is not counted."""
 
     def __init__(self, proc: subprocess.Popen[bytes] | ForkedRun, files: Sequence[str], tmp: str | None, *,
-                 nice: int = 0, on_start: Callable[[int], None] | None = None, piped_problem: str | None = None
-                 ) -> None:
+                 nice: int = 0, on_start: Callable[[int], None] | None = None, piped_problem: str | None = None,
+                 spent_s: float | None = 0.0) -> None:
         self._start = time.perf_counter()
         self._proc = proc
+        self._spent_s = spent_s
         self._piped_problem = piped_problem  # the problem's text when VAL read it from a pipe (an armed run)
         self._files = list(files)
         self._tmp = tmp
@@ -112,15 +131,17 @@ class ValRun:
             return None
         output = b"".join(self._output)
         if isinstance(self._proc, subprocess.Popen):
-            self._proc.wait()
-        else:  # a forked run: its exit code follows its output (`planner.valfork`)
+            cpu_s = reap(self._proc, self._spent_s)
+        else:  # a forked run: its exit code and CPU follow its output (`planner.valfork`)
             output = self._proc.settle(output)
+            cpu_s = self._proc.cpu_s
         quiet = output.decode(errors="replace")
         try:
             if self._proc.returncode == 0 and "Plan valid" in quiet:
-                self._result = ValidationResult(True, "Plan valid", time.perf_counter() - self._start)
+                self._result = ValidationResult(True, "Plan valid", time.perf_counter() - self._start, cpu_s)
             else:
-                self._result = ValidationResult(False, self._reason(quiet), time.perf_counter() - self._start)
+                self._result = ValidationResult(False, self._reason(quiet), time.perf_counter() - self._start,
+                                                cpu_s)
                 log.debug("VAL rejected the plan: %s", self._result.reason)
         finally:
             self._cleanup()
@@ -192,6 +213,21 @@ class ValRun:
         if not self._removed:
             remove_files(self._files, self._tmp)
             self._removed = True
+
+
+def reap(proc: subprocess.Popen[bytes], spent_s: float | None) -> float | None:
+    """Wait for `proc` (its output has ended) and set its exit code; the CPU it used (user + system) less
+    `spent_s`, or None when that is not known (a process already waited for, or `spent_s` None)."""
+    if proc.returncode is not None or spent_s is None:
+        proc.wait()
+        return None
+    try:
+        _, status, usage = os.wait4(proc.pid, 0)
+    except ChildProcessError:  # waited for elsewhere meanwhile: its exit code is Popen's to find
+        proc.wait()
+        return None
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return max(0.0, usage.ru_utime + usage.ru_stime - spent_s)
 
 
 def write_file(path: str, text: str) -> None:
@@ -331,7 +367,7 @@ def extract_reason(output: str) -> str:
 def validate_pieces(domain: str, pieces: Sequence[tuple[str, Sequence[str]]], timeout_s: float = 60.0
                     ) -> ValidationResult:
     """VAL on every (problem, plan) piece at once, one process each: valid when every piece is; otherwise the
-    reason of the first piece, in order, that VAL refused, naming the piece."""
+    reason of the first piece, in order, that VAL refused, naming the piece. The CPU: every piece's."""
     if not pieces:
         raise PlannerError("pieces: nothing to validate")
     start = time.perf_counter()
@@ -348,8 +384,9 @@ def validate_pieces(domain: str, pieces: Sequence[tuple[str, Sequence[str]]], ti
         return results[0]
     for i, result in enumerate(results, start=1):
         if not result.valid:
-            return ValidationResult(False, f"piece {i} of {len(pieces)}: {result.reason}", time.perf_counter() - start)
-    return ValidationResult(True, "Plan valid", time.perf_counter() - start)
+            return ValidationResult(False, f"piece {i} of {len(pieces)}: {result.reason}", time.perf_counter() - start,
+                                    total_cpu(results))
+    return ValidationResult(True, "Plan valid", time.perf_counter() - start, total_cpu(results))
 
 
 def keep_off_this_cpu(pid: int) -> Callable[[], None] | None:

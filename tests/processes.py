@@ -1,4 +1,5 @@
-"""Whether a process still runs, as the tests that kill services and their children look at it (Linux /proc)."""
+"""Whether a process still runs, as the tests that kill services and their children look at it, and the CPU of
+the children a process has waited for (Linux /proc)."""
 from __future__ import annotations
 
 import os
@@ -16,6 +17,13 @@ def alive(pid: int) -> bool:
     except OSError:
         return False
     return state not in ("Z", "X")
+
+
+def reaped_cpu_s(pid: int) -> float:
+    """The CPU (user + system) of the children process `pid` has waited for, as the kernel counts it (/proc: in
+    whole clock ticks, each of user and system)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[13]) + int(fields[14])) / os.sysconf("SC_CLK_TCK")
 
 
 def pids_of_a_killed_owner(script: str) -> list[int]:

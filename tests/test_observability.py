@@ -4,8 +4,8 @@ through its queue, a `planhrc planning-worker`, Debian's Prometheus scraping all
 
 * Prometheus scrapes both replicas (with a reader's key: reads are protected) and the worker; after perceptions
   sent to both replicas, its query API gives every series back: requests by replica, decisions, re-plan stages
-  measured where they ran (the worker's planning, the service's VAL and store), the queue's depth, the worker's
-  jobs.
+  measured where they ran (the worker's planning, the service's VAL and store), VAL's verdicts and their CPU, the
+  queue's depth, the worker's jobs.
 * One perception is one trace, across processes: the route's server span, the use case, the planning span whose
   job crosses the PostgreSQL queue to the worker (its span a child of the service's), VAL and the store; each span's
   parent is in the same trace, the worker's span comes from the worker's process.
@@ -171,6 +171,8 @@ def test_prometheus_scrapes_two_replicas_and_a_planning_worker(db, tmp_path):
                 count = value_of(prom, f'sum(planhrc_replan_stage_seconds_count{{stage="{stage}"}})')
                 assert count == replans, (stage, count)
             assert value_of(prom, 'sum(planhrc_val_verdicts_total{verdict="accepted"})') == replans
+            assert value_of(prom, 'sum(planhrc_val_cpu_seconds_count)') == replans  # VAL's CPU per verdict
+            assert value_of(prom, 'sum(planhrc_val_cpu_seconds_sum)') > 0
             assert until(lambda: value_of(prom, 'sum(planhrc_planning_jobs_total{job="planhrc-planning-worker",'
                                                 'status="solved"})') == replans)
             assert value_of(prom, 'max(planhrc_planning_queue_depth{state="queued"})') == 0

@@ -1,6 +1,6 @@
 """VAL's fork server (`planner.valfork`): its runs write what `Validate` started on its own writes, with the same
-exit code; a cancelled or killed run leaves the server serving; nothing outlives the owner; without a C compiler
-the checks go on as before."""
+exit code; the CPU the server gives after a run's status is what the kernel counted for the run; a cancelled or
+killed run leaves the server serving; nothing outlives the owner; without a C compiler the checks go on as before."""
 from __future__ import annotations
 
 import os
@@ -18,8 +18,8 @@ from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.validate import (VAL_ADDRESS_SPACE_BYTES, VAL_FILES, ValRun, plan_text, val_env,
                                       validate_binary)
-from planhrc.planner.valfork import ForkServer, library
-from tests.processes import alive, left_alive, pids_of_a_killed_owner
+from planhrc.planner.valfork import ForkedProcess, ForkServer, library
+from tests.processes import alive, left_alive, pids_of_a_killed_owner, reaped_cpu_s
 from tests.test_val_runs import DOMAIN, PAPER_ABSOLUTE, _task
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("cc") is None,
@@ -43,14 +43,19 @@ def _files(folder: Path, domain: str, problem: str, plan: list[str]) -> list[str
 
 
 def _forked(server: ForkServer, files: list[str]) -> tuple[bytes, int]:
+    output, proc = _forked_run(server, files)
+    assert proc.returncode is not None
+    return output, proc.returncode
+
+
+def _forked_run(server: ForkServer, files: list[str]) -> tuple[bytes, ForkedProcess]:
+    """A run's own output (its status taken off) and the run, settled."""
     proc = server.run(files)
     output = b""
     while chunk := proc.stdout.read(65536):
         output += chunk
     proc.stdout.close()
-    output = proc.settle(output)
-    assert proc.returncode is not None
-    return output, proc.returncode
+    return proc.settle(output), proc
 
 
 def _cold(files: list[str]) -> tuple[bytes, int]:
@@ -71,6 +76,43 @@ def test_a_forked_run_writes_what_validate_on_its_own_writes(server, tmp_path, f
         assert forked == cold, name
     assert _cold(_files(tmp_path / "whole", domain, problem, plan))[1] == 0
     assert b"Plan valid" in _forked(server, [str(tmp_path / "whole" / n) for n in VAL_FILES])[0]
+
+
+def test_a_forked_run_s_status_carries_the_cpu_the_kernel_counted_for_it(server, tmp_path):
+    """Each run's CPU, as the server writes it after the run's status, is what the kernel charged to the run: the
+    server's own count of its reaped children's CPU (/proc, in clock ticks) grows by the runs' figures together,
+    and no run has more CPU than the time from its request to its end (VAL runs on one thread)."""
+    problem, plan = _task("absolute", 12, 8)
+    files = _files(tmp_path, PAPER_ABSOLUTE, problem, plan)
+    before = reaped_cpu_s(server.pid)
+    spent = []
+    for _ in range(20):
+        t = time.perf_counter()
+        output, proc = _forked_run(server, files)
+        ran = time.perf_counter() - t
+        assert proc.returncode == 0 and b"Plan valid" in output and b"planhrc-valfork" not in output
+        assert proc.cpu_s is not None and 0 < proc.cpu_s <= ran, (proc.cpu_s, ran)
+        spent.append(proc.cpu_s)
+    counted = reaped_cpu_s(server.pid) - before
+    tick = 1 / os.sysconf("SC_CLK_TCK")  # each of user and system is counted in whole ticks
+    assert abs(counted - sum(spent)) <= 2 * tick + 0.002, (counted, sum(spent))
+
+
+def test_a_status_without_its_cpu_is_a_killed_run_s():
+    """`settle` takes only a whole status line (exit code and CPU): anything else is output of a run that was
+    killed before the server wrote its status."""
+    read_end, write_end = os.pipe()
+    os.close(write_end)
+    for tail, code, cpu in ((b"\nplanhrc-valfork-status 0 1500\n", 0, 0.0015),
+                            (b"\nplanhrc-valfork-status -9 20\n", -9, 0.00002),
+                            (b"\nplanhrc-valfork-status 0\n", -signal.SIGKILL, None),
+                            (b"\nplanhrc-valfork-status 0 15", -signal.SIGKILL, None)):
+        proc = ForkedProcess(0, os.dup(read_end))
+        output = proc.settle(b"Plan valid" + tail)
+        proc.stdout.close()
+        assert (proc.returncode, proc.cpu_s) == (code, cpu), tail
+        assert output == (b"Plan valid" if cpu is not None else b"Plan valid" + tail)
+    os.close(read_end)
 
 
 def test_a_run_on_a_missing_file_fails_as_validate_fails(server, tmp_path):

@@ -1,8 +1,10 @@
 """VAL as a process the caller does not wait on (`planner.validate.ValRun`) and VAL processes armed ahead of need
-(`planner.armed`): the same verdicts as a plain run, nothing left behind, nothing outliving its owner."""
+(`planner.armed`): the same verdicts as a plain run, each with the CPU its run used, nothing left behind, nothing
+outliving its owner."""
 from __future__ import annotations
 
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -16,7 +18,7 @@ from planhrc.model import make_object
 from planhrc.planner import get_planner
 from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
-from planhrc.planner.validate import keep_off_this_cpu, start_validation, validate_plan
+from planhrc.planner.validate import keep_off_this_cpu, start_validation, validate_pieces, validate_plan
 from planhrc.translator.problem import get_problem
 from tests.processes import alive, left_alive, pids_of_a_killed_owner
 
@@ -52,6 +54,40 @@ def test_a_run_answers_later_and_as_a_plain_run_does():
     assert wrong is not None and not wrong.valid
     assert wrong.reason == validate_plan(DOMAIN, problem, plan[:-1]).reason
     assert "Goal not satisfied" in wrong.reason
+
+
+def _children_cpu_s() -> float:
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)  # the children this process has waited for
+    return used.ru_utime + used.ru_stime
+
+
+def test_a_verdict_says_the_cpu_its_run_used():
+    """A cold run's CPU is all its process used (this process's count of its reaped children grows by as much); an
+    armed run's leaves out what VAL spent before it was given the plan (its start-up and the domain)."""
+    problem, plan = _task("absolute")
+    for steps in (plan, plan[:-1]):  # accepted and refused (the verbose run for the reason is not counted)
+        before = _children_cpu_s()
+        run = start_validation(PAPER_ABSOLUTE, problem, steps)
+        verdict = run.verdict(None)
+        assert run._proc.returncode is not None and verdict.valid == (steps == plan)
+        if verdict.valid:
+            assert abs(verdict.cpu_s - (_children_cpu_s() - before)) < 1e-5, verdict
+        else:
+            assert 0 < verdict.cpu_s < _children_cpu_s() - before  # the verbose run came after
+    armed = ArmedValidators(arm_delay_s=0.0, forking=False)
+    try:
+        armed.start(PAPER_ABSOLUTE, problem, plan).verdict(None)
+        _armed_once(armed, PAPER_ABSOLUTE)
+        before = _children_cpu_s()
+        verdict = armed.start(PAPER_ABSOLUTE, problem, plan).verdict(None)
+        whole = _children_cpu_s() - before
+        assert armed.counts["armed"] == 1 and verdict.valid
+        assert 0 < verdict.cpu_s < whole, (verdict.cpu_s, whole)  # the process's CPU less its start-up
+    finally:
+        armed.close()
+    before = _children_cpu_s()
+    pieces = validate_pieces(PAPER_ABSOLUTE, [(problem, plan), (problem, plan)])  # two runs: their CPU together
+    assert pieces.valid and abs(pieces.cpu_s - (_children_cpu_s() - before)) < 2e-5, pieces
 
 
 def test_a_run_past_its_time_limit_is_killed_and_leaves_no_files():

@@ -11,8 +11,9 @@ class Observer(Protocol):
     def decided(self, kind: str, timings: Mapping[str, float] | None) -> None:
         """A perception was decided (`kind`), with its re-plan's stage times when it re-planned."""
 
-    def validated(self, accepted: bool, seconds: float) -> None:
-        """VAL's verdict on a new plan or on a piece of one."""
+    def validated(self, accepted: bool, seconds: float, cpu_s: float | None) -> None:
+        """VAL's verdict on a new plan or on a piece of one: its time, and the CPU of its VAL runs (None: not
+        known)."""
 
     def stored(self, seconds: float, replanned: bool) -> None:
         """A perception's write took `seconds` (a re-plan's write: `replanned`)."""
@@ -28,7 +29,7 @@ class _Quiet:
     def decided(self, kind: str, timings: Mapping[str, float] | None) -> None:
         pass
 
-    def validated(self, accepted: bool, seconds: float) -> None:
+    def validated(self, accepted: bool, seconds: float, cpu_s: float | None) -> None:
         pass
 
     def stored(self, seconds: float, replanned: bool) -> None:

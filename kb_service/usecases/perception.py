@@ -155,7 +155,8 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
             raise
         verdict = planned.verdict.outcome(0) if planned.outcome.solved and planned.outcome.actions else None
         if verdict is not None and "validate" in verdict.timings:
-            context.observer.validated(verdict.validated or verdict.validated_steps > 0, verdict.timings["validate"])
+            context.observer.validated(verdict.validated or verdict.validated_steps > 0, verdict.timings["validate"],
+                                       verdict.timings.get("validate_cpu"))
         context.observer.decided(written.turn.decision, written.timings)
 
         # after the commit: the object's plan changed (or is gone); its checks behind the answer follow it
@@ -167,7 +168,7 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         def record(piece: PieceVerdict) -> None:
             assert plan_id is not None  # only an adopted plan's pieces are checked behind the answer
             record_verdict(store, obj.ident, plan_id, piece)
-            context.observer.validated(piece.verdict.accepted, piece.seconds)
+            context.observer.validated(piece.verdict.accepted, piece.seconds, piece.cpu_s)
 
         context.validator.follow(obj.ident, plan_id, planned.verdict, record, _later_checks(context, obj, planned))
         return written.turn
