@@ -93,43 +93,37 @@ def _read_goal_differences(kb: ServiceLink, obj: dict[str, Any]) -> dict[int, fl
     return goal_differences(str(obj.get("formulation", "relative")), values)
 
 
-def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int, float] | None:
-    """(turned, held, delta) of the plan's action after `action`, or None (also when that action turns nothing: a
-    bimanual plan's centring, grasp or release is no move for a human)."""
+def _steps_after(kb: ServiceLink, action: dict[str, Any]) -> list[dict[str, Any]]:
+    """The steps of `action`'s plan after it, in order (none when the action names no plan or it cannot be read)."""
     plan_id, step = action.get("plan_id"), action.get("step")
     if not plan_id or step is None:
-        return None
+        return []
     try:
         plan = kb.read_plan(str(plan_id))
     except ProtocolError as exc:
         log.warning("plan %s: cannot read it (%s)", plan_id, exc)
-        return None
+        return []
     last = int(action.get("last_step") or step)
-    for entry in plan.get("steps", []):
-        if entry.get("step") == last + 1:
-            if not float(entry["delta_deg"]):
-                return None
-            return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
-    return None
+    return sorted((e for e in plan.get("steps", []) if int(e.get("step", 0)) > last), key=lambda e: int(e["step"]))
+
+
+def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int, float] | None:
+    """(turned, held, delta) of the plan's action after `action`, or None (also when that action turns nothing: a
+    bimanual plan's centring, grasp or release is no move for a human)."""
+    last = int(action.get("last_step") or action.get("step") or 0)
+    entry = next(iter(_steps_after(kb, action)), None)
+    if entry is None or int(entry["step"]) != last + 1 or not float(entry["delta_deg"]):
+        return None
+    return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
 
 
 def _held_turn(kb: ServiceLink, action: dict[str, Any]) -> RotationAction | None:
     """The turn a bimanual plan makes with the hands that `action` (a centring or a grasp) puts on its links: the
     turns that follow it there up to the release, as one; None when the plan turns nothing there or cannot be
     read."""
-    plan_id, step = action.get("plan_id"), action.get("step")
-    if not plan_id or step is None:
-        return None
-    try:
-        plan = kb.read_plan(str(plan_id))
-    except ProtocolError as exc:
-        log.warning("plan %s: cannot read it (%s)", plan_id, exc)
-        return None
     links = (int(action["turned_link_index"]), int(action["held_link_index"]))
     total, turning = 0.0, False
-    for entry in sorted(plan.get("steps", []), key=lambda e: int(e.get("step", 0))):
-        if int(entry.get("step", 0)) <= int(action.get("last_step") or step):
-            continue
+    for entry in _steps_after(kb, action):
         delta = float(entry.get("delta_deg") or 0.0)
         if (int(entry["turned_link_index"]), int(entry["held_link_index"])) != links or (turning and not delta):
             break
