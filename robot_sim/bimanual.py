@@ -30,13 +30,14 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from planhrc.robot_sim.acting import Pose, perform_parts
 from planhrc.robot_sim.grip import Hands, drive_arm
 from planhrc.robot_sim.scene import ARMS, HOME_POSE, Scene, arm_joints, direction, joint_between, set_arm_joints
+from planhrc.robot_sim.sightlines import Sightlines
 from planhrc.robot_sim.skills import (ActionResult, ArcMiss, Command, Interrupt, Robot, RotationAction, Unreachable,
                                       arc_turns, execute)
 from planhrc.vocabulary import ActionOutcome, FailureReason
@@ -77,21 +78,24 @@ def named_arms(data: Mapping[str, Any]) -> tuple[str, str]:
 class BothHands:
     """What Baxter's hands do across a bimanual plan's steps: where they work and what they hold."""
 
-    def __init__(self, scene: Scene, robot: Robot) -> None:
-        self.scene, self.robot = scene, robot
+    def __init__(self, scene: Scene, robot: Robot, sight: Sightlines | None = None) -> None:
+        self.scene, self.robot, self.sight = scene, robot, sight
         self.hands = Hands(scene, robot)
+        self.centred: tuple[Station, Pose] | None = None  # the station the hands came over, and the pose it was for
 
     def held_links(self) -> tuple[int, ...]:
         return tuple(sorted(link for _, link in self.hands.held.values()))
 
     def perform(self, parts: Sequence[RotationAction], data: Mapping[str, Any], pose: Pose, final: bool,
-                interrupt: Interrupt, stop_fraction: float | None) -> ActionResult:
+                interrupt: Interrupt, stop_fraction: float | None,
+                then: RotationAction | None = None) -> ActionResult:
         """Do one dispatched step (a turn may come as its single steps, `parts`); on anything but success both
-        hands open and the arms go home."""
+        hands open and the arms go home. `then`: the turn the plan makes next with the hands this step puts on
+        the links (the stations are chosen so that the cameras see the links through it)."""
         first = parts[0]
         if first.name in HAND_STEPS:
             result = {MOVE_TO_CENTRE: self._move_to_centre, GRASP_LINKS: self._grasp,
-                      RELEASE_LINKS: self._release}[first.name](first, named_arms(data))
+                      RELEASE_LINKS: self._release}[first.name](first, named_arms(data), pose, then)
         else:
             result = self._turn_parts(parts, pose, final, interrupt, stop_fraction)
         if result.outcome is not ActionOutcome.SUCCEEDED:
@@ -117,20 +121,28 @@ class BothHands:
         return True
 
     # -- the steps that turn nothing ---------------------------------------------------------------------------
-    def _move_to_centre(self, action: RotationAction, arms: tuple[str, str]) -> ActionResult:
+    def _move_to_centre(self, action: RotationAction, arms: tuple[str, str], pose: Pose,
+                        then: RotationAction | None) -> ActionResult:
         self.hands.release_all()  # the plan moves open hands: none is holding now
-        station = plan_station(self.scene, self.robot, action, arms)
+        station = plan_station(self.scene, self.robot, action, arms, self.sight, pose, then)
+        self.centred = None
         if isinstance(station, Unreachable):
             return _hand_failure(FailureReason.UNREACHABLE, f"not at the centre: {station.message}")
+        self.centred = (station, pose)
         for arm, q in station.above.items():
             if not drive_arm(self.scene, self.robot, arm, q):
                 return _hand_failure(FailureReason.STALL, f"the {arm} arm did not reach its pose over "
                                      f"link {station.points[arm][0]}")
         return _hand_success(f"both hands over links {action.held_link} and {action.turned_link}{_swap(station)}")
 
-    def _grasp(self, action: RotationAction, arms: tuple[str, str]) -> ActionResult:
-        # the links may have moved since the hands came over them: the approach is planned from where they lie now
-        station = plan_station(self.scene, self.robot, action, arms)
+    def _grasp(self, action: RotationAction, arms: tuple[str, str], pose: Pose,
+               then: RotationAction | None) -> ActionResult:
+        # the station the hands came over, unless the links have moved since: then the approach is planned from
+        # where they lie now
+        centred, self.centred = self.centred, None
+        station = (centred[0] if centred is not None and _same_place(centred[1], pose)
+                   and (centred[0].turned_link, centred[0].held_link) == (action.turned_link, action.held_link)
+                   else plan_station(self.scene, self.robot, action, arms, self.sight, pose, then))
         if isinstance(station, Unreachable):
             return _hand_failure(FailureReason.UNREACHABLE, f"no grasp: {station.message}")
         for arm in station.above:
@@ -143,7 +155,8 @@ class BothHands:
         held = ", ".join(f"the {arm} hand holds link {link}" for arm, (link, _, _) in station.points.items())
         return _hand_success(f"{held}{_swap(station)}")
 
-    def _release(self, action: RotationAction, arms: tuple[str, str]) -> ActionResult:
+    def _release(self, action: RotationAction, arms: tuple[str, str], pose: Pose,
+                 then: RotationAction | None) -> ActionResult:
         holding = dict(self.hands.held)
         if holding:
             self.scene.step(self.robot.arc_steps)  # hold still until the object has stopped moving, then let go
@@ -185,6 +198,12 @@ class BothHands:
         return execute(self.scene, command, self.robot, interrupt, stop_fraction, hands=self.hands)
 
 
+def _same_place(a: Pose, b: Pose, angle_deg: float = 1.0, distance_m: float = 0.005) -> bool:
+    """Whether the object lies where it lay (every link within `angle_deg`, the base point within `distance_m`)."""
+    return (float(np.hypot(*np.subtract(a.geometry.base_point_xy, b.geometry.base_point_xy))) <= distance_m
+            and all(abs((x - y + 180.0) % 360.0 - 180.0) <= angle_deg for x, y in zip(a.angles, b.angles)))
+
+
 def _hand_success(message: str) -> ActionResult:
     return ActionResult(ActionOutcome.SUCCEEDED, None, message, 0.0, 0.0)
 
@@ -203,17 +222,24 @@ def _gripper_yaw(scene: Scene, robot: Robot, arm: str) -> float:
     return math.atan2(frame[1, 0], frame[0, 0])
 
 
-def _grasp_points(scene: Scene, link: int, toward: float | None) -> list[np.ndarray]:
-    """Where a gripper may take `link`, best first: a quarter of a link from its centre, towards the joint first
-    (`toward`: +1 when the joint lies along the link's direction, -1 against it), or with `toward` None on the
-    side away from the head camera first (the hand then does not stand between the camera and the marker)."""
+OUTER_GRASP = 0.38  # of a link's length from its centre: the grasp points tried after the quarter ones
+
+
+def _grasp_points(scene: Scene, link: int, joint_side: float, turning: bool, outer: bool) -> list[np.ndarray]:
+    """Where a gripper may take `link`, best first: a quarter of a link from its centre (never on the marker at the
+    centre), the turning gripper towards the joint first (`joint_side`: +1 when the joint lies along the link's
+    direction, -1 against it), the keeper on the side away from the head camera first (its hand then does not
+    stand between that camera and the marker); with `outer`, then `OUTER_GRASP` from the centre on the side away
+    from the joint (clear of the other gripper)."""
     along = direction(scene.link_orientations_deg()[link - 1])
-    quarter = scene.spec.link_length_m / 4.0
-    points = [scene.link_center(link) + s * quarter * along for s in (-1.0, 1.0)]
-    if toward is not None:
-        return [points[1], points[0]] if toward > 0 else points
-    eye = _eye_xy(scene)
-    return sorted(points, key=lambda p: -float(np.linalg.norm(p - eye)))
+    centre, length = scene.link_center(link), scene.spec.link_length_m
+    points = [centre + s * length / 4.0 * along for s in (-1.0, 1.0)]
+    if turning:
+        points = [points[1], points[0]] if joint_side > 0 else points
+    else:
+        eye = _eye_xy(scene)
+        points = sorted(points, key=lambda p: -float(np.linalg.norm(p - eye)))
+    return points + ([centre - joint_side * OUTER_GRASP * length * along] if outer else [])
 
 
 def _eye_xy(scene: Scene) -> np.ndarray:
@@ -224,49 +250,115 @@ def _eye_xy(scene: Scene) -> np.ndarray:
     return np.asarray(state[4][:2], dtype=float)
 
 
-def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple[str, str]) -> Station | Unreachable:
+def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple[str, str],
+                 sight: Sightlines | None = None, pose: Pose | None = None,
+                 then: RotationAction | None = None) -> Station | Unreachable:
     """The arm poses above and on the two links at the action's joint, the named pairing first (turning arm on the
     downstream link, keeper on the upstream one), else the other; nothing moves. The grasp points are
-    `_grasp_points` (see the module's note)."""
-    _, side = joint_between(action.turned_link, action.held_link, scene.n_links)
+    `_grasp_points` (see the module's note), each arm's in turn. Without `sight`: the first station the arms
+    reach. With `sight` (and the object as perceived, `pose`): the first station, in that order, from which every
+    link's marker stays in some camera's clear sight with the hands on the links and, when the plan
+    turns `then` while they hold, at the end of that turn (which the turning arm must be able to follow); else the
+    one that covers the markers least (`Sightlines.cover`, summed), a station whose turn the arm cannot follow
+    last."""
+    joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
     theta = scene.link_orientations_deg()
     z_grasp = scene.link_center_z + robot.grasp_height_m
     z_above = z_grasp + robot.approach_height_m
     # +1: the joint lies at the link's end (direction of the link), -1: at its start
     toward = {action.turned_link: -1.0 if side == "downstream" else 1.0,
               action.held_link: 1.0 if side == "downstream" else -1.0}
+    if then is not None and (then.turned_link, then.held_link) != (action.turned_link, action.held_link):
+        then = None
     saved = {arm: arm_joints(scene, arm) for arm in ARMS}
-    worst: Unreachable | None = None
+    misses: list[Unreachable] = []
+    best: tuple[bool, float, Station] | None = None
+    survey = None
+    if sight is not None and pose is not None:
+        survey = sight.survey({"held": pose, "turned": pose.after(then) if then is not None else pose})
+
+    def options(arm: str, link: int) -> Iterator[tuple[np.ndarray, float, tuple[float, ...], tuple[float, ...]]]:
+        """Where `arm` can take `link`, best first: each grasp point with the first gripper yaw that reaches it
+        (when the cameras' sight decides, then with the other yaw too: the wrist turns another way)."""
+        yaw0 = -math.radians(theta[link - 1])
+        twist = robot.turn_twist_deg if link == action.turned_link else robot.hold_twist_deg
+        later = []
+        for xy in _grasp_points(scene, link, toward[link], link == action.turned_link, sight is not None):
+            for i, yaw in enumerate((yaw0, yaw0 + math.pi)):
+                q_above, miss = robot.solve_ik(arm, [xy[0], xy[1], z_above], yaw, max_twist_deg=twist)
+                q_down = None
+                if q_above is not None:
+                    q_down, miss = robot.solve_ik(arm, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=twist)
+                if q_above is not None and q_down is not None:
+                    yield xy, yaw, q_above, q_down
+                    if sight is None:
+                        return
+                    if i == 0:
+                        later.append((xy, yaw + math.pi))
+                    break
+                misses.append(Unreachable(link, miss, f"{arm} arm over link {link} at x={xy[0]:.2f} m, "
+                                                      f"y={xy[1]:.2f} m"))
+        for xy, yaw in later:
+            q_above, _ = robot.solve_ik(arm, [xy[0], xy[1], z_above], yaw, max_twist_deg=twist)
+            if q_above is not None:
+                q_down, _ = robot.solve_ik(arm, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=twist)
+                if q_down is not None:
+                    yield xy, yaw, q_above, q_down
+
+    arc_ends: dict[tuple[str, float, float, float], tuple[float, ...] | None] = {}
+
+    def arc_end(station: Station, turner: str) -> tuple[float, ...] | None:
+        """The turning arm's joints at the end of the held turn from the station's grasp (None: it cannot follow
+        the arc)."""
+        assert then is not None
+        _, grasp_xy, yaw = station.points[turner]
+        key = (turner, round(float(grasp_xy[0]), 5), round(float(grasp_xy[1]), 5), round(yaw, 5))
+        if key not in arc_ends:
+            set_arm_joints(scene, turner, station.down[turner])
+            arc = arc_turns(robot, turner, grasp_xy, z_grasp, scene.joint_points()[joint_k - 1], then.delta_deg, yaw)
+            arc_ends[key] = None if isinstance(arc, ArcMiss) else arc[0][-1].joint_positions
+        return arc_ends[key]
+
+    def cover(station: Station, turner: str) -> tuple[bool, float]:
+        """(whether the turning arm can follow the held turn, the markers' cover summed over the postures)."""
+        assert survey is not None
+        total = sum(survey.cover("held", station.down))
+        if then is None:
+            return True, total
+        end = arc_end(station, turner)
+        if end is None:
+            return False, total
+        return True, total + sum(survey.cover("turned", {**station.down, turner: end}))
+
     try:
         for pairing, swapped in ((arms, False), (arms[::-1], True)):
             turner, keeper = pairing
-            points, above, down = {}, {}, {}
-            for arm, link in ((keeper, action.held_link), (turner, action.turned_link)):
-                yaw0 = -math.radians(theta[link - 1])
-                twist = robot.turn_twist_deg if link == action.turned_link else robot.hold_twist_deg
-                found = None
-                for xy in _grasp_points(scene, link, toward[link] if link == action.turned_link else None):
-                    for yaw in (yaw0, yaw0 + math.pi):
-                        q_above, miss = robot.solve_ik(arm, [xy[0], xy[1], z_above], yaw, max_twist_deg=twist)
-                        q_down = None
-                        if q_above is not None:
-                            q_down, miss = robot.solve_ik(arm, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=twist)
-                        if q_above is not None and q_down is not None:
-                            found = (xy, yaw, q_above, q_down)
-                            break
-                        missed = Unreachable(link, miss, f"{arm} arm over link {link} at x={xy[0]:.2f} m, "
-                                                         f"y={xy[1]:.2f} m")
-                        worst = missed if worst is None or missed.miss_m < worst.miss_m else worst
-                    if found is not None:
-                        break
-                if found is None:
-                    break
-                points[arm] = (link, found[0], found[1])
-                above[arm], down[arm] = found[2], found[3]
-            if len(points) == 2:
-                return Station(action.turned_link, action.held_link, points, above, down, swapped)
-        assert worst is not None
-        return worst
+            keeps = list(options(keeper, action.held_link))
+            turns = list(options(turner, action.turned_link)) if keeps else []
+            for kept in keeps:
+                for turned in turns:
+                    station = Station(action.turned_link, action.held_link,
+                                      {keeper: (action.held_link, kept[0], kept[1]),
+                                       turner: (action.turned_link, turned[0], turned[1])},
+                                      {keeper: kept[2], turner: turned[2]}, {keeper: kept[3], turner: turned[3]},
+                                      swapped)
+                    if survey is None:
+                        return station
+                    follows, covered = cover(station, turner)
+                    if log.isEnabledFor(logging.DEBUG):
+                        log.debug("station at j%d: %s, cover %.2f%s", joint_k - 1,
+                                  ", ".join(f"{arm} on l{link} at ({xy[0]:.3f}, {xy[1]:.3f})"
+                                            for arm, (link, xy, _) in station.points.items()),
+                                  covered, "" if follows else " (turn not followed)")
+                    if follows and covered == 0.0:
+                        return station
+                    if best is None or (not follows, covered) < (not best[0], best[1]):
+                        best = (follows, covered, station)
+        if best is not None:
+            log.info("grasp at j%d: no station the arms reach keeps every marker in clear sight; the one covering "
+                     "them least (%.2f%s)", joint_k - 1, best[1], "" if best[0] else ", its turn not followed")
+            return best[2]
+        return min(misses, key=lambda m: m.miss_m)
     finally:
         for arm, q in saved.items():
             set_arm_joints(scene, arm, q)

@@ -246,13 +246,24 @@ def run_episode(kb_url: str, token: str | None, scenario: DemoScenario, out_dir:
         "seen_links": summary.seen_links,
         "unseen_links": summary.unseen_links,
         "links_per_perception": [{"step": s.step, "seen": sum(v is not None for v in s.perceived_deg),
-                                  "unseen": list(s.missing_links), "looks": s.looks} for s in summary.steps],
+                                  "unseen": list(s.missing_links), "looks": s.looks,
+                                  "seen_by": _seen_by(s.seen_by)} for s in summary.steps],
+        "links_seen_by": dict(Counter(b for s in summary.steps for b in s.seen_by if b is not None)),
         "action_s": [round(s.action_s, 3) for s in summary.steps if s.action is not None],
         "marker_error_deg": _marker_errors(summary),
         "states_off_table": _states_off_table(summary, spec),
         "decisions": [{"seq": e["seq"], "kind": e["kind"], "reason": e["reason"]} for e in decisions],
         "out_dir": str(out_dir),
     }
+
+
+def _seen_by(sources: Sequence[str | None]) -> dict[str, list[int]]:
+    """Camera -> the links (1-based) it saw in one perception."""
+    out: dict[str, list[int]] = {}
+    for link, source in enumerate(sources, start=1):
+        if source is not None:
+            out.setdefault(source, []).append(link)
+    return out
 
 
 def _marker_errors(summary: WorkerSummary) -> list[float]:
@@ -321,6 +332,7 @@ def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
         "states_off_table": sum(r["states_off_table"] for r in results),
         "links_seen": sum(r["seen_links"] for r in results),
         "links_unseen": sum(r["unseen_links"] for r in results),
+        "links_seen_by": dict(sum((Counter(r["links_seen_by"]) for r in results), Counter())),
         "action_s": {"median": round(statistics.median(action_s), 3), "max": round(action_s[-1], 3)} if action_s else None,
         "marker_error_deg": {"mean": round(statistics.fmean(errors), 2), "max": round(errors[-1], 2)} if errors else None,
     }

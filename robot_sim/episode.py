@@ -30,6 +30,7 @@ class StepRecord:
     skill: str | None = None  # robot_skill: the skill asked for and what it did
     measured_deg: float | None = None  # after a failed or partial action: the turned link, as perceived again
     looks: int = 1
+    seen_by: tuple[str | None, ...] = ()  # the camera that saw each link (`head`, `cell`; None: unseen)
     perception_s: float = 0.0
     service_s: float = 0.0
     action_s: float = 0.0

@@ -36,8 +36,15 @@ class Perception:
 
     link_orientations_deg: tuple[float | None, ...]
     frame: np.ndarray | None = None
-    looks: int = 1  # views taken (more than one: the head turned to look again)
+    looks: int = 1  # views taken (more than one: the head turned to look again, or another camera looked)
     base_point_xy: tuple[float, float] | None = None  # p1 on the table as measured (None: l1 not seen)
+    seen_by: tuple[str | None, ...] | None = None  # the camera that saw each link (None: unseen; all None: unsaid)
+
+    @property
+    def sources(self) -> tuple[str | None, ...]:
+        """The camera that saw each link (`head` when the perception does not say), None for a link unseen."""
+        by = self.seen_by or (None,) * len(self.link_orientations_deg)
+        return tuple(None if v is None else (b or "head") for v, b in zip(self.link_orientations_deg, by))
 
     @property
     def complete(self) -> bool:
@@ -162,7 +169,8 @@ class CameraPerception:
         self._aim()
         frame = self.render()
         reading = self.read(frame)
-        return Perception(reading.link_orientations_deg, frame, base_point_xy=reading.base_point_xy)
+        return Perception(reading.link_orientations_deg, frame, base_point_xy=reading.base_point_xy,
+                          seen_by=tuple("head" if v is not None else None for v in reading.link_orientations_deg))
 
     def look(self) -> Perception:
         """Look; while markers are missing, look again with the head turned to each side, keeping what each
@@ -170,18 +178,28 @@ class CameraPerception:
         seen = self.perceive()
         if seen.complete:
             return seen
-        values = list(seen.link_orientations_deg)
-        base = seen.base_point_xy
+        again = self.look_again(seen)
+        values = tuple(v if v is not None else a for v, a in zip(seen.link_orientations_deg,
+                                                                   again.link_orientations_deg))
+        return Perception(values, seen.frame, looks=1 + again.looks,
+                          base_point_xy=seen.base_point_xy or again.base_point_xy,
+                          seen_by=tuple("head" if v is not None else None for v in values))
+
+    def look_again(self, seen: Perception) -> Perception:
+        """The links `seen` misses, as the head turned to each side sees them (each pan in turn until none is
+        missing), then the head turns back; `looks` counts the pans, the frame is none."""
+        values: list[float | None] = [None] * len(seen.link_orientations_deg)
+        base = None
         for pan in self.camera.look_again_pans_rad:
             self.turn_head(pan)
             again = self.perceive()
             values = [v if v is not None else a for v, a in zip(values, again.link_orientations_deg)]
             base = base or again.base_point_xy
-            if all(v is not None for v in values):
+            if all(v is not None or s is not None for v, s in zip(values, seen.link_orientations_deg)):
                 break
         self.turn_head(0.0)
-        return Perception(tuple(values), seen.frame, looks=1 + len(self.camera.look_again_pans_rad),
-                          base_point_xy=base)
+        return Perception(tuple(values), None, looks=len(self.camera.look_again_pans_rad), base_point_xy=base,
+                          seen_by=tuple("head" if v is not None else None for v in values))
 
     def detect(self, frame: np.ndarray, wanted: set[int]) -> dict[int, float]:
         """Marker id -> table angle for the wanted link markers seen (and trusted) in `frame`."""
@@ -207,4 +225,4 @@ class FallbackPerception:
         noise = self._rng.normal(0.0, self.sigma_deg, size=len(truth)) if self.sigma_deg > 0 else np.zeros(len(truth))
         base = self.scene.base_point()
         return Perception(tuple(float((t + n) % 360.0) for t, n in zip(truth, noise)), None,
-                          base_point_xy=(round(base[0], 4), round(base[1], 4)))
+                          base_point_xy=(round(base[0], 4), round(base[1], 4)), seen_by=("fallback",) * len(truth))

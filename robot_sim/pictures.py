@@ -163,10 +163,12 @@ def _wrap(text: str, width: int) -> str:
 
 
 # -- camera frames ---------------------------------------------------------------------------------------------
-def detect_markers(frame: np.ndarray, upscales: Sequence[int] = (2, 1, 3)) -> dict[int, np.ndarray]:
+def detect_markers(frame: np.ndarray, upscales: Sequence[int] = (2, 1, 3),
+                   wanted: frozenset[int] | None = None) -> dict[int, np.ndarray]:
     """Marker id -> its 4 corners in frame pixels, found as the camera perception finds them (the markers are
-    only ~20 px wide, so enlarged copies are searched too)."""
-    return MarkerFinder(upscales, refine=False).find(grey_image(frame))
+    only ~20 px wide, so enlarged copies are searched too); only the `wanted` ids when given (the links', not the
+    calibration board's)."""
+    return MarkerFinder(upscales, refine=False).find(grey_image(frame), wanted)
 
 
 def overlay_markers(frame: np.ndarray, markers: dict[int, np.ndarray]) -> np.ndarray:

@@ -316,6 +316,13 @@ class Scene:
             top = position + up * (self.spec.link_height_m / 2.0 + 0.001)
             self.client.resetBasePositionAndOrientation(marker, top.tolist(), quat)
 
+    def take_board_away(self) -> None:
+        """Take the calibration board's markers off the table (a cell's camera once calibrated needs them no more,
+        and a link lying on a board marker's black square would lose its own marker's white border)."""
+        for body in self.board_bodies.values():
+            self.client.removeBody(body)
+        self.board_bodies.clear()
+
     def close(self) -> None:
         """Remove the scene's temporary files (the caller disconnects its own client)."""
         self._workdir.cleanup()

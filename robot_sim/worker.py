@@ -35,7 +35,10 @@ from pybullet_utils.bullet_client import BulletClient
 from planhrc.client import KBClient, ProtocolError
 from planhrc.robot_sim.human import (Human, HumanContext, RobotTurn, apply_event, assist_failed_action,
                                      goal_differences, help_turns)
+from planhrc.robot_sim.camera import SIM_BOARD
+from planhrc.robot_sim.cell_camera import CELL, HEAD, CellCamera, CellCameraSpec, TwoCameras
 from planhrc.robot_sim.perception import CameraPerception, FallbackPerception, Perceiver, Perception
+from planhrc.robot_sim.sightlines import SightCamera, Sightlines
 from planhrc.robot_sim.pictures import caption_frame, detect_markers, draw_configurations, step_caption, write_movie
 from planhrc.robot_sim.scenarios import HumanEvent, Scenario, get_scenario
 from planhrc.robot_sim.episode import StepRecord, WorkerSummary, picture_steps
@@ -44,7 +47,7 @@ from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scene import Scene, SceneSpec, build_scene
 from planhrc.robot_sim.service_link import ServiceLink
 from planhrc.robot_sim.acting import measured_pose, perform_parts, perform_skill, way_round
-from planhrc.robot_sim.bimanual import HAND_STEPS, BothHands, single_steps
+from planhrc.robot_sim.bimanual import HAND_STEPS, RELEASE_LINKS, BothHands, single_steps
 from planhrc.robot_sim.skills import Robot, RotationAction
 from planhrc.vocabulary import ActionOutcome, DecisionKind, FailureReason, GiveUpReason, StopReason
 
@@ -66,6 +69,7 @@ class _Run:
     performed: int = 0  # scenario events the human actually carried out
     stop_message: str = ""
     final_help: tuple[str, ...] = ()  # the help request the last give-up became
+    cell_frames: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (perception, the cell camera's image)
 
 
 def _joint_index(name: str) -> int:
@@ -89,30 +93,53 @@ def _read_goal_differences(kb: ServiceLink, obj: dict[str, Any]) -> dict[int, fl
     return goal_differences(str(obj.get("formulation", "relative")), values)
 
 
-def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int, float] | None:
-    """(turned, held, delta) of the plan's action after `action`, or None (also when that action turns nothing: a
-    bimanual plan's centring, grasp or release is no move for a human)."""
+def _steps_after(kb: ServiceLink, action: dict[str, Any]) -> list[dict[str, Any]]:
+    """The steps of `action`'s plan after it, in order (none when the action names no plan or it cannot be read)."""
     plan_id, step = action.get("plan_id"), action.get("step")
     if not plan_id or step is None:
-        return None
+        return []
     try:
         plan = kb.read_plan(str(plan_id))
     except ProtocolError as exc:
         log.warning("plan %s: cannot read it (%s)", plan_id, exc)
-        return None
+        return []
     last = int(action.get("last_step") or step)
-    for entry in plan.get("steps", []):
-        if entry.get("step") == last + 1:
-            if not float(entry["delta_deg"]):
-                return None
-            return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
-    return None
+    return sorted((e for e in plan.get("steps", []) if int(e.get("step", 0)) > last), key=lambda e: int(e["step"]))
 
 
-def _perceive(perceiver: Perceiver) -> Perception:
-    """Look (the camera looks again with the head turned while markers are missing). An unseen link stays
-    unseen: nothing fills it in."""
+def _following_action(kb: ServiceLink, action: dict[str, Any]) -> tuple[int, int, float] | None:
+    """(turned, held, delta) of the plan's action after `action`, or None (also when that action turns nothing: a
+    bimanual plan's centring, grasp or release is no move for a human)."""
+    last = int(action.get("last_step") or action.get("step") or 0)
+    entry = next(iter(_steps_after(kb, action)), None)
+    if entry is None or int(entry["step"]) != last + 1 or not float(entry["delta_deg"]):
+        return None
+    return int(entry["turned_link_index"]), int(entry["held_link_index"]), float(entry["delta_deg"])
+
+
+def _held_turn(kb: ServiceLink, action: dict[str, Any]) -> RotationAction | None:
+    """The turn a bimanual plan makes with the hands that `action` (a centring or a grasp) puts on its links: the
+    turns that follow it there up to the release, as one; None when the plan turns nothing there or cannot be
+    read."""
+    links = (int(action["turned_link_index"]), int(action["held_link_index"]))
+    total, turning = 0.0, False
+    for entry in _steps_after(kb, action):
+        delta = float(entry.get("delta_deg") or 0.0)
+        if (int(entry["turned_link_index"]), int(entry["held_link_index"])) != links or (turning and not delta):
+            break
+        if delta:
+            total, turning = total + delta, True
+        elif str(entry.get("name")) == RELEASE_LINKS:
+            break
+    return RotationAction(links[0], links[1], total, name="held turn") if total else None
+
+
+def _perceive(perceiver: Perceiver, cameras: TwoCameras | None, run: _Run) -> Perception:
+    """Look (the head camera, then the cell camera for the links it missed, then the head turned; `TwoCameras`).
+    An unseen link stays unseen: nothing fills it in."""
     seen = perceiver.look()
+    if cameras is not None and cameras.last_cell_frame is not None:
+        run.cell_frames.append((len(run.frames), cameras.last_cell_frame))
     if not seen.complete:
         log.warning("perception: links %s not seen", seen.missing_links)
     return seen
@@ -135,13 +162,16 @@ def run_worker(
     record_motion: bool = True,
     record_frames: bool = True,
     recording: Recording | None = None,
+    cell_camera: CellCameraSpec | None = CellCameraSpec(),
 ) -> WorkerSummary:
     """Run the cooperation loop against the KB service until the goal is reached, or it cannot go on.
 
     `record_frames=False` skips the camera frames and the GIF when perceiving without the camera (faster);
     `record_motion=False` leaves out the GIF's frames taken half-way through each action. `kb` is the link to
     the service (default: a `KBClient` on `kb_url`; the ROS 2 layer passes its link through the bridge's topics).
-    `recording` makes the episode's recorder (`--record`: the ROS 2 layer's bag in `out_dir`).
+    `recording` makes the episode's recorder (`--record`: the ROS 2 layer's bag in `out_dir`). `cell_camera` is
+    the cell's fixed camera with the camera perception (None: the head camera alone), calibrated from the board
+    on the table (`camera.SIM_BOARD`) before the first look; the bimanual grasps then keep the markers in sight.
     """
     if perception not in ("camera", "fallback"):
         raise SimError(f"perception: must be 'camera' or 'fallback', got {perception!r}")
@@ -163,24 +193,35 @@ def run_worker(
         if spec.n_links != len(links):
             raise SimError(f"scene_spec.n_links: {spec.n_links}, but object {object_id} has {len(links)} links")
         scenario = human_scenario if isinstance(human_scenario, Scenario) else get_scenario(human_scenario, spec.n_links)
+        cell_camera = cell_camera if perception == "camera" else None  # without the camera nothing looks
+        if cell_camera is not None and spec.board is None:
+            spec = replace(spec, board=SIM_BOARD)  # the cell's calibration board lies on the table
         scene = build_scene(client, spec)
         served = kb
         robot = Robot(scene, realtime_s=0.01 if gui else 0.0)
         camera = CameraPerception(client, scene)
-        perceiver: Perceiver = (camera if perception == "camera"
+        cameras, sight = None, None
+        if cell_camera is not None:
+            cell = CellCamera(client, scene, cell_camera)
+            cell.calibrate()  # once, the arms at home, as a cell's camera is calibrated when it is mounted
+            scene.take_board_away()
+            cameras = TwoCameras(camera, cell)
+            sight = Sightlines(scene, [SightCamera(HEAD, camera.pose, camera.intrinsics),
+                                       SightCamera(CELL, cell.pose, cell.intrinsics)])
+        perceiver: Perceiver = ((cameras or camera) if perception == "camera"
                                 else FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed))
         if recording is not None:
             recorder = recording(out, obj, goal_link_orientations_deg)
             served, perceiver = recorder.link(kb), recorder.perceiver(perceiver, camera)
         human = Human(scene)
         # a bimanual plan's grasps stay across its steps: the worker's hands remember them
-        both = BothHands(scene, robot) if obj.get("formulation") == "bimanual" else None
+        both = BothHands(scene, robot, sight) if obj.get("formulation") == "bimanual" else None
         context = HumanContext(step_deg=float(obj.get("step_deg") or 360 / int(obj["orientations"])),
                                goal_differences=_read_goal_differences(kb, obj))
         run = _Run()
         summary_reason = _loop(served, object_id, scene, robot, camera, perceiver, human, scenario, context,
                                max_steps, run, record_motion=record_motion and record_frames,
-                               record_frames=record_frames, both=both)
+                               record_frames=record_frames, both=both, cameras=cameras)
         reached = summary_reason is StopReason.GOAL_REACHED
         summary = WorkerSummary(
             object_id=object_id,
@@ -229,7 +270,7 @@ def _signature(action: RotationAction) -> tuple[int, int, float, int, str]:
 def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: CameraPerception, perceiver: Perceiver,
           human: Human, scenario: Scenario, context: HumanContext, max_steps: int, run: _Run,
           record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3,
-          both: BothHands | None = None) -> StopReason:
+          both: BothHands | None = None, cameras: TwoCameras | None = None) -> StopReason:
     """Perceive -> decide -> act until the goal; returns why it stopped.
 
     A failed action is not tried again the same way: a macro step that failed is split into its single steps;
@@ -253,7 +294,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             human.finish()  # the robot waits until the human has let go; the next move starts from there
 
         t0 = time.perf_counter()
-        seen = _perceive(perceiver)
+        seen = _perceive(perceiver, cameras, run)
         t1 = time.perf_counter()
         values = seen.link_orientations_deg
         # nothing seen at all says nothing the service could store: it is an incomplete perception here
@@ -273,7 +314,8 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
                     perceived_deg=tuple(None if v is None else round(v, 2) for v in values),
                     true_deg=tuple(round(v, 2) for v in theta), missing_links=seen.missing_links,
                     decision=kind, reason="no link seen (not posted)" if decision is None else decision.reason,
-                    looks=seen.looks, matched_expected_step=None if decision is None else decision.matched_expected_step,
+                    looks=seen.looks, seen_by=seen.sources,
+                    matched_expected_step=None if decision is None else decision.matched_expected_step,
                     perception_s=t1 - t0, service_s=t2 - t1)
         if decision is None or decision.decision is DecisionKind.INCOMPLETE_PERCEPTION:
             # the head has turned to look again already; nothing is filled in from elsewhere
@@ -311,7 +353,13 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
 
         if decision.decision is DecisionKind.ROBOT_SKILL:
             t3 = time.perf_counter()
+            held = both.held_links() if both is not None else ()
+            if both is not None and held:
+                both.let_go()  # a slide takes its own links: the hands let go first, as the plan has them do
+                context.busy_links = ()
             done = perform_skill(scene, robot, decision.skill or {})
+            if held:
+                done = f"let go of links {' and '.join(map(str, held))}, then {done}"
             run.records.append(StepRecord(**base, skill=done, action_s=time.perf_counter() - t3))
             step += 1
             continue
@@ -396,7 +444,8 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
         if parts is None:
             result = None
         elif both is not None:
-            result = both.perform(parts, data, pose, final, interrupt, stop_fraction)
+            then = _held_turn(kb, data) if hand_step and action.name != RELEASE_LINKS and both.sight else None
+            result = both.perform(parts, data, pose, final, interrupt, stop_fraction, then)
         else:
             result = perform_parts(scene, robot, pose, parts, final, interrupt, stop_fraction)
         t4 = time.perf_counter()
@@ -521,7 +570,11 @@ def _save(out: Path, summary: WorkerSummary, run: _Run, spec: SceneSpec,
     (out / "summary.json").write_text(json.dumps(data, indent=2, default=str))
     steps = picture_steps(run.records, run.configurations, run.base_points)
     by_step = {s.step: s for s in steps}
-    markers = [detect_markers(frame) for frame in run.frames]
+    links = frozenset(range(spec.n_links))  # link K carries marker K-1; the board's markers are not the object's
+    markers = [detect_markers(frame, wanted=links) for frame in run.frames]
+    for i, frame in run.cell_frames:  # what the cell camera saw when the head camera missed links
+        Image.fromarray(caption_frame(frame, [f"perception {i + 1}: the cell camera", "", ""],
+                                      markers=detect_markers(frame, wanted=links))).save(out / f"cell_{i:03d}.png")
     if len(markers) == len(steps):  # what the pictures draw on each frame is what they report
         steps = [replace(s, markers_seen=len(m)) for s, m in zip(steps, markers)]
         by_step = {s.step: s for s in steps}

@@ -188,7 +188,9 @@ def test_an_unseen_link_is_posted_unseen_and_never_filled_from_the_simulator(kb,
     assert all(p[2] is None and None not in p[:2] + p[3:] for p in posted)
     assert summary.stop_reason == "unseen_links" and not summary.reached_goal
     assert summary.unseen_links == 3 and summary.seen_links == 12
-    assert all(s.decision == "incomplete_perception" and s.looks == 5 for s in summary.steps)
+    # the head straight ahead, the cell camera, then the head turned 4 times: no camera saw link 3
+    assert all(s.decision == "incomplete_perception" and s.looks == 6 for s in summary.steps)
+    assert all(s.seen_by[2] is None and None not in s.seen_by[:2] + s.seen_by[3:] for s in summary.steps)
     gave_up = [b for m, path, _, b in kb.log if path == "/objects/o1/give-up"]  # and the service is told
     assert gave_up == [{"reason": "unseen_links", "message": "links [3] not seen in 3 perceptions"}]
 
