@@ -7,7 +7,7 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 | `records`, `errors` | the immutable records the store hands out and its typed errors (root `KBError`) |
 | `names` | the IRIs of the TBox and the ABox, and how each record and ground predicate is named |
 | `checks` | the input checks of every write (pure: they read only the object), `check_plan` -> `CheckedPlan` |
-| `cache` | the one cached get of records (cache -> load -> `NotFoundError`) |
+| `cache`, `identity` | the one cached get of records (cache -> load -> `NotFoundError`); the identity map every engine's records are (the journal first, the cache limit) |
 | `backends`, `location` | the backends by name; `open_store(db, tbox)` opens the one a location names; a location as it may be shown (no password) |
 | `unit`, `facade` | what the shared writes ask of a backend's unit of work; what every backend's store class does alike |
 | `knowledge_base` | `SqliteStore`: the SQLite backend, the parts below in one database |

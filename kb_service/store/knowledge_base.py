@@ -32,7 +32,7 @@ from .interface import MAX_EVENTS_PAGE, MAX_SEQ
 from .journal import JournalTable
 from .names import ABOX_IRI
 from .owl import World
-from .reads import Records
+from .reads import SqliteRecords
 from .records import Compaction, Execution, StoredEvent
 from .responses import ResponseMemory
 from .retention import compact_object
@@ -48,14 +48,14 @@ class SqliteStore(StoreFacade):
     """TBox + ABox in one owlready2 World on SQLite (a file, or memory when `path` is None), with the service's
     side tables; thread safe."""
 
-    _records: Records
+    _records: SqliteRecords
 
     def __init__(self, path: str | None, tbox_path: Path | str) -> None:
         abox = self._abox = Abox(path, tbox_path)
         self._guard = abox.guard
         try:
             journal = JournalTable(abox.q)
-            self._records = Records(abox, journal)
+            self._records = SqliteRecords(abox, journal)
             self._backlog = PlanBacklog(abox, self._records, journal)
             abox.listen(self._backlog, self._records)
             self._writes = RecordWriter(abox, self._records, self._backlog)
