@@ -298,20 +298,20 @@ class StoreCore:
             return tuple(self._records.info(ident).obj for ident in self._records.object_ids())
 
     def get_state(self, state_id: str) -> StoredState:
-        with self._guard:
-            return self._records.states.get(state_id)
+        return self._get(self._records.states, state_id)
 
     def get_problem(self, problem_id: str) -> StoredProblem:
-        with self._guard:
-            return self._records.problems.get(problem_id)
+        return self._get(self._records.problems, problem_id)
 
     def get_plan(self, plan_id: str) -> StoredPlan:
-        with self._guard:
-            return self._records.plans.get(plan_id)
+        return self._get(self._records.plans, plan_id)
 
     def get_action(self, action_id: str) -> StoredAction:
+        return self._get(self._records.actions, action_id)
+
+    def _get(self, records: RecordCache[R], ident: str) -> R:
         with self._guard:
-            return self._records.actions.get(action_id)
+            return records.get(ident)
 
     def latest_problem(self, object_id: str) -> StoredProblem | None:
         return self._latest(self._records.problems, object_id)

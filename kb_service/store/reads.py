@@ -98,10 +98,9 @@ class SqliteRecords(IdentityMap):
         return None if key is None else (sid, key)
 
     def _read_state(self, state_id: str) -> StoredState | None:
-        abox = self.abox
-        typed = self._typed(state_id, STATE_CLASSES)
-        if typed is None:
+        if (typed := self._typed(state_id, STATE_CLASSES)) is None:
             return None
+        abox = self.abox
         sid, kind = typed
         obj_sid = abox.ref(sid, "stateOf")
         abox.names([obj_sid])
@@ -132,10 +131,9 @@ class SqliteRecords(IdentityMap):
         return StoredProblem(problem_id, o, i, g, float(abox.data1(sid, "createdAt")))
 
     def _read_action(self, action_id: str) -> StoredAction | None:
-        abox = self.abox
-        typed = self._typed(action_id, ACTION_CLASSES)
-        if typed is None:
+        if (typed := self._typed(action_id, ACTION_CLASSES)) is None:
             return None
+        abox = self.abox
         sid, name = typed
         parts: dict[str, list[int]] = {p: abox.objn(sid, p) for p in ("pre", "effNeg", "effPos")}
         ces = sorted(abox.objn(sid, "condEff"), key=lambda c: int(abox.data1(c, "position")))
