@@ -92,6 +92,19 @@ def state_size(obj: ArticulatedObject) -> int:
     return len(obj.state([0] * obj.n_joints))
 
 
+class StateSizes:
+    """`state_size` of each object, made once (objects never change): whether a task on it is worth a worker."""
+
+    def __init__(self) -> None:
+        self._sizes: dict[str, int] = {}  # object id -> state_size
+
+    def at_least(self, obj: ArticulatedObject, atoms: int) -> bool:
+        size = self._sizes.get(obj.ident)
+        if size is None:
+            size = self._sizes.setdefault(obj.ident, state_size(obj))
+        return size >= atoms
+
+
 # -- the outcome on the wire ----------------------------------------------------------------------------------
 def pack_outcome(outcome: PlanOutcome) -> Iterator[bytes]:
     """The outcome as frames: a header (the outcome without actions and states, and how many frames follow),
@@ -209,7 +222,7 @@ class PlanningPool:
         self._all: set[_Worker] = set()
         self._cond = threading.Condition()
         self._closed = False
-        self._sizes: dict[str, int] = {}  # object id -> state_size (objects never change)
+        self._sizes = StateSizes()
         self._pause = _CollectorPause()
 
     def close(self) -> None:
@@ -241,12 +254,7 @@ class PlanningPool:
 
     def takes(self, obj: ArticulatedObject) -> bool:
         """Whether a task on `obj` is worth a worker (large enough, and the pool open)."""
-        if self.size == 0 or self._closed:
-            return False
-        size = self._sizes.get(obj.ident)
-        if size is None:
-            size = self._sizes.setdefault(obj.ident, state_size(obj))
-        return size >= self.min_atoms
+        return self.size != 0 and not self._closed and self._sizes.at_least(obj, self.min_atoms)
 
     def plan(self, job: PlanningJob) -> PlanOutcome:
         """The job's outcome: the worker's, or `timeout` / `error` when no worker answered in time or it died."""

@@ -40,7 +40,7 @@ from planhrc.pipeline import PlanOutcome
 from planhrc.vocabulary import PlanningStatus
 
 from .metrics import WorkerMetrics
-from .planning_pool import JobCollector, PlanningJob, pack_outcome, state_size, unpack_outcome
+from .planning_pool import JobCollector, PlanningJob, StateSizes, pack_outcome, unpack_outcome
 from .store import UnavailableError
 from .store.postgres.jobs import (CLAIM, COLLECT, DEPTH, DONE_CHANNEL, FINISH, FORGET, HAND_BACK, JOB_CHANNEL,
                                   JOB_TABLES, MIN_LEFT_S, RENEW, SUBMIT, WITHDRAW, Claimed, claimed)
@@ -108,7 +108,7 @@ class QueuedPlanning:
         self._link = _Link(db, password, "planhrc-planning")
         self._guard = threading.Lock()
         self._waiting: dict[int, threading.Event] = {}
-        self._sizes: dict[str, int] = {}
+        self._sizes = StateSizes()
         self._closed = threading.Event()
         self._listener = threading.Thread(target=self._listen, name="planhrc-planning-done", daemon=True)
         self._listener.start()
@@ -122,12 +122,7 @@ class QueuedPlanning:
         self._link.close()
 
     def takes(self, obj: ArticulatedObject) -> bool:
-        if self._closed.is_set():
-            return False
-        size = self._sizes.get(obj.ident)
-        if size is None:
-            size = self._sizes.setdefault(obj.ident, state_size(obj))
-        return size >= self.min_atoms
+        return not self._closed.is_set() and self._sizes.at_least(obj, self.min_atoms)
 
     def plan(self, job: PlanningJob) -> PlanOutcome:
         """The outcome a worker made, or `timeout` when none came by the job's deadline and its grace (the job is

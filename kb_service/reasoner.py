@@ -13,6 +13,7 @@ import io
 import logging
 import os
 import subprocess
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -28,7 +29,7 @@ from planhrc.service_process import die_with_parent
 
 from .store import ABOX_IRI, TBOX_IRI, KnowledgeStore, SqliteStore
 from .store.errors import ReasonerError
-from .store.owl import facts_in, iri_pairs, reasoner_subprocess_kwargs
+from .store.owl import facts_in, iri_pairs, pellet_command, reasoner_subprocess_kwargs
 
 log = logging.getLogger(__name__)
 
@@ -241,3 +242,24 @@ def derive_relative_orientations(kb: SqliteStore, state_id: str, timeout_s: floa
         return tuple(degrees[k] for k in range(2, n + 1))
     finally:
         copy.close()
+
+
+def run_pellet(world: World, args: Sequence[str], timeout_s: float, what: str, *, file_name: str,
+               jvm_options: Sequence[str] = ()) -> subprocess.CompletedProcess[str]:
+    """Pellet as owlready2 ships it (`pellet_command`), run with `args` on `world` saved as RDF/XML to a temporary
+    file (its path the last argument), ending with the service; no answer within `timeout_s`, or no Java, is a
+    `ReasonerError` naming `what`."""
+    _configure_java()
+    with tempfile.TemporaryDirectory(prefix="planhrc-pellet-") as tmp:
+        path = Path(tmp) / file_name
+        world.save(str(path), format="rdfxml")
+        command = pellet_command(owlready2.JAVA_EXE)
+        command[1:1] = jvm_options
+        command += [*args, str(path)]
+        try:
+            return subprocess.run(command, capture_output=True, text=True, timeout=timeout_s,
+                                  preexec_fn=die_with_parent)
+        except subprocess.TimeoutExpired:
+            raise ReasonerError(f"{what}: no answer within {timeout_s:g} s") from None
+        except OSError as exc:
+            raise ReasonerError(f"{what}: cannot start Java: {exc}") from None

@@ -16,8 +16,6 @@ import logging
 import random
 import re
 import statistics
-import subprocess
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,12 +26,10 @@ from owlready2 import AllDifferent, And, Not, OneOf, Thing, World
 
 from planhrc.model import HAS_ORIENTATION, Atom, State, is_subsumed, make_object
 from planhrc.paths import default_tbox_path
-from planhrc.service_process import die_with_parent
 
-from .reasoner import _configure_java, drop_builtin_rules, reason_in_place
+from .reasoner import drop_builtin_rules, reason_in_place, run_pellet
 from .store import ABOX_IRI, PREDICATES, TBOX_IRI
 from .store.errors import ReasonerError, ValidationError
-from .store.owl import pellet_command
 
 log = logging.getLogger(__name__)
 
@@ -185,19 +181,8 @@ _UNSAT_NAME = re.compile(r"\b(Q_\d+)\b")
 
 def _pellet_unsatisfiable(world: World, timeout_s: float) -> set[str]:
     """Names of the unsatisfiable named classes of `world`, by one `pellet unsat` run (OWL API loader)."""
-    _configure_java()
-    with tempfile.TemporaryDirectory(prefix="planhrc-dl-") as tmp:
-        path = Path(tmp) / "batch.owl"
-        world.save(str(path), format="rdfxml")
-        command = pellet_command(owlready2.JAVA_EXE) + ["unsat", "-v", "--loader", "OWLAPIv3", "--ignore-imports",
-                                                        str(path)]
-        try:
-            proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s,
-                                  preexec_fn=die_with_parent)
-        except subprocess.TimeoutExpired:
-            raise ReasonerError(f"pellet: no answer within {timeout_s} s") from None
-        except OSError as exc:
-            raise ReasonerError(f"pellet: cannot start Java: {exc}") from None
+    proc = run_pellet(world, ["unsat", "-v", "--loader", "OWLAPIv3", "--ignore-imports"], timeout_s, "pellet",
+                      file_name="batch.owl")
     timer = proc.stderr[proc.stderr.find("Timer summary"):] if "Timer summary" in proc.stderr else ""
     log.debug("pellet unsat: %s", timer)
     if proc.returncode != 0:

@@ -11,7 +11,6 @@ options of `jvm` (a short run, and their classes cached ahead of time).
 from __future__ import annotations
 
 import re
-import subprocess
 import tempfile
 import time
 from dataclasses import dataclass
@@ -21,10 +20,9 @@ from typing import Any, Sequence
 import owlready2
 from owlready2 import World
 
-from planhrc.service_process import die_with_parent
 from planhrc.vocabulary import ReasoningScope
 
-from ..reasoner import INFERENCES_IRI, REASONERS, _configure_java, drop_builtin_rules, reason_in_place
+from ..reasoner import INFERENCES_IRI, REASONERS, _configure_java, drop_builtin_rules, reason_in_place, run_pellet
 from ..store import ABOX_IRI, TBOX_IRI, ReasonerError, ValidationError
 from ..store.owl import load_ntriples, ntriples_in, pellet_command, reasoner_classpath
 from .entailment import Vocabulary
@@ -130,20 +128,8 @@ def _made_cache(cache: Path, given: ReasonerInput, timeout_s: float) -> str:
 
 def explain_inconsistency(world: World, timeout_s: float, cache: Path | None = None) -> list[str]:
     """The axioms of one explanation of the inconsistency of `world`, by `pellet explain --inconsistent`."""
-    _configure_java()
-    with tempfile.TemporaryDirectory(prefix="planhrc-explain-") as tmp:
-        path = Path(tmp) / "abox.owl"
-        world.save(str(path), format="rdfxml")
-        command = pellet_command(owlready2.JAVA_EXE)
-        command[1:1] = java_options(cache)
-        command += ["explain", "--inconsistent", "--ignore-imports", str(path)]
-        try:
-            proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s,
-                                  preexec_fn=die_with_parent)
-        except subprocess.TimeoutExpired:
-            raise ReasonerError(f"pellet explain: no answer within {timeout_s:g} s") from None
-        except OSError as exc:
-            raise ReasonerError(f"pellet explain: cannot start Java: {exc}") from None
+    proc = run_pellet(world, ["explain", "--inconsistent", "--ignore-imports"], timeout_s, "pellet explain",
+                      file_name="abox.owl", jvm_options=java_options(cache))
     return parse_explanation(proc.stdout)
 
 

@@ -7,14 +7,14 @@ default) and PostgreSQL (`postgres/`, an optional dependency), split by responsi
 | `records`, `errors` | the immutable records the store hands out and its typed errors (root `KBError`) |
 | `names` | the IRIs of the TBox and the ABox, and how each record and ground predicate is named |
 | `checks` | the input checks of every write (pure: they read only the object), `check_plan` -> `CheckedPlan` |
-| `cache` | the one cached get of records (cache -> load -> `NotFoundError`) |
+| `cache`, `identity` | the one cached get of records (cache -> load -> `NotFoundError`); the identity map every engine's records are (the journal first, the cache limit) |
 | `backends`, `location` | the backends by name; `open_store(db, tbox)` opens the one a location names; a location as it may be shown (no password) |
-| `unit`, `facade` | what the shared writes ask of a backend's unit of work; what every backend's store class does alike |
+| `work`, `unit`, `facade` | the core every engine shares: the unit of work and the guard (`UnitOfWork`); what the shared writes ask of an engine; the store's core (`StoreCore`: life cycle, reads, side tables' checks, compaction's steps) |
 | `knowledge_base` | `SqliteStore`: the SQLite backend, the parts below in one database |
-| `abox` | the SQLite ABox's unit of work: the owlready2 world, names of individuals, counters, `transaction()` |
-| `reads`, `writes`, `triples` | records read back from triples, the writes, and what each record is as triples |
+| `abox` | the SQLite engine's unit of work: the owlready2 world, names of individuals, counters, its connection's commit and rollback |
+| `reads`, `writes`, `triples` | the SQLite engine's reads of records (`SqliteRecords`), the writes, and what each record is as triples |
 | `journal`, `backlog` | a new plan's journal row (the plan, read from it), written out as triples when a reader of the triples needs them |
-| `events`, `execution`, `responses`, `inferred` | the event log, the execution cursor, idempotent responses, what a reasoner inferred (side tables) |
+| `events`, `execution`, `responses`, `inferred` | the SQLite engine's side tables: the event log, the execution cursor, idempotent responses, what a reasoner inferred (checked by `checks`) |
 | `retention`, `export`, `roots` | compaction of each object's history; RDF export (N-Triples, RDF/XML, Turtle); where an object's current ABox starts (every backend's) |
 | `owl` | every use of owlready2's internals (its SQLite tables, storids, literal encoding, reasoner settings) |
 | `postgres` | `PostgresStore`: the ABox as rows of triples in PostgreSQL, the side tables beside it, what replicas need |

@@ -5,8 +5,9 @@ The ontology lives in an owlready2 `World` backed by SQLite. The TBox file is lo
 ABox is written straight into owlready2's quad tables (`objs`, `datas`) through the adapter (`owl.QuadStore`), a
 `Batch` of triples at a time, after the whole input has been checked (`checks`): a write either commits completely
 or not at all. Nothing loads ABox individuals as owlready2 Python objects, so owlready2's entity cache never goes
-stale. What reacts to a commit or a rollback (the record caches of `reads`, the count of journalled plans of
-`backlog`) registers as a `TransactionListener`.
+stale. Its transactions, counts and listeners (the record caches of `reads`, the count of journalled plans of
+`backlog`) are the unit of work's (`work.UnitOfWork`); this engine supplies the SQLite connection's commit and
+rollback.
 
 Every method here is called with `lock` held; the store (`knowledge_base.SqliteStore`) takes it.
 """
@@ -14,30 +15,21 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import threading
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence, TypeVar
+from typing import Any, Iterable, Iterator, Sequence
 
 from .errors import DamagedStoreError, KBError
 from .names import ABOX_IRI, TBOX_IRI, TBOX_TERMS, counter_name, record_name
 from .owl import NAMED_INDIVIDUAL, RDF_TYPE, QuadStore, World
+from .work import UnitOfWork
 
 log = logging.getLogger(__name__)
-T = TypeVar("T")
 
 _TABLES = (
     "CREATE TABLE IF NOT EXISTS planhrc_meta (key TEXT PRIMARY KEY, value TEXT)",
     "CREATE TABLE IF NOT EXISTS planhrc_counter (name TEXT PRIMARY KEY, value INTEGER)",
 )
-
-
-class TransactionListener(Protocol):
-    """What keeps state about uncommitted writes: told when the open transaction commits or rolls back."""
-
-    def committed(self) -> None: ...
-
-    def rolled_back(self) -> None: ...
 
 
 class Batch:
@@ -64,36 +56,16 @@ class Batch:
         self.datas.append((s, self.terms[prop], value))
 
 
-class Guard:
-    """`with guard:` holds the store's lock and refuses a closed store (what every public method of the store
-    does first)."""
-
-    __slots__ = ("_abox",)
-
-    def __init__(self, abox: Abox) -> None:
-        self._abox = abox
-
-    def __enter__(self) -> None:
-        self._abox.lock.acquire()
-        if self._abox.closed:
-            self._abox.lock.release()
-            raise KBError("knowledge base: closed")
-
-    def __exit__(self, *exc: object) -> None:
-        self._abox.lock.release()
-
-
-class Abox:
+class Abox(UnitOfWork):
     """TBox + ABox in one owlready2 World on SQLite, with the store's counters, in one transaction at a time."""
 
     def __init__(self, path: str | None, tbox_path: Path | str) -> None:
-        self.lock = threading.RLock()
+        super().__init__()
         self.path = path
         self.tbox_path = Path(tbox_path)
         if not self.tbox_path.is_file():
             raise KBError(f"tbox_path: no such file {self.tbox_path}")
         self.q = QuadStore(path)
-        self.closed = False
         try:
             if path:
                 self.q.use_wal()
@@ -106,20 +78,11 @@ class Abox:
         except Exception:
             self.q.abandon()
             raise
-        self.depth = 0  # nesting of `transaction()`: writes inside commit with the outermost one
-        # /health reads these without a query: counted once at open, then kept by every commit.
         self.triples = self.q.count()
         self.objects = len(self.q.subjects(RDF_TYPE, self.t["ArticulatedObject"], self.c))
-        self.pending_triples = 0  # written by the open transaction
-        self.pending_objects = 0
         self.revision = 0  # commits since the store was opened (`Reads.revision`)
         self.iri_sid: dict[str, int] = {}
         self.sid_name: dict[int, str] = {}
-        self._listeners: tuple[TransactionListener, ...] = ()
-        self.guard = Guard(self)
-
-    def listen(self, *listeners: TransactionListener) -> None:
-        self._listeners = listeners
 
     def _load_tbox(self) -> None:
         data = self.tbox_path.read_bytes()
@@ -135,12 +98,7 @@ class Abox:
     def world(self) -> World:
         return self.q.world
 
-    def check_open(self) -> None:
-        if self.closed:
-            raise KBError("knowledge base: closed")
-
-    def close(self) -> None:
-        self.closed = True
+    def _close_connection(self) -> None:
         self.q.close()
 
     # -- names of individuals -----------------------------------------------------------------------------
@@ -176,9 +134,6 @@ class Abox:
 
     def batch(self) -> Batch:
         return Batch(self.t)
-
-    def note_object(self) -> None:
-        self.pending_objects += 1
 
     # -- triples of one individual ------------------------------------------------------------------------
     def is_a(self, sid: int, cls: str) -> bool:
@@ -244,53 +199,15 @@ class Abox:
         self.q.insert_datas(self.c, [(resolve(s), p, value) for s, p, value in batch.datas])
         self.pending_triples += len(batch.objs) + len(batch.datas)
 
-    def write(self, fill: Callable[[], T]) -> T:
-        """Run `fill()` (which adds triples / side-table rows) in one transaction; roll back on any error.
-        Inside `transaction()` it only adds to the open transaction, which commits or rolls back as a whole."""
-        if self.depth:
-            return fill()
-        try:
-            result = fill()
-            self._commit()
-            return result
-        except BaseException:
-            self._rollback()
-            raise
-
+    # -- transactions (`work.UnitOfWork.transaction`) -------------------------------------------------------
     @contextmanager
-    def transaction(self) -> Iterator[None]:
-        """Every write inside the block is one transaction: all of them commit together at the end, or, when
-        anything in the block raises (a refused write included), none does and the store is as before."""
-        if self.depth:
-            self.depth += 1
-            try:
-                yield
-            finally:
-                self.depth -= 1
-            return
-        self.depth = 1
+    def _one_transaction(self) -> Iterator[None]:
         try:
             yield
-            self._commit()
+            self.q.commit()
         except BaseException:
-            self._rollback()
+            self.q.rollback()
+            # Storids handed out in a rolled-back transaction are invalid: forget every name (they are read again).
+            self.forget_names()
             raise
-        finally:
-            self.depth = 0
-
-    def _commit(self) -> None:
-        self.q.commit()
-        self.triples += self.pending_triples
-        self.objects += self.pending_objects
-        self.pending_triples = self.pending_objects = 0
         self.revision += 1
-        for listener in self._listeners:
-            listener.committed()
-
-    def _rollback(self) -> None:
-        self.q.rollback()
-        self.pending_triples = self.pending_objects = 0
-        # Storids handed out in a rolled-back transaction are invalid: forget every name (they are read again).
-        self.forget_names()
-        for listener in self._listeners:
-            listener.rolled_back()

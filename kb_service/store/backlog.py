@@ -14,7 +14,7 @@ from typing import Iterable
 
 from .abox import Abox
 from .journal import JournalEntry, JournalTable
-from .reads import Records
+from .reads import SqliteRecords
 from .records import StoredPlan
 from .triples import plan_triples
 
@@ -29,7 +29,7 @@ YIELD_S = 0.002
 class PlanBacklog:
     """The journalled plans of one SQLite ABox; a `TransactionListener` of its `Abox`."""
 
-    def __init__(self, abox: Abox, records: Records, table: JournalTable) -> None:
+    def __init__(self, abox: Abox, records: SqliteRecords, table: JournalTable) -> None:
         self._abox = abox
         self._records = records
         self._table = table

@@ -1,4 +1,4 @@
-"""The one cached get of the store's records (and of objects' infos, `object_info`): from the cache, else loaded from
+"""The one cached get of the store's records: from the cache, else loaded from
 the backend (a journalled plan, its actions and expected states from its row), else NotFoundError.
 
 Records are immutable, so a cached one is never stale; the cache is dropped whole (after a rollback, or when it
@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from typing import Callable, Generic, Protocol, TypeVar
 
-from planhrc.model import ArticulatedObject
-
-from .checks import ObjectInfo
-from .errors import NotFoundError, ValidationError
+from .errors import NotFoundError
 
 
 class Record(Protocol):
@@ -62,18 +59,3 @@ class RecordCache(Generic[R]):
     def __len__(self) -> int:
         return len(self._records) + len(self._later)
 
-
-def object_info(objects: dict[str, ObjectInfo], load: Callable[[str], ArticulatedObject | None], object_id: str,
-                field: str | None = None) -> ObjectInfo:
-    """An object's info from `objects`, else loaded (and kept); unknown -> ValidationError naming `field` (writes)
-    or NotFoundError (reads)."""
-    info = objects.get(object_id) if isinstance(object_id, str) else None
-    if info is None and isinstance(object_id, str):
-        obj = load(object_id)
-        if obj is not None:
-            info = objects[object_id] = ObjectInfo(obj)
-    if info is None:
-        if field is None:
-            raise NotFoundError(f"object_id: no object {object_id!r}")
-        raise ValidationError(f"{field}: no object {object_id!r}")
-    return info

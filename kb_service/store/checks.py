@@ -7,6 +7,7 @@ service runs it while VAL checks the same plan). Nothing here depends on a backe
 """
 from __future__ import annotations
 
+import json
 import time
 from functools import cached_property
 from typing import Any, Sequence
@@ -22,11 +23,12 @@ from planhrc.model import (
     orientation_name,
     perceive,
 )
+from planhrc.vocabulary import ExecutionStatus, one_of
 
 from .errors import DeadlineError, ValidationError
 from .interface import FORMATS, HISTORY, MAX_SEQ
 from .names import ACTION_CLASSES, COMPLETE_KINDS, PREDICATES, atom_fragment
-from .records import STATE_KINDS, ActionSpec, CheckedPlan, CondEffect
+from .records import STATE_KINDS, ActionSpec, CheckedPlan, CondEffect, Execution, StoredPlan
 
 MAX_VALID_ACTIONS = 20_000  # actions kept as checked per object (`ObjectInfo.valid_actions`)
 
@@ -330,3 +332,68 @@ def check_export(history: Any, object_ids: Any, fmt: Any = "nt") -> None:
         raise ValidationError(f"history: must be one of {', '.join(HISTORY)}, got {history!r}")
     if history == "all" and object_ids is not None:
         raise ValidationError("object: the whole history is exported for every object (history=all)")
+
+
+# -- the side tables' rows (every engine's: the core checks them before its engine writes them) ---------------------
+def check_event(kind: Any, reason: Any, data: Any) -> str:
+    """Validate an event; returns its data as JSON text."""
+    if not isinstance(kind, str) or not kind:
+        raise ValidationError("kind: must be a non-empty string")
+    if not isinstance(reason, str):
+        raise ValidationError("reason: must be a string")
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise ValidationError(f"data: expected a dict, got {type(data).__name__}")
+    return _json_text("data", data)
+
+
+def check_response(key: Any, response: Any) -> str:
+    """Validate a response to remember; returns it as JSON text."""
+    if not isinstance(key, str) or not key:
+        raise ValidationError("key: must be a non-empty string")
+    if not isinstance(response, dict):
+        raise ValidationError(f"response: expected a dict, got {type(response).__name__}")
+    return _json_text("response", response)
+
+
+def _json_text(field: str, value: dict[str, Any]) -> str:
+    try:
+        return json.dumps(value, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"{field}: not JSON-serialisable ({exc})") from None
+
+
+def check_inferred(scope: object, lines: Sequence[object]) -> list[str]:
+    """Validate what a reasoner inferred, to keep: a non-empty scope, N-Triples lines (each ending with ' .'); the
+    lines, each ending with a newline."""
+    if not isinstance(scope, str) or not scope:
+        raise ValidationError("scope: must be a non-empty string")
+    out = []
+    for i, line in enumerate(lines):
+        if not isinstance(line, str) or not line.rstrip().endswith("."):
+            raise ValidationError(f"lines[{i}]: not an N-Triples line")
+        out.append(line if line.endswith("\n") else line + "\n")
+    return out
+
+
+def check_execution(object_id: str, execution: Execution, plan: StoredPlan | None) -> None:
+    """Validate a new execution of `object_id`; `plan` is the stored plan `execution.plan_id` names."""
+    if execution.status not in set(ExecutionStatus):
+        raise ValidationError(f"execution.status: must be {one_of(ExecutionStatus)}, got {execution.status!r}")
+    if plan is not None and plan.object_id != object_id:
+        raise ValidationError(f"execution.plan_id: plan {plan.id!r} belongs to object {plan.object_id!r}")
+    if execution.next_step is not None:
+        if isinstance(execution.next_step, bool) or not isinstance(execution.next_step, int):
+            raise ValidationError("execution.next_step: must be an integer or None")
+        if plan is None:
+            raise ValidationError("execution.next_step: needs a plan_id")
+        if not 1 <= execution.next_step <= len(plan.actions) + 1:
+            raise ValidationError(
+                f"execution.next_step: must be in 1..{len(plan.actions) + 1}, got {execution.next_step}"
+            )
+    if execution.dispatched_action_id is not None:
+        if plan is None or execution.dispatched_action_id not in {a.id for a in plan.actions}:
+            raise ValidationError(
+                f"execution.dispatched_action_id: {execution.dispatched_action_id!r} is no action of plan "
+                f"{execution.plan_id!r}"
+            )

@@ -1,13 +1,12 @@
 """The event log: every decision with its reason, goals, dispatches and feedback of an object, append-only.
 
-One side table of the knowledge base's database, written inside the knowledge base's transactions."""
+One side table of the SQLite store's database, written inside its transactions (a row is checked by
+`checks.check_event` before)."""
 from __future__ import annotations
 
 import json
 import time
-from typing import Any
 
-from .errors import ValidationError
 from .owl import QuadStore
 from .records import StoredEvent
 
@@ -25,21 +24,6 @@ class EventLog:
         quads.execute(SCHEMA)
         if "client" not in {row[1] for row in quads.execute("PRAGMA table_info(planhrc_event)")}:
             quads.execute(ADD_CLIENT)
-
-    @staticmethod
-    def check(kind: Any, reason: Any, data: Any) -> str:
-        """Validate an event; returns its data as JSON text."""
-        if not isinstance(kind, str) or not kind:
-            raise ValidationError("kind: must be a non-empty string")
-        if not isinstance(reason, str):
-            raise ValidationError("reason: must be a string")
-        data = {} if data is None else data
-        if not isinstance(data, dict):
-            raise ValidationError(f"data: expected a dict, got {type(data).__name__}")
-        try:
-            return json.dumps(data, sort_keys=True, allow_nan=False)
-        except (TypeError, ValueError) as exc:
-            raise ValidationError(f"data: not JSON-serialisable ({exc})") from None
 
     def append(self, object_id: str, kind: str, reason: str, text: str, client: str | None) -> StoredEvent:
         """Write a checked event (inside the open transaction); `client`: who caused it (None: the service)."""

@@ -232,18 +232,19 @@ class QuadStore:
         self.db.rollback()
 
     def close(self) -> None:
-        if self._checkpointer is not None:
-            self._checkpointer.close()
-            self._checkpointer = None
+        self._stop_checkpoints()
         self.world.save()
         self.world.close()
 
     def abandon(self) -> None:
         """Close without committing what the open transaction wrote (a store that failed to open)."""
+        self._stop_checkpoints()
+        self.world.close()
+
+    def _stop_checkpoints(self) -> None:
         if self._checkpointer is not None:
             self._checkpointer.close()
             self._checkpointer = None
-        self.world.close()
 
     # -- ontologies --------------------------------------------------------------------------------------------
     def load_ontology(self, iri: str, data: bytes, reload: bool) -> None:

@@ -1,9 +1,6 @@
-"""Records read back from the SQLite ABox's triples, through one cache per kind (`cache.RecordCache`).
-
-`Records` is the store's identity map: the objects (with the lookups the checks need), the states, problems, plans
-and actions read or written so far. A plan whose triples are not written yet (`backlog`) is read from its journal
-row, which is looked up first: a row turns into triples in one transaction, so one or the other is found. Every
-method is called with the store's lock held.
+"""The SQLite engine of the store's identity map (`identity.IdentityMap`): records read back from the ABox's triples
+(`abox.Abox`) and journal rows (`journal.JournalTable`). The map caches them; the engine also caches the names of
+the storids it has read (`Abox.sid_name`). Every method is called with the store's lock held.
 """
 from __future__ import annotations
 
@@ -12,62 +9,41 @@ from typing import Sequence
 from planhrc.model import ArticulatedObject, Atom, Formulation, natural_key
 
 from .abox import Abox
-from .cache import RecordCache, object_info
-from .checks import ObjectInfo
-from .errors import DamagedStoreError, NotFoundError, ValidationError
+from .errors import DamagedStoreError
+from .identity import IdentityMap
 from .journal import JournalEntry, JournalTable
 from .names import ACTION_CLASSES, PREDICATE_OF_CLASS, PREDICATES, STATE_CLASSES
 from .owl import RDF_TYPE
 from .records import ActionSpec, CondEffect, StoredAction, StoredPlan, StoredProblem, StoredState
 
-# Storids and records cached past this many entries are dropped after a commit (they are read again on demand),
-# so the service's memory stays flat as the history grows.
-CACHE_LIMIT = 5_000
 
-
-class Records:
+class SqliteRecords(IdentityMap):
     """The records of one SQLite ABox, cached; a `TransactionListener` of its `Abox`."""
 
     def __init__(self, abox: Abox, journal: JournalTable) -> None:
         self.abox = abox
         self.journal = journal
-        self.objects: dict[str, ObjectInfo] = {}
-        self.states = RecordCache("state", StoredState, self._load_state)
-        self.problems = RecordCache("problem", StoredProblem, self._load_problem)
-        self.plans = RecordCache("plan", StoredPlan, self._load_plan)
-        self.actions = RecordCache("action", StoredAction, self._load_action)
+        super().__init__()
 
-    # -- the identity map's life --------------------------------------------------------------------------
-    def clear(self) -> None:
-        """Forget every cached record and storid."""
+    def _cached(self) -> int:
+        return len(self.abox.sid_name) + len(self.states)
+
+    def _forget(self) -> None:
         self.abox.forget_names()
-        self.objects.clear()
-        for cache in (self.states, self.problems, self.plans, self.actions):
-            cache.clear()
 
-    def committed(self) -> None:
-        if len(self.abox.sid_name) + len(self.states) > CACHE_LIMIT:
-            self.clear()
+    def _entry(self, plan_id: str) -> JournalEntry | None:
+        return self.journal.entry(plan_id)
 
-    def rolled_back(self) -> None:
-        # Records cached during a rolled-back transaction were never stored.
-        self.clear()
-
-    def put_entry(self, entry: JournalEntry) -> StoredPlan:
-        """Cache a journalled plan's records (its actions and expected states); the plan's."""
-        return entry.cache(self.plans, self.actions, self.states)
+    def _entry_of_state(self, object_id: str, number: int) -> JournalEntry | None:
+        return self.journal.entry_of_state(object_id, number)
 
     # -- objects --------------------------------------------------------------------------------------------
-    def info(self, object_id: str, field: str | None = None) -> ObjectInfo:
-        """The object's info; unknown -> ValidationError naming `field` (writes) or NotFoundError (reads)."""
-        return object_info(self.objects, self._load_object, object_id, field)
-
     def object_ids(self) -> list[str]:
         sids = self.abox.q.subjects(RDF_TYPE, self.abox.t["ArticulatedObject"], self.abox.c)
         self.abox.names(sids)
         return sorted((self.abox.sid_name[s] for s in sids), key=natural_key)
 
-    def _load_object(self, ident: str) -> ArticulatedObject | None:
+    def _read_object(self, ident: str) -> ArticulatedObject | None:
         abox = self.abox
         sid = abox.sid(ident)
         if sid is None or not abox.is_a(sid, "ArticulatedObject"):
@@ -85,7 +61,7 @@ class Records:
             name=abox.data1(sid, "objectName") or "",
         )
 
-    # -- loaders of the cached kinds ------------------------------------------------------------------------
+    # -- the triples of the cached kinds ----------------------------------------------------------------------
     def _predicate_atoms(self, pred_sids: Sequence[int]) -> dict[int, Atom]:
         """Atoms of reified predicate individuals, read with a few queries."""
         out: dict[int, Atom] = {}
@@ -121,17 +97,10 @@ class Records:
         key = next((k for k, cls in classes.items() if self.abox.t[cls] in types), None)
         return None if key is None else (sid, key)
 
-    def _load_state(self, state_id: str) -> StoredState | None:
-        object_id, _, number = state_id.rpartition("_state_")
-        if number.isdigit():
-            entry = self.journal.entry_of_state(object_id, int(number))
-            if entry is not None:
-                self.put_entry(entry)
-                return self.states.get(state_id)
-        abox = self.abox
-        typed = self._typed(state_id, STATE_CLASSES)
-        if typed is None:
+    def _read_state(self, state_id: str) -> StoredState | None:
+        if (typed := self._typed(state_id, STATE_CLASSES)) is None:
             return None
+        abox = self.abox
         sid, kind = typed
         obj_sid = abox.ref(sid, "stateOf")
         abox.names([obj_sid])
@@ -151,7 +120,7 @@ class Records:
             created_at=float(abox.data1(sid, "createdAt")), link_orientations_deg=observed,
         )
 
-    def _load_problem(self, problem_id: str) -> StoredProblem | None:
+    def _read_problem(self, problem_id: str) -> StoredProblem | None:
         abox = self.abox
         sid = abox.sid(problem_id)
         if sid is None or not abox.is_a(sid, "Problem"):
@@ -161,17 +130,10 @@ class Records:
         o, i, g = (abox.sid_name[r] for r in refs)
         return StoredProblem(problem_id, o, i, g, float(abox.data1(sid, "createdAt")))
 
-    def _load_action(self, action_id: str) -> StoredAction | None:
-        plan_id, _, step = action_id.rpartition("_a")
-        if step.isdigit():
-            entry = self.journal.entry(plan_id)
-            if entry is not None:
-                self.put_entry(entry)
-                return self.actions.get(action_id)
-        abox = self.abox
-        typed = self._typed(action_id, ACTION_CLASSES)
-        if typed is None:
+    def _read_action(self, action_id: str) -> StoredAction | None:
+        if (typed := self._typed(action_id, ACTION_CLASSES)) is None:
             return None
+        abox = self.abox
         sid, name = typed
         parts: dict[str, list[int]] = {p: abox.objn(sid, p) for p in ("pre", "effNeg", "effPos")}
         ces = sorted(abox.objn(sid, "condEff"), key=lambda c: int(abox.data1(c, "position")))
@@ -190,10 +152,7 @@ class Records:
         )
         return StoredAction(action_id, int(abox.data1(sid, "stepIndex")), spec)
 
-    def _load_plan(self, plan_id: str) -> StoredPlan | None:
-        entry = self.journal.entry(plan_id)
-        if entry is not None:
-            return self.put_entry(entry)
+    def _read_plan(self, plan_id: str) -> StoredPlan | None:
         abox = self.abox
         sid = abox.sid(plan_id)
         if sid is None or not abox.is_a(sid, "Plan"):

@@ -1,11 +1,10 @@
 """Idempotent responses: the first answer given under an `Idempotency-Key`, so a retried request gets it again.
-One side table of the knowledge base's database."""
+One side table of the SQLite store's database (a response is checked by `checks.check_response` before)."""
 from __future__ import annotations
 
 import json
 from typing import Any
 
-from .errors import ValidationError
 from .owl import QuadStore
 
 SCHEMA = "CREATE TABLE IF NOT EXISTS planhrc_response (object_id TEXT, key TEXT, response TEXT, PRIMARY KEY (object_id, key))"
@@ -20,18 +19,6 @@ class ResponseMemory:
         row = self.quads.execute("SELECT response FROM planhrc_response WHERE object_id=? AND key=?",
                                  (str(object_id), str(key))).fetchone()
         return json.loads(row[0]) if row else None
-
-    @staticmethod
-    def check(key: Any, response: Any) -> str:
-        """Validate a response to remember; returns it as JSON text."""
-        if not isinstance(key, str) or not key:
-            raise ValidationError("key: must be a non-empty string")
-        if not isinstance(response, dict):
-            raise ValidationError(f"response: expected a dict, got {type(response).__name__}")
-        try:
-            return json.dumps(response, sort_keys=True, allow_nan=False)
-        except (TypeError, ValueError) as exc:
-            raise ValidationError(f"response: not JSON-serialisable ({exc})") from None
 
     def remember(self, object_id: str, key: str, text: str) -> None:
         """Remember a checked response (inside the open transaction); the first one stored under a key wins."""

@@ -1,10 +1,8 @@
-"""Records read back from the PostgreSQL ABox's rows, through one cache per kind (`cache.RecordCache`): the
-store's identity map, as `reads.Records` is the SQLite store's (a `unit.RecordsOfWrites` and a
-`TransactionListener` of its `Session`).
+"""The PostgreSQL engine of the store's identity map (`..identity.IdentityMap`): records read back from the ABox's
+rows and the journal's (a `unit.RecordsOfWrites` and a `TransactionListener` of its `Session`).
 
 A record is read with a query or two per kind of individual it is made of (the record, its predicate individuals,
-its observations), whatever its size. A plan whose triples are not written yet (`journal`) is read from its journal
-row, which is looked up first: a row turns into triples in one transaction, so one or the other is found. A predicate individual that belongs to its object (a static fact, an
+its observations), whatever its size. A predicate individual that belongs to its object (a static fact, an
 orientation of a joint) is known by its name (`names.atom_fragment`, the names every write gives them); an action's
 own predicates are read. Every method is called with the store's lock held.
 """
@@ -14,9 +12,8 @@ from typing import Any, Sequence
 
 from planhrc.model import ArticulatedObject, Atom, Formulation, natural_key
 
-from ..cache import RecordCache, object_info
-from ..checks import ObjectInfo
 from ..errors import DamagedStoreError
+from ..identity import IdentityMap
 from ..journal import JournalEntry, decode
 from ..names import ABOX_IRI, ACTION_CLASSES, PREDICATE_OF_CLASS, PREDICATES, STATE_CLASSES, TBOX_IRI
 from ..records import ActionSpec, CondEffect, StoredAction, StoredPlan, StoredProblem, StoredState
@@ -24,49 +21,35 @@ from .rows import Individual, individuals
 from .schema import RDF_TYPE
 from .session import Session
 
-# Records cached past this many are dropped after a commit (read again on demand): the memory stays flat.
-CACHE_LIMIT = 5_000
 _ACTION_PARTS = ("pre", "effNeg", "effPos")
 _COND_PARTS = ("when", "effNeg_a", "effPos_a")
 
 
-class PgRecords:
-    """The records of one PostgreSQL ABox, cached."""
+class PgRecords(IdentityMap):
+    """The records of one PostgreSQL ABox, cached; what an object's own predicates are, by name."""
 
     def __init__(self, session: Session) -> None:
         self.session = session
-        self.objects: dict[str, ObjectInfo] = {}
         self._atom_of: dict[str, dict[str, Atom]] = {}  # object id -> name of its own predicate -> atom
-        # a journalled plan's records are read from its row, in any process
-        self.states = RecordCache("state", StoredState, self._load_state)
-        self.problems = RecordCache("problem", StoredProblem, self._load_problem)
-        self.plans = RecordCache("plan", StoredPlan, self._load_plan)
-        self.actions = RecordCache("action", StoredAction, self._load_action)
+        super().__init__()
 
-    def clear(self) -> None:
-        self.objects.clear()
+    def _cached(self) -> int:
+        return len(self.states) + len(self.actions)
+
+    def _forget(self) -> None:
         self._atom_of.clear()
-        for cache in (self.states, self.problems, self.plans, self.actions):
-            cache.clear()
 
-    def committed(self) -> None:
-        if len(self.states) + len(self.actions) > CACHE_LIMIT:
-            self.clear()
+    # -- the journal's rows (a journalled plan's records are read from its row, in any process) ----------------
+    def _entry(self, plan_id: str) -> JournalEntry | None:
+        return self._journal_row("plan_id = %s", (plan_id,))
 
-    def rolled_back(self) -> None:
-        self.clear()  # records cached during a rolled-back transaction were never stored
+    def _entry_of_state(self, object_id: str, number: int) -> JournalEntry | None:
+        return self._journal_row("object_id = %s AND first_state <= %s AND last_state >= %s",
+                                 (object_id, number, number))
 
-    def put_entry(self, entry: JournalEntry) -> StoredPlan:
-        """Cache a journalled plan's records (its actions and expected states); the plan's."""
-        return entry.cache(self.plans, self.actions, self.states)
-
-    def _journalled(self, sql: str, params: tuple[Any, ...]) -> JournalEntry | None:
+    def _journal_row(self, sql: str, params: tuple[Any, ...]) -> JournalEntry | None:
         row = self.session.execute("SELECT payload FROM planhrc_plan_journal WHERE " + sql, params).fetchone()
-        if row is None:
-            return None
-        entry = decode(bytes(row[0]))
-        self.put_entry(entry)
-        return entry
+        return None if row is None else decode(bytes(row[0]))
 
     # -- rows ---------------------------------------------------------------------------------------------
     def describe(self, names: Sequence[str]) -> dict[str, Individual]:
@@ -82,16 +65,12 @@ class PgRecords:
         return ind if ind is not None and cls in ind.types else None
 
     # -- objects --------------------------------------------------------------------------------------------
-    def info(self, object_id: str, field: str | None = None) -> ObjectInfo:
-        """The object's info; unknown -> ValidationError naming `field` (writes) or NotFoundError (reads)."""
-        return object_info(self.objects, self._load_object, object_id, field)
-
     def object_ids(self) -> list[str]:
         rows = self.session.execute("SELECT s FROM planhrc_triple WHERE o = %s AND p = %s",
                                     (TBOX_IRI + "ArticulatedObject", RDF_TYPE))
         return sorted((s[len(ABOX_IRI):] for (s,) in rows), key=natural_key)
 
-    def _load_object(self, ident: str) -> ArticulatedObject | None:
+    def _read_object(self, ident: str) -> ArticulatedObject | None:
         obj = self._get(ident, "ArticulatedObject")
         if obj is None:
             return None
@@ -123,12 +102,8 @@ class PgRecords:
             raise DamagedStoreError(f"store: predicate individual {missing[0]} is not stored")
         return out
 
-    # -- loaders of the cached kinds ------------------------------------------------------------------------
-    def _load_state(self, state_id: str) -> StoredState | None:
-        object_id, _, number = state_id.rpartition("_state_")
-        if number.isdigit() and self._journalled("object_id = %s AND first_state <= %s AND last_state >= %s",
-                                                 (object_id, int(number), int(number))):
-            return self.states.get(state_id)
+    # -- the rows of the cached kinds -------------------------------------------------------------------------
+    def _read_state(self, state_id: str) -> StoredState | None:
         state = self.describe([state_id]).get(state_id)
         kind = next((k for k, cls in STATE_CLASSES.items() if state and cls in state.types), None)
         if state is None or kind is None:
@@ -146,17 +121,14 @@ class PgRecords:
         return StoredState(id=state_id, object_id=object_id, kind=kind, atoms=atoms,
                            created_at=float(state.value("createdAt")), link_orientations_deg=observed)
 
-    def _load_problem(self, problem_id: str) -> StoredProblem | None:
+    def _read_problem(self, problem_id: str) -> StoredProblem | None:
         problem = self._get(problem_id, "Problem")
         if problem is None:
             return None
         return StoredProblem(problem_id, problem.one("aboutObject"), problem.one("init"), problem.one("goal"),
                              float(problem.value("createdAt")))
 
-    def _load_action(self, action_id: str) -> StoredAction | None:
-        plan_id, _, step = action_id.rpartition("_a")
-        if step.isdigit() and self._journalled("plan_id = %s", (plan_id,)):
-            return self.actions.get(action_id)
+    def _read_action(self, action_id: str) -> StoredAction | None:
         return self._load_actions([action_id]).get(action_id)
 
     def _load_actions(self, action_ids: Sequence[str]) -> dict[str, StoredAction]:
@@ -182,9 +154,7 @@ class PgRecords:
             out[name] = StoredAction(name, int(ind.value("stepIndex")), spec)
         return out
 
-    def _load_plan(self, plan_id: str) -> StoredPlan | None:
-        if self._journalled("plan_id = %s", (plan_id,)):
-            return self.plans.get(plan_id)
+    def _read_plan(self, plan_id: str) -> StoredPlan | None:
         plan = self._get(plan_id, "Plan")
         if plan is None:
             return None

@@ -3,29 +3,27 @@ and which individuals are stored.
 
 The connection runs in autocommit mode, so a read outside a transaction holds no snapshot open; a write, or a
 `transaction()` block, is one `BEGIN ... COMMIT`, and nested blocks join the outermost one; each commit that wrote is
-counted in the database (`revision`). What reacts to a commit or a rollback (the record caches) registers as a
-`TransactionListener`. Every method here is called with `lock` held; the store takes it (`guard`), which also
-reconnects a connection the server dropped (between transactions only: a transaction cut off is rolled back, never
-replayed) and turns a lost connection into `UnavailableError`.
+counted in the database (`revision`). The nesting, the counts and the listeners are the unit of work's
+(`..work.UnitOfWork`); this engine supplies the connection. Every method here is called with `lock` held; the store
+takes it (`guard`), which also reconnects a connection the server dropped (`ready`: between transactions only, a
+transaction cut off is rolled back, never replayed) and turns a lost connection into `UnavailableError` (`lost`).
 """
 from __future__ import annotations
 
 import logging
-import threading
 from contextlib import contextmanager
-from typing import Any, Callable, Iterator, Sequence, TypeVar
+from typing import Any, Iterator, Sequence
 
 import psycopg
 
-from ..abox import TransactionListener
 from ..errors import KBError, UnavailableError
 from ..names import ABOX_IRI, TBOX_IRI, counter_name, record_name
 from .rows import RowBatch
 from ..location import shown_location
 from .schema import RDF_TYPE
+from ..work import UnitOfWork
 
 log = logging.getLogger(__name__)
-T = TypeVar("T")
 Connection = psycopg.Connection[tuple[Any, ...]]
 CONNECT_TIMEOUT_S = 10
 # Each statement planned with the sizes of now, not with a plan cached when the statement was first prepared: the
@@ -57,54 +55,26 @@ def connect(db: str, password: str | None, what: str = "planhrc") -> Connection:
         raise KBError(f"db: {shown_location(db)} is no PostgreSQL location ({exc})") from None
 
 
-class Guard:
-    """`with guard:` holds the store's lock, refuses a closed store and reconnects a dropped connection; a
-    connection lost inside is an `UnavailableError`."""
-
-    __slots__ = ("_session",)
-
-    def __init__(self, session: Session) -> None:
-        self._session = session
-
-    def __enter__(self) -> None:
-        session = self._session
-        session.lock.acquire()
-        try:
-            if session.closed:
-                raise KBError("knowledge base: closed")
-            if not session.depth and session.conn.broken:
-                session.reconnect()
-        except BaseException:
-            session.lock.release()
-            raise
-
-    def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
-        self._session.lock.release()
-        if isinstance(exc, psycopg.OperationalError):
-            reason = " ".join(str(exc).split())[:200]  # libpq's messages may run over several lines
-            raise UnavailableError(f"db: the connection to the database was lost ({reason}); "
-                                   "nothing of this request was written") from None
-
-
-class Session:
+class Session(UnitOfWork):
     """One connection to the store's database, in one transaction at a time."""
 
     def __init__(self, db: str, password: str | None) -> None:
-        self.lock = threading.RLock()
+        super().__init__()
         self.db = db
         self._password = password
         self.conn = connect(db, password)
-        self.closed = False
-        self.depth = 0
         self.known: set[str] = set()  # individuals known to be stored (never deleted: objects, their parts)
-        # /health reads these without a query: counted once at open, then kept by this process's commits.
-        self.triples = self.objects = 0
-        self.pending_triples = self.pending_objects = 0
-        self._listeners: tuple[TransactionListener, ...] = ()
-        self.guard = Guard(self)
 
-    def listen(self, *listeners: TransactionListener) -> None:
-        self._listeners = listeners
+    def ready(self) -> None:
+        if not self.depth and self.conn.broken:
+            self.reconnect()
+
+    def lost(self, exc: BaseException) -> BaseException | None:
+        if not isinstance(exc, psycopg.OperationalError):
+            return None
+        reason = " ".join(str(exc).split())[:200]  # libpq's messages may run over several lines
+        return UnavailableError(f"db: the connection to the database was lost ({reason}); "
+                                "nothing of this request was written")
 
     def reconnect(self) -> None:
         log.warning("store: the connection to %s was lost; connecting again", shown_location(self.db))
@@ -118,12 +88,7 @@ class Session:
         conn.execute("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY")
         return conn
 
-    def check_open(self) -> None:
-        if self.closed:
-            raise KBError("knowledge base: closed")
-
-    def close(self) -> None:
-        self.closed = True
+    def _close_connection(self) -> None:
         self.conn.close()
 
     def execute(self, sql: str, params: Sequence[Any] = ()) -> psycopg.Cursor[tuple[Any, ...]]:
@@ -173,49 +138,13 @@ class Session:
         self.known.update(batch.new)
         self.pending_triples += len(batch.rows)
 
-    def note_object(self) -> None:
-        self.pending_objects += 1
-
-    # -- transactions ---------------------------------------------------------------------------------------
-    def write(self, fill: Callable[[], T]) -> T:
-        """Run `fill()` in one transaction; roll back on any error. Inside `transaction()` it only adds to the
-        open transaction, which commits or rolls back as a whole."""
-        if self.depth:
-            return fill()
-        with self.transaction():
-            return fill()
-
+    # -- transactions (`..work.UnitOfWork.transaction`) -----------------------------------------------------
     @contextmanager
-    def transaction(self) -> Iterator[None]:
-        if self.depth:
-            self.depth += 1
-            try:
-                yield
-            finally:
-                self.depth -= 1
-            return
-        self.depth = 1
+    def _one_transaction(self) -> Iterator[None]:
         try:
             with self.conn.transaction():
                 yield
                 self.execute(COUNT_COMMIT, (REVISION_SHARDS,))
         except BaseException:
-            self._rolled_back()
+            self.known.clear()  # names created by the rolled-back transaction are not stored
             raise
-        else:
-            self._committed()
-        finally:
-            self.depth = 0
-
-    def _committed(self) -> None:
-        self.triples += self.pending_triples
-        self.objects += self.pending_objects
-        self.pending_triples = self.pending_objects = 0
-        for listener in self._listeners:
-            listener.committed()
-
-    def _rolled_back(self) -> None:
-        self.pending_triples = self.pending_objects = 0
-        self.known.clear()  # names created by the rolled-back transaction are not stored
-        for listener in self._listeners:
-            listener.rolled_back()

@@ -2,7 +2,8 @@
 written by the backend-neutral writes (`writes`, `triples`) through this backend's unit of work (`session`) and read
 back by `records`, with the event log, the execution cursor and idempotent responses as tables beside it, retention
 and the RDF export (`history`), and what a reasoner inferred beside them (`inferred`). It implements
-`interface.KnowledgeStore`, and what replicas need (`replicas.ObjectLocking`, `event_feed`).
+`interface.KnowledgeStore` through the store's core (`..facade.StoreCore`), giving it the parts above and the side
+tables (`tables`), and adds what replicas need (`replicas.ObjectLocking`, `event_feed`).
 
 Every public method takes the store's lock and refuses a closed store. Each write checks its input completely
 before anything is written; every write is one transaction, and `transaction()` makes several writes one. A plan is
@@ -16,56 +17,37 @@ so in its log.
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
-import time
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator, Self, Sequence
+from typing import Any, Iterator, Sequence
 
-from planhrc.vocabulary import ExecutionStatus
-
-from ..checks import check_events_page, check_keep_perceived
 from ..errors import DamagedStoreError, KBError, UnavailableError
-from ..events import EventLog
-from ..facade import StoreFacade
-from ..inferred import InferredFacts
+from ..facade import StoreCore
 from ..location import shown_location
-from ..names import TBOX_IRI, counter_name
+from ..names import TBOX_IRI
 from ..owl import QuadStore, ntriple_lines
-from ..records import Compaction, Execution, StoredEvent
-from ..responses import ResponseMemory
 from ..roots import POSTGRESQL, current_roots
 from ..writes import RecordWriter
 from .history import abox_lines, compact_object
 from .inferred import PgInferred
 from .journal import PgJournal
 from .records import PgRecords
-from .replicas import EVENT_CHANNEL, LOCK_NAMESPACE, LOCK_OBJECT, PgEventFeed
-from ..acting import acting_client
+from .replicas import LOCK_NAMESPACE, LOCK_OBJECT, PgEventFeed
 from .schema import ABOX_ONTOLOGY, OWL, RDF_TYPE, SCHEMA_LOCK, SCHEMA_VERSION, TABLES
 from .session import Session
+from .tables import PgEventLog, PgExecutionCursor, PgResponseMemory
 
 log = logging.getLogger(__name__)
 
 
-# An event in one round trip: the object's next seq (its counter's row lock orders the object's events, across
-# processes too), the row, and its announcement to the feed (`replicas.PgEventFeed`), sent when the transaction commits.
-_APPEND_EVENT = (
-    "WITH c AS (INSERT INTO planhrc_counter AS c (name, value) VALUES (%s, 1) ON CONFLICT (name) "
-    "DO UPDATE SET value = c.value + 1 RETURNING value), "
-    "e AS (INSERT INTO planhrc_event (object_id, seq, kind, reason, data, created_at, client) "
-    "SELECT %s, value, %s, %s, %s::json, %s, %s FROM c RETURNING seq) "
-    "SELECT seq, pg_notify(%s, %s || ' ' || seq) FROM e"
-)
-
 COMPACT_LOCK = 0x706C616E68726302  # "planhrc\x02": held by the one process compacting the store
 
 
-class PostgresStore(StoreFacade):
+class PostgresStore(StoreCore):
     """TBox (from its file) + ABox and the service's tables in one PostgreSQL database; thread safe."""
 
     _records: PgRecords
+    _journal: PgJournal
 
     def __init__(self, db: str | None, tbox_path: Path | str, password: str | None = None) -> None:
         if not db:
@@ -75,7 +57,7 @@ class PostgresStore(StoreFacade):
             raise KBError(f"tbox_path: no such file {self.tbox_path}")
         self._password = password
         self._tbox_lines = _tbox_lines(self.tbox_path)
-        session = self._session = Session(db, password)
+        session = self._unit = self._session = Session(db, password)
         self._guard = session.guard
         self._plans_to_write = 0  # the last count read, what /health shows while the database is away
         try:
@@ -85,6 +67,9 @@ class PostgresStore(StoreFacade):
             session.listen(self._records)
             self._writes = RecordWriter(session, self._records, self._journal)
             self._inferred = PgInferred(session)
+            self._events = PgEventLog(session)
+            self._execution = PgExecutionCursor(session)
+            self._responses = PgResponseMemory(session)
             self._journal.check()  # before anything is served
         except BaseException:
             session.close()
@@ -117,23 +102,6 @@ class PostgresStore(StoreFacade):
                             (TBOX_IRI + "ArticulatedObject", RDF_TYPE)).fetchone()
             s.objects = int(row[0] if row else 0)
 
-    # -- life cycle -------------------------------------------------------------------------------------------
-    def close(self) -> None:
-        with self._session.lock:  # the journalled plans stay rows: they are the plans, in the database
-            if not self._session.closed:
-                self._session.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    @contextmanager
-    def transaction(self) -> Iterator[None]:
-        with self._guard, self._session.transaction():
-            yield
-
     # -- what only this backend has: replicas -------------------------------------------------------------------
     def lock_object(self, object_id: str) -> None:
         with self._guard:
@@ -146,77 +114,9 @@ class PostgresStore(StoreFacade):
         self._session.check_open()
         return PgEventFeed(self._session.db, self._password)
 
-    # -- writes (the rest: `facade.StoreFacade`) ------------------------------------------------------------
-    def add_event(self, object_id: str, kind: str, reason: str, data: dict[str, Any]) -> StoredEvent:
-        with self._guard:
-            ident = self._records.info(object_id, "object_id").obj.ident
-            text = EventLog.check(kind, reason, data)
-            s = self._session
-            client = acting_client()
-
-            def fill() -> StoredEvent:
-                created = time.time()
-                row = s.execute(_APPEND_EVENT, (counter_name(ident, "event"), ident, kind, reason, text, created,
-                                                client, EVENT_CHANNEL, ident)).fetchone()
-                assert row is not None
-                return StoredEvent(int(row[0]), ident, kind, reason, json.loads(text), created, client)
-
-            return s.write(fill)
-
-    def set_execution(self, object_id: str, execution: Execution) -> None:
-        with self._guard:
-            ident = self._checked_execution(object_id, execution)
-            row = (ident, execution.plan_id, execution.next_step, ExecutionStatus(execution.status).value,
-                   execution.dispatched_action_id)
-            self._session.write(lambda: self._session.execute(
-                "INSERT INTO planhrc_execution VALUES (%s, %s, %s, %s, %s) ON CONFLICT (object_id) DO UPDATE SET "
-                "plan_id = EXCLUDED.plan_id, next_step = EXCLUDED.next_step, status = EXCLUDED.status, "
-                "dispatched_action_id = EXCLUDED.dispatched_action_id", row))
-
-    def remember_response(self, object_id: str, key: str, response: dict[str, Any]) -> None:
-        with self._guard:
-            text = ResponseMemory.check(key, response)
-            self._session.write(lambda: self._session.execute(
-                "INSERT INTO planhrc_response VALUES (%s, %s, %s::json) ON CONFLICT DO NOTHING",
-                (str(object_id), key, text)))
-
-    # -- reads (the rest: `facade.StoreFacade`) -------------------------------------------------------------
+    # -- reads (the rest: `facade.StoreCore`) ---------------------------------------------------------------
     def _latest_id(self, object_id: str, noun: str) -> str | None:
         return self._session.latest(object_id, noun)
-
-    def list_events(self, object_id: str, after_seq: int = 0, limit: int | None = None) -> tuple[StoredEvent, ...]:
-        check_events_page(after_seq, limit)
-        with self._guard:
-            ident = self._records.info(object_id).obj.ident
-            rows = self._session.execute(
-                "SELECT seq, kind, reason, data, created_at, client FROM planhrc_event WHERE object_id = %s "
-                "AND seq > %s ORDER BY seq LIMIT %s", (ident, after_seq, limit)).fetchall()
-        return tuple(StoredEvent(int(seq), ident, kind, reason, data, float(created), client)
-                     for seq, kind, reason, data, created, client in rows)
-
-    def get_execution(self, object_id: str) -> Execution:
-        with self._guard:
-            ident = self._records.info(object_id).obj.ident
-            row = self._session.execute("SELECT plan_id, next_step, status, dispatched_action_id FROM "
-                                        "planhrc_execution WHERE object_id = %s", (ident,)).fetchone()
-        if row is None:
-            return Execution(plan_id=None, next_step=None, status=ExecutionStatus.IDLE)
-        plan_id, next_step, status, dispatched = row
-        return Execution(plan_id, next_step, ExecutionStatus(status), dispatched)
-
-    def recall_response(self, object_id: str, key: str) -> dict[str, Any] | None:
-        with self._guard:
-            row = self._session.execute("SELECT response FROM planhrc_response WHERE object_id = %s AND key = %s",
-                                        (str(object_id), str(key))).fetchone()
-        return dict(row[0]) if row else None
-
-    def triple_count(self) -> int:
-        self._session.check_open()
-        return self._session.triples
-
-    def object_count(self) -> int:
-        self._session.check_open()
-        return self._session.objects
 
     def revision(self) -> int:
         """Changes with every commit that wrote, by any process on the database: one query of a few rows."""
@@ -236,38 +136,23 @@ class PostgresStore(StoreFacade):
             pass  # /health answers from memory while the database takes no connections, as its other counts do
         return self._plans_to_write
 
-    # -- retention --------------------------------------------------------------------------------------------
-    def compact(self, keep_perceived: int) -> Compaction:
-        keep = check_keep_perceived(keep_perceived)
-        with self._guard:
-            s = self._session
-            objects = self._records.object_ids()
-            shared = {oid: sorted(self._records.info(oid).shared_atom_name.values()) for oid in objects}
-            roots = {oid: self._roots(oid) for oid in objects}
-            # the plans kept are written out (the walk below reads their triples); the others' rows are dropped
-            self._journal.settle([name for names in roots.values() for name in names])
+    # -- retention (the steps: `facade.StoreCore.compact`) ---------------------------------------------------
+    def _may_compact(self) -> bool:
+        # one process compacts at a time (every replica compacts on its schedule), and each object's writes wait
+        # for it as for any other write of the object (its lock, until the commit)
+        row = self._session.execute("SELECT pg_try_advisory_xact_lock(%s)", (COMPACT_LOCK,)).fetchone()
+        if not (row and row[0]):
+            log.info("store: another process is compacting the store; this one leaves it to it")
+            return False
+        return True
 
-            def fill() -> Compaction:
-                # one process compacts at a time (every replica compacts on its schedule), and each object's
-                # writes wait for it as for any other write of the object (its lock, until the commit)
-                row = s.execute("SELECT pg_try_advisory_xact_lock(%s)", (COMPACT_LOCK,)).fetchone()
-                if not (row and row[0]):
-                    log.info("store: another process is compacting the store; this one leaves it to it")
-                    return Compaction(0, 0, 0)
-                individuals = triples = 0
-                for oid in objects:
-                    s.execute(LOCK_OBJECT, (LOCK_NAMESPACE + oid,))
-                    # a plan another replica adopted since the roots were read is current too: its row stays
-                    kept = {*roots[oid], *self._roots(oid)}
-                    individuals += self._journal.drop(oid, kept)
-                    i, t = compact_object(s.conn, oid, shared[oid], keep)
-                    individuals, triples = individuals + i, triples + t
-                s.pending_triples -= triples
-                return Compaction(len(objects), individuals, triples)
-
-            result = s.write(fill)
-            self._records.clear()  # records of deleted individuals must not be served from memory
-            return result
+    def _compact_object(self, object_id: str, roots: list[str], shared: list[str], keep: int) -> tuple[int, int]:
+        s = self._session
+        s.execute(LOCK_OBJECT, (LOCK_NAMESPACE + object_id,))
+        # a plan another replica adopted since the roots were read is current too: its row stays
+        dropped = self._journal.drop(object_id, {*roots, *self._roots(object_id)})
+        individuals, triples = compact_object(s.conn, object_id, shared, keep)
+        return dropped + individuals, triples
 
     # -- export -----------------------------------------------------------------------------------------------
     def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
@@ -289,16 +174,6 @@ class PostgresStore(StoreFacade):
 
     def _roots(self, object_id: str) -> list[str]:
         return current_roots(self._session.conn, POSTGRESQL, object_id)
-
-    # -- inferences -------------------------------------------------------------------------------------------
-    def replace_inferred(self, scope: str, lines: Sequence[str]) -> int:
-        checked = InferredFacts.check(scope, lines)
-        with self._guard:
-            return self._inferred.replace(scope, checked)
-
-    def inferred_lines(self) -> Iterator[str]:
-        with self._guard:
-            return iter(self._inferred.lines())
 
 
 def _tbox_lines(tbox_path: Path) -> tuple[str, ...]:
