@@ -15,7 +15,9 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, TypeVar
 
-from .command_settings import CommandSettings, add_store_options, read_settings
+from planhrc.cli_args import OneLineParser, port, tbox_file, tbox_problem, writable_dir
+
+from .command_settings import CommandSettings, add_store_options, read_settings, settings_or_say, store_given
 from .network import Name, SettingsProblem, check_exposure
 from .store.backends import backend_of
 from .store.errors import KBError
@@ -43,7 +45,6 @@ SERVE_OPTIONS = {"host": "--host", "port": "--port", "db_path": "--db", "db_pass
 def add_serve_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     from uvicorn.config import LOG_LEVELS
 
-    from planhrc.cli_args import port, tbox_file
     from planhrc.planner.registry import PLANNERS
 
     p = subparsers.add_parser("serve", help="run the knowledge-base HTTP service",
@@ -139,7 +140,6 @@ def check_serve_settings(settings: Settings, name: Name, warnings: list[str] | N
     what it can start with but should not."""
     from uvicorn.config import LOG_LEVELS
 
-    from planhrc.cli_args import tbox_problem, writable_dir
     from planhrc.planner.registry import PLANNERS, available_planners
 
     if settings.planner not in PLANNERS:
@@ -275,8 +275,6 @@ def _leave_request_threads(code: int, how: str) -> None:
 
 
 def add_compact_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
-    from planhrc.cli_args import tbox_file
-
     p = subparsers.add_parser(
         "compact", help="drop the history the retention policy does not keep",
         description="Compact a store: keep each object's current records (goal, latest problem, current plan and "
@@ -297,15 +295,10 @@ def run_compact(args: argparse.Namespace) -> int:
     from .store import KBError, SqliteStore, open_store
     from .store.location import shown_location
 
-    try:
-        read = read_settings({"db_path": ("--db", args.db), "db_password_file": ("--db-password-file",
-                              args.db_password_file), "keep_perceived": ("--keep", args.keep),
-                              "tbox_path": ("--tbox", args.tbox)})
-    except SettingsProblem as exc:
-        print(f"planhrc compact: {exc}", file=sys.stderr)
+    read = settings_or_say("planhrc compact", {**store_given(args), "keep_perceived": ("--keep", args.keep),
+                                                "tbox_path": ("--tbox", args.tbox)})
+    if read is None:
         return 2
-    for warning in read.warnings:
-        print(f"planhrc compact: warning: {warning}", file=sys.stderr)
     settings, db_option = read.settings, read.name("db_path")
     sqlite = backend_of(settings.db_path) == "sqlite"
     if sqlite and (settings.db_path in (None, "", ":memory:") or not Path(settings.db_path).is_file()):
@@ -333,8 +326,6 @@ def run_compact(args: argparse.Namespace) -> int:
 
 
 def add_planning_worker_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
-    from planhrc.cli_args import port, tbox_file
-
     p = subparsers.add_parser(
         "planning-worker", help="plan queued tasks for the services of a PostgreSQL store, on any host",
         description="Serve the planning job queue of a PostgreSQL store: take the large tasks the services on that "
@@ -363,8 +354,7 @@ def run_planning_worker(args: argparse.Namespace) -> int:
     import threading
 
     try:
-        read = read_settings({"db_path": ("--db", args.db), "db_password_file": ("--db-password-file",
-                              args.db_password_file), "tbox_path": ("--tbox", args.tbox),
+        read = read_settings({**store_given(args), "tbox_path": ("--tbox", args.tbox),
                               "planning_lease_s": ("--lease-s", args.lease_s),
                               "log_format": ("--log-format", args.log_format),
                               "otlp_endpoint": ("--otlp-endpoint", args.otlp_endpoint)})
@@ -409,8 +399,6 @@ def run_planning_worker(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from planhrc.cli_args import OneLineParser
-
     parser = OneLineParser(prog="python -m planhrc.kb_service.cli")
     add_serve_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)

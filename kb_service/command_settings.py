@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Mapping
 
@@ -34,6 +35,24 @@ def add_store_options(parser: argparse.ArgumentParser,
     parser.add_argument("--db-password-file", default=None, metavar="FILE",
                         help="file holding the PostgreSQL password (env PLANHRC_DB_PASSWORD_FILE; libpq's PGPASSFILE "
                         "and PGPASSWORD work too)")
+
+
+def store_given(args: argparse.Namespace) -> dict[str, tuple[str, Any]]:
+    """What `add_store_options`' options gave, for `read_settings`."""
+    return {"db_path": ("--db", args.db), "db_password_file": ("--db-password-file", args.db_password_file)}
+
+
+def settings_or_say(command: str, options: Mapping[str, tuple[str, Any]]) -> CommandSettings | None:
+    """`read_settings` for a command that has nothing more to check: a problem printed as one line on standard error
+    (None: the command exits 2), the warnings printed there too."""
+    try:
+        read = read_settings(options)
+    except SettingsProblem as exc:
+        print(f"{command}: {exc}", file=sys.stderr)
+        return None
+    for warning in read.warnings:
+        print(f"{command}: warning: {warning}", file=sys.stderr)
+    return read
 
 
 def read_settings(options: Mapping[str, tuple[str, Any]]) -> CommandSettings:

@@ -57,19 +57,21 @@ def install_console(app: FastAPI, protect_reads: bool = False) -> None:
         return FileResponse(index, media_type="text/html",
                             headers={"Cache-Control": "no-cache", "Content-Security-Policy": CONSOLE_POLICY})
 
-    @app.get(DOCS_URL, include_in_schema=False)
-    def read_swagger_ui(request: Request) -> HTMLResponse:
+    def docs_page(request: Request, make: Callable[[str, str], HTMLResponse]) -> HTMLResponse:
+        """A documentation page made by `make(root, assets)` (the served root, the shipped assets' URL), under the
+        documentation pages' content policy."""
         root = request.scope.get("root_path", "")
-        page = get_swagger_ui_html(
-            openapi_url=f"{root}{app.openapi_url}", title=f"{app.title} - Swagger UI",
-            oauth2_redirect_url=f"{root}{oauth2_redirect_url}",
-            swagger_js_url=f"{root}{DOCS_ASSETS_URL}/swagger-ui-bundle.js",
-            swagger_css_url=f"{root}{DOCS_ASSETS_URL}/swagger-ui.css",
-            swagger_favicon_url=f"{root}{DOCS_ASSETS_URL}/favicon.png",
-            swagger_ui_parameters={"persistAuthorization": True},
-        )
+        page = make(root, f"{root}{DOCS_ASSETS_URL}")
         page.headers["Content-Security-Policy"] = DOCS_POLICY
         return page
+
+    @app.get(DOCS_URL, include_in_schema=False)
+    def read_swagger_ui(request: Request) -> HTMLResponse:
+        return docs_page(request, lambda root, assets: get_swagger_ui_html(
+            openapi_url=f"{root}{app.openapi_url}", title=f"{app.title} - Swagger UI",
+            oauth2_redirect_url=f"{root}{oauth2_redirect_url}", swagger_js_url=f"{assets}/swagger-ui-bundle.js",
+            swagger_css_url=f"{assets}/swagger-ui.css", swagger_favicon_url=f"{assets}/favicon.png",
+            swagger_ui_parameters={"persistAuthorization": True}))
 
     @app.get(oauth2_redirect_url, include_in_schema=False)
     def read_swagger_ui_redirect() -> HTMLResponse:
@@ -77,14 +79,10 @@ def install_console(app: FastAPI, protect_reads: bool = False) -> None:
 
     @app.get(REDOC_URL, include_in_schema=False)
     def read_redoc(request: Request) -> HTMLResponse:
-        root = request.scope.get("root_path", "")
-        page = get_redoc_html(
+        return docs_page(request, lambda root, assets: get_redoc_html(
             openapi_url=f"{root}{app.openapi_url}", title=f"{app.title} - ReDoc",
-            redoc_js_url=f"{root}{DOCS_ASSETS_URL}/redoc.standalone.js",
-            redoc_favicon_url=f"{root}{DOCS_ASSETS_URL}/favicon.png", with_google_fonts=False,
-        )
-        page.headers["Content-Security-Policy"] = DOCS_POLICY
-        return page
+            redoc_js_url=f"{assets}/redoc.standalone.js", redoc_favicon_url=f"{assets}/favicon.png",
+            with_google_fonts=False))
 
     app.openapi = openapi_with_bearer(app.openapi, protect_reads)  # type: ignore[method-assign]
 

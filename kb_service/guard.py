@@ -112,21 +112,35 @@ def route_of(scope: Scope) -> tuple[str, str] | None:
     return found
 
 
-class RequestGuard:
-    """ASGI middleware applying a `GuardPolicy` and the clients' roles before the application sees the request.
-    `registry(scope)`: the service's client registry (None before the service has started: only its tokens)."""
+class HttpMiddleware:
+    """An ASGI middleware of HTTP requests (`http`, with the request's headers, their names in lower case); anything
+    else (lifespan, websockets) goes to the application untouched."""
 
-    def __init__(self, app: ASGIApp, policy: GuardPolicy,
-                 registry: Callable[[Scope], ClientRegistry | None]) -> None:
+    def __init__(self, app: ASGIApp) -> None:
         self.app = app
-        self.policy = policy
-        self.registry = registry
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
+        await self.http(scope, receive, send, headers)
+
+    async def http(self, scope: Scope, receive: Receive, send: Send, headers: dict[str, str]) -> None:
+        raise NotImplementedError
+
+
+class RequestGuard(HttpMiddleware):
+    """ASGI middleware applying a `GuardPolicy` and the clients' roles before the application sees the request.
+    `registry(scope)`: the service's client registry (None before the service has started: only its tokens)."""
+
+    def __init__(self, app: ASGIApp, policy: GuardPolicy,
+                 registry: Callable[[Scope], ClientRegistry | None]) -> None:
+        super().__init__(app)
+        self.policy = policy
+        self.registry = registry
+
+    async def http(self, scope: Scope, receive: Receive, send: Send, headers: dict[str, str]) -> None:
         method = scope.get("method", "GET").upper()
         try:
             client, refusal = await self._admit(scope, headers)

@@ -13,22 +13,22 @@ import time
 from pathlib import Path
 from typing import TypeVar
 
-from .command_settings import add_store_options, read_settings
-from .network import SettingsProblem
+from .command_settings import add_store_options, settings_or_say, store_given
 from .store.backends import backend_of
 from .store.errors import KBError
 
 _Parser = TypeVar("_Parser", bound=argparse.ArgumentParser)
 
+DESCRIPTION = ("Manage the clients of a store: each has a name, a role (robot: perceptions, next action, feedback, "
+               "give-up; operator: objects, goals, reasoning; reader: reads) and a key, kept as a hash. Changes take "
+               "effect on running services within a second.")
+
 
 def add_keys_parser(subparsers: argparse._SubParsersAction[_Parser]) -> _Parser:
     from .clients import Role
 
-    p = subparsers.add_parser(
-        "keys", help="the clients of a store: their names, roles and API keys",
-        description="Manage the clients of a store: each has a name, a role (robot: perceptions, next action, "
-        "feedback, give-up; operator: objects, goals, reasoning; reader: reads) and a key, kept as a hash. Changes "
-        "take effect on running services within a second.")
+    p = subparsers.add_parser("keys", help="the clients of a store: their names, roles and API keys",
+                              description=DESCRIPTION)
     sub = p.add_subparsers(dest="keys_command", required=True, metavar="ACTION")
     add = sub.add_parser("add", help="a new client; prints its key alone on standard output")
     add.add_argument("name", help="the client's name (recorded on every event it causes)")
@@ -49,14 +49,9 @@ def run_keys(args: argparse.Namespace) -> int:
     from .store.location import shown_location
 
     command = f"planhrc keys {args.keys_command}"
-    try:
-        read = read_settings({"db_path": ("--db", args.db),
-                              "db_password_file": ("--db-password-file", args.db_password_file)})
-    except SettingsProblem as exc:
-        print(f"{command}: {exc}", file=sys.stderr)
+    read = settings_or_say(command, store_given(args))
+    if read is None:
         return 2
-    for warning in read.warnings:
-        print(f"{command}: warning: {warning}", file=sys.stderr)
     settings, db_option = read.settings, read.name("db_path")
     db = settings.db_path
     if db in (None, "", ":memory:"):

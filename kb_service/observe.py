@@ -13,7 +13,7 @@ import uuid
 from contextlib import AbstractContextManager
 from typing import Any, Mapping
 
-from .guard import ASGIApp, Message, Receive, Scope, Send, route_of
+from .guard import ASGIApp, HttpMiddleware, Message, Receive, Scope, Send, route_of
 from .logs import RequestLabels, labelled
 from .metrics import ServiceMetrics
 from .tracing import Tracing, set_attributes
@@ -49,21 +49,17 @@ class Observation:
         return self.tracing.carrier()
 
 
-class Observe:
+class Observe(HttpMiddleware):
     """ASGI middleware: request id, log labels, the request's span and its metrics."""
 
     def __init__(self, app: ASGIApp, observation: Observation) -> None:
-        self.app = app
+        super().__init__(app)
         self.observation = observation
 
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
+    async def http(self, scope: Scope, receive: Receive, send: Send, headers: dict[str, str]) -> None:
         started = time.perf_counter()
         method = scope.get("method", "GET").upper()
         path = scope.get("path", "/")
-        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
         given = headers.get("x-request-id", "")
         request_id = given if REQUEST_ID.match(given) else uuid.uuid4().hex[:16]
         found = OBJECT_PATH.match(path)
