@@ -11,7 +11,7 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")  # starlette's notice about httpx2
     from fastapi.testclient import TestClient
 
-from planhrc.kb_service.usecases import perception
+from planhrc.kb_service.usecases import unit_of_work
 from planhrc.pipeline import val_runs
 from planhrc.kb_service.app import create_app
 from planhrc.kb_service.store import SqliteStore
@@ -179,7 +179,7 @@ def test_a_relative_replan_writes_while_val_checks_and_stores_only_what_val_acce
     with TestClient(create_app(make_settings(db_path=db, token=None))) as client:
         oid = _object(client, 3)
         client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": [0, 90, 90]})
-        monkeypatch.setattr(perception, "OVERLAP_WAIT_S", 10.0)  # this test is about the overlap, not its bound
+        monkeypatch.setattr(unit_of_work, "OVERLAP_WAIT_S", 10.0)  # this test is about the overlap, not its bound
         ended, starts = _timed_val(monkeypatch, 0.05), _write_starts(monkeypatch)
         answer = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 0, 0]}).json()
         assert answer["decision"] == "replan" and answer["next_action"] is not None
@@ -187,7 +187,7 @@ def test_a_relative_replan_writes_while_val_checks_and_stores_only_what_val_acce
         assert client.get(f"/objects/{oid}/plan").json()["id"] == answer["plan_id"]
 
         monkeypatch.undo()
-        monkeypatch.setattr(perception, "OVERLAP_WAIT_S", 10.0)
+        monkeypatch.setattr(unit_of_work, "OVERLAP_WAIT_S", 10.0)
         ended = _timed_val(monkeypatch, 0.05, ValidationResult(False, "step 1: precondition not satisfied", 0.0))
         starts = _write_starts(monkeypatch)
         refused = client.post(f"/objects/{oid}/perceptions", json={"link_orientations_deg": [0, 270, 180]}).json()

@@ -6,7 +6,7 @@ requests and results to its bodies; nothing here knows HTTP.
 |---|---|---|
 | create an object | `create_object(NewObject) -> ObjectRead` | `objects` |
 | set a goal | `set_goal(GoalRequest) -> GoalSet` | `goal` |
-| perceive, decide, re-plan, write | `perceive(PerceptionRequest) -> Turn` | `perception`, `refine`, `turns` |
+| perceive, decide, re-plan, write | `perceive(PerceptionRequest) -> Turn` | `perception`, `seen`, `refine`, `turns` |
 | take the next action (the VAL gate) | `take_next_action(object_id) -> NextAction` or None | `dispatch` (with `gate`) |
 | a worker's feedback | `give_feedback(FeedbackRequest) -> FeedbackResult` | `feedback` |
 | a worker gives up | `give_up(GiveUpRequest) -> GaveUp` | `giving_up` |

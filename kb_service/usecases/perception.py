@@ -1,4 +1,5 @@
-"""A perception: perceive -> decide -> (re-plan) -> write, in one function (`perceive`).
+"""A perception, as the paper's cooperation loop draws it (`perceive`): snap the perceived configuration to a state,
+decide (the expected state it matches: continue or resume; else re-plan), plan when the decision asks for it, write.
 
 It stores all it leads to in one write: the perceived state and, after a re-plan, its problem, plan and expected
 states, then the execution, the decision's event and the idempotent answer. A refused or failed write stores none
@@ -8,43 +9,37 @@ drops the dispatched action (its feedback then gets a conflict).
 
 Planning and VAL run under the object's lock only: the store (shared by every object) is held just for the write.
 A re-plan calls the pipeline once (`pipeline.plan_for_service`), which hands back the plan with a handle on VAL's
-verdict, VAL running in its own processes; the store's checks of the plan run meanwhile. A plan VAL checks in one
-short run has its write begun before VAL answered: the write reads the verdict inside the store's transaction,
-waiting `OVERLAP_WAIT_S` at most, so that a slow VAL (a loaded machine) does not hold the store every object
-writes to: the write is then rolled back, VAL waited for outside the store, and the write done again. A plan VAL
-refuses is never stored; a re-plan that does not finish within the planning deadline raises DeadlineError and
+verdict, VAL running in its own processes; the store's checks of the plan run meanwhile, and the write overlaps VAL
+as the unit of work says (`unit_of_work.write_on_verdict`: the one place a write is retried or waits on VAL). A plan
+VAL refuses is never stored; a re-plan that does not finish within the planning deadline raises DeadlineError and
 stores nothing.
 """
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from typing import Callable
 
-from planhrc.cooperation import Decision, decide
+from planhrc.cooperation import Decision
 from planhrc.event_log import IncompleteData
-from planhrc.model import ArticulatedObject, ModelError, Perception, perceive as snap
+from planhrc.model import ArticulatedObject, ModelError, perceive as snap
 from planhrc.pipeline import PieceVerdict, PlannedTurn, PlanOutcome, deadline_from, plan_for_service
 from planhrc.pipeline.later import Precheck
-from planhrc.vocabulary import DecisionKind, PlanningStatus
+from planhrc.vocabulary import DecisionKind
 
-from ..store import DeadlineError, Execution, StoredPlan, StoredState, ValidationError
-from ..store import CheckedPlan
+from ..store import CheckedPlan, DeadlineError, ValidationError
 from . import refine
 from .context import Context
 from .idempotency import fingerprint, recall, remember
 from .inputs import check_count, check_finite, measured_base
 from .log import log_event, record_verdict
-from .memory import ObjectMemo
+from .seen import NewPlan, Seen
 from .turns import Written, adopt, decision_data, follow
-from .unit_of_work import object_write, read_mark, serialized
+from .unit_of_work import object_write, read_mark, serialized, write_on_verdict
 from .values import Turn
 
 log = logging.getLogger(__name__)
-
-# How long a perception's write, begun while VAL checks its new plan in one short run, waits for VAL inside the
-# store's transaction: on a quiet machine VAL answers within it; a slower run is waited for outside the store.
-OVERLAP_WAIT_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -56,29 +51,6 @@ class PerceptionRequest:
     link_orientations_deg: tuple[float | None, ...]
     idempotency_key: str | None = None
     base_point_xy: tuple[float, ...] | None = None
-
-
-class _ValStillRunning(Exception):
-    """VAL did not answer within OVERLAP_WAIT_S of the write: roll it back and wait outside the store."""
-
-
-@dataclass(frozen=True)
-class _Seen:
-    """What a perception found before its write: the object as perceived, where its cooperation stands, and the
-    decision taken (None: no goal to decide towards)."""
-
-    obj: ArticulatedObject
-    perception: Perception
-    execution: Execution
-    goal: StoredState | None
-    plan: StoredPlan | None
-    memo: ObjectMemo
-    base: refine.Base  # where the checks place a placed object's base point (None: abstract)
-    measured: tuple[float, float] | None  # the base point the perception measured
-    key: str | None  # the request's idempotency key, and its fingerprint
-    fingerprint: str
-    mark: int  # where the object's log stood before anything was read (`unit_of_work.read_mark`)
-    decision: Decision | None = None
 
 
 def perceive(context: Context, request: PerceptionRequest) -> Turn:
@@ -93,66 +65,26 @@ def perceive(context: Context, request: PerceptionRequest) -> Turn:
 
 
 def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) -> Turn:
-    store, links, key = context.store, request.link_orientations_deg, request.idempotency_key
-    measured = measured_base(request.base_point_xy)
     with context.locks.hold(request.object_id):
-        obj = store.get_object(request.object_id)
-        mark = read_mark(context, obj.ident)  # before the remembered answer and the state are read
-        print_ = fingerprint({"perception": list(links)} if measured is None else
-                             {"perception": list(links), "base_point_xy": list(measured)})
-        recalled = recall(store, obj.ident, key, print_, Turn)
-        if recalled is not None:
-            return recalled
-        if any(v is None for v in links):
-            return _incomplete(context, obj, request, print_, measured, mark)
+        # snap: the perceived state, and where the object's cooperation stands
+        seen = _snap(context, request, deadline_at)
+        if not isinstance(seen, Seen):  # answered already (the idempotency key), or links not seen
+            return seen
+        if seen.goal is None:
+            return _write(context, seen, None).turn  # no decision: nothing to count
 
-        # where the object's cooperation stands
-        memo = context.memory.of(store, obj.ident)
-        try:  # validated and snapped once, here; a bimanual state takes the robot's control facts (`planhrc.control`)
-            perception = snap(obj, links, control=memo.control)
-        except ModelError as exc:
-            raise ValidationError(str(exc)) from None
-        execution = store.get_execution(obj.ident)
-        goal = store.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
-        plan, view = context.views.get(store, execution.plan_id)
-        base = measured or memo.where  # a perception with a base point places the object (None: abstract)
-        seen = _Seen(obj, perception, execution, goal, plan, memo, base, measured, key, print_, mark)
-        if goal is None:
-            return _write(context, seen).turn  # no decision: nothing to count
-
-        # decide
-        decision = decide(perception.atoms, goal.atoms, view, execution.next_step, memo.last_outcome)
-        decision = refine.recheck_at(context, obj, base, plan, perception, decision, memo)
-        decision = refine.escalate(context, obj, plan, perception, decision, memo, base)
-        decision = refine.gate_decision(context, obj, plan, decision, deadline_at)
-        seen = replace(seen, decision=decision)
+        # decide: the goal reached, continue or resume the plan, the human asked (written at once); else re-plan
+        decision = refine.decision_for(context, seen)
         if decision.kind not in (DecisionKind.REPLAN, DecisionKind.NO_PLAN):
-            written = _write(context, seen)
+            written = _write(context, seen, decision)
             context.observer.decided(written.turn.decision, None)
             return written.turn
 
-        # re-plan: the pipeline once, VAL running in its own processes meanwhile
-        context.validator.stop(obj.ident)  # the plan being replaced needs no more checking
-        replan = refine.replan_request(obj, perception, goal.atoms, plan, decision, memo, base, deadline_at)
-        with context.observer.span("plan"):  # the object: on `perceive`
-            planned = plan_for_service(replan, context.planning, context.validator, context.pool)
-        try:
-            if planned.outcome.status is PlanningStatus.TIMEOUT:
-                raise DeadlineError(f"planning: {planned.outcome.message}")
-            checked = _check_plan(context, obj, planned.outcome, deadline_at, planned.verdict.steps_before_answer)
-            with context.observer.span("val"):
-                if not planned.verdict.read_in_write:
-                    planned.verdict.outcome(None)  # VAL's verdict before the write: the store is not held meanwhile
-                try:
-                    written = _write(context, seen, planned, checked)
-                except _ValStillRunning:
-                    log.info("VAL was slower than %.0f ms on %s's plan: the write waited for it outside the store",
-                             OVERLAP_WAIT_S * 1000, obj.ident)
-                    planned.verdict.outcome(None)
-                    written = _write(context, seen, planned, checked)
-        except BaseException:
-            planned.verdict.cancel()  # no VAL process outlives the request
-            raise
+        # plan, then write once VAL's verdict is in (read inside the write when it comes soon: `unit_of_work`)
+        planned = _plan(context, seen, decision)
+        written = write_on_verdict(context, seen.obj.ident, planned, lambda: _check_plan(context, seen, planned),
+                                   lambda new_plan: _write(context, seen, decision, new_plan))
+        obj, store = seen.obj, context.store
         verdict = planned.verdict.outcome(0) if planned.outcome.solved and planned.outcome.actions else None
         if verdict is not None and "validate" in verdict.timings:
             context.observer.validated(verdict.validated or verdict.validated_steps > 0, verdict.timings["validate"],
@@ -174,48 +106,78 @@ def _perceive(context: Context, request: PerceptionRequest, deadline_at: float) 
         return written.turn
 
 
-def _write(context: Context, seen: _Seen, planned: PlannedTurn | None = None, checked: CheckedPlan | None = None
-           ) -> Written:
-    """The perception's one write. With a re-plan whose VAL verdict is read inside the write (`read_in_write`),
-    it waits for the verdict before it uses the plan, so it commits a plan VAL accepted or none (a plan VAL
-    refuses is stored as a problem without a plan), or raises _ValStillRunning (rolled back) after
-    OVERLAP_WAIT_S."""
-    store, obj, goal, decision = context.store, seen.obj, seen.goal, seen.decision
+def _snap(context: Context, request: PerceptionRequest, deadline_at: float) -> Seen | Turn:
+    """What the perception finds under the object's lock: the perceived state (snapped once, here) and where the
+    object's cooperation stands; or the answer at once (the request's key answered before, links not seen)."""
+    store, links = context.store, request.link_orientations_deg
+    measured = measured_base(request.base_point_xy)
+    obj = store.get_object(request.object_id)
+    mark = read_mark(context, obj.ident)  # before the remembered answer and the state are read
+    print_ = fingerprint({"perception": list(links)} if measured is None else
+                         {"perception": list(links), "base_point_xy": list(measured)})
+    recalled = recall(store, obj.ident, request.idempotency_key, print_, Turn)
+    if recalled is not None:
+        return recalled
+    if any(v is None for v in links):
+        return _incomplete(context, obj, request, print_, measured, mark)
+    memo = context.memory.of(store, obj.ident)
+    try:  # validated and snapped once, here; a bimanual state takes the robot's control facts (`planhrc.control`)
+        perception = snap(obj, links, control=memo.control)
+    except ModelError as exc:
+        raise ValidationError(str(exc)) from None
+    execution = store.get_execution(obj.ident)
+    goal = store.get_state(memo.goal_state_id) if memo.goal_state_id is not None else None
+    plan, view = context.views.get(store, execution.plan_id)
+    return Seen(obj=obj, perception=perception, execution=execution, goal=goal, plan=plan, view=view, memo=memo,
+                base=measured or memo.where,  # a perception with a base point places the object (None: abstract)
+                measured=measured, deadline_at=deadline_at, key=request.idempotency_key, fingerprint=print_,
+                mark=mark)
+
+
+def _plan(context: Context, seen: Seen, decision: Decision) -> PlannedTurn:
+    """The re-plan a decision asks for: the pipeline once, VAL checking the new plan in its own processes after."""
+    context.validator.stop(seen.obj.ident)  # the plan being replaced needs no more checking
+    request = refine.replan_request(seen, decision)
+    with context.observer.span("plan"):  # the object: on `perceive`
+        return plan_for_service(request, context.planning, context.validator, context.pool)
+
+
+def _write(context: Context, seen: Seen, decision: Decision | None,
+           new_plan: Callable[[], NewPlan] | None = None) -> Written:
+    """The perception's one write. After a re-plan it reads the new plan as VAL checked it (`new_plan()`) once the
+    perceived state is written: inside the write, as the unit of work lets it (`unit_of_work.write_on_verdict`),
+    so it commits a plan VAL accepted or none (a plan VAL refuses is stored as a problem without a plan)."""
+    store, obj, goal = context.store, seen.obj, seen.goal
     started = time.perf_counter()
     with context.observer.span("store"), object_write(context, obj.ident, seen.mark):
         perceived = store.add_perception(seen.perception)
-        outcome: PlanOutcome | None = None
-        if planned is not None:
-            outcome = planned.verdict.outcome(OVERLAP_WAIT_S if planned.verdict.read_in_write else None)
-            if outcome is None:
-                raise _ValStillRunning()
-            if outcome.status is PlanningStatus.TIMEOUT:
-                raise DeadlineError(f"planning: {outcome.message}")
+        new = new_plan() if new_plan is not None else None
         if goal is None or decision is None:
-            written = Written(Turn(DecisionKind.NO_PLAN, None, perceived.id, None, None,
-                                   "no goal is set: PUT /objects/{id}/goal first"))
-        elif planned is None or outcome is None:
-            written = follow(context, obj, perceived, seen.execution, seen.plan, decision, seen.memo, seen.base)
+            written = Written(turn=Turn(decision=DecisionKind.NO_PLAN, plan_id=None, perceived_state_id=perceived.id,
+                                        next_action=None, matched_expected_step=None,
+                                        reason="no goal is set: PUT /objects/{id}/goal first"))
+        elif new is None:
+            written = follow(context, seen, perceived, decision)
         else:
-            written = adopt(context, obj, perceived, goal, decision, outcome, checked, planned.verdict.early_answer())
+            written = adopt(context, seen, perceived, decision, new)
         turn = written.turn
         data = decision_data(written, goal.id if goal is not None else None,
                              decision.remedy if decision is not None else None, seen.measured)
         log_event(store, obj.ident, turn.decision, turn.reason, data)
         remember(store, obj.ident, seen.key, seen.fingerprint, turn)
-    context.observer.stored(time.perf_counter() - started, replanned=planned is not None)
+    context.observer.stored(time.perf_counter() - started, replanned=new_plan is not None)
     return written
 
 
-def _check_plan(context: Context, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float,
-                first_steps: int | None) -> CheckedPlan | None:
+def _check_plan(context: Context, seen: Seen, planned: PlannedTurn) -> CheckedPlan | None:
     """The store's checks of a new plan (outside the store's lock), while VAL checks it in its own processes: of
-    its first `first_steps` steps only when VAL checks only those before the answer (the rest: `_later_checks`)."""
+    its first steps only when VAL checks only those before the answer (the rest: `_later_checks`)."""
+    outcome: PlanOutcome = planned.outcome
     if not (outcome.solved and outcome.actions):
         return None
     try:
-        return context.store.check_plan(obj.ident, outcome.actions, outcome.expected_states, deadline_at,
-                                        first_steps)
+        return context.store.check_plan(seen.obj.ident, outcome.actions, outcome.expected_states, seen.deadline_at,
+                                        planned.verdict.steps_before_answer)
     except DeadlineError as exc:  # said as every other stage says it: with the deadline the settings give
         where = str(exc).removeprefix("planning: the deadline passed")
         raise DeadlineError(f"planning: planning deadline of {context.planning.deadline_s:g} s exceeded{where}") \
@@ -250,7 +212,8 @@ def _incomplete(context: Context, obj: ArticulatedObject, request: PerceptionReq
                          [str(unseen[0])])
     reason = (f"link{'s' if len(unseen) > 1 else ''} {named} {'were' if len(unseen) > 1 else 'was'} not seen: "
               "look again")
-    turn = Turn(DecisionKind.INCOMPLETE_PERCEPTION, None, None, None, None, reason, unseen_links=tuple(unseen))
+    turn = Turn(decision=DecisionKind.INCOMPLETE_PERCEPTION, plan_id=None, perceived_state_id=None, next_action=None,
+                matched_expected_step=None, reason=reason, unseen_links=tuple(unseen))
     store = context.store
     with object_write(context, obj.ident, mark):  # the base point recorded, not used: it changes nothing
         log_event(store, obj.ident, DecisionKind.INCOMPLETE_PERCEPTION, reason,

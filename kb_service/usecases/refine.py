@@ -1,46 +1,58 @@
-"""What a perception decides, beyond the cooperation model's own rule (`cooperation.decide`): each step below takes
-a decision and returns it, or a better one, for the object as it lies now.
+"""What a perception decides (`decision_for`): the cooperation model's own rule (`cooperation.decide`), then each
+step below, which takes what the perception found (`seen.Seen`) and a decision and returns it, or a better one, for
+the object as it lies now.
 
 * `recheck_at`: going on with the plan, checked at the base point as measured now (re-plan if it leaves the table);
 * `escalate`: after a failure of the motion it would dispatch, not the same motion again (`cooperation.escalate`);
-* `gate_decision`: a motion VAL refused is not dispatched (re-plan);
-* `replan_request`: what a re-plan starts from (a joint turned the other way round, else the planner).
+* `gate_decision`: a motion VAL refused is not dispatched (re-plan).
+
+`replan_request` is what a re-plan starts from (a joint turned the other way round, else the planner).
 """
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Callable, Sequence
 
-from planhrc.cooperation import Decision, FailureHistory, escalate as escalate_failure
+from planhrc.cooperation import Decision, FailureHistory, decide, escalate as escalate_failure
 from planhrc.geometry import Cell, ObjectGeometry, link_centres, reach_shortfall
 from planhrc.judge import judge_motion
-from planhrc.model import ArticulatedObject, Formulation, Perception, State
+from planhrc.model import ArticulatedObject, Formulation, Perception
 from planhrc.ordering import Move, Placement, RefusedMotion, leaves_the_table
 from planhrc.pipeline import ReplanRequest, action_motion, move_of
 from planhrc.vocabulary import ActionOutcome, DecisionKind, Remedy
 
-from ..store import StoredPlan
 from .actions import last_step, merges, next_action
 from .context import Context
 from .gate import val_gate
 from .memory import ObjectMemo
+from .seen import Base, Seen
 
-Base = tuple[float, float] | None  # where a placed object's base point lies (None: an abstract object)
 DISPATCHING = (DecisionKind.CONTINUE, DecisionKind.RESUME)
 
 
-def recheck_at(context: Context, obj: ArticulatedObject, base: Base, plan: StoredPlan | None,
-               perception: Perception, decision: Decision, memo: ObjectMemo) -> Decision:
+def decision_for(context: Context, seen: Seen) -> Decision:
+    """The decision on a perception of an object with a goal: the cooperation model's, refined by each step in
+    `STEPS`, in that order."""
+    assert seen.goal is not None  # without a goal there is nothing to decide towards
+    decision = decide(seen.perception.atoms, seen.goal.atoms, seen.view, seen.execution.next_step,
+                      seen.memo.last_outcome)
+    for step in STEPS:
+        decision = step(context, seen, decision)
+    return decision
+
+
+def recheck_at(context: Context, seen: Seen, decision: Decision) -> Decision:
     """A decision to go on with the current plan, checked where the object lies now, as measured: the motion it
     would dispatch is judged as the worker will judge it (`planhrc.judge.judge_motion`, from the measured pose)
     and must not be one the robot refused from this state before; the rest of the plan must not put a link past
     the table's edge or inside the robot with the base point at `base` (the plan was checked where the base point
     was then). Otherwise the plan is not dispatched as is: re-plan."""
+    obj, base, plan, memo = seen.obj, seen.base, seen.plan, seen.memo
     if base is None or plan is None or decision.next_step is None or decision.kind not in DISPATCHING:
         return decision
     if not 1 <= decision.next_step <= len(plan.actions):
         return decision
-    geometry, pose = ObjectGeometry.of(obj, base), tuple(float(v) for v in perception.raw_deg)
+    geometry, pose = ObjectGeometry.of(obj, base), tuple(float(v) for v in seen.perception.raw_deg)
     merge = merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
     motion = next_action(merge, obj, plan, plan.actions[decision.next_step - 1])
     move = Move(motion.name, motion.turned_link_index, motion.held_link_index, motion.joint_index, motion.delta_deg)
@@ -49,24 +61,23 @@ def recheck_at(context: Context, obj: ArticulatedObject, base: Base, plan: Store
     if refused is not None or not verdict.ok:
         why = (f"the robot refused that turn from this state before ({refused.fact})" if refused is not None
                else verdict.sentence())
-        return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
-                        f"{decision.reason}; but with the base point measured at ({base[0]:.3f}, {base[1]:.3f}) "
-                        f"and the links as measured, turning link {move.turned} by {move.delta_deg:+d}° "
-                        f"({motion.id}) would end with {why}: re-plan")
+        return _replan(decision, f"{decision.reason}; but with the base point measured at ({base[0]:.3f}, "
+                                 f"{base[1]:.3f}) and the links as measured, turning link {move.turned} by "
+                                 f"{move.delta_deg:+d}° ({motion.id}) would end with {why}: re-plan")
     rest = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.next_step]
     step, problem = leaves_the_table(Placement(geometry, pose), rest)
     if step is None or problem is None:
         return decision
     where = f"({base[0]:.3f}, {base[1]:.3f})"
-    return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
-                    f"{decision.reason}; but with the base point measured at {where} step "
-                    f"a_{decision.next_step + step - 1} of {plan.id} would end with {problem.message}: re-plan")
+    return _replan(decision, f"{decision.reason}; but with the base point measured at {where} step "
+                             f"a_{decision.next_step + step - 1} of {plan.id} would end with {problem.message}: "
+                             "re-plan")
 
 
-def escalate(context: Context, obj: ArticulatedObject, plan: StoredPlan | None, perception: Perception,
-             decision: Decision, memo: ObjectMemo, base: Base) -> Decision:
+def escalate(context: Context, seen: Seen, decision: Decision) -> Decision:
     """`cooperation.escalate` for the motion the decision would dispatch: after a failure of that motion (or
     while the human is asked for it) it is not dispatched identically again."""
+    obj, plan, memo = seen.obj, seen.plan, seen.memo
     failure = memo.failure
     asked = (failure is not None and Remedy.ASK_HUMAN in failure.tried
              and memo.last_decision == DecisionKind.HUMAN_HELP_REQUESTED)  # still waiting for the human
@@ -79,37 +90,48 @@ def escalate(context: Context, obj: ArticulatedObject, plan: StoredPlan | None, 
     motion = action_motion(obj, action)
     merge = merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
     macro = last_step(merge, obj, plan, action) - action.step + 1
-    reachable = _reachable(perception, obj, base, motion["turned_link_index"], motion["held_link_index"])
+    reachable = _reachable(seen.perception, obj, seen.base, motion["turned_link_index"], motion["held_link_index"])
     return escalate_failure(decision, failure, (motion["joint_index"], motion["turned_link_index"]), macro,
                             reachable)
 
 
-def gate_decision(context: Context, obj: ArticulatedObject, plan: StoredPlan | None, decision: Decision,
-                  deadline_at: float) -> Decision:
+def gate_decision(context: Context, seen: Seen, decision: Decision) -> Decision:
     """A decision that would dispatch a step of `plan` (continue, resume) stands only when VAL has accepted
     every piece the motion lies in (`gate.val_gate`); when VAL refused one, it becomes a re-plan saying so."""
+    plan = seen.plan
     if (decision.kind not in DISPATCHING or plan is None or decision.next_step is None
             or not 1 <= decision.next_step <= len(plan.actions)):
         return decision
-    refusal = val_gate(context, obj, plan, plan.actions[decision.next_step - 1], deadline_at)
+    refusal = val_gate(context, seen.obj, plan, plan.actions[decision.next_step - 1], seen.deadline_at)
     if refusal is None:
         return decision
-    return Decision(DecisionKind.REPLAN, None, decision.matched_expected_step,
-                    f"{decision.reason}; but {refusal}: re-plan from the perceived state")
+    return _replan(decision, f"{decision.reason}; but {refusal}: re-plan from the perceived state")
 
 
-def replan_request(obj: ArticulatedObject, perception: Perception, goal: State, plan: StoredPlan | None,
-                   decision: Decision, memo: ObjectMemo, base: Base, deadline_at: float) -> ReplanRequest:
+# The refinement steps, in the order `decision_for` takes them.
+STEPS: tuple[Callable[[Context, Seen, Decision], Decision], ...] = (recheck_at, escalate, gate_decision)
+
+
+def _replan(decision: Decision, reason: str) -> Decision:
+    """A decision to go on with the plan, turned into a re-plan for `reason`."""
+    return Decision(kind=DecisionKind.REPLAN, next_step=None, matched_expected_step=decision.matched_expected_step,
+                    reason=reason)
+
+
+def replan_request(seen: Seen, decision: Decision) -> ReplanRequest:
     """The re-plan a decision asks for: the current plan's rest with the failing joint turned the other way round
     (remedy other_way), else the planner's; ordered on the table for a placed object, its base point at `base`."""
+    obj, plan, memo, base = seen.obj, seen.plan, seen.memo, seen.base
+    assert seen.goal is not None  # a re-plan is decided towards a goal
     moves = None
     if (decision.remedy == Remedy.OTHER_WAY and plan is not None and memo.failure is not None
             and decision.matched_expected_step is not None):
         rest = [a for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.matched_expected_step]
         turned = other_way(obj, [move_of(obj, a.spec) for a in rest], memo.failure)
         moves = tuple(turned) if turned is not None else None
-    return ReplanRequest(obj, perception.atoms, goal, deadline_at,
-                         placement(obj, perception.raw_deg, base, memo.refused, may_slide(memo, base)), moves)
+    return ReplanRequest(obj=obj, init=seen.perception.atoms, goal=seen.goal.atoms, deadline_at=seen.deadline_at,
+                         placement=placement(obj, seen.perception.raw_deg, base, memo.refused, may_slide(memo, base)),
+                         moves=moves)
 
 
 # Slides asked for per goal: room is made a few times at most (a slide the object ends short of, a human's move may

@@ -10,17 +10,17 @@ from typing import Mapping
 from planhrc.cooperation import Decision, PlanView
 from planhrc.event_log import DecisionData, SkillRequest
 from planhrc.geometry import ObjectGeometry
-from planhrc.model import ArticulatedObject, snap_angle
+from planhrc.model import snap_angle
 from planhrc.ordering import Placement, help_for
-from planhrc.pipeline import EarlyAnswer, PlanOutcome, move_of
+from planhrc.pipeline import EarlyAnswer, move_of
 from planhrc.vocabulary import DecisionKind, ExecutionStatus, PlanningStatus, Remedy, Skill
 
 from ..store import Execution, StoredPlan, StoredState
-from ..store import CheckedPlan
 from .actions import last_step, merges, next_action
 from .context import Context
 from .memory import ObjectMemo
-from .refine import Base, whole_turn_deg
+from .refine import whole_turn_deg
+from .seen import NewPlan, Seen
 from .values import Turn
 
 IDLE, READY, DISPATCHED = ExecutionStatus.IDLE, ExecutionStatus.READY, ExecutionStatus.DISPATCHED
@@ -40,16 +40,16 @@ class Written:
     adopted: tuple[StoredPlan, PlanView] | None = None
 
 
-def follow(context: Context, obj: ArticulatedObject, perceived: StoredState, execution: Execution,
-           plan: StoredPlan | None, decision: Decision, memo: ObjectMemo, base: Base) -> Written:
+def follow(context: Context, seen: Seen, perceived: StoredState, decision: Decision) -> Written:
     """Goal reached, continue or resume: the execution moves within the current plan; or the human is asked to do
     the next motion, and the execution waits for the next perception."""
-    store = context.store
+    store, obj, execution, plan, memo = context.store, seen.obj, seen.execution, seen.plan, seen.memo
     if decision.kind == DecisionKind.GOAL_REACHED:
         store.set_execution(obj.ident, Execution(execution.plan_id, None, ExecutionStatus.GOAL_REACHED,
                                                  execution.dispatched_action_id))
-        return Written(Turn(DecisionKind.GOAL_REACHED, execution.plan_id, perceived.id, None,
-                            decision.matched_expected_step, decision.reason))
+        return Written(turn=Turn(decision=DecisionKind.GOAL_REACHED, plan_id=execution.plan_id,
+                                 perceived_state_id=perceived.id, next_action=None,
+                                 matched_expected_step=decision.matched_expected_step, reason=decision.reason))
     assert plan is not None and decision.next_step is not None
     # a split remedy dispatches this plan's steps one by one from now on (its event says so too, for the memo)
     merge = decision.remedy != Remedy.SPLIT and merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
@@ -58,37 +58,41 @@ def follow(context: Context, obj: ArticulatedObject, perceived: StoredState, exe
         last = last_step(merge, obj, plan, action)
         moves = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
                  if action.step <= a.step <= last]
-        seen = tuple(float(snap_angle(v, obj.orientations)) for v in perceived.link_orientations_deg or ())
-        if len(seen) != obj.n_links:  # not a perceived state with its observation: the plan's own view
-            seen = tuple(float(v) for v in obj.link_orientations_of(perceived.atoms))
-        placed = Placement(ObjectGeometry.of(obj, base), seen, whole_turn_deg=whole_turn_deg(obj))
+        pose = tuple(float(snap_angle(v, obj.orientations)) for v in perceived.link_orientations_deg or ())
+        if len(pose) != obj.n_links:  # not a perceived state with its observation: the plan's own view
+            pose = tuple(float(v) for v in obj.link_orientations_of(perceived.atoms))
+        placed = Placement(ObjectGeometry.of(obj, seen.base), pose, whole_turn_deg=whole_turn_deg(obj))
         help_items = help_for(placed, moves, None, why=_failure_words(memo))
         store.set_execution(obj.ident, Execution(plan.id, decision.next_step, IDLE, None))
-        return Written(Turn(DecisionKind.HUMAN_HELP_REQUESTED, plan.id, perceived.id, None,
-                            decision.matched_expected_step, decision.reason, help=tuple(help_items)))
+        return Written(turn=Turn(decision=DecisionKind.HUMAN_HELP_REQUESTED, plan_id=plan.id,
+                                 perceived_state_id=perceived.id, next_action=None,
+                                 matched_expected_step=decision.matched_expected_step, reason=decision.reason,
+                                 help=tuple(help_items)))
     still_dispatched = execution.status == DISPATCHED and execution.dispatched_action_id == action.id
     store.set_execution(obj.ident, Execution(plan.id, decision.next_step, DISPATCHED if still_dispatched else READY,
                                              execution.dispatched_action_id))
-    return Written(Turn(DecisionKind(decision.kind), plan.id, perceived.id, next_action(merge, obj, plan, action),
-                        decision.matched_expected_step, decision.reason))
+    return Written(turn=Turn(decision=DecisionKind(decision.kind), plan_id=plan.id, perceived_state_id=perceived.id,
+                             next_action=next_action(merge, obj, plan, action),
+                             matched_expected_step=decision.matched_expected_step, reason=decision.reason))
 
 
-def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal: StoredState, decision: Decision,
-          outcome: PlanOutcome, checked: CheckedPlan | None, early: EarlyAnswer | None) -> Written:
+def adopt(context: Context, seen: Seen, perceived: StoredState, decision: Decision, new: NewPlan) -> Written:
     """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL: the whole plan, or
     with the early answer its first motion), its plan with expected states; move the execution. A plan whose turns
     come after a slide is answered with the slide (`robot_skill`): the robot slides the object, perceives again and
-    goes on with the plan from its first step. With the early answer the decision's event names the plan's pieces and those accepted (`decision_data`): the record the
-    dispatch gate starts from, through a restart."""
-    store = context.store
+    goes on with the plan from its first step. With the early answer the decision's event names the plan's pieces
+    and those accepted (`decision_data`): the record the dispatch gate starts from, through a restart."""
+    store, obj, goal, outcome, early = context.store, seen.obj, seen.goal, new.outcome, new.early
+    assert goal is not None  # a re-plan is decided towards a goal
     problem = store.add_problem(obj.ident, perceived.id, goal.id)
 
     def written(turn: Turn, behind: EarlyAnswer | None = None,
                 adopted: tuple[StoredPlan, PlanView] | None = None) -> Written:
-        return Written(turn, problem.id, outcome.status, outcome.timings, outcome.ordering, behind, adopted)
+        return Written(turn=turn, problem_id=problem.id, planning_status=outcome.status, timings=outcome.timings,
+                       ordering=outcome.ordering, early=behind, adopted=adopted)
 
     if outcome.solved and outcome.actions:
-        plan = store.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states, checked)
+        plan = store.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states, new.checks)
         store.set_execution(obj.ident, Execution(plan.id, 1, READY, None))
         view = PlanView(expected_states=outcome.expected_states, preconditions=tuple(a.pre for a in outcome.actions))
         ordering = f" ({outcome.ordering})" if outcome.ordering else ""
@@ -99,24 +103,29 @@ def adopt(context: Context, obj: ArticulatedObject, perceived: StoredState, goal
             store.set_execution(obj.ident, Execution(plan.id, 1, IDLE, None))  # nothing dispatched before it
             slide = outcome.slide
             skill = SkillRequest(Skill.SLIDE, slide.to_xy, slide.links, slide.sentence())
-            turn = Turn(DecisionKind.ROBOT_SKILL, plan.id, perceived.id, None, decision.matched_expected_step,
-                        f"{reason}; the robot makes room first: {slide.sentence()}", skill=skill)
+            turn = Turn(decision=DecisionKind.ROBOT_SKILL, plan_id=plan.id, perceived_state_id=perceived.id,
+                        next_action=None, matched_expected_step=decision.matched_expected_step,
+                        reason=f"{reason}; the robot makes room first: {slide.sentence()}", skill=skill)
             return written(turn, early, (plan, view))
         action = next_action(context.settings.merge_macro_steps, obj, plan, plan.actions[0])
-        turn = Turn(DecisionKind.REPLAN, plan.id, perceived.id, action, decision.matched_expected_step, reason)
+        turn = Turn(decision=DecisionKind.REPLAN, plan_id=plan.id, perceived_state_id=perceived.id,
+                    next_action=action, matched_expected_step=decision.matched_expected_step, reason=reason)
         return written(turn, early, (plan, view))
     if outcome.solved:  # the perceived state already satisfies the goal
         store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
-        return written(Turn(DecisionKind.GOAL_REACHED, None, perceived.id, None, None, outcome.message))
+        return written(Turn(decision=DecisionKind.GOAL_REACHED, plan_id=None, perceived_state_id=perceived.id,
+                            next_action=None, matched_expected_step=None, reason=outcome.message))
     if outcome.help:  # a plan exists but the robot cannot carry it out on this table: ask the human
         store.set_execution(obj.ident, Execution(None, None, IDLE, None))
         reason = f"{decision.reason}; {outcome.message}; the robot asks the human for help"
-        return written(Turn(DecisionKind.HUMAN_HELP_REQUESTED, None, perceived.id, None,
-                            decision.matched_expected_step, reason, help=outcome.help))
+        return written(Turn(decision=DecisionKind.HUMAN_HELP_REQUESTED, plan_id=None, perceived_state_id=perceived.id,
+                            next_action=None, matched_expected_step=decision.matched_expected_step, reason=reason,
+                            help=outcome.help))
     store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.NO_PLAN, None))
     reason = (f"{decision.reason}; planning {outcome.status}: {outcome.message}; "
               "a human must bring the object to a workable configuration")
-    return written(Turn(DecisionKind.NO_PLAN, None, perceived.id, None, decision.matched_expected_step, reason))
+    return written(Turn(decision=DecisionKind.NO_PLAN, plan_id=None, perceived_state_id=perceived.id,
+                        next_action=None, matched_expected_step=decision.matched_expected_step, reason=reason))
 
 
 def decision_data(written: Written, goal_state_id: str | None, remedy: Remedy | None,
