@@ -11,6 +11,7 @@ import threading
 import time
 import warnings
 from pathlib import Path
+from typing import Callable
 
 import httpx
 import pytest
@@ -39,9 +40,10 @@ def _angles(rng: random.Random, n: int) -> list[int]:
 
 
 def test_a_large_task_plans_while_another_object_and_health_answer(tmp_path):
-    """A 200-link x 12 absolute object's perception plans into its 4 s deadline (503); meanwhile an 8-link
-    object's re-planning perceptions and `/health` keep answering (none waits for the large task's deadline): the
-    large task's grounding and replay run in a worker process, not in the service's interpreter."""
+    """A 200-link x 12 absolute object's perception plans for seconds (into its 4 s deadline on a slow machine);
+    meanwhile an 8-link object's re-planning perceptions and `/health` keep answering (none waits for the large
+    task's answer): the large task's grounding and replay run in a worker process, not in the service's
+    interpreter."""
     rng = random.Random(3)
     with serving(tmp_path / "kb.sqlite3", env={"PLANHRC_PLANNING_DEADLINE_S": "4"}) as base, \
             httpx.Client(base_url=base, timeout=60) as client, httpx.Client(base_url=base, timeout=60) as other:
@@ -51,27 +53,50 @@ def test_a_large_task_plans_while_another_object_and_health_answer(tmp_path):
         other.get("/health")  # the connection's first answer is not the service's
         started = threading.Event()
 
+        answered: dict[str, float] = {}
+
         def plan_big() -> httpx.Response:
             with httpx.Client(base_url=base, timeout=60) as c:
                 started.set()
-                return c.post(f"/objects/{big}/perceptions", json={"link_orientations_deg": [0] * 200})
+                answer = c.post(f"/objects/{big}/perceptions", json={"link_orientations_deg": [0] * 200})
+                answered["at"] = time.perf_counter()
+                return answer
 
-        calls = []
-        for i in range(25):
-            angles = _angles(rng, 8)
-            calls.append((f"small-{i}", lambda a=angles: other.post(f"/objects/{small}/perceptions",
-                                                                     json={"link_orientations_deg": a})))
-            calls.append((f"health-{i}", lambda: other.get("/health")))
-        big_answer, timings, done_before = timed_beside(plan_big, started, calls)
-        assert big_answer.status_code == 503 and "deadline of 4 s" in big_answer.json()["detail"], big_answer.text
-        small_times = sorted(v for k, v in timings.items() if k.startswith("small"))
-        health_times = sorted(v for k, v in timings.items() if k.startswith("health"))
-        # A stall behind the large task would last its whole 4 s deadline; on a loaded two-core machine a single
-        # call may still wait a few hundred milliseconds for a core, so the slowest is held well under the stall
-        # and the typical call to what an idle service answers.
-        assert small_times[-1] < 2.0 and small_times[len(small_times) // 2] < 0.25, small_times[-5:]
-        assert health_times[-1] < 1.0 and health_times[len(health_times) // 2] < 0.05, health_times[-5:]
-        assert done_before < 4.0, done_before  # the calls ran while the large task planned
+        def calls_of() -> list[tuple[str, Callable[[], httpx.Response]]]:
+            calls = []
+            for i in range(25):
+                angles = _angles(rng, 8)
+                calls.append((f"small-{i}", lambda a=angles: other.post(f"/objects/{small}/perceptions",
+                                                                         json={"link_orientations_deg": a})))
+                calls.append((f"health-{i}", lambda: other.get("/health")))
+            return calls
+
+        # the same calls with nothing else planning first: what this machine answers them in, in this run
+        alone = {}
+        for name, call in calls_of():
+            t = time.perf_counter()
+            assert call().status_code == 200, name
+            alone[name] = time.perf_counter() - t
+        began = time.perf_counter()
+        big_answer, timings, done_before = timed_beside(plan_big, started, calls_of())
+        # planned in time on a fast machine (its first motion validated), else answered at its deadline
+        assert big_answer.status_code == 200 or (big_answer.status_code == 503 and "deadline of 4 s" in
+                                                 big_answer.json()["detail"]), big_answer.text
+        ends, last = [], began + done_before  # the calls ran one after another: each ended where the next began
+        for seconds in reversed(list(timings.values())):
+            ends.append(last)
+            last -= seconds
+        during = sum(end < answered["at"] for end in ends)
+        assert during >= 10, (during, answered["at"] - began)  # answered while the large task was planning
+        # A stall behind the large task would last its whole 4 s deadline. Beside it the calls share two cores
+        # with the large task's worker, so each is held to what the same call took here without it (this run,
+        # this machine) plus a margin far below the stall, not to a figure of an idle machine.
+        for kind in ("small", "health"):
+            beside = sorted(v for k, v in timings.items() if k.startswith(kind))
+            before = sorted(v for k, v in alone.items() if k.startswith(kind))
+            assert beside[-1] < before[-1] + 2.0, (kind, beside[-5:], before[-5:])
+            assert beside[len(beside) // 2] < 3 * before[len(before) // 2] + 0.2, (kind, beside, before)
+        assert done_before < 4.0 + sum(alone.values()), done_before  # the calls ran while the large task planned
 
 
 def _children(pid: int) -> set[int]:
