@@ -22,9 +22,10 @@ def read_object(context: Context, object_id: str) -> ObjectRead:
     with context.locks.hold(obj.ident):
         execution = store.get_execution(obj.ident)
         memo = context.memory.of(store, obj.ident)
-    return ObjectRead(obj.ident, obj.name, obj.formulation.value, obj.orientations, obj.step,
-                      tuple(LinkRead(name, length) for name, length in zip(obj.links, obj.link_lengths_m)),
-                      tuple(obj.joints), memo.goal_state_id, memo.base_point_xy, execution)
+    return ObjectRead(id=obj.ident, name=obj.name, formulation=obj.formulation.value, orientations=obj.orientations,
+                      step_deg=obj.step, goal_state_id=memo.goal_state_id, base_point_xy=memo.base_point_xy,
+                      links=tuple(LinkRead(name, length) for name, length in zip(obj.links, obj.link_lengths_m)),
+                      joints=tuple(obj.joints), execution=execution)
 
 
 def list_objects(context: Context) -> list[ObjectRead]:
@@ -100,16 +101,19 @@ def atoms_read(atoms: frozenset[Atom]) -> tuple[str, ...]:
 
 def state_read(state: StoredState) -> StateRead:
     joints = {a[2]: int(a[1].split("_", 1)[1]) for a in state.atoms if a[0] == HAS_ORIENTATION and len(a) == 3}
-    return StateRead(state.id, state.object_id, state.kind, atoms_read(state.atoms), dict(sorted(joints.items())),
-                     tuple(state.link_orientations_deg) if state.link_orientations_deg else None, state.created_at)
+    return StateRead(id=state.id, object_id=state.object_id, kind=state.kind, atoms=atoms_read(state.atoms),
+                     joint_values_deg=dict(sorted(joints.items())),
+                     link_orientations_deg=tuple(state.link_orientations_deg) if state.link_orientations_deg else None,
+                     created_at=state.created_at)
 
 
 def _plan_read(context: Context, plan: StoredPlan) -> PlanRead:
     store = context.store
     obj = store.get_object(plan.object_id)
     expected = tuple(state_read(store.get_state(sid)) for sid in plan.expected_state_ids)
-    return PlanRead(plan.id, plan.object_id, plan.problem_id, plan.planner, _steps(obj, plan),
-                    tuple(plan.expected_state_ids), expected, plan.created_at)
+    return PlanRead(id=plan.id, object_id=plan.object_id, problem_id=plan.problem_id, planner=plan.planner,
+                    steps=_steps(obj, plan), expected_state_ids=tuple(plan.expected_state_ids),
+                    expected_states=expected, created_at=plan.created_at)
 
 
 def _steps(obj: ArticulatedObject, plan: StoredPlan) -> tuple[PlanStepRead, ...]:
@@ -118,9 +122,10 @@ def _steps(obj: ArticulatedObject, plan: StoredPlan) -> tuple[PlanStepRead, ...]
         motion = action_motion(obj, a)
         spec = a.spec
         steps.append(PlanStepRead(
-            a.id, a.step, spec.name, tuple(spec.params), atoms_read(spec.pre), atoms_read(spec.eff_neg),
-            atoms_read(spec.eff_pos),
-            tuple({"when": atoms_read(c.when), "eff_neg": atoms_read(c.eff_neg), "eff_pos": atoms_read(c.eff_pos)}
-                  for c in spec.cond_eff),
-            motion["joint_index"], motion["turned_link_index"], motion["held_link_index"], motion["delta_deg"]))
+            id=a.id, step=a.step, name=spec.name, params=tuple(spec.params), pre=atoms_read(spec.pre),
+            eff_neg=atoms_read(spec.eff_neg), eff_pos=atoms_read(spec.eff_pos),
+            cond_eff=tuple({"when": atoms_read(c.when), "eff_neg": atoms_read(c.eff_neg),
+                            "eff_pos": atoms_read(c.eff_pos)} for c in spec.cond_eff),
+            joint_index=motion["joint_index"], turned_link_index=motion["turned_link_index"],
+            held_link_index=motion["held_link_index"], delta_deg=motion["delta_deg"]))
     return tuple(steps)

@@ -80,7 +80,7 @@ class LinkRead:
     length_m: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObjectRead:
     id: str
     name: str
@@ -94,7 +94,7 @@ class ObjectRead:
     execution: Execution
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class StateRead:
     id: str
     object_id: str
@@ -105,7 +105,7 @@ class StateRead:
     created_at: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlanStepRead:
     id: str
     step: int
@@ -121,7 +121,7 @@ class PlanStepRead:
     delta_deg: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlanRead:
     id: str
     object_id: str
