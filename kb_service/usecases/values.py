@@ -87,10 +87,10 @@ class ObjectRead:
     formulation: str
     orientations: int
     step_deg: int
-    links: tuple[LinkRead, ...]
-    joints: tuple[str, ...]
     goal_state_id: str | None
     base_point_xy: tuple[float, float] | None
+    links: tuple[LinkRead, ...]
+    joints: tuple[str, ...]
     execution: Execution
 
 
@@ -98,8 +98,8 @@ class ObjectRead:
 class StateRead:
     id: str
     object_id: str
-    kind: str
     atoms: tuple[str, ...]
+    kind: str
     joint_values_deg: Mapping[str, int]
     link_orientations_deg: tuple[float, ...] | None
     created_at: float
@@ -128,9 +128,9 @@ class PlanRead:
     problem_id: str
     planner: str
     steps: tuple[PlanStepRead, ...]
+    created_at: float
     expected_state_ids: tuple[str, ...]
     expected_states: tuple[StateRead, ...]
-    created_at: float
 
 
 @dataclass(frozen=True)
