@@ -18,6 +18,7 @@ runs as its client (`store.acting.acting_as`): every event it leads to records t
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 import json
 import logging
 from dataclasses import dataclass
@@ -112,7 +113,7 @@ def route_of(scope: Scope) -> tuple[str, str] | None:
     return found
 
 
-class HttpMiddleware:
+class HttpMiddleware(ABC):
     """An ASGI middleware of HTTP requests (`http`, with the request's headers, their names in lower case); anything
     else (lifespan, websockets) goes to the application untouched."""
 
@@ -126,8 +127,9 @@ class HttpMiddleware:
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
         await self.http(scope, receive, send, headers)
 
+    @abstractmethod
     async def http(self, scope: Scope, receive: Receive, send: Send, headers: dict[str, str]) -> None:
-        raise NotImplementedError
+        """The request, with its headers."""
 
 
 class RequestGuard(HttpMiddleware):

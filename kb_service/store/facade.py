@@ -11,6 +11,7 @@ how an object's history is compacted and exported, its journal's settling, and i
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import replace
 from typing import Any, Iterable, Iterator, Protocol, Self, Sequence
@@ -86,7 +87,7 @@ class InferredTable(Protocol):
     def lines(self) -> Iterable[str]: ...
 
 
-class StoreCore:
+class StoreCore(ABC):
     """What a store does on every engine (see the module's docstring)."""
 
     _unit: UnitOfWork
@@ -126,16 +127,17 @@ class StoreCore:
 
     # -- what an engine supplies ------------------------------------------------------------------------------
 
+    @abstractmethod
     def _latest_id(self, object_id: str, noun: str) -> str | None:
         """The newest record of a kind of the object (its counter), or None: the backend's."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _roots(self, object_id: str) -> list[str]:
         """`roots.current_roots` of the object on the backend's connection, the guard held: the backend's."""
-        raise NotImplementedError
 
+    @abstractmethod
     def export_lines(self, history: str = "current", object_ids: Sequence[str] | None = None) -> Iterator[str]:
-        raise NotImplementedError
+        """The export's lines (`history`, `object_ids`: as `_export_ids` checks them): the backend's."""
 
     def current_roots(self, object_id: str) -> tuple[str, ...]:
         with self._guard:
@@ -283,10 +285,10 @@ class StoreCore:
         """Whether this process compacts now (inside compaction's transaction): the engine's, yes by default."""
         return True
 
+    @abstractmethod
     def _compact_object(self, object_id: str, roots: list[str], shared: list[str], keep: int) -> tuple[int, int]:
         """Drop what retention does not keep of one object, its journalled plans but `roots` included (inside
         compaction's transaction); (records, triples) deleted: the engine's."""
-        raise NotImplementedError
 
     # -- reads ------------------------------------------------------------------------------------------------
     def get_object(self, object_id: str) -> ArticulatedObject:

@@ -9,6 +9,7 @@ guard asks of it (`ready`, `lost`). Every method here but the guard's is called 
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 import threading
 from contextlib import AbstractContextManager, contextmanager
 from typing import Callable, Iterator, Protocol, TypeVar
@@ -52,7 +53,7 @@ class Guard:
             raise lost from None
 
 
-class UnitOfWork:
+class UnitOfWork(ABC):
     """One connection's transactions, one at a time, with the store's counts and listeners."""
 
     def __init__(self) -> None:
@@ -118,13 +119,14 @@ class UnitOfWork:
             self.depth = 0
 
     # -- what an engine supplies ------------------------------------------------------------------------------
+    @abstractmethod
     def _one_transaction(self) -> AbstractContextManager[None]:
         """One transaction on the connection: committed when the block ends, rolled back when it raises (and what
         the engine cached of it forgotten)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _close_connection(self) -> None:
-        raise NotImplementedError
+        """Close the engine's connection."""
 
     def ready(self) -> None:
         """Make the connection ready for a request (the guard held): nothing, unless the engine can lose it."""
