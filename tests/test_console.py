@@ -175,6 +175,8 @@ def test_the_console_runs_under_its_own_content_security_policy(cell):
     try:
         page.wait_for_selector("#drawing .perceived-layer .link")
         page.wait_for_selector("#log li.replan")
+        # The log comes from the event stream, the plan from its own read: either may be drawn first.
+        page.wait_for_selector("#plan li")
         assert page.locator("#plan li").count() > 0
     finally:
         page.close()
