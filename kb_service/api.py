@@ -220,7 +220,7 @@ async def create_feedback(
     request = usecases.FeedbackRequest(object_id, action_id, body.outcome, body.message, idempotency_key,
                                        body.reason, body.measured_deg,
                                        usecases.RefusalFact.of_data(body.refusal.model_dump(mode="json"))
-                                       if body.refusal is not None else None)
+                                       if body.refusal is not None else None, body.hands_open)
     result = await run_in_threadpool(usecases.give_feedback, context, request)
     return FeedbackPublic.model_validate(result, from_attributes=True)
 

@@ -446,6 +446,10 @@ class FeedbackCreate(BaseModel):
         "unreachable): the geometric fact. The service never proposes the same turn from the same state again "
         "(it remembers it in the object's log). Optional: a refusal without it is remembered from the latest "
         "perception.", examples=[None])
+    hands_open: bool = Field(
+        default=False, description="Bimanual objects only: after the action the robot opened both hands and took "
+        "them away (its grasps are gone, the centre stays), as after a failure: e.g. a turn done, but the hands "
+        "hid a link from every camera. The next plan grasps again.", examples=[False])
 
     @model_validator(mode="after")
     def _reason_only_for_failures(self) -> "FeedbackCreate":

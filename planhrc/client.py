@@ -202,10 +202,12 @@ class KBClient:
 
     def post_feedback(self, object_id: str, action_id: str, outcome: ActionOutcome | str,
                       message: str = "", reason: FailureReason | str | None = None,
-                      measured_deg: float | None = None, refusal: dict[str, Any] | None = None) -> dict[str, Any]:
+                      measured_deg: float | None = None, refusal: dict[str, Any] | None = None,
+                      hands_open: bool = False) -> dict[str, Any]:
         """Report the outcome of the dispatched action: succeeded, failed or partial, with why it failed (`reason`)
         and the turned link's measured orientation after release (`measured_deg`); for a turn refused before it
-        moved, the geometric fact (`refusal`: code, link, against, distance_m, from_deg, base_point_xy)."""
+        moved, the geometric fact (`refusal`: code, link, against, distance_m, from_deg, base_point_xy); for a
+        bimanual object, `hands_open` when the robot opened both hands after the action."""
         key = str(uuid.uuid4())
         body: dict[str, Any] = {"outcome": str(outcome)}
         if message:
@@ -216,6 +218,8 @@ class KBClient:
             body["measured_deg"] = float(measured_deg)
         if refusal is not None:
             body["refusal"] = refusal
+        if hands_open:
+            body["hands_open"] = True
         return self._object("POST", f"/objects/{object_id}/actions/{action_id}/feedback", body, key)
 
     def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:

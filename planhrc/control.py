@@ -36,15 +36,17 @@ def after_failure(control: Iterable[Atom]) -> frozenset[Atom]:
     return frozenset(kept | {(FREE, g) for g in grippers})
 
 
-def control_after(control: Iterable[Atom], done: Sequence[ActionSpec], succeeded: bool) -> frozenset[Atom]:
+def control_after(control: Iterable[Atom], done: Sequence[ActionSpec], succeeded: bool,
+                  hands_open: bool = False) -> frozenset[Atom]:
     """The control facts after the worker's feedback on the actions `done` (one motion, in order): their control
-    effects when it succeeded, else `after_failure`."""
+    effects when it succeeded, else `after_failure`; `after_failure` too when the worker opened its hands after
+    the motion (`hands_open`: a succeeded turn whose grasp hid a link from every camera)."""
     now = frozenset(control)
     if not succeeded:
         return after_failure(now)
     for action in done:
         now = (now - control_of(action.eff_neg)) | control_of(action.eff_pos)
-    return now
+    return after_failure(now) if hands_open else now
 
 
 def check_control(obj: ArticulatedObject, control: Iterable[Atom], field: str = "control") -> frozenset[Atom]:

@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
-from typing import Any, Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from planhrc.robot_sim.acting import Pose, perform_parts
 from planhrc.robot_sim.grip import Hands, drive_arm
+from planhrc.robot_sim.perception import Perception
 from planhrc.robot_sim.scene import ARMS, HOME_POSE, Scene, arm_joints, direction, joint_between, set_arm_joints
 from planhrc.robot_sim.sightlines import Sightlines
 from planhrc.robot_sim.skills import (ActionResult, ArcMiss, Command, Interrupt, Robot, RotationAction, Unreachable,
@@ -66,6 +67,12 @@ class Station:
     down: Mapping[str, tuple[float, ...]]
     swapped: bool  # the arms work the other way round from the plan's grippers
 
+    @property
+    def key(self) -> tuple[Any, ...]:
+        """Where the hands take the links, to the millimetre and the hundredth of a radian."""
+        return tuple(sorted((arm, link, round(float(xy[0]), 3), round(float(xy[1]), 3), round(yaw, 2))
+                            for arm, (link, xy, yaw) in self.points.items()))
+
 
 def named_arms(data: Mapping[str, Any]) -> tuple[str, str]:
     """(turning arm, keeper arm) as the action names them (its last two parameters), else Baxter's usual ones."""
@@ -78,8 +85,10 @@ def named_arms(data: Mapping[str, Any]) -> tuple[str, str]:
 class BothHands:
     """What Baxter's hands do across a bimanual plan's steps: where they work and what they hold."""
 
-    def __init__(self, scene: Scene, robot: Robot, sight: Sightlines | None = None) -> None:
-        self.scene, self.robot, self.sight = scene, robot, sight
+    def __init__(self, scene: Scene, robot: Robot, sight: Sightlines | None = None,
+                 look: Callable[[], Perception] | None = None) -> None:
+        self.scene, self.robot, self.sight, self.look = scene, robot, sight, look
+        self.looked: Perception | None = None  # the look that ended the last step, every link seen
         self.hands = Hands(scene, robot)
         self.centred: tuple[Station, Pose] | None = None  # the station the hands came over, and the pose it was for
 
@@ -93,14 +102,39 @@ class BothHands:
         hands open and the arms go home. `then`: the turn the plan makes next with the hands this step puts on
         the links (the stations are chosen so that the cameras see the links through it)."""
         first = parts[0]
+        self.looked = None
         if first.name in HAND_STEPS:
             result = {MOVE_TO_CENTRE: self._move_to_centre, GRASP_LINKS: self._grasp,
                       RELEASE_LINKS: self._release}[first.name](first, named_arms(data), pose, then)
         else:
             result = self._turn_parts(parts, pose, final, interrupt, stop_fraction)
+            if result.outcome is ActionOutcome.SUCCEEDED:
+                result = self._looked_at(result)
         if result.outcome is not ActionOutcome.SUCCEEDED:
             self.let_go()
         return result
+
+    def take_look(self) -> Perception | None:
+        """The look that ended the last step (every link seen, the hands as they stay), once; None when there was
+        none."""
+        looked, self.looked = self.looked, None
+        return looked
+
+    def _looked_at(self, result: ActionResult) -> ActionResult:
+        """With `look`, a held turn done is looked at: when the hands hide a link from every camera they let go and
+        go home (the service then counts on open hands: `ActionResult.hands_open`), else the look is kept."""
+        if self.look is None or not self.hands.held:
+            return result
+        seen = self.look()
+        if not seen.missing_links:
+            self.looked = seen
+            return result
+        log.info("after the held turn link(s) %s are hidden from every camera: the hands let go", seen.missing_links)
+        self._open_and_lift()
+        for arm in ARMS:
+            drive_arm(self.scene, self.robot, arm, HOME_POSE[arm])
+        return replace(result, hands_open=True, message=f"{result.message}; then both hands opened and went home: "
+                       f"they hid link(s) {', '.join(map(str, seen.missing_links))} from every camera")
 
     def let_go(self) -> None:
         """Both hands open and the arms go home (after a failure)."""
@@ -137,14 +171,48 @@ class BothHands:
 
     def _grasp(self, action: RotationAction, arms: tuple[str, str], pose: Pose,
                then: RotationAction | None) -> ActionResult:
+        """Take the two links; with `look` (the cameras), then look: a grasp that hides a link from every camera
+        is let go and the next-best station taken, up to `GRASP_TRIES` stations (the robot's model of its arms and
+        cameras is not exact; a link a hand hides is a link the service cannot follow)."""
         # the station the hands came over, unless the links have moved since: then the approach is planned from
         # where they lie now
         centred, self.centred = self.centred, None
         station = (centred[0] if centred is not None and _same_place(centred[1], pose)
                    and (centred[0].turned_link, centred[0].held_link) == (action.turned_link, action.held_link)
                    else plan_station(self.scene, self.robot, action, arms, self.sight, pose, then))
-        if isinstance(station, Unreachable):
-            return _hand_failure(FailureReason.UNREACHABLE, f"no grasp: {station.message}")
+        tried: list[tuple[Any, ...]] = []
+        hidden: Sequence[int] = ()
+        while True:
+            if isinstance(station, Unreachable):
+                if tried:
+                    break
+                return _hand_failure(FailureReason.UNREACHABLE, f"no grasp: {station.message}")
+            failure = self._take(station)
+            if failure is not None:
+                return failure
+            seen = self.look() if self.look is not None else None
+            hidden = seen.missing_links if seen is not None else ()
+            if not hidden:
+                self.looked = seen
+                held = ", ".join(f"the {arm} hand holds link {link}" for arm, (link, _, _) in station.points.items())
+                again = f" (grasp {len(tried) + 1}: the ones before hid a link)" if tried else ""
+                return _hand_success(f"{held}{_swap(station)}{again}")
+            tried.append(station.key)
+            log.info("grasp at l%d/l%d: link(s) %s hidden from every camera; letting go for another grasp",
+                     action.held_link, action.turned_link, list(hidden))
+            self._open_and_lift()
+            if len(tried) >= GRASP_TRIES:
+                break
+            station = plan_station(self.scene, self.robot, action, arms, self.sight, pose, then, avoid=tried)
+        for arm in ARMS:
+            drive_arm(self.scene, self.robot, arm, HOME_POSE[arm])
+        return _hand_failure(FailureReason.UNREACHABLE,
+                             f"no grasp at links {action.held_link} and {action.turned_link} leaves every link in a "
+                             f"camera's sight: link(s) {', '.join(map(str, hidden))} hidden at each of the "
+                             f"{len(tried)} grasps tried")
+
+    def _take(self, station: Station) -> ActionResult | None:
+        """The hands down onto the station's points and closed; None when both hold."""
         for arm in station.above:
             for q in (station.above[arm], station.down[arm]):
                 if not drive_arm(self.scene, self.robot, arm, q):
@@ -152,11 +220,11 @@ class BothHands:
         for arm, (link, _, _) in station.points.items():
             if not self.hands.grasp(arm, link):
                 return _hand_failure(FailureReason.GRASP_LOST, f"the {arm} gripper closed on nothing at link {link}")
-        held = ", ".join(f"the {arm} hand holds link {link}" for arm, (link, _, _) in station.points.items())
-        return _hand_success(f"{held}{_swap(station)}")
+        return None
 
-    def _release(self, action: RotationAction, arms: tuple[str, str], pose: Pose,
-                 then: RotationAction | None) -> ActionResult:
+    def _open_and_lift(self) -> list[str]:
+        """Both hands open where they are and each that held lifts straight up off its link; the arms that
+        lifted."""
         holding = dict(self.hands.held)
         if holding:
             self.scene.step(self.robot.arc_steps)  # hold still until the object has stopped moving, then let go
@@ -173,6 +241,11 @@ class BothHands:
             if q is not None:
                 drive_arm(self.scene, self.robot, arm, q)
             lifted.append(arm)
+        return lifted
+
+    def _release(self, action: RotationAction, arms: tuple[str, str], pose: Pose,
+                 then: RotationAction | None) -> ActionResult:
+        lifted = self._open_and_lift()
         for arm in ARMS:  # out of the head camera's view of the links
             drive_arm(self.scene, self.robot, arm, HOME_POSE[arm])
         return _hand_success(f"both hands open{', lifted' if lifted else ' (they held nothing)'} and back home")
@@ -222,6 +295,7 @@ def _gripper_yaw(scene: Scene, robot: Robot, arm: str) -> float:
     return math.atan2(frame[1, 0], frame[0, 0])
 
 
+GRASP_TRIES = 3  # the grasps tried at one centre before the step fails: each looked at, the next-best after
 OUTER_GRASP = 0.38  # of a link's length from its centre: the grasp points tried after the quarter ones
 
 
@@ -252,7 +326,7 @@ def _eye_xy(scene: Scene) -> np.ndarray:
 
 def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple[str, str],
                  sight: Sightlines | None = None, pose: Pose | None = None,
-                 then: RotationAction | None = None) -> Station | Unreachable:
+                 then: RotationAction | None = None, avoid: Sequence[tuple[Any, ...]] = ()) -> Station | Unreachable:
     """The arm poses above and on the two links at the action's joint, the named pairing first (turning arm on the
     downstream link, keeper on the upstream one), else the other; nothing moves. The grasp points are
     `_grasp_points` (see the module's note), each arm's in turn. Without `sight`: the first station the arms
@@ -260,7 +334,8 @@ def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple
     link's marker stays in some camera's clear sight with the hands on the links and, when the plan
     turns `then` while they hold, at the end of that turn (which the turning arm must be able to follow); else the
     one that covers the markers least (`Sightlines.cover`, summed), a station whose turn the arm cannot follow
-    last."""
+    last. Stations whose `Station.key` is in `avoid` (grasps tried already) are passed over: the first other
+    station the arms reach, of every grasp point, without `sight`."""
     joint_k, side = joint_between(action.turned_link, action.held_link, scene.n_links)
     theta = scene.link_orientations_deg()
     z_grasp = scene.link_center_z + robot.grasp_height_m
@@ -271,6 +346,7 @@ def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple
     if then is not None and (then.turned_link, then.held_link) != (action.turned_link, action.held_link):
         then = None
     saved = {arm: arm_joints(scene, arm) for arm in ARMS}
+    every = sight is not None or bool(avoid)  # every grasp point and yaw, not only the first that reaches
     misses: list[Unreachable] = []
     best: tuple[bool, float, Station] | None = None
     survey = None
@@ -283,7 +359,7 @@ def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple
         yaw0 = -math.radians(theta[link - 1])
         twist = robot.turn_twist_deg if link == action.turned_link else robot.hold_twist_deg
         later = []
-        for xy in _grasp_points(scene, link, toward[link], link == action.turned_link, sight is not None):
+        for xy in _grasp_points(scene, link, toward[link], link == action.turned_link, every):
             for i, yaw in enumerate((yaw0, yaw0 + math.pi)):
                 q_above, miss = robot.solve_ik(arm, [xy[0], xy[1], z_above], yaw, max_twist_deg=twist)
                 q_down = None
@@ -291,7 +367,7 @@ def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple
                     q_down, miss = robot.solve_ik(arm, [xy[0], xy[1], z_grasp], yaw, max_twist_deg=twist)
                 if q_above is not None and q_down is not None:
                     yield xy, yaw, q_above, q_down
-                    if sight is None:
+                    if not every:
                         return
                     if i == 0:
                         later.append((xy, yaw + math.pi))
@@ -342,6 +418,8 @@ def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple
                                        turner: (action.turned_link, turned[0], turned[1])},
                                       {keeper: kept[2], turner: turned[2]}, {keeper: kept[3], turner: turned[3]},
                                       swapped)
+                    if station.key in avoid:
+                        continue
                     if survey is None:
                         return station
                     follows, covered = cover(station, turner)
@@ -358,6 +436,8 @@ def plan_station(scene: Scene, robot: Robot, action: RotationAction, arms: tuple
             log.info("grasp at j%d: no station the arms reach keeps every marker in clear sight; the one covering "
                      "them least (%.2f%s)", joint_k - 1, best[1], "" if best[0] else ", its turn not followed")
             return best[2]
+        if not misses:  # every station the arms reach was tried already
+            return Unreachable(action.turned_link, 0.0, f"no grasp at joint {joint_k} left untried")
         return min(misses, key=lambda m: m.miss_m)
     finally:
         for arm, q in saved.items():

@@ -89,6 +89,7 @@ class ActionResult:
     commanded_deg: float
     reached_deg: float
     refusal: Mapping[str, Any] | None = None  # a turn not started: the geometric fact, for the service
+    hands_open: bool = False  # after the action the hands opened and went home (`BothHands`): the grasps are gone
 
     @property
     def value(self) -> str:

@@ -134,10 +134,12 @@ def _held_turn(kb: ServiceLink, action: dict[str, Any]) -> RotationAction | None
     return RotationAction(links[0], links[1], total, name="held turn") if total else None
 
 
-def _perceive(perceiver: Perceiver, cameras: TwoCameras | None, run: _Run) -> Perception:
-    """Look (the head camera, then the cell camera for the links it missed, then the head turned; `TwoCameras`).
-    An unseen link stays unseen: nothing fills it in."""
-    seen = perceiver.look()
+def _perceive(perceiver: Perceiver, cameras: TwoCameras | None, run: _Run, ready: Perception | None = None
+              ) -> Perception:
+    """Look (the head camera, then the cell camera for the links it missed, then the head turned; `TwoCameras`),
+    unless the look that ended the last step is `ready` (nothing moved since). An unseen link stays unseen:
+    nothing fills it in."""
+    seen = ready if ready is not None else perceiver.look()
     if cameras is not None and cameras.last_cell_frame is not None:
         run.cell_frames.append((len(run.frames), cameras.last_cell_frame))
     if not seen.complete:
@@ -215,7 +217,10 @@ def run_worker(
             served, perceiver = recorder.link(kb), recorder.perceiver(perceiver, camera)
         human = Human(scene)
         # a bimanual plan's grasps stay across its steps: the worker's hands remember them
-        both = BothHands(scene, robot, sight) if obj.get("formulation") == "bimanual" else None
+        # with the cameras, a grasp or a held turn is looked at before it counts (`BothHands`): a grasp that hides
+        # a link is taken again elsewhere; the look is the next perception when nothing moves in between
+        both = (BothHands(scene, robot, sight, look=perceiver.look if perception == "camera" else None)
+                if obj.get("formulation") == "bimanual" else None)
         context = HumanContext(step_deg=float(obj.get("step_deg") or 360 / int(obj["orientations"])),
                                goal_differences=_read_goal_differences(kb, obj))
         run = _Run()
@@ -286,6 +291,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
     carried: list[str] = []  # human moves made while the robot idled at the goal, reported with the next step
     # signature of a failed action -> (its sentence, whether it was also tried in single steps)
     failed: dict[tuple[int, int, float, int, str], tuple[str, bool, FailureReason | None]] = {}
+    ready: Perception | None = None  # the look that ended the last step, when nothing has moved since
     while step <= max_steps:
         human_before, carried = carried, []
         for index, event in _events(scenario, run, step, "before"):
@@ -294,7 +300,8 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             human.finish()  # the robot waits until the human has let go; the next move starts from there
 
         t0 = time.perf_counter()
-        seen = _perceive(perceiver, cameras, run)
+        seen = _perceive(perceiver, cameras, run, None if human_before else ready)
+        ready = None
         t1 = time.perf_counter()
         values = seen.link_orientations_deg
         # nothing seen at all says nothing the service could store: it is an incomplete perception here
@@ -449,10 +456,12 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
         else:
             result = perform_parts(scene, robot, pose, parts, final, interrupt, stop_fraction)
         t4 = time.perf_counter()
+        ready = both.take_look() if both is not None else None
         while during_events:  # the robot stopped before half-way: the human acts anyway
             index, event = during_events.pop(0)
             if (what := _act(human, run, index, event, context)) is not None:
                 human_during.append(what)
+                ready = None  # the look is older than the human's move
         human.finish()
         # the links still held stay the robot's: a human leaves them alone
         context.busy_links, context.robot_turn = (both.held_links() if both is not None else ()), None
@@ -512,7 +521,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             measured = again.link_orientations_deg[action.turned_link - 1]
         if action.action_id is not None:
             _feedback(kb, object_id, action.action_id, result.outcome, message, result.reason, measured,
-                      result.refusal)
+                      result.refusal, result.hands_open)
         if result.outcome is ActionOutcome.SUCCEEDED:
             failed.pop(signature, None)
         elif result.reason is not None:
@@ -532,16 +541,16 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
 
 def _feedback(kb: ServiceLink, object_id: str, action_id: str, outcome: ActionOutcome, message: str,
               reason: FailureReason | None = None, measured_deg: float | None = None,
-              refusal: Mapping[str, Any] | None = None) -> None:
+              refusal: Mapping[str, Any] | None = None, hands_open: bool = False) -> None:
     """Post an action's outcome with its sentence and, for a failed or partial one, its reason and the turned
-    link's measured orientation; for a turn not started, the geometric fact (`refusal`)."""
+    link's measured orientation; for a turn not started, the geometric fact (`refusal`); `hands_open` when the
+    hands let go after a succeeded step."""
     if outcome is ActionOutcome.SUCCEEDED:
         reason, measured_deg, refusal = None, None, None
+    extra: dict[str, Any] = {"hands_open": True} if hands_open and outcome is ActionOutcome.SUCCEEDED else {}
     if refusal is not None:
-        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg,
-                         refusal=dict(refusal))
-    else:
-        kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg)
+        extra["refusal"] = dict(refusal)
+    kb.post_feedback(object_id, action_id, outcome.value, message, reason=reason, measured_deg=measured_deg, **extra)
 
 
 def _give_up(kb: ServiceLink, object_id: str, reason: GiveUpReason, message: str, run: _Run) -> list[dict[str, Any]]:

@@ -359,11 +359,13 @@ class RecordingLink:
 
     def post_feedback(self, object_id: str, action_id: str, outcome: ActionOutcome | str, message: str = "",
                       reason: FailureReason | str | None = None, measured_deg: float | None = None,
-                      refusal: dict[str, Any] | None = None) -> dict[str, Any]:
-        answer = self.inner.post_feedback(object_id, action_id, outcome, message, reason, measured_deg, refusal)
+                      refusal: dict[str, Any] | None = None, hands_open: bool = False) -> dict[str, Any]:
+        answer = self.inner.post_feedback(object_id, action_id, outcome, message, reason, measured_deg, refusal,
+                                          hands_open)
         self.bag.add("feedback", self.bag.maker.string(
             {"action_id": action_id, "outcome": str(outcome), "message": message,
-             "reason": None if reason is None else str(reason), "measured_deg": measured_deg, "refusal": refusal}))
+             "reason": None if reason is None else str(reason), "measured_deg": measured_deg, "refusal": refusal,
+             "hands_open": hands_open}))
         return answer
 
     def give_up(self, object_id: str, reason: str, message: str) -> dict[str, Any]:

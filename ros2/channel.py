@@ -139,7 +139,8 @@ class ObjectChannel:
                 if action_id is None:
                     raise Ros2Error("feedback.action_id: no action was dispatched here; name the action")
                 self.kb.post_feedback(self.object_id, action_id, feedback.outcome, feedback.message,
-                                      reason=feedback.reason, measured_deg=feedback.measured_deg)
+                                      reason=feedback.reason, measured_deg=feedback.measured_deg,
+                                      hands_open=feedback.hands_open)
             except (Ros2Error, ProtocolError) as exc:
                 self._refuse(request, exc)
                 return

@@ -186,6 +186,7 @@ class FeedbackRequest:
     reason: str | None = None
     measured_deg: float | None = None
     request_id: str | None = None
+    hands_open: bool = False
 
 
 @dataclass(frozen=True)
@@ -224,9 +225,13 @@ def read_feedback(text: str, topic: str = "feedback") -> FeedbackRequest:
     if measured is not None and (isinstance(measured, bool) or not isinstance(measured, (int, float))
                                  or not math.isfinite(measured)):
         raise Ros2Error(f"{topic}.measured_deg: must be a finite number, got {measured!r}")
+    hands_open = data.get("hands_open", False)
+    if not isinstance(hands_open, bool):
+        raise Ros2Error(f"{topic}.hands_open: must be true or false, got {hands_open!r}")
     return FeedbackRequest(str(outcome), _optional_text(topic, data, "action_id"),
                            _optional_text(topic, data, "message") or "", reason,
-                           None if measured is None else float(measured), _optional_text(topic, data, "request_id"))
+                           None if measured is None else float(measured), _optional_text(topic, data, "request_id"),
+                           hands_open)
 
 
 def read_give_up(text: str, topic: str = "give_up") -> GiveUpRequest:

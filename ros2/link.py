@@ -197,7 +197,7 @@ class Ros2Link:
 
     def post_feedback(self, object_id: str, action_id: str, outcome: ActionOutcome | str, message: str = "",
                       reason: FailureReason | str | None = None, measured_deg: float | None = None,
-                      refusal: dict[str, Any] | None = None) -> dict[str, Any]:
+                      refusal: dict[str, Any] | None = None, hands_open: bool = False) -> dict[str, Any]:
         self._check(object_id)
         request_id = str(uuid.uuid4())
         body: dict[str, Any] = {"action_id": action_id, "outcome": str(outcome), "message": message,
@@ -206,6 +206,8 @@ class Ros2Link:
             body["reason"] = str(reason)
         if measured_deg is not None and math.isfinite(measured_deg):
             body["measured_deg"] = float(measured_deg)
+        if hands_open:
+            body["hands_open"] = True
         # `refusal` does not cross the bridge (its feedback message has no such field): the service remembers a
         # refused turn from the latest perception instead
         key = ("feedback", request_id)

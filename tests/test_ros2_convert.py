@@ -103,11 +103,13 @@ def test_feedback_and_give_up_json():
     feedback = read_feedback(json.dumps({"outcome": "failed", "reason": "slip", "measured_deg": 87.5,
                                          "message": "let go", "request_id": "r1"}))
     assert (feedback.outcome, feedback.reason, feedback.measured_deg, feedback.action_id) == ("failed", "slip", 87.5, None)
+    assert not feedback.hands_open and read_feedback('{"outcome": "succeeded", "hands_open": true}').hands_open
     assert read_give_up('{"reason": "unseen_links", "message": "no markers"}').reason == "unseen_links"
     for text, field in (("[1]", "feedback.data"), ("nope", "feedback.data"), ('{"outcome": "done"}', "feedback.outcome"),
                         ('{"outcome": "failed", "reason": "tired"}', "feedback.reason"),
                         ('{"outcome": "failed", "measured_deg": "x"}', "feedback.measured_deg"),
-                        ('{"outcome": "succeeded", "action_id": 3}', "feedback.action_id")):
+                        ('{"outcome": "succeeded", "action_id": 3}', "feedback.action_id"),
+                        ('{"outcome": "succeeded", "hands_open": "yes"}', "feedback.hands_open")):
         with pytest.raises(Ros2Error) as err:
             read_feedback(text)
         assert str(err.value).startswith(field + ":")

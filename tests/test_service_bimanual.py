@@ -91,7 +91,9 @@ def test_nominal_bimanual_episode_grasps_turns_releases_and_reaches_the_goal(cli
     assert client.get(f"/objects/{oid}").json()["execution"]["status"] == "goal_reached"
 
 
-def test_a_failed_turn_lets_go_and_the_robot_resumes_from_its_grasp(client):
+def to_the_first_turn(client) -> tuple[str, list[float], dict]:
+    """A bimanual object with the goal, its plan followed until its next action is its first turn: (object id,
+    links, the last answer)."""
     oid = new_object(client, formulation="bimanual")
     client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": GOAL})
     links = [0.0, 0.0, 0.0, 0.0]
@@ -100,12 +102,52 @@ def test_a_failed_turn_lets_go_and_the_robot_resumes_from_its_grasp(client):
         links, _ = act(client, oid, links)
         answer = perceive(client, oid, noisy(links))
         assert answer["decision"] == "continue"
+    return oid, links, answer
+
+
+def test_a_failed_turn_lets_go_and_the_robot_resumes_from_its_grasp(client):
+    oid, links, answer = to_the_first_turn(client)
     turn = answer["next_action"]
     links, _ = act(client, oid, links, "failed", moved=False)
     answer = perceive(client, oid, noisy(links))
     # nothing turned, but the worker opened its hands: the state before the grasp, so the grasp comes again
     assert answer["decision"] == "resume" and answer["matched_expected_step"] == turn["step"] - 1
     assert answer["next_action"]["name"] == "grasplinks"
+
+
+def test_a_turn_done_with_the_hands_opened_after_it_continues_past_the_release(client):
+    """The worker turned, then opened its hands (they hid a link from every camera): the service counts on open
+    hands, so the next perception is the state after the plan's release and the robot goes on from there."""
+    oid, links, _ = to_the_first_turn(client)
+    plan = client.get(f"/objects/{oid}/plan").json()
+    turn = client.post(f"/objects/{oid}/actions/next").json()
+    following = [s["name"] for s in plan["steps"][turn["step"]:]]
+    r = client.post(f"/objects/{oid}/actions/{turn['id']}/feedback", json={"outcome": "succeeded", "hands_open": True})
+    assert r.status_code == 200, r.text
+    links = move(links, turn)
+    events = client.get(f"/objects/{oid}/events").json()
+    feedback = [e for e in events if e["kind"] == "feedback"][-1]
+    assert "then the hands opened" in feedback["reason"]
+    answer = perceive(client, oid, noisy(links))
+    assert following[0] == "releaselinks"  # the plan lets go after this turn: that is done already
+    assert answer["decision"] == "resume" and answer["matched_expected_step"] == turn["step"] + 2
+    assert answer["next_action"]["name"] in ("movetocentre", "grasplinks")
+    # the perceived state holds no grasp: nothing the hands no longer hold
+    state = client.get(f"/states/{answer['perceived_state_id']}").json()
+    assert not holding(state)
+
+
+def test_hands_open_is_refused_for_an_object_without_hands_and_changes_nothing(client):
+    oid = new_object(client)  # relative
+    client.put(f"/objects/{oid}/goal", json={"link_orientations_deg": GOAL})
+    perceive(client, oid, noisy([0.0, 0.0, 0.0, 0.0]))
+    action = client.post(f"/objects/{oid}/actions/next").json()
+    before = client.get(f"/objects/{oid}").json()["execution"]
+    r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded", "hands_open": True})
+    assert r.status_code == 422 and "hands_open" in r.json()["detail"] and "\n" not in r.json()["detail"], r.text
+    assert client.get(f"/objects/{oid}").json()["execution"] == before
+    r = client.post(f"/objects/{oid}/actions/{action['id']}/feedback", json={"outcome": "succeeded", "hands_open": 3})
+    assert r.status_code == 422, r.text
 
 
 def test_a_human_moving_the_object_while_the_robot_holds_nothing(client):

@@ -2,14 +2,16 @@
 actions, a turn about the centred joint with the other link kept still, a release, and both hands open after a
 failure (what the service's `planhrc.control.after_failure` assumes). The goal a bimanual object names is read as
 link orientations from l1, for the simulated human too."""
+import math
+
 import pybullet
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.robot_sim.acting import measured_pose
-from planhrc.robot_sim.bimanual import BothHands, named_arms, step_kind
+from planhrc.robot_sim.bimanual import GRASP_TRIES, BothHands, named_arms, step_kind
 from planhrc.robot_sim.human import goal_differences
-from planhrc.robot_sim.perception import angle_difference_deg
+from planhrc.robot_sim.perception import CameraPerception, Perception, angle_difference_deg
 from planhrc.robot_sim.scene import HOME_POSE, SceneSpec, arm_joints, build_scene
 from planhrc.robot_sim.skills import Robot, RotationAction
 from planhrc.vocabulary import ActionOutcome, FailureReason
@@ -123,6 +125,71 @@ def test_a_turn_whose_grip_gives_way_is_partial_and_leaves_both_hands_open(cell)
     # a turn dispatched with nothing held is not started: the grasp comes first
     again = _do(scene, both, "rotateclockwise", 3, 2, 45.0)
     assert again.outcome is ActionOutcome.FAILED and "not held" in again.message
+
+
+class Eyes:
+    """The head camera's real looks, each kept; the links named in `hide` are dropped from the first `times` looks:
+    as if a hand covered their markers (the test's one stand-in: where the arms cover a marker is not the unit)."""
+
+    def __init__(self, scene, robot, hide=(), times=0):
+        self.camera, self.robot, self.hide, self.times = CameraPerception(scene.client, scene), robot, hide, times
+        self.looks, self.hands = [], []
+
+    def __call__(self):
+        seen = self.camera.look()
+        self.hands.append({arm: tuple(self.robot.end_effector_pose(arm)[0][:2]) for arm in ("left", "right")})
+        if len(self.looks) < self.times:
+            seen = Perception(tuple(None if k + 1 in self.hide else v for k, v in enumerate(seen.link_orientations_deg)),
+                              seen.frame)
+        self.looks.append(seen)
+        return seen
+
+
+@pytest.mark.sim
+def test_a_grasp_that_hides_a_link_is_let_go_and_taken_again_elsewhere(cell):
+    scene, robot = cell
+    eyes = Eyes(scene, robot, hide=(3,), times=1)
+    both = BothHands(scene, robot, look=eyes)
+    grasped = _do(scene, both, "grasplinks", 3, 2, 0)
+    assert grasped.outcome is ActionOutcome.SUCCEEDED, grasped.message
+    assert "grasp 2" in grasped.message and len(eyes.looks) == 2
+    assert both.held_links() == (2, 3) and scene.client.getNumConstraints() == 2
+    first, second = eyes.hands
+    assert max(math.dist(first[arm], second[arm]) for arm in first) > 0.01  # another station, not the same again
+    assert eyes.looks[1].complete
+    assert both.take_look() is eyes.looks[1] and both.take_look() is None  # the next perception, once
+
+
+@pytest.mark.sim
+def test_when_every_grasp_hides_a_link_the_step_fails_with_open_hands(cell):
+    scene, robot = cell
+    eyes = Eyes(scene, robot, hide=(3,), times=99)
+    both = BothHands(scene, robot, look=eyes)
+    before = scene.link_orientations_deg()
+    grasped = _do(scene, both, "grasplinks", 3, 2, 0)
+    assert grasped.outcome is ActionOutcome.FAILED and grasped.reason is FailureReason.UNREACHABLE
+    assert "link(s) 3 hidden at each of the 3 grasps tried" in grasped.message, grasped.message
+    assert len(eyes.looks) == GRASP_TRIES == 3 and len(set(map(str, eyes.hands))) == 3
+    assert both.held_links() == () and scene.client.getNumConstraints() == 0
+    assert _at_home(scene, "left") and _at_home(scene, "right")
+    assert max(map(abs, _turned(before, scene.link_orientations_deg()))) < 2.0
+    assert both.take_look() is None
+
+
+@pytest.mark.sim
+def test_a_held_turn_that_leaves_a_link_hidden_ends_with_the_hands_open_and_says_so(cell):
+    scene, robot = cell
+    eyes = Eyes(scene, robot)
+    both = BothHands(scene, robot, look=eyes)
+    assert _do(scene, both, "grasplinks", 3, 2, 0).outcome is ActionOutcome.SUCCEEDED
+    both.take_look()
+    eyes.hide, eyes.times = (4,), len(eyes.looks) + 1  # the next look: link 4 covered
+    turned = _do(scene, both, "rotateclockwise", 3, 2, 45.0)
+    assert turned.outcome is ActionOutcome.SUCCEEDED and turned.hands_open, turned.message
+    assert "hid link(s) 4 from every camera" in turned.message
+    assert both.held_links() == () and scene.client.getNumConstraints() == 0
+    assert _at_home(scene, "left") and _at_home(scene, "right")
+    assert both.take_look() is None  # the hands moved after that look: the next perception looks anew
 
 
 @pytest.mark.sim

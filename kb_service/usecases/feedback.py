@@ -6,7 +6,7 @@ the next perceived states hold beside the perceived orientations."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Mapping
+from typing import Any, Mapping
 
 from planhrc.control import control_after
 from planhrc.event_log import EventKind, FeedbackData, RefusalData
@@ -14,7 +14,7 @@ from planhrc.json_record import JsonRecord
 from planhrc.pipeline import action_motion
 from planhrc.vocabulary import Accepted, ActionOutcome, ExecutionStatus, FailureReason, Infeasible
 
-from ..store import ConflictError, Execution, StoredAction
+from ..store import ConflictError, Execution, StoredAction, ValidationError
 from .actions import last_step, merges
 from .context import Context
 from .idempotency import fingerprint, recall, remember
@@ -50,6 +50,7 @@ class FeedbackRequest:
     reason: str | None = None
     measured_deg: float | None = None
     refusal: RefusalFact | None = None  # a turn refused before it moved: the geometric fact
+    hands_open: bool = False  # bimanual: the robot opened its hands after the action (`control.control_after`)
 
 
 def give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult:
@@ -64,13 +65,17 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
     store, object_id, action_id, message = context.store, request.object_id, request.action_id, request.message
     with context.locks.hold(object_id):
         obj = store.get_object(object_id)
+        if request.hands_open and not obj.grippers:
+            raise ValidationError(f"hands_open: {object_id} is a {obj.formulation.value} object: it has no hands "
+                                  "in its plans")
         mark = read_mark(context, object_id)  # before the remembered answer and the execution are read
-        print_ = fingerprint({"feedback": [action_id, outcome, message]}
-                             if failure is None and measured_deg is None else
-                             {"feedback": [action_id, outcome, message, failure, measured_deg]}
-                             if request.refusal is None else
-                             {"feedback": [action_id, outcome, message, failure, measured_deg,
-                                           request.refusal.to_data(defaults=True)]})
+        said: dict[str, Any] = ({"feedback": [action_id, outcome, message]}
+                                if failure is None and measured_deg is None else
+                                {"feedback": [action_id, outcome, message, failure, measured_deg]}
+                                if request.refusal is None else
+                                {"feedback": [action_id, outcome, message, failure, measured_deg,
+                                              request.refusal.to_data(defaults=True)]})
+        print_ = fingerprint({**said, "hands_open": True} if request.hands_open else said)
         recalled = recall(store, object_id, request.idempotency_key, print_, FeedbackResult)
         if recalled is not None:
             return recalled
@@ -99,14 +104,15 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
             new = replace(execution, dispatched_action_id=None)
             text = f"a_{action.step} {outcome}, reported after a perception had already moved the execution"
         result = FeedbackResult(action_id, accepted, new)
-        why = f" [{failure}]" if failure is not None else ""
+        why = (f" [{failure}]" if failure is not None else "") + ("; then the hands opened" if request.hands_open
+                                                                  else "")
         motion = action_motion(obj, action)
         refused = (refusal_data(context, object_id, request.refusal, motion)
                    if outcome == ActionOutcome.FAILED and failure in REFUSALS else None)
         control = None
         if obj.grippers:  # bimanual: what the robot's grippers hold and where the centre is now (`planhrc.control`)
             control = tuple(sorted(control_after(memo.control or obj.initial_control(), [a.spec for a in done],
-                                                 outcome == ActionOutcome.SUCCEEDED)))
+                                                 outcome == ActionOutcome.SUCCEEDED, request.hands_open)))
         data = FeedbackData(action_id=action_id, step=action.step, outcome=outcome, accepted=accepted, reason=failure,
                             measured_deg=measured_deg, message=message, joint_index=motion["joint_index"],
                             turned_link_index=motion["turned_link_index"], refusal=refused, control=control)
