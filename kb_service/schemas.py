@@ -420,7 +420,7 @@ class FeedbackCreate(BaseModel):
         "A worker's report on a dispatched action. A reason is given only for an action that did not succeed.",
         {"outcome": "succeeded"},
         {"if": {"properties": {"outcome": {"const": ActionOutcome.SUCCEEDED.value}}},
-         "then": {"properties": {"reason": {"type": "null"}}}},
+         "then": {"properties": {"reason": {"type": "null"}, "refusal": {"type": "null"}}}},
     )
 
     outcome: ActionOutcome = Field(

@@ -11,13 +11,18 @@ from planhrc.robot_sim.service_link import ServiceLink
 
 if TYPE_CHECKING:
     from planhrc.robot_sim.episode import WorkerSummary
-    from planhrc.robot_sim.perception import CameraPerception, Perceiver
+    from planhrc.robot_sim.perception import CameraPerception, Perception, Perceiver
 
 
 class EpisodeRecorder(Protocol):
     def link(self, kb: ServiceLink) -> ServiceLink: ...
 
     def perceiver(self, perceiver: "Perceiver", camera: "CameraPerception") -> "Perceiver": ...
+
+    def look(self, seen: "Perception", camera: "CameraPerception") -> None:
+        """Record a look taken past the recorded perceiver, when it is used as a perception (the look that ended a
+        bimanual step: `BothHands.take_look`)."""
+        ...
 
     def close(self, summary: "WorkerSummary | None") -> None: ...
 

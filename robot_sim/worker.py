@@ -25,8 +25,9 @@ import logging
 import re
 import time
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import pybullet
@@ -134,11 +135,13 @@ def _held_turn(kb: ServiceLink, action: dict[str, Any]) -> RotationAction | None
     return RotationAction(links[0], links[1], total, name="held turn") if total else None
 
 
-def _perceive(perceiver: Perceiver, cameras: TwoCameras | None, run: _Run, ready: Perception | None = None
-              ) -> Perception:
+def _perceive(perceiver: Perceiver, cameras: TwoCameras | None, run: _Run, ready: Perception | None = None,
+              noted: Callable[[Perception], None] | None = None) -> Perception:
     """Look (the head camera, then the cell camera for the links it missed, then the head turned; `TwoCameras`),
-    unless the look that ended the last step is `ready` (nothing moved since). An unseen link stays unseen:
-    nothing fills it in."""
+    unless the look that ended the last step is `ready` (nothing moved since; `noted` records it as the perceiver
+    records its own looks). An unseen link stays unseen: nothing fills it in."""
+    if ready is not None and noted is not None:
+        noted(ready)
     seen = ready if ready is not None else perceiver.look()
     if cameras is not None and cameras.last_cell_frame is not None:
         run.cell_frames.append((len(run.frames), cameras.last_cell_frame))
@@ -210,23 +213,27 @@ def run_worker(
             cameras = TwoCameras(camera, cell)
             sight = Sightlines(scene, [SightCamera(HEAD, camera.pose, camera.intrinsics),
                                        SightCamera(CELL, cell.pose, cell.intrinsics)])
-        perceiver: Perceiver = ((cameras or camera) if perception == "camera"
+        eyes: Perceiver = cameras or camera
+        perceiver: Perceiver = (eyes if perception == "camera"
                                 else FallbackPerception(scene, sigma_deg=sigma_deg, seed=seed))
+        noted: Callable[[Perception], None] | None = None
         if recording is not None:
             recorder = recording(out, obj, goal_link_orientations_deg)
             served, perceiver = recorder.link(kb), recorder.perceiver(perceiver, camera)
+            noted = partial(recorder.look, camera=camera)
         human = Human(scene)
         # a bimanual plan's grasps stay across its steps: the worker's hands remember them
         # with the cameras, a grasp or a held turn is looked at before it counts (`BothHands`): a grasp that hides
-        # a link is taken again elsewhere; the look is the next perception when nothing moves in between
-        both = (BothHands(scene, robot, sight, look=perceiver.look if perception == "camera" else None)
+        # a link is taken again elsewhere; the look is the next perception when nothing moves in between (recorded
+        # then, as a perception)
+        both = (BothHands(scene, robot, sight, look=eyes.look if perception == "camera" else None)
                 if obj.get("formulation") == "bimanual" else None)
         context = HumanContext(step_deg=float(obj.get("step_deg") or 360 / int(obj["orientations"])),
                                goal_differences=_read_goal_differences(kb, obj))
         run = _Run()
         summary_reason = _loop(served, object_id, scene, robot, camera, perceiver, human, scenario, context,
                                max_steps, run, record_motion=record_motion and record_frames,
-                               record_frames=record_frames, both=both, cameras=cameras)
+                               record_frames=record_frames, both=both, cameras=cameras, noted=noted)
         reached = summary_reason is StopReason.GOAL_REACHED
         summary = WorkerSummary(
             object_id=object_id,
@@ -275,7 +282,8 @@ def _signature(action: RotationAction) -> tuple[int, int, float, int, str]:
 def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: CameraPerception, perceiver: Perceiver,
           human: Human, scenario: Scenario, context: HumanContext, max_steps: int, run: _Run,
           record_motion: bool = True, record_frames: bool = True, max_unseen: int = 3,
-          both: BothHands | None = None, cameras: TwoCameras | None = None) -> StopReason:
+          both: BothHands | None = None, cameras: TwoCameras | None = None,
+          noted: Callable[[Perception], None] | None = None) -> StopReason:
     """Perceive -> decide -> act until the goal; returns why it stopped.
 
     A failed action is not tried again the same way: a macro step that failed is split into its single steps;
@@ -300,7 +308,7 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             human.finish()  # the robot waits until the human has let go; the next move starts from there
 
         t0 = time.perf_counter()
-        seen = _perceive(perceiver, cameras, run, None if human_before else ready)
+        seen = _perceive(perceiver, cameras, run, None if human_before else ready, noted)
         ready = None
         t1 = time.perf_counter()
         values = seen.link_orientations_deg

@@ -14,7 +14,7 @@ from planhrc.json_record import JsonRecord
 from planhrc.pipeline import action_motion
 from planhrc.vocabulary import Accepted, ActionOutcome, ExecutionStatus, FailureReason, Infeasible
 
-from ..store import ConflictError, Execution, StoredAction, ValidationError
+from ..store import ConflictError, Execution, StoredAction
 from .actions import last_step, merges
 from .context import Context
 from .idempotency import fingerprint, recall, remember
@@ -65,9 +65,6 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
     store, object_id, action_id, message = context.store, request.object_id, request.action_id, request.message
     with context.locks.hold(object_id):
         obj = store.get_object(object_id)
-        if request.hands_open and not obj.grippers:
-            raise ValidationError(f"hands_open: {object_id} is a {obj.formulation.value} object: it has no hands "
-                                  "in its plans")
         mark = read_mark(context, object_id)  # before the remembered answer and the execution are read
         said: dict[str, Any] = ({"feedback": [action_id, outcome, message]}
                                 if failure is None and measured_deg is None else
@@ -85,6 +82,9 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
             current = execution.dispatched_action_id or "none"
             raise ConflictError(
                 f"action_id: {action_id} is not the current dispatched action of {object_id} (current: {current})")
+        if request.hands_open and not obj.grippers:
+            raise ConflictError(f"hands_open: {object_id} is a {obj.formulation.value} object: its plans have no "
+                                "hands to open")
         memo = context.memory.of(store, object_id)
         done: tuple[StoredAction, ...] = (action,)  # the motion's actions: feedback on a merged one covers each step
         if execution.status == ExecutionStatus.DISPATCHED:
