@@ -164,6 +164,10 @@ class QueuedPlanning:
                 if not collected:
                     self._withdraw(job_id)
 
+    def warm(self, job: PlanningJob) -> None:
+        """Nothing: the object's next job goes to whichever `planhrc planning-worker` takes it first, on any host,
+        so no warm-up can be placed where that job will run."""
+
     def depth(self) -> dict[str, int]:
         """Jobs queued and running in the database now (every service's, not only this one's)."""
         return {str(state): int(count) for state, count in self._link.execute(DEPTH)}

@@ -12,7 +12,7 @@ import logging
 from dataclasses import dataclass, replace
 from typing import Callable, Protocol, TypeVar
 
-from planhrc.model import ArticulatedObject, State
+from planhrc.model import ArticulatedObject, State, is_subsumed
 from planhrc.ordering import Move, Placement
 from planhrc.vocabulary import PlanningStatus
 
@@ -39,12 +39,38 @@ class PlanningJob:
     deadline_at: float  # time.monotonic()
 
 
+def warm_up_job(obj: ArticulatedObject, goal: State, config: PlanningConfig, deadline_at: float) -> PlanningJob:
+    """A job towards `goal` from a configuration the goal does not hold (every joint at the first orientation, or
+    else at the second): planning it (`warm_up`) does a re-plan's work that does not depend on the perceived state
+    (the domain read, the planner's grounding of the object's task), which a later job on the object then finds
+    memoised."""
+    degrees = obj.orientation_degrees
+    init = obj.state([degrees[0]] * obj.n_joints)
+    if is_subsumed(init, goal):
+        init = obj.state([degrees[1 % len(degrees)]] * obj.n_joints)
+    return PlanningJob(obj, init, goal, replace(config, validate=False), None, deadline_at)
+
+
+def warm_up(job: PlanningJob) -> PlanOutcome:
+    """Translate and plan `job` (`stages.find_plan`), nothing more: what counts is what the planning process
+    memoises on the way. The outcome carries neither actions, expected states nor the task."""
+    found = stages.find_plan(job.obj, job.init, job.goal, job.config, deadline_at=job.deadline_at)
+    if isinstance(found, PlanOutcome):
+        return replace(found, actions=(), expected_states=(), task=None)
+    return PlanOutcome(PlanningStatus.SOLVED, "warmed up: planned, not replayed", found.result.planner,
+                       timings=found.timings)
+
+
 class LargeTaskPlanning(Protocol):
     """Where large tasks are planned (the service's worker processes, `kb_service.planning_pool`)."""
 
     def takes(self, obj: ArticulatedObject) -> bool: ...
 
     def plan(self, job: PlanningJob) -> PlanOutcome: ...
+
+    def warm(self, job: PlanningJob) -> None:
+        """Start `warm_up(job)` where the object's next jobs will be planned, off the caller's thread (or do
+        nothing where that cannot help)."""
 
 
 @dataclass(frozen=True)
