@@ -66,13 +66,14 @@ import sys
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection
 from typing import Callable, Iterator, Mapping, Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
-from planhrc.pipeline.replan import PlanningJob
+from planhrc.pipeline.replan import PlanningJob, StepsKnown
+from planhrc.translator.translate import PddlTask
 from planhrc.transition import Change, ExpectedStates, changes_of
 from planhrc.vocabulary import PlanningStatus
 
@@ -263,15 +264,17 @@ class PlanningPool:
         """Whether a task on `obj` is worth a worker (large enough, and the pool open)."""
         return self.size != 0 and not self._closed and self._sizes.at_least(obj, self.min_atoms)
 
-    def plan(self, job: PlanningJob) -> PlanOutcome:
-        """The job's outcome: the worker's, or `timeout` / `error` when no worker answered in time or it died."""
+    def plan(self, job: PlanningJob, steps_known: StepsKnown | None = None) -> PlanOutcome:
+        """The job's outcome: the worker's, or `timeout` / `error` when no worker answered in time or it died.
+        With `steps_known`, the worker sends the plan's task and steps before it replays them (`EarlySteps`), and
+        they are handed to `steps_known` here, on the caller's thread, as soon as they come."""
         worker = self._take(job.obj.ident, job.deadline_at)
         if worker is None:
             if self._closed:
                 return _outcome(job, PlanningStatus.ERROR, "the service is stopping: no planning worker")
             return _outcome(job, PlanningStatus.TIMEOUT, f"planning deadline of {job.config.deadline_s:g} s "
                             "exceeded while waiting for a free planning worker")
-        return self._run(worker, job, False)
+        return self._run(worker, job, False, steps_known)
 
     def warm(self, job: PlanningJob) -> None:
         """Warm a worker up for `job`'s object (`pipeline.warm_up`: the worker starts if none is free, imports the
@@ -292,13 +295,20 @@ class PlanningPool:
             worker.last_object = worker.warming = object_id
         threading.Thread(target=self._run, args=(worker, job, True), name="planhrc-pool-warm", daemon=True).start()
 
-    def _run(self, worker: _Worker, job: PlanningJob, warm_up: bool) -> PlanOutcome:
+    def _run(self, worker: _Worker, job: PlanningJob, warm_up: bool, steps_known: StepsKnown | None = None
+             ) -> PlanOutcome:
         """`job` on `worker` (taken for it): planned, or only warmed up (`warm_up`); the worker given back."""
         healthy = False
         try:
-            worker.conn.send((job, self._tracing.carrier(), warm_up))
+            worker.conn.send((job, self._tracing.carrier(), warm_up, steps_known is not None))
             frames = self._frames(worker, job.deadline_at + self.grace_s)
-            header = next(frames)  # the worker's answer has come: the rest follows at once
+            header = next(frames)
+            if steps_known is not None:
+                early = pickle.loads(header)
+                if isinstance(early, EarlySteps):  # the replay goes on in the worker meanwhile
+                    steps_known(early.task, early.steps)
+                    header = next(frames)
+            # the worker's answer has come: the rest follows at once
             with self._pause:
                 outcome = unpack_outcome(itertools.chain((header,), frames), job.init)
                 if _atoms_in(outcome.expected_states) >= FREEZE_ATOMS:
@@ -372,6 +382,15 @@ class PlanningPool:
         threading.Thread(target=worker.stop, name="planhrc-pool-stop", daemon=True).start()
 
 
+@dataclass(frozen=True)
+class EarlySteps:
+    """What a worker sends first when asked to (`PlanningPool.plan`'s `steps_known`): the plan's task and steps,
+    before it replays them."""
+
+    task: PddlTask
+    steps: tuple[str, ...]
+
+
 class _CollectorPause:
     """The cyclic garbage collector off while any thread of the service is inside (see the module's note), on
     again when the last one leaves (if it was on when the first came in). `gc` has one switch per process: the
@@ -427,14 +446,16 @@ def run_worker() -> None:
     try:
         while True:
             try:
-                job, carrier, warm_up = conn.recv()
+                job, carrier, warm_up, steps_first = conn.recv()
             except (EOFError, OSError):
                 return
+            run: Callable[[PlanningJob], PlanOutcome] = (
+                pipeline.warm_up if warm_up else (lambda j: _plan_steps_first(conn, j)) if steps_first else _plan)
             with collector.job():
                 with tracing.span("planning_warm_up" if warm_up else "planning_job",
                                   {"object_id": job.obj.ident, "worker.pid": os.getpid(), "queue": "pool"},
                                   parent=carrier):
-                    sent = _answer(conn, job, pipeline.warm_up if warm_up else _plan)
+                    sent = _answer(conn, job, run)
             tracing.flush()
             if not sent:
                 return
@@ -464,6 +485,20 @@ def _plan(job: PlanningJob) -> PlanOutcome:
     from planhrc import pipeline
 
     return pipeline.plan(job.obj, job.init, job.goal, job.config, placement=job.placement, deadline_at=job.deadline_at)
+
+
+def _plan_steps_first(conn: Connection, job: PlanningJob) -> PlanOutcome:
+    """`_plan` for a job VAL does not check here (the early answer: the service does), the plan's task and steps
+    sent (`EarlySteps`) before they are replayed."""
+    from planhrc import pipeline
+
+    assert not job.config.validate
+    found = pipeline.find_plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
+                               deadline_at=job.deadline_at)
+    if isinstance(found, PlanOutcome):
+        return found
+    conn.send_bytes(pickle.dumps(EarlySteps(found.task, found.steps), pickle.HIGHEST_PROTOCOL))
+    return pipeline.expect(job.obj, job.init, job.goal, found, job.deadline_at)
 
 
 def _answer(conn: Connection, job: PlanningJob, run: Callable[[PlanningJob], PlanOutcome]) -> bool:
