@@ -20,7 +20,8 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   the one before it (the replay's own changes), and the service keeps them so (`transition.ExpectedStates`: a
   state is made whole when something reads it, most of them behind the answer). The outcome travels
   in several frames (header, actions, states in chunks) so that no single unpickling holds the service's
-  interpreter for long.
+  interpreter for long. Asked to (`plan`'s `steps_known`: the service checks the first motion with VAL itself), a
+  worker first sends the plan's task and steps (`EarlySteps`), before it replays them.
 * **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small
   objects (ground conditional effects, atoms), and every few thousand allocations start a collection pass; the
   full passes walk every expected state made so far (each holds all the object's static facts), so on the
@@ -259,6 +260,11 @@ class PlanningPool:
     def pids(self) -> tuple[int, ...]:
         with self._cond:
             return tuple(sorted(w.pid for w in self._all))
+
+    def warming(self) -> tuple[str, ...]:
+        """The objects a worker is warming up for now (`warm`)."""
+        with self._cond:
+            return tuple(sorted(w.warming for w in self._all if w.warming is not None))
 
     def takes(self, obj: ArticulatedObject) -> bool:
         """Whether a task on `obj` is worth a worker (large enough, and the pool open)."""
