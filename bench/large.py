@@ -3,7 +3,9 @@ validated action.
 
 For each size (default 50 links x 36 and 200 x 12, absolute), a fresh `planhrc serve` (its planning pool on, the
 planning deadline the settings', or `--deadline`) gets one object with a random goal and `--runs` perceptions at
-random configurations, one after the other once the last plan's later VAL pieces have their verdicts. Per
+random configurations, one after the other once the last plan's later VAL pieces have their verdicts (the first
+`--first-after` seconds after the goal was set: a camera's first frame comes some time after the goal, time in
+which the service warms its planning up for the object; default 0, the first perception at once). Per
 perception: the HTTP status, the wall time to the answer, which is the time to the first validated action when the
 answer names one (a re-plan is answered once VAL accepted its first motion, and the store checked it), the plan's
 length and how many of its steps were checked before the answer (the first motion, or the whole plan when it was
@@ -48,7 +50,7 @@ STAGES = ("translate", "plan", "expected_states", "validate")
 
 
 def measure_size(links: int, orientations: int, formulation: str, runs: int, seed: int,
-                 deadline_s: float | None = None) -> dict[str, Any]:
+                 deadline_s: float | None = None, first_after_s: float = 0.0) -> dict[str, Any]:
     rng = random.Random(seed)
     rows = []
     env = {"PLANHRC_PLANNING_DEADLINE_S": str(deadline_s)} if deadline_s is not None else None
@@ -57,6 +59,7 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
         ident = create_object(client, links, orientations, formulation, f"large-{links}x{orientations}")
         set_goal(client, ident, random_angles(rng, links, orientations))
         settle = Settle(client, ident)
+        time.sleep(first_after_s)
         for _ in range(runs):
             t = time.perf_counter()
             r = client.post(f"/objects/{ident}/perceptions",
@@ -87,7 +90,8 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 row["detail"] = str(r.json().get("detail", ""))[:160]
             rows.append(row)
             settle.wait(limit_s=600.0)
-    return {"links": links, "orientations": orientations, "formulation": formulation, "rows": rows}
+    return {"links": links, "orientations": orientations, "formulation": formulation, "first_after_s": first_after_s,
+            "rows": rows}
 
 
 CPU_STAGES = ("translate and plan (the object's first)", "translate and plan (a later one)",
@@ -146,6 +150,7 @@ def stage_cpu(links: int, orientations: int, seed: int) -> dict[str, Any]:
 def markdown(report: dict[str, Any]) -> str:
     m = report["machine"]
     lines = [f"machine: {m['cpu']}, {m['cores']} cores; planning deadline {report['deadline_s']} s; "
+             f"first perception {report.get('first_after_s', 0)} s after the goal; "
              f"load average {report['load_at_start']} at the start, {report.get('load_at_end', '-')} at the end", ""]
     if report.get("stage_cpu"):
         lines += ["CPU seconds of an absolute re-plan's stages, in process (`stage_cpu`):", "",
@@ -171,7 +176,7 @@ def markdown(report: dict[str, Any]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     import os
 
-    from planhrc.cli_args import OneLineParser, positive_float, positive_int, writable_dir
+    from planhrc.cli_args import OneLineParser, non_negative_float, positive_float, positive_int, writable_dir
 
     parser = OneLineParser(prog="python -m planhrc.bench.large", description=__doc__,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -182,16 +187,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--deadline", type=positive_float, default=None,
                         help="the service's planning deadline in seconds (default: the settings')")
+    parser.add_argument("--first-after", type=non_negative_float, default=0.0,
+                        help="seconds between setting the goal and the first perception (default 0)")
     parser.add_argument("--stage-cpu", action="store_true",
                         help="first, each size's absolute re-plan stages in this process: their CPU seconds")
     parser.add_argument("--out", type=writable_dir, default=None, help="folder for large.json and large.md")
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine": machine_info(),
                               "deadline_s": args.deadline or make_settings().planning_deadline_s,
-                              "load_at_start": round(os.getloadavg()[0], 2)}
+                              "first_after_s": args.first_after, "load_at_start": round(os.getloadavg()[0], 2)}
     if args.stage_cpu:
         report["stage_cpu"] = [stage_cpu(links, k, args.seed) for links, k in args.sizes]
-    report["sizes"] = [measure_size(links, k, args.formulation, args.runs, args.seed, args.deadline)
+    report["sizes"] = [measure_size(links, k, args.formulation, args.runs, args.seed, args.deadline, args.first_after)
                        for links, k in args.sizes]
     report["load_at_end"] = round(os.getloadavg()[0], 2)
     table = markdown(report)

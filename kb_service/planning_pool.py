@@ -20,7 +20,8 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   the one before it (the replay's own changes), and the service keeps them so (`transition.ExpectedStates`: a
   state is made whole when something reads it, most of them behind the answer). The outcome travels
   in several frames (header, actions, states in chunks) so that no single unpickling holds the service's
-  interpreter for long.
+  interpreter for long. Asked to (`plan`'s `steps_known`: the service checks the first motion with VAL itself), a
+  worker first sends the plan's task and steps (`EarlySteps`), before it replays them.
 * **The cyclic garbage collector.** A large task's replay and unpacking make hundreds of thousands of small
   objects (ground conditional effects, atoms), and every few thousand allocations start a collection pass; the
   full passes walk every expected state made so far (each holds all the object's static facts), so on the
@@ -42,7 +43,13 @@ worker's, so they end with it). The store's checks of the plan stay with the cal
   first and the large task gets what is left (`planhrc service-bench --parts contention` compares the slowest
   /health and the other object's slowest perception with the workers at the service's priority).
 * **Life.** The service makes the pool in its lifespan and closes it at shutdown; a worker starts when a job
-  first needs it (it imports the pipeline first, which takes a while), up to `workers`, and stays. A worker ignores SIGINT
+  first needs it (it imports the pipeline first, which takes a while), up to `workers`, and stays.
+* **Warm-up.** An object's first job would also pay for what a worker memoises per object (the planner's grounding
+  of its task: about 1 s of the first 200 x 12 absolute re-plan, on top of the worker's start). When a large
+  object's goal is set, the service asks the pool to `warm` a worker up for it: a free worker (or one it may still
+  start) runs `pipeline.warm_up` (translate and plan a task towards the goal, no replay, no VAL), off the request's
+  thread; the object's next job waits for that worker rather than start another, cold one. Nothing is warmed
+  behind another job, nor on a worker that last planned the object. A worker ignores SIGINT
   (the service stops it), stops on SIGTERM with the VAL or planner processes it started, and watches its parent:
   when the parent is gone (SIGKILL included) it stops the same way.
 """
@@ -60,13 +67,14 @@ import sys
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection
 from typing import Callable, Iterator, Mapping, Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, Atom, State
 from planhrc.pipeline import PlanOutcome
-from planhrc.pipeline.replan import PlanningJob
+from planhrc.pipeline.replan import PlanningJob, StepsKnown
+from planhrc.translator.translate import PddlTask
 from planhrc.transition import Change, ExpectedStates, changes_of
 from planhrc.vocabulary import PlanningStatus
 
@@ -181,6 +189,7 @@ class _Worker:
         child_end.close()
         self.conn = Connection(parent_end.detach())
         self.last_object: str | None = None
+        self.warming: str | None = None  # the object whose warm-up it runs (`PlanningPool.warm`)
 
     @property
     def pid(self) -> int:
@@ -252,28 +261,67 @@ class PlanningPool:
         with self._cond:
             return tuple(sorted(w.pid for w in self._all))
 
+    def warming(self) -> tuple[str, ...]:
+        """The objects a worker is warming up for now (`warm`)."""
+        with self._cond:
+            return tuple(sorted(w.warming for w in self._all if w.warming is not None))
+
     def takes(self, obj: ArticulatedObject) -> bool:
         """Whether a task on `obj` is worth a worker (large enough, and the pool open)."""
         return self.size != 0 and not self._closed and self._sizes.at_least(obj, self.min_atoms)
 
-    def plan(self, job: PlanningJob) -> PlanOutcome:
-        """The job's outcome: the worker's, or `timeout` / `error` when no worker answered in time or it died."""
+    def plan(self, job: PlanningJob, steps_known: StepsKnown | None = None) -> PlanOutcome:
+        """The job's outcome: the worker's, or `timeout` / `error` when no worker answered in time or it died.
+        With `steps_known`, the worker sends the plan's task and steps before it replays them (`EarlySteps`), and
+        they are handed to `steps_known` here, on the caller's thread, as soon as they come."""
         worker = self._take(job.obj.ident, job.deadline_at)
         if worker is None:
             if self._closed:
                 return _outcome(job, PlanningStatus.ERROR, "the service is stopping: no planning worker")
             return _outcome(job, PlanningStatus.TIMEOUT, f"planning deadline of {job.config.deadline_s:g} s "
                             "exceeded while waiting for a free planning worker")
+        return self._run(worker, job, False, steps_known)
+
+    def warm(self, job: PlanningJob) -> None:
+        """Warm a worker up for `job`'s object (`pipeline.warm_up`: the worker starts if none is free, imports the
+        pipeline and memoises the object's grounding), on a thread of its own, so that the object's next job finds
+        it ready. Only on a worker free now or one the pool may still start (never behind another job), and not
+        when a worker last planned the object (it is warm). The object's next job waits for that worker while the
+        warm-up runs (`_take`): another, cold worker would do the same work again."""
+        object_id = job.obj.ident
+        with self._cond:
+            if self._closed or any(w.last_object == object_id for w in self._all):
+                return
+            if self._idle:
+                worker = self._idle.pop(0)
+            elif len(self._all) < self.size:
+                worker = self._start()
+            else:
+                return
+            worker.last_object = worker.warming = object_id
+        threading.Thread(target=self._run, args=(worker, job, True), name="planhrc-pool-warm", daemon=True).start()
+
+    def _run(self, worker: _Worker, job: PlanningJob, warm_up: bool, steps_known: StepsKnown | None = None
+             ) -> PlanOutcome:
+        """`job` on `worker` (taken for it): planned, or only warmed up (`warm_up`); the worker given back."""
         healthy = False
         try:
-            worker.conn.send((job, self._tracing.carrier()))
+            worker.conn.send((job, self._tracing.carrier(), warm_up, steps_known is not None))
             frames = self._frames(worker, job.deadline_at + self.grace_s)
-            header = next(frames)  # the worker's answer has come: the rest follows at once
+            header = next(frames)
+            if steps_known is not None:
+                early = pickle.loads(header)
+                if isinstance(early, EarlySteps):  # the replay goes on in the worker meanwhile
+                    steps_known(early.task, early.steps)
+                    header = next(frames)
+            # the worker's answer has come: the rest follows at once
             with self._pause:
                 outcome = unpack_outcome(itertools.chain((header,), frames), job.init)
                 if _atoms_in(outcome.expected_states) >= FREEZE_ATOMS:
                     gc.freeze()  # see the module's note: kept out of the collector's full passes
             healthy = True
+            if warm_up:
+                log.info("planning worker %d warmed up for %s: %s", worker.pid, job.obj.ident, outcome.message)
             return outcome
         except _Overrun:
             log.warning("planning worker %d overran the deadline of %s: stopped", worker.pid, job.obj.ident)
@@ -294,18 +342,20 @@ class PlanningPool:
             yield worker.conn.recv_bytes()
 
     def _take(self, object_id: str, deadline_at: float) -> _Worker | None:
-        """A free worker (started here while the pool has fewer than `size`), waiting for one until the job's
-        deadline; None when none came or the pool is closed."""
+        """A free worker (the one that last planned the object when it is free; started here while the pool has
+        fewer than `size`), waiting for one until the job's deadline; while a worker warms up for the object, that
+        one. None when none came or the pool is closed."""
         with self._cond:
             while not self._closed:
-                if self._idle:
-                    worker = next((w for w in self._idle if w.last_object == object_id), self._idle[0])
+                warming = any(w.warming == object_id for w in self._all)
+                worker = next((w for w in self._idle if w.last_object == object_id), None)
+                if worker is None and self._idle and not warming:
+                    worker = self._idle[0]
+                if worker is not None:
                     self._idle.remove(worker)
                     break
-                if len(self._all) < self.size:
-                    worker = _Worker(self._environment)
-                    self._all.add(worker)
-                    log.info("planning worker %d started", worker.pid)
+                if not warming and len(self._all) < self.size:
+                    worker = self._start()
                     break
                 left = deadline_at - time.monotonic()
                 if left <= 0:
@@ -316,17 +366,35 @@ class PlanningPool:
             worker.last_object = object_id
             return worker
 
+    def _start(self) -> _Worker:
+        """A new worker, counted in the pool (the caller holds `_cond`)."""
+        worker = _Worker(self._environment)
+        self._all.add(worker)
+        log.info("planning worker %d started", worker.pid)
+        return worker
+
     def _give_back(self, worker: _Worker, healthy: bool) -> None:
-        """A worker back to the idle ones; a failed one is stopped (off this thread) and its place freed."""
+        """A worker back to the idle ones; a failed one is stopped (off this thread) and its place freed. Every
+        waiting job looks again (one may be waiting for this worker's warm-up)."""
         with self._cond:
+            worker.warming = None
             if healthy and not self._closed:
                 self._idle.append(worker)
-                self._cond.notify()
+                self._cond.notify_all()
                 return
             self._all.discard(worker)
-            self._cond.notify()
+            self._cond.notify_all()
         worker.close()
         threading.Thread(target=worker.stop, name="planhrc-pool-stop", daemon=True).start()
+
+
+@dataclass(frozen=True)
+class EarlySteps:
+    """What a worker sends first when asked to (`PlanningPool.plan`'s `steps_known`): the plan's task and steps,
+    before it replays them."""
+
+    task: PddlTask
+    steps: tuple[str, ...]
 
 
 class _CollectorPause:
@@ -384,13 +452,16 @@ def run_worker() -> None:
     try:
         while True:
             try:
-                job, carrier = conn.recv()
+                job, carrier, warm_up, steps_first = conn.recv()
             except (EOFError, OSError):
                 return
+            run: Callable[[PlanningJob], PlanOutcome] = (
+                pipeline.warm_up if warm_up else (lambda j: _plan_steps_first(conn, j)) if steps_first else _plan)
             with collector.job():
-                with tracing.span("planning_job", {"object_id": job.obj.ident, "worker.pid": os.getpid(),
-                                                   "queue": "pool"}, parent=carrier):
-                    sent = _answer(conn, job, pipeline.plan)
+                with tracing.span("planning_warm_up" if warm_up else "planning_job",
+                                  {"object_id": job.obj.ident, "worker.pid": os.getpid(), "queue": "pool"},
+                                  parent=carrier):
+                    sent = _answer(conn, job, run)
             tracing.flush()
             if not sent:
                 return
@@ -416,10 +487,31 @@ class JobCollector:
             gc.collect(2 if self.done % FULL_COLLECT_JOBS == 0 else 1)
 
 
-def _answer(conn: Connection, job: PlanningJob, plan: Callable[..., PlanOutcome]) -> bool:
-    """Plan the job and send its outcome; False when the service's end of the connection is gone."""
+def _plan(job: PlanningJob) -> PlanOutcome:
+    from planhrc import pipeline
+
+    return pipeline.plan(job.obj, job.init, job.goal, job.config, placement=job.placement, deadline_at=job.deadline_at)
+
+
+def _plan_steps_first(conn: Connection, job: PlanningJob) -> PlanOutcome:
+    """`_plan` for a job VAL does not check here (the early answer: the service does), the plan's task and steps
+    sent (`EarlySteps`) before they are replayed."""
+    from planhrc import pipeline
+
+    assert not job.config.validate
+    found = pipeline.find_plan(job.obj, job.init, job.goal, job.config, placement=job.placement,
+                               deadline_at=job.deadline_at)
+    if isinstance(found, PlanOutcome):
+        return found
+    conn.send_bytes(pickle.dumps(EarlySteps(found.task, found.steps), pickle.HIGHEST_PROTOCOL))
+    return pipeline.expect(job.obj, job.init, job.goal, found, job.deadline_at)
+
+
+def _answer(conn: Connection, job: PlanningJob, run: Callable[[PlanningJob], PlanOutcome]) -> bool:
+    """Run the job (plan it, or warm up for it) and send its outcome; False when the service's end of the
+    connection is gone."""
     try:
-        outcome = plan(job.obj, job.init, job.goal, job.config, placement=job.placement, deadline_at=job.deadline_at)
+        outcome = run(job)
     except Exception as exc:  # the service gets an outcome whatever happens
         log.exception("planning failed for %s", job.obj.ident)
         outcome = PlanOutcome(PlanningStatus.ERROR, f"{type(exc).__name__}: {exc}", job.config.planner)

@@ -37,6 +37,7 @@ import psycopg
 
 from planhrc.model import ArticulatedObject
 from planhrc.pipeline import PlanOutcome
+from planhrc.pipeline.replan import StepsKnown
 from planhrc.vocabulary import PlanningStatus
 
 from .metrics import WorkerMetrics
@@ -124,9 +125,10 @@ class QueuedPlanning:
     def takes(self, obj: ArticulatedObject) -> bool:
         return not self._closed.is_set() and self._sizes.at_least(obj, self.min_atoms)
 
-    def plan(self, job: PlanningJob) -> PlanOutcome:
+    def plan(self, job: PlanningJob, steps_known: StepsKnown | None = None) -> PlanOutcome:
         """The outcome a worker made, or `timeout` when none came by the job's deadline and its grace (the job is
-        withdrawn: no worker starts it after that)."""
+        withdrawn: no worker starts it after that). `steps_known` is not called: a queued job's outcome comes
+        whole, in one row."""
         deadline = job.config.deadline_s
         left = job.deadline_at - time.monotonic()
         if left <= MIN_LEFT_S:
@@ -163,6 +165,10 @@ class QueuedPlanning:
                     self._waiting.pop(job_id, None)
                 if not collected:
                     self._withdraw(job_id)
+
+    def warm(self, job: PlanningJob) -> None:
+        """Nothing: the object's next job goes to whichever `planhrc planning-worker` takes it first, on any host,
+        so no warm-up can be placed where that job will run."""
 
     def depth(self) -> dict[str, int]:
         """Jobs queued and running in the database now (every service's, not only this one's)."""

@@ -36,7 +36,7 @@ from .pieces import (MIN_PIECE_STEPS, ValPiece, early_answer_first_piece, early_
                      validation_pieces)
 from .stages import Found, expect, find_plan, plan, plan_moves, planner_chain, run_planners
 from .gate import GateAnswer, PieceRecord, PieceVerdict, Verdict, gate
-from .replan import PlannedTurn, PlanningJob, ReplanRequest, plan_for_service
+from .replan import PlannedTurn, PlanningJob, ReplanRequest, plan_for_service, warm_up, warm_up_job
 from .val_runs import ValCheck, validate
 from .validation import EarlyAnswer, Validator, VerdictHandle
 
@@ -47,5 +47,5 @@ __all__ = [
     "deadline_from", "early_answer_first_piece", "early_pieces", "expect", "find_plan", "first_motion_steps", "gate",
     "merge_macro_steps", "move_of", "order_steps", "piece_bounds", "piece_of", "plan", "plan_for_service",
     "plan_moves", "planner_chain", "problem_name", "run_planners", "steps_of", "step_text", "time_left", "validate",
-    "validation_pieces",
+    "validation_pieces", "warm_up", "warm_up_job",
 ]

@@ -10,7 +10,11 @@ How a new plan is checked (`Validator.check`), by what VAL costs on its domain:
 * **the early answer** (setting `val_early_answer`, a domain with conditional effects, a plan longer than its
   first motion by a piece at least): VAL on the first motion only before the answer, in `val_pieces` pieces at
   once; the rest in `later.LaterPieces`, checked behind the answer once the plan is stored (`follow`), each
-  verdict handed to the caller's recorder (the service writes it to the object's log);
+  verdict handed to the caller's recorder (the service writes it to the object's log). A plan planned elsewhere
+  (a planning worker) may have its first motion's VAL started as soon as its steps are known (`start_first`: the
+  first motion's steps replayed here), beside the replay of the rest; `check` keeps those runs only for an outcome
+  whose steps, first actions and expected states are the ones they were made from (`FirstPieces.matches`), and
+  starts them afresh otherwise;
 * **otherwise** the whole plan, in `val_pieces` pieces at once for a long plan of such a domain.
 
 The dispatch gate (`gate.gate`) reads the verdicts recorded; a verdict still to come is waited for here
@@ -24,6 +28,7 @@ from dataclasses import dataclass, replace
 from typing import Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, State
+from planhrc.transition import replay
 from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.fast_downward import has_conditional_effects
@@ -35,7 +40,7 @@ from . import val_runs
 from .config import PlanningConfig, PlanOutcome, problem_name, time_left
 from .gate import PieceVerdict, Verdict
 from .later import LaterPieces, Precheck, Recorder
-from .motion import step_text
+from .motion import first_motion_steps, step_text
 from .pieces import MIN_PIECE_STEPS, ValPiece, early_answer_first_piece, piece_bounds, piece_of
 
 log = logging.getLogger(__name__)
@@ -52,6 +57,31 @@ class EarlyAnswer:
 
     pieces: tuple[tuple[int, int], ...]
     accepted: int
+
+
+@dataclass(frozen=True)
+class FirstPieces:
+    """VAL on a plan's first motion (`first` steps), started from the plan's steps and the replay of its first ones
+    (`actions`, and the `states` s^e_1 .. s^e_(first+1) the pieces start and end in) before the rest was replayed:
+    the runs (`checks`) on `pieces`."""
+
+    steps: tuple[str, ...]
+    actions: tuple[ActionSpec, ...]
+    states: tuple[State, ...]
+    first: int
+    pieces: tuple[ValPiece, ...]
+    checks: tuple[val_runs.ValCheck, ...]
+
+    def matches(self, outcome: PlanOutcome, first: int | None) -> bool:
+        """Whether the runs check what `outcome`'s early answer would check: the same steps, the same first motion
+        (`first`, from the outcome's actions), the same first actions and expected states."""
+        return (first == self.first and outcome.steps == self.steps
+                and tuple(outcome.actions[:len(self.actions)]) == self.actions
+                and all(outcome.expected_states[i] == state for i, state in enumerate(self.states)))
+
+    def cancel(self) -> None:
+        for check in self.checks:
+            check.cancel()
 
 
 class VerdictHandle:
@@ -144,13 +174,36 @@ class Validator:
         """One VAL run on a whole plan, started now (`beside`)."""
         return val_runs.start_val(task, steps, self.armed)
 
+    def start_first(self, obj: ArticulatedObject, init: State, task: PddlTask, steps: Sequence[str],
+                    deadline_at: float) -> FirstPieces | None:
+        """VAL on the first motion of a plan whose steps are known and whose expected states are not yet (planned
+        in a worker, which replays them meanwhile), started now, as the early answer would start it (`check`):
+        its first steps replayed here from `init`, as many as one motion can take. None when the early answer
+        would not check the plan so (VAL off, no early answer, no conditional effects, a plan short of a piece
+        after its first motion), or the first motion is not decided by those steps."""
+        if not (self.early_answer and steps and has_conditional_effects(task.validation_domain)):
+            return None
+        # one motion turns less than a full turn, each step at least 360 / orientations: it ends within these
+        prefix = tuple(steps[:obj.orientations + 1])
+        actions, states = replay(read_domain_model(self.config.tbox_path, obj.formulation.value), init, prefix,
+                                 deadline_at)
+        first = first_motion_steps(obj, actions, self.merge_macro_steps)
+        if (first >= len(prefix) and len(prefix) < len(steps)) or len(steps) - first < MIN_PIECE_STEPS:
+            return None
+        pieces = self._first_pieces(obj, task, steps, states, first)
+        checks = val_runs.start_runs(task, [(p.problem, p.steps) for p in pieces], self.armed)
+        return FirstPieces(tuple(steps), actions, tuple(states[i] for i in range(first + 1)), first, pieces, checks)
+
     def check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float,
-              started: val_runs.ValCheck | None = None) -> VerdictHandle:
-        """VAL on a new plan, started (or, with `started`, already running) in VAL's processes: the handle on its
+              started: val_runs.ValCheck | None = None, first_started: FirstPieces | None = None) -> VerdictHandle:
+        """VAL on a new plan, started (or, with `started`, already running; with `first_started`, its first
+        motion's runs kept when they check what the early answer would) in VAL's processes: the handle on its
         verdict. Nothing to check (no plan, VAL off, validated where it was planned): a settled handle."""
         if not (outcome.solved and outcome.actions) or not self.config.validate or outcome.validated:
             if started is not None:
                 started.cancel()
+            if first_started is not None:
+                first_started.cancel()
             return VerdictHandle.settled(outcome)
         task = outcome.task
         assert task is not None  # a solved plan with actions was translated
@@ -161,8 +214,13 @@ class Validator:
                                      config=self.config, deadline_at=deadline_at, read_in_write=True)
             first = (early_answer_first_piece(obj, outcome, self.merge_macro_steps) if self.early_answer
                      else None)
+            if first_started is not None and not first_started.matches(outcome, first):
+                log.warning("the first motion's VAL runs started for a plan of %s do not match its outcome: "
+                            "started again", obj.ident)
+                first_started.cancel()
+                first_started = None
             if first is not None:
-                return self._check_first(obj, outcome, task, first, deadline_at)
+                return self._check_first(obj, outcome, task, first, deadline_at, first_started)
             # cold runs: a plan checked whole here is short (or the early answer is off), not worth keeping
             # VAL processes armed with its domain beside the service
             checks = val_runs.start_runs(task, val_runs.whole_plan(obj, outcome, self.config.val_pieces))
@@ -171,20 +229,32 @@ class Validator:
         except Exception as exc:  # VAL could not start: the perception still gets a decision
             if started is not None:
                 started.cancel()
+            if first_started is not None:
+                first_started.cancel()
             return VerdictHandle.settled(_error(outcome, exc))
 
-    def _check_first(self, obj: ArticulatedObject, outcome: PlanOutcome, task: PddlTask, first: int,
-                     deadline_at: float) -> VerdictHandle:
-        """The early answer: the first motion (its first `first` steps) in `val_pieces` pieces checked at once
-        (VAL's cost grows with the steps of such a domain, so pieces at once answer sooner than one run), the
-        rest of the plan left to `LaterPieces`."""
+    def _bounds(self, n_steps: int, first: int) -> list[tuple[int, int]]:
+        """The early answer's pieces: the first motion (`first` steps) in `val_pieces` pieces, then the rest."""
         # the later pieces are checked on problems narrowed to the joints their steps reach (`piece_of`): the
         # shorter a piece, the fewer joints it reaches, but each costs a VAL process and a verdict's write
-        rest = len(outcome.steps) - first
-        bounds = piece_bounds(len(outcome.steps), self.config.val_pieces, first, max(1, self.config.val_pieces),
-                              max(self.config.val_pieces, rest // LATER_PIECE_STEPS))
-        before = tuple(piece_of(obj, task.problem, outcome.steps, outcome.expected_states, a + 1, b,
-                                task.validation_domain) for a, b in bounds if b <= first)
+        rest = n_steps - first
+        return piece_bounds(n_steps, self.config.val_pieces, first, max(1, self.config.val_pieces),
+                            max(self.config.val_pieces, rest // LATER_PIECE_STEPS))
+
+    def _first_pieces(self, obj: ArticulatedObject, task: PddlTask, steps: Sequence[str], states: Sequence[State],
+                      first: int) -> tuple[ValPiece, ...]:
+        """The pieces of the first motion (`first` steps) VAL checks before the early answer."""
+        return tuple(piece_of(obj, task.problem, steps, states, a + 1, b, task.validation_domain)
+                     for a, b in self._bounds(len(steps), first) if b <= first)
+
+    def _check_first(self, obj: ArticulatedObject, outcome: PlanOutcome, task: PddlTask, first: int,
+                     deadline_at: float, started: FirstPieces | None = None) -> VerdictHandle:
+        """The early answer: the first motion (its first `first` steps) in `val_pieces` pieces checked at once
+        (VAL's cost grows with the steps of such a domain, so pieces at once answer sooner than one run; with
+        `started`, those runs already under way), the rest of the plan left to `LaterPieces`."""
+        bounds = self._bounds(len(outcome.steps), first)
+        before = (started.pieces if started is not None
+                  else self._first_pieces(obj, task, outcome.steps, outcome.expected_states, first))
 
         def build(a: int, b: int) -> ValPiece:
             return piece_of(obj, task.problem, outcome.steps, outcome.expected_states, a, b, task.validation_domain)
@@ -192,7 +262,8 @@ class Validator:
         later = LaterPieces(task.validation_domain, tuple((a + 1, b) for a, b in bounds[len(before):]), build,
                             self.config.deadline_s, accepted=tuple((p.first, p.last) for p in before))
         try:
-            checks = val_runs.start_runs(task, [(p.problem, p.steps) for p in before], self.armed)
+            checks = (started.checks if started is not None
+                      else val_runs.start_runs(task, [(p.problem, p.steps) for p in before], self.armed))
         except BaseException:
             later.cancel()
             raise

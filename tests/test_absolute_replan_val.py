@@ -209,3 +209,65 @@ def test_a_200_by_12_absolute_object_gets_a_validated_first_action_over_http(tmp
             assert time.monotonic() < deadline, "the first later piece's verdict did not come"
             time.sleep(0.2)
         assert verdicts[0]["first_step"] == pieces[len(accepted)][0] and verdicts[0]["verdict"] == "accepted"
+
+
+def test_a_replan_from_a_planning_worker_starts_val_on_its_first_motion_before_the_replay_comes_back(monkeypatch):
+    """The worker sends the plan's steps before it replays them: VAL's runs on the first motion start then (before
+    the outcome), on exactly the pieces the early answer would cut from the outcome's own expected states, and the
+    verdict is the early answer's. Runs started for another plan are not kept: they are stopped and the first
+    motion is checked afresh."""
+    from planhrc.kb_service.planning_pool import PlanningPool
+    from planhrc.pipeline import (PlanningJob, ReplanRequest, config_from_settings, early_answer_first_piece,
+                                  plan_for_service)
+    from planhrc.settings import make_settings
+
+    links, k = 30, 12
+    rng = random.Random(3)
+    obj = make_object("rod", "absolute", links, k)
+    goal = obj.configuration_atoms([rng.choice(obj.orientation_degrees) for _ in range(links)])
+    init = obj.state([rng.choice(obj.orientation_degrees) for _ in range(links)])
+    config = config_from_settings(make_settings())
+    validator = validation.Validator(config, early_answer=True, merge_macro_steps=True, armed=False)
+    order: list[tuple[str, tuple[tuple[str, tuple[str, ...]], ...]]] = []
+    real_start = val_runs.start_runs
+    monkeypatch.setattr(val_runs, "start_runs", lambda task, pieces, armed=None: (
+        order.append(("val", tuple((p, tuple(s)) for p, s in pieces))), real_start(task, pieces, armed))[1])
+    try:
+        with PlanningPool(1, 1) as pool:
+            real_plan = pool.plan
+
+            def plan(job: PlanningJob, steps_known=None):
+                outcome = real_plan(job, steps_known)
+                order.append(("outcome", ()))
+                return outcome
+
+            monkeypatch.setattr(pool, "plan", plan)
+            planned = plan_for_service(ReplanRequest(obj, init, goal, time.monotonic() + ROOMY_DEADLINE_S), config,
+                                       validator, pool)
+            outcome = planned.outcome
+            verdict = planned.verdict.outcome()
+            assert [what for what, _ in order] == ["val", "outcome"]  # VAL began before the replay came back
+            first = early_answer_first_piece(obj, outcome, True)
+            assert first is not None and planned.verdict.steps_before_answer == first
+            cut = validator._first_pieces(obj, outcome.task, outcome.steps, outcome.expected_states, first)
+            assert order[0][1] == tuple((p.problem, p.steps) for p in cut)  # what the early answer checks
+            assert verdict is not None and verdict.solved and verdict.validated_steps == first
+            planned.verdict.cancel()
+
+            # runs started for another plan of the object: stopped, the first motion checked afresh
+            other = obj.state([rng.choice(obj.orientation_degrees) for _ in range(links)])
+            elsewhere = plan_for_service(ReplanRequest(obj, other, goal, time.monotonic() + ROOMY_DEADLINE_S),
+                                         config, validator, pool)
+            stale = validator.start_first(obj, other, elsewhere.outcome.task, elsewhere.outcome.steps,
+                                          time.monotonic() + ROOMY_DEADLINE_S)
+            elsewhere.verdict.cancel()
+            assert stale is not None and not stale.matches(outcome, first)
+            before = len(order)
+            again = validator.check(obj, outcome, time.monotonic() + ROOMY_DEADLINE_S, first_started=stale)
+            assert [what for what, _ in order[before:]] == ["val"]  # started afresh, on the outcome's own pieces
+            assert order[-1][1] == order[0][1]
+            checked = again.outcome()
+            assert checked is not None and checked.solved and checked.validated_steps == first
+            again.cancel()
+    finally:
+        validator.close()

@@ -175,8 +175,11 @@ def test_the_service_leaves_its_start_up_heap_out_of_full_collections(tmp_path):
 
 def test_a_perception_whose_planning_worker_dies_answers_and_the_next_one_plans(tmp_path):
     """The worker planning an object's perception is killed: that perception still answers (no plan, the reason
-    named, nothing planned stored) and the next perception on a pooled task gets a plan from a new worker."""
-    settings = make_settings(db_path=str(tmp_path / "kb.sqlite3"), token=None, planning_deadline_s=60)
+    named, nothing planned stored) and the next perception on a pooled task gets a plan from a new worker. (One
+    worker, which the big object's goal warms up; once warm it is stopped (SIGSTOP), so the perception's job is sure
+    to be on it when it is killed.)"""
+    settings = make_settings(db_path=str(tmp_path / "kb.sqlite3"), token=None, planning_deadline_s=60,
+                             planning_workers=1)
     app = create_app(settings)
     with TestClient(app) as client:
         big = client.post("/objects", json={"name": "big", "links": 200, "orientations": 12,
@@ -184,18 +187,20 @@ def test_a_perception_whose_planning_worker_dies_answers_and_the_next_one_plans(
         mid = client.post("/objects", json={"name": "mid", "links": 20, "orientations": 12,
                                             "formulation": "absolute"}).json()["id"]
         rng = random.Random(11)
-        client.put(f"/objects/{big}/goal", json={"link_orientations_deg": _angles(rng, 200)}).raise_for_status()
-        client.put(f"/objects/{mid}/goal", json={"link_orientations_deg": [90] * 20}).raise_for_status()
         pool = app.state.context.pool
+        client.put(f"/objects/{big}/goal", json={"link_orientations_deg": _angles(rng, 200)}).raise_for_status()
+        (pid,) = pool.pids()  # started for the warm-up
+        client.put(f"/objects/{mid}/goal", json={"link_orientations_deg": [90] * 20}).raise_for_status()
+        until = time.monotonic() + 120
+        while pool.warming() and time.monotonic() < until:
+            time.sleep(0.05)
+        assert not pool.warming() and pool.pids() == (pid,)
+        os.kill(pid, signal.SIGSTOP)
         answer: dict = {}
         worker = threading.Thread(target=lambda: answer.update(r=client.post(
             f"/objects/{big}/perceptions", json={"link_orientations_deg": _angles(rng, 200)})))
         worker.start()
-        until = time.monotonic() + 20
-        while not pool.pids() and time.monotonic() < until:
-            time.sleep(0.05)
-        (pid,) = pool.pids()
-        time.sleep(2.0)  # well into its grounding
+        time.sleep(0.5)  # the job on its way to the stopped worker (or not yet: either way it is that worker's)
         os.kill(pid, signal.SIGKILL)
         worker.join(60)
         r = answer["r"]

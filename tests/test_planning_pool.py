@@ -173,6 +173,61 @@ def test_only_large_tasks_go_to_the_pool():
     assert not PlanningPool(0, 1).takes(make_object("a", "absolute", 20, 12))
 
 
+def test_a_warm_up_grounds_the_objects_task_so_a_replan_from_another_state_grounds_nothing(config):
+    from planhrc.planner import inproc
+
+    rod = make_object("rod", "absolute", 30, 12)
+    goal = rod.configuration_atoms([30 * (i % 12) for i in range(30)])
+    inproc.forget()
+    warmed = pipeline.warm_up(pipeline.warm_up_job(rod, goal, config, time.monotonic() + 60))
+    assert warmed.solved and not warmed.actions and not warmed.expected_states and warmed.task is None
+    grounded = inproc._recognised_cached.cache_info()
+    assert grounded.misses == 1
+    found = pipeline.find_plan(rod, rod.state([90] * 30), goal, config)
+    assert isinstance(found, pipeline.Found) and found.steps
+    assert inproc._recognised_cached.cache_info().misses == grounded.misses  # the warm-up's grounding, used
+    # a goal the first configuration already holds: warmed from the second one
+    zeros = rod.configuration_atoms([0] * 30)
+    assert not pipeline.warm_up_job(rod, zeros, config, time.monotonic() + 60).init >= zeros
+
+
+def test_an_objects_next_job_waits_for_the_worker_warming_up_for_it_and_a_warm_worker_is_not_warmed_again(config):
+    rod = make_object("rod", "absolute", 30, 12)
+    goal = [30 * (i % 12) for i in range(30)]
+    with PlanningPool(2, 1) as pool:
+        pool.warm(pipeline.warm_up_job(rod, rod.configuration_atoms(goal), config, time.monotonic() + 60))
+        (pid,) = pool.pids()  # started for the warm-up, which is still importing the pipeline
+        assert pool.plan(_job(config, rod, [90] * 30, goal, deadline_s=60)).solved
+        assert pool.pids() == (pid,)  # the job took the warming worker, not a second, cold one
+        pool.warm(pipeline.warm_up_job(rod, rod.configuration_atoms(goal), config, time.monotonic() + 60))
+        other = make_object("other", "absolute", 30, 12)
+        assert pool.plan(_job(config, other, [0] * 30, goal, deadline_s=60)).solved
+        assert pool.pids() == (pid,)  # the worker that planned `rod` was not taken by a second warm-up
+
+
+def test_a_large_objects_goal_starts_a_worker_warming_up_before_any_perception(tmp_path):
+    from fastapi.testclient import TestClient
+
+    from planhrc.kb_service.app import create_app
+
+    settings = make_settings(db_path=str(tmp_path / "kb.sqlite3"), token=None, planning_workers=1)
+    with TestClient(create_app(settings)) as client:
+        pool = client.app.state.context.pool
+        made = []
+        for formulation, links in (("relative", 4), ("absolute", 30)):
+            r = client.post("/objects", json={"name": formulation, "links": links, "orientations": 12,
+                                              "formulation": formulation})
+            assert r.status_code == 201, r.text
+            made.append(r.json()["id"])
+            r = client.put(f"/objects/{made[-1]}/goal", json={"link_orientations_deg": [30.0] * links})
+            assert r.status_code == 200, r.text
+            assert len(pool.pids()) == (0 if formulation == "relative" else 1)  # a small object's goal: no worker
+        (pid,) = pool.pids()
+        r = client.post(f"/objects/{made[1]}/perceptions", json={"link_orientations_deg": [0.0] * 30})
+        assert r.status_code == 200 and r.json()["decision"] == "replan", r.text
+        assert pool.pids() == (pid,)
+
+
 def test_a_planning_process_collects_after_each_job_and_everything_every_hundred():
     """The collector is off during a job; after it the young generations are collected, and every generation
     after every FULL_COLLECT_JOBS-th job (the grounded tasks a worker keeps are walked only then)."""

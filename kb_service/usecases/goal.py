@@ -9,6 +9,7 @@ from planhrc.event_log import EventKind, GoalSetData
 from planhrc.geometry import PLANNING, Cell, ObjectGeometry, configuration_feasible
 from planhrc.model import ArticulatedObject, Formulation, State, snap_angle
 from planhrc.motion_search import room_for_goal
+from planhrc.pipeline import deadline_from, warm_up_job
 from planhrc.vocabulary import ExecutionStatus
 
 from ..store import Execution, ValidationError
@@ -56,7 +57,16 @@ def _set_goal(context: Context, request: GoalRequest) -> GoalSet:
             log_event(store, object_id, EventKind.GOAL_SET, f"goal set; the next perception plans towards it{said}",
                       GoalSetData(goal_state_id=goal.id, problem_id=problem.id if problem else None,
                                   warnings=tuple(warnings)))
+        _warm(context, obj, atoms)
         return GoalSet(goal.id, problem.id if problem else None, tuple(warnings))
+
+
+def _warm(context: Context, obj: ArticulatedObject, goal: State) -> None:
+    """A large object's planning warmed up for its new goal, off this request's path (`LargeTaskPlanning.warm`):
+    the perception that plans next finds the object's task grounded."""
+    pool = context.pool
+    if pool is not None and pool.takes(obj):
+        pool.warm(warm_up_job(obj, goal, context.planning, deadline_from(context.planning)))
 
 
 def goal_atoms(obj: ArticulatedObject, link_orientations_deg: tuple[float, ...] | None,
