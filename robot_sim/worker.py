@@ -469,8 +469,9 @@ def _loop(kb: ServiceLink, object_id: str, scene: Scene, robot: Robot, camera: C
             index, event = during_events.pop(0)
             if (what := _act(human, run, index, event, context)) is not None:
                 human_during.append(what)
-                ready = None  # the look is older than the human's move
         human.finish()
+        if human_during:
+            ready = None  # a human moved during the step (a move may end after the look): the next perception looks
         # the links still held stay the robot's: a human leaves them alone
         context.busy_links, context.robot_turn = (both.held_links() if both is not None else ()), None
         if result is None:
