@@ -204,8 +204,7 @@ class BothHands:
             if len(tried) >= GRASP_TRIES:
                 break
             station = plan_station(self.scene, self.robot, action, arms, self.sight, pose, then, avoid=tried)
-        for arm in ARMS:
-            drive_arm(self.scene, self.robot, arm, HOME_POSE[arm])
+        # `perform` then sends the open hands home
         return _hand_failure(FailureReason.UNREACHABLE,
                              f"no grasp at links {action.held_link} and {action.turned_link} leaves every link in a "
                              f"camera's sight: link(s) {', '.join(map(str, hidden))} hidden at each of the "
