@@ -130,9 +130,7 @@ class BothHands:
             self.looked = seen
             return result
         log.info("after the held turn link(s) %s are hidden from every camera: the hands let go", seen.missing_links)
-        self._open_and_lift()
-        for arm in ARMS:
-            drive_arm(self.scene, self.robot, arm, HOME_POSE[arm])
+        self._put_down()
         return replace(result, hands_open=True, message=f"{result.message}; then both hands opened and went home: "
                        f"they hid link(s) {', '.join(map(str, seen.missing_links))} from every camera")
 
@@ -221,6 +219,14 @@ class BothHands:
                 return _hand_failure(FailureReason.GRASP_LOST, f"the {arm} gripper closed on nothing at link {link}")
         return None
 
+    def _put_down(self) -> list[str]:
+        """`_open_and_lift`, then both arms home, out of the head camera's view of the links; the arms that
+        lifted."""
+        lifted = self._open_and_lift()
+        for arm in ARMS:
+            drive_arm(self.scene, self.robot, arm, HOME_POSE[arm])
+        return lifted
+
     def _open_and_lift(self) -> list[str]:
         """Both hands open where they are and each that held lifts straight up off its link; the arms that
         lifted."""
@@ -244,9 +250,7 @@ class BothHands:
 
     def _release(self, action: RotationAction, arms: tuple[str, str], pose: Pose,
                  then: RotationAction | None) -> ActionResult:
-        lifted = self._open_and_lift()
-        for arm in ARMS:  # out of the head camera's view of the links
-            drive_arm(self.scene, self.robot, arm, HOME_POSE[arm])
+        lifted = self._put_down()
         return _hand_success(f"both hands open{', lifted' if lifted else ' (they held nothing)'} and back home")
 
     # -- the turns ----------------------------------------------------------------------------------------------
