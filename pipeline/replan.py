@@ -6,7 +6,9 @@ For a plan VAL checks in one short run, VAL starts on the plan's steps as soon a
 expected states are replayed, so that VAL runs on the other core beside the replay and whatever the caller does
 next (the store's checks of the plan, the start of its write). Likewise for a large task planned in a worker with
 the early answer: the worker sends the plan's steps before it replays them, and VAL starts on the first motion
-here (`Validator.start_first`) while the worker replays the rest.
+here (`Validator.start_first`) while the worker replays the rest; only for objects of `EARLY_VAL_MIN_LINKS` links or
+more, whose replay is long enough to hide VAL behind it (for a smaller object the service's own replay of the first
+motion costs more than it saves: docs/results/validation-speed/large-warm-up.md).
 """
 from __future__ import annotations
 
@@ -27,6 +29,8 @@ from .validation import FirstPieces, Validator, VerdictHandle
 log = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
+
+EARLY_VAL_MIN_LINKS = 50  # the least object a worker's plan has VAL started on its first motion before the replay
 
 
 @dataclass(frozen=True)
@@ -151,6 +155,8 @@ def _planned_in_pool(request: ReplanRequest, config: PlanningConfig, validator: 
         return _guarded(obj, config, lambda: pool.plan(job)), None, None
     job = PlanningJob(obj, request.init, request.goal, replace(config, validate=False), request.placement,
                       request.deadline_at)
+    if obj.n_links < EARLY_VAL_MIN_LINKS:  # VAL starts once the outcome is here (`Validator.check`)
+        return _guarded(obj, config, lambda: pool.plan(job)), None, None
     begun: list[FirstPieces] = []
 
     def steps_known(task: PddlTask, steps: tuple[str, ...]) -> None:

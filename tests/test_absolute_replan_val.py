@@ -221,7 +221,10 @@ def test_a_replan_from_a_planning_worker_starts_val_on_its_first_motion_before_t
                                   plan_for_service)
     from planhrc.settings import make_settings
 
+    from planhrc.pipeline import replan
+
     links, k = 30, 12
+    monkeypatch.setattr(replan, "EARLY_VAL_MIN_LINKS", links)  # the gate is the next test's
     rng = random.Random(3)
     obj = make_object("rod", "absolute", links, k)
     goal = obj.configuration_atoms([rng.choice(obj.orientation_degrees) for _ in range(links)])
@@ -269,5 +272,51 @@ def test_a_replan_from_a_planning_worker_starts_val_on_its_first_motion_before_t
             checked = again.outcome()
             assert checked is not None and checked.solved and checked.validated_steps == first
             again.cancel()
+    finally:
+        validator.close()
+
+
+def test_a_worker_plan_of_a_smaller_object_has_val_started_after_the_outcome(monkeypatch):
+    """Below `EARLY_VAL_MIN_LINKS` the worker's replay is short: the service does not replay the first motion itself
+    to start VAL early; VAL starts on the outcome's own pieces once it is back, and its verdict is the same."""
+    from planhrc.kb_service.planning_pool import PlanningPool
+    from planhrc.pipeline import ReplanRequest, config_from_settings, early_answer_first_piece, plan_for_service
+    from planhrc.pipeline import replan
+    from planhrc.settings import make_settings
+
+    links, k = 20, 12
+    assert links < replan.EARLY_VAL_MIN_LINKS
+    rng = random.Random(3)
+    obj = make_object("rod", "absolute", links, k)
+    goal = obj.configuration_atoms([rng.choice(obj.orientation_degrees) for _ in range(links)])
+    init = obj.state([rng.choice(obj.orientation_degrees) for _ in range(links)])
+    config = config_from_settings(make_settings())
+    validator = validation.Validator(config, early_answer=True, merge_macro_steps=True, armed=False)
+    order: list[str] = []
+    real_start = val_runs.start_runs
+    monkeypatch.setattr(val_runs, "start_runs", lambda task, pieces, armed=None: (
+        order.append("val"), real_start(task, pieces, armed))[1])
+    first_calls: list[int] = []
+    real_first = validator.start_first
+    monkeypatch.setattr(validator, "start_first", lambda *a, **kw: (first_calls.append(1), real_first(*a, **kw))[1])
+    try:
+        with PlanningPool(1, 1) as pool:
+            real_plan = pool.plan
+
+            def plan(job, steps_known=None):
+                assert steps_known is None  # the worker is not asked for its steps before the replay
+                outcome = real_plan(job, steps_known)
+                order.append("outcome")
+                return outcome
+
+            monkeypatch.setattr(pool, "plan", plan)
+            planned = plan_for_service(ReplanRequest(obj, init, goal, time.monotonic() + ROOMY_DEADLINE_S), config,
+                                       validator, pool)
+            verdict = planned.verdict.outcome()
+            assert order[0] == "outcome" and "val" in order and not first_calls
+            first = early_answer_first_piece(obj, planned.outcome, True)
+            assert first is not None and planned.verdict.steps_before_answer == first
+            assert verdict is not None and verdict.solved and verdict.validated_steps == first
+            planned.verdict.cancel()
     finally:
         validator.close()
