@@ -28,7 +28,10 @@ whole milliseconds so that equal times tie exactly; among plans of equal time th
 configurations closer than `ROOMY`'s 5 cm to the table's edges wins (a turn dragging links along the table flexes
 the joints beyond it by a few degrees). The heuristic, the time of each joint's shorter way round and of one motion
 per joint still to turn (plus the slide to the nearest place where the goal fits, where it does not fit here), never
-overestimates: a plan found by the exhaustive search is the least robot time the table allows (`Work.exact`). When
+overestimates: a plan found by the exhaustive search is the least robot time the table allows (`Work.exact`). A
+node is not expanded when another node of the same configuration (the same offsets and place, other hands) was
+reached sooner by at least what the hands can add to the next motion (`_Astar._dominated`): every plan on from it is
+matched from the other at no more time, so neither the least time nor whether a plan exists changes. When
 the search does not finish within its budget, a weighted search (`f = g + w h`) finds a plan whose time is at most
 `Work.bound` times the least possible, the bound taken from the exhaustive search's open list when it stopped.
 """
@@ -421,6 +424,12 @@ class _Astar:
         self._new_motion_s = (space.costs.centre_s + space.costs.grasp_s + space.costs.held_turn_s
                               if hands.bimanual else space.costs.turn_s)
         self._turns = [(m.turned, m.held, float(sign * step)) for m in space.alphabet for sign in (1, -1)]
+        # per configuration (offsets, place): the least (g, tight) of any of its nodes, and how much more the first
+        # motion from one node of a configuration can cost than from another (the hands differ, nothing else does):
+        # a node costing at least that much more than its configuration's best is dominated (`_dominated`)
+        self._config_best: dict[tuple[tuple[int, ...], int], tuple[int, int]] = {}
+        self._hands_slack_ms = _ms(space.costs.release_s + space.costs.centre_s + space.costs.grasp_s +
+                                   space.costs.held_turn_s if hands.bimanual else space.costs.turn_s) + 1
 
     # -- the heuristic -----------------------------------------------------------------------------------------
     def h_ms(self, node: _Node) -> int:
@@ -450,10 +459,23 @@ class _Astar:
             return _Node(zero, 0, hands.centre - 1, 0, hands.grasped)
         return _Node(zero, 0, -1, 0, False)
 
+    def _dominated(self, node: _Node, g: int, tight: int) -> bool:
+        """Whether another node of the same configuration is reached at least `_hands_slack_ms` sooner, and with
+        no more tight rests: every plan on from `node` is then matched from it at no more time (the same motions;
+        only the first can cost more, by the hands' slack at most; which turns and slides the judge accepts does
+        not depend on the hands), so `node` need not be expanded, and whether a plan exists is unchanged."""
+        best = self._config_best.get((node.offsets, node.place))
+        return best is not None and (best[0] + self._hands_slack_ms, best[1]) <= (g, tight) and best[1] <= tight
+
     def _push(self, node: _Node, g: int, tight: int, parent: tuple[_Node, Motion] | None) -> None:
         best = self._best.get(node)
         if best is not None and best <= (g, tight):
             return
+        if self._dominated(node, g, tight):
+            return
+        config = (node.offsets, node.place)
+        if (g, tight) < self._config_best.get(config, (math.inf, math.inf)):
+            self._config_best[config] = (g, tight)
         self._best[node] = (g, tight)
         self._parent[node] = parent
         f = g + int(math.ceil(self.weight * self.h_ms(node)))
@@ -485,8 +507,8 @@ class _Astar:
                 if isinstance(kind, _Node):  # a slide not judged yet: judged now, among the cheapest ways on
                     self._judge_slide(node, g, tight, kind)
                     continue
-                if self._best.get(node) != (g, tight):
-                    continue  # reached again at less time since: that entry counts
+                if self._best.get(node) != (g, tight) or self._dominated(node, g, tight):
+                    continue  # reached again at less time since, or dominated since: that entry counts
                 if node.offsets == space.target:
                     if not batch:
                         return _Found(node, g, tight, self._path(node))
