@@ -211,26 +211,34 @@ def test_a_200_by_12_absolute_object_gets_a_validated_first_action_over_http(tmp
         assert verdicts[0]["first_step"] == pieces[len(accepted)][0] and verdicts[0]["verdict"] == "accepted"
 
 
+def _a_random_task_with_the_early_answer(links: int, k: int, rng: random.Random):
+    """A random absolute task of `links` x `k` (object, goal, initial state), the service's planning config and a
+    validator with the early answer."""
+    from planhrc.pipeline import config_from_settings
+    from planhrc.settings import make_settings
+
+    obj = make_object("rod", "absolute", links, k)
+    goal = obj.configuration_atoms([rng.choice(obj.orientation_degrees) for _ in range(links)])
+    init = obj.state([rng.choice(obj.orientation_degrees) for _ in range(links)])
+    config = config_from_settings(make_settings())
+    return obj, goal, init, config, validation.Validator(config, early_answer=True, merge_macro_steps=True,
+                                                         armed=False)
+
+
 def test_a_replan_from_a_planning_worker_starts_val_on_its_first_motion_before_the_replay_comes_back(monkeypatch):
     """The worker sends the plan's steps before it replays them: VAL's runs on the first motion start then (before
     the outcome), on exactly the pieces the early answer would cut from the outcome's own expected states, and the
     verdict is the early answer's. Runs started for another plan are not kept: they are stopped and the first
     motion is checked afresh."""
     from planhrc.kb_service.planning_pool import PlanningPool
-    from planhrc.pipeline import (PlanningJob, ReplanRequest, config_from_settings, early_answer_first_piece,
+    from planhrc.pipeline import (PlanningJob, ReplanRequest, early_answer_first_piece,
                                   plan_for_service)
-    from planhrc.settings import make_settings
-
     from planhrc.pipeline import replan
 
     links, k = 30, 12
     monkeypatch.setattr(replan, "EARLY_VAL_MIN_LINKS", links)  # the gate is the next test's
     rng = random.Random(3)
-    obj = make_object("rod", "absolute", links, k)
-    goal = obj.configuration_atoms([rng.choice(obj.orientation_degrees) for _ in range(links)])
-    init = obj.state([rng.choice(obj.orientation_degrees) for _ in range(links)])
-    config = config_from_settings(make_settings())
-    validator = validation.Validator(config, early_answer=True, merge_macro_steps=True, armed=False)
+    obj, goal, init, config, validator = _a_random_task_with_the_early_answer(links, k, rng)
     order: list[tuple[str, tuple[tuple[str, tuple[str, ...]], ...]]] = []
     real_start = val_runs.start_runs
     monkeypatch.setattr(val_runs, "start_runs", lambda task, pieces, armed=None: (
@@ -280,18 +288,13 @@ def test_a_worker_plan_of_a_smaller_object_has_val_started_after_the_outcome(mon
     """Below `EARLY_VAL_MIN_LINKS` the worker's replay is short: the service does not replay the first motion itself
     to start VAL early; VAL starts on the outcome's own pieces once it is back, and its verdict is the same."""
     from planhrc.kb_service.planning_pool import PlanningPool
-    from planhrc.pipeline import ReplanRequest, config_from_settings, early_answer_first_piece, plan_for_service
+    from planhrc.pipeline import ReplanRequest, early_answer_first_piece, plan_for_service
     from planhrc.pipeline import replan
-    from planhrc.settings import make_settings
 
     links, k = 20, 12
     assert links < replan.EARLY_VAL_MIN_LINKS
     rng = random.Random(3)
-    obj = make_object("rod", "absolute", links, k)
-    goal = obj.configuration_atoms([rng.choice(obj.orientation_degrees) for _ in range(links)])
-    init = obj.state([rng.choice(obj.orientation_degrees) for _ in range(links)])
-    config = config_from_settings(make_settings())
-    validator = validation.Validator(config, early_answer=True, merge_macro_steps=True, armed=False)
+    obj, goal, init, config, validator = _a_random_task_with_the_early_answer(links, k, rng)
     order: list[str] = []
     real_start = val_runs.start_runs
     monkeypatch.setattr(val_runs, "start_runs", lambda task, pieces, armed=None: (
