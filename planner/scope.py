@@ -23,9 +23,11 @@ the initial state (else the problem is kept whole: VAL must refuse it as the who
 * the goal literals naming dropped objects held initially and their facts never change, so they hold at the end;
   the others are the narrowed problem's goal.
 
-So VAL accepts the steps on the narrowed problem exactly when it accepts them on the whole one. The problem text is
-read line by line as `translator.problem.write_problem` writes it (the objects of a type on one line, one fact per
-line); a text of another shape is kept whole.
+So VAL accepts the steps on the narrowed problem exactly when it accepts them on the whole one. Then the objects of
+the quantified types that no relaxed run of the steps ever holds (an orientation no joint holds or is turned to,
+bound through a fluent fact rather than a static one: `planner.held`, with its own argument) are dropped from that
+problem the same way. The problem text is read line by line as `translator.problem.write_problem` writes it (the
+objects of a type on one line, one fact per line); a text of another shape is kept whole.
 """
 from __future__ import annotations
 
@@ -33,9 +35,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Sequence
 
-from planhrc.model import EQUALITY
+from planhrc.model import EQUALITY, Atom
 
 from .errors import PlannerError
+from .held import Relaxed, StaticFacts, held_objects, relaxed_of
 from .operators import normalise_domain
 from .pddl import parse_domain
 
@@ -64,33 +67,97 @@ class _Scope:
         return tuple(f"    ({name} " for name in sorted(self.predicates))
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """A problem's text cut where `narrow_problem` edits it: its objects by type, its init facts and its goal
+    literals, each with its line and read once."""
+
+    head: str
+    objects: dict[str, list[str]]
+    between: str
+    init: list[tuple[str, Atom]]  # (line, fact)
+    middle: str
+    goal: list[tuple[str, bool, Atom | None]]  # (line with its end, negated, atom; None: not a literal's line)
+
+    @classmethod
+    def read(cls, problem: str) -> _Problem | None:
+        try:
+            head, rest = problem.split(_OBJECTS, 1)
+            objects_text, rest = rest.split(_CLOSE, 1)
+            between, rest = rest.split(_INIT, 1)
+            init_text, rest = rest.split(_CLOSE, 1)
+            middle, goal_and_tail = rest.split(_GOAL, 1)
+        except ValueError:
+            return None
+        objects: dict[str, list[str]] = {}
+        for line in objects_text.splitlines():
+            names, dash, kind = line.rpartition(" - ")
+            if dash:
+                objects[kind.strip()] = names.split()
+        goal: list[tuple[str, bool, Atom | None]] = []
+        for line in goal_and_tail.splitlines(keepends=True):
+            text = line.strip()
+            negated = text.startswith("(not ")
+            goal.append((line, negated, _atom(text[5:-1] if negated else text) if line.startswith("    (") else None))
+        return cls(head, objects, between, [(line, _atom(line)) for line in init_text.splitlines()], middle, goal)
+
+    def goal_holds_initially(self, dropped: set[str], before: set[str]) -> bool:
+        """Whether every goal literal naming an object of `dropped` (and none of `before`, dropped already) holds
+        in the initial state."""
+        named = [(negated, atom) for _, negated, atom in self.goal
+                 if atom is not None and not dropped.isdisjoint(atom[1:]) and before.isdisjoint(atom[1:])]
+        if not named:
+            return True
+        init = {atom for _, atom in self.init}
+        return all((atom in init) != negated for negated, atom in named)
+
+    def without(self, dropped: set[str]) -> str:
+        """The problem's text without the objects `dropped` and every fact and goal literal naming them."""
+        kept_objects = "".join(
+            f"    {' '.join(n for n in names if n not in dropped)} - {kind}\n" for kind, names in self.objects.items()
+            if any(n not in dropped for n in names))
+        kept_init = "".join(f"{line}\n" for line, atom in self.init if dropped.isdisjoint(atom[1:]))
+        kept_goal = "".join(line for line, _, atom in self.goal if atom is None or dropped.isdisjoint(atom[1:]))
+        return (self.head + _OBJECTS + kept_objects + _CLOSE + self.between + _INIT + kept_init + _CLOSE
+                + self.middle + _GOAL + kept_goal)
+
+
 def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
-    """`problem` without the objects of quantified types that `steps` cannot reach, or `problem` itself when
-    nothing can be dropped or the domain, the text or a step does not allow it (see the module's note)."""
+    """`problem` without the objects of quantified types that `steps` cannot reach (see the module's note), then
+    without those of the rest no relaxed run of the steps ever holds (`planner.held`), or `problem` itself when
+    nothing can be dropped or the domain, the text or a step does not allow it."""
+    if not steps:
+        return problem
+    read = _Problem.read(problem)
+    if read is None:
+        return problem
+    dropped: set[str] = set()
     scope = _scope_of(domain)
-    if scope is None or not steps:
-        return problem
-    try:
-        head, rest = problem.split(_OBJECTS, 1)
-        objects_text, rest = rest.split(_CLOSE, 1)
-        between, rest = rest.split(_INIT, 1)
-        init_text, rest = rest.split(_CLOSE, 1)
-        middle, goal_and_tail = rest.split(_GOAL, 1)
-    except ValueError:
-        return problem
-    objects: dict[str, list[str]] = {}
-    for line in objects_text.splitlines():
-        names, dash, kind = line.rpartition(" - ")
-        if dash:
-            objects[kind.strip()] = names.split()
-    init_lines = init_text.splitlines()
-    statics = _statics_of("\n".join(line for line in init_lines if line.startswith(scope.prefixes)))
+    if scope is not None:
+        unreached = _unreached(scope, read, steps)
+        if unreached is None:
+            return problem  # a step VAL refuses on the whole problem
+        if unreached and read.goal_holds_initially(unreached, set()):
+            dropped |= unreached
+    relaxed = relaxed_of(domain)
+    if relaxed is not None:
+        never = _never_held(relaxed, read, steps, dropped)
+        if never and read.goal_holds_initially(never, dropped):
+            dropped |= never
+    return read.without(dropped) if dropped else problem
+
+
+def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str]) -> set[str] | None:
+    """The objects of the scope's types that no step reaches; None when a step is not an action of the domain or
+    lacks arguments."""
+    prefixes = scope.prefixes
+    statics = _statics_of("\n".join(line for line, _ in read.init if line.startswith(prefixes)))
     reached: dict[str, set[str]] = {kind: set() for kind in scope.types}
     for step in steps:
         name, *args = step.strip().strip("()").lower().split()
         by_type = scope.reach.get(name)
         if by_type is None:
-            return problem  # not an action of the domain: VAL says so on the whole problem
+            return None
         for kind, reach in by_type.items():
             try:
                 reached[kind].update(args[i] for i in reach.parameters)
@@ -101,29 +168,26 @@ def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
                     key = tuple(fixed[:pos - 1] + fixed[pos:])
                     reached[kind].update(statics.get((predicate, pos, key), ()))
             except IndexError:
-                return problem  # too few arguments: VAL says so on the whole problem
-    dropped = {name for kind in scope.types for name in objects.get(kind, ()) if name not in reached[kind]}
-    if not dropped:
-        return problem
-    goal_lines = goal_and_tail.splitlines(keepends=True)
-    goal_prefixes = tuple({"    " + line.strip().removeprefix("(not ").split(" ", 1)[0] + " " for line in goal_lines
-                           if line.startswith("    (")})
-    init = {_atom(line) for line in init_lines if line.startswith(goal_prefixes)}  # the init a goal may name
-    for line in goal_lines:
-        text = line.strip()
-        negated = text.startswith("(not ")
-        atom = _atom(text[5:-1] if negated else text)
-        if dropped.intersection(atom[1:]) and (atom in init) == negated:
-            return problem  # a goal on a dropped object that does not hold initially: VAL must refuse it
-    kept_objects = "".join(
-        f"    {' '.join(n for n in names if n not in dropped)} - {kind}\n" for kind, names in objects.items()
-        if any(n not in dropped for n in names))
-    kept_init = "".join(line for line in init_text.splitlines(keepends=True)
-                        if dropped.isdisjoint(_atom(line)[1:]))
-    kept_goal = "".join(line for line in goal_lines if not line.startswith("    (")
-                        or dropped.isdisjoint(_atom(line.strip().removeprefix("(not ").removesuffix(")"))[1:]))
-    return (head + _OBJECTS + kept_objects + _CLOSE + between + _INIT + kept_init + _CLOSE + middle + _GOAL
-            + kept_goal)
+                return None
+    return {name for kind in scope.types for name in read.objects.get(kind, ()) if name not in reached[kind]}
+
+
+def _never_held(relaxed: Relaxed, read: _Problem, steps: Sequence[str], dropped: set[str]) -> set[str]:
+    """The objects of the relaxed run's types, of the problem without `dropped`, that the run does not keep."""
+    initial = [atom for _, atom in read.init if atom and atom[0] in relaxed.fluent and dropped.isdisjoint(atom[1:])]
+    static = _static_facts("\n".join(line for line, atom in read.init if atom and atom[0] not in relaxed.fluent))
+    objects = {kind: [n for n in names if n not in dropped] for kind, names in read.objects.items()}
+    kept = held_objects(relaxed, static, initial, steps, objects)
+    if kept is None:
+        return set()
+    return {name for kind in relaxed.types for name in objects.get(kind, ()) if name not in kept}
+
+
+@lru_cache(maxsize=8)
+def _static_facts(lines: str) -> StaticFacts:
+    """A problem's static facts (`lines`, as the problem writes them), indexed; kept for the last few problems,
+    as `_statics_of`."""
+    return StaticFacts(_atom(line) for line in lines.splitlines())
 
 
 @lru_cache(maxsize=8)
@@ -165,7 +229,7 @@ def _scope_of(domain: str) -> _Scope | None:
                 bound = next((lit for lit in block.condition if not lit.negated and lit.predicate != EQUALITY
                               and lit.predicate not in fluent and lit.args.count(var) == 1
                               and all(a == var or a in names for a in lit.args)), None)
-                if bound is None:  # (orientations: `orientationord ?o3 ?o4` binds one by another) none dropped
+                if bound is None:  # (orientations: bound through a fluent: none dropped here, `held`)
                     types.discard(kind)
                     continue
                 pos = bound.args.index(var) + 1
