@@ -403,6 +403,9 @@ class Grounder:
         self._conditional: dict[str, _Conditional | None] = {}  # None: not cacheable, always `ground_action`
         self._once: set[str] = set()  # conditional steps ground once so far (kept from their second grounding on)
         self._static_index: StateIndex | None = None
+        # (schema, the values of the parameters its conditional effects name) -> (statics, their bindings)
+        self._bindings_of: dict[tuple[str, tuple[str, ...]], tuple[frozenset[Atom], tuple[
+            tuple[frozenset[Atom], frozenset[Atom], CondEffect], ...]]] = {}
 
     def statics(self, state: Atoms) -> frozenset[Atom]:
         """The atoms of `state` no action of the domain changes (the same along a plan)."""
@@ -459,6 +462,28 @@ class Grounder:
                             if not lit.negated and lit.predicate != EQUALITY and lit.predicate in fluent)
         absent = frozenset(instantiate(lit, binding) for lit in schema.precondition
                            if lit.negated and lit.predicate != EQUALITY and lit.predicate in fluent)
+        # the bindings depend on the parameters the conditional effects name, not on the step's others (a turn's
+        # orientations, its grippers): steps that differ only in those share them
+        named = sorted({a for ce in schema.conditional_effects for lit in (*ce.when, *ce.effects) for a in lit.args
+                        if a in binding})
+        key = (schema.name, tuple(binding[a] for a in named))
+        shared = self._bindings_of.get(key)
+        if shared is not None and (shared[0] is statics or shared[0] == statics):
+            return _Conditional(statics, replace(action, cond_eff=()), present, absent, shared[1])
+        candidates = self._candidates(schema, binding, statics)
+        if candidates is None:
+            return None
+        if len(self._bindings_of) >= self.LIMIT:
+            self._bindings_of.clear()
+        self._bindings_of[key] = (statics, candidates)
+        return _Conditional(statics, replace(action, cond_eff=()), present, absent, candidates)
+
+    def _candidates(self, schema: ActionSchemaSpec, binding: dict[str, str], statics: frozenset[Atom]
+                    ) -> tuple[tuple[frozenset[Atom], frozenset[Atom], CondEffect], ...] | None:
+        """Each binding of the schema's conditional effects under `binding` that the static facts allow, with what
+        it needs of the fluents, in the order `ground_action` sorts them; None when a conditional effect has a
+        variable no static literal binds, or there are more than `MAX_CANDIDATES`."""
+        fluent = self._fluent
         static_index = self._index_of(statics)
         candidates: list[tuple[frozenset[Atom], frozenset[Atom], CondEffect]] = []
         for ce in schema.conditional_effects:
@@ -487,7 +512,7 @@ class Grounder:
                                eff_neg=frozenset(instantiate(lit, b) for lit in ce.effects if lit.negated),
                                eff_pos=frozenset(instantiate(lit, b) for lit in ce.effects if not lit.negated))))
         candidates.sort(key=lambda c: _cond_order(c[2]))
-        return _Conditional(statics, replace(action, cond_eff=()), present, absent, tuple(candidates))
+        return tuple(candidates)
 
     def _index_of(self, statics: frozenset[Atom]) -> StateIndex:
         """The index of the static facts (one problem's, the same for every step of its plans), kept."""

@@ -211,6 +211,41 @@ def test_a_step_with_conditional_effects_grounds_as_a_fresh_one_in_every_state_a
             grounder.ground(step, state, statics=statics)  # the last step again: its joint has moved on
 
 
+def test_bimanual_turns_that_differ_only_in_orientations_and_grippers_share_their_bindings():
+    """A bimanual turn's conditional effect names only its turned link and joint: steps that differ in their
+    orientations or grippers share the bindings the static facts allow (one set per action, link and joint), and
+    each still grounds as `ground_action` grounds it, along random plans from random states."""
+    from planhrc.pipeline import config_from_settings, plan
+    from planhrc.settings import make_settings
+    from planhrc.transition import Grounder, ground_action
+
+    domain = read_domain_model(default_tbox_path(), "bimanual")
+    grounder = Grounder(domain)
+    config = config_from_settings(make_settings(validate_plans=False))
+    obj = make_object("o", "bimanual", 5, 24)
+    rng = random.Random(6)
+    turns, steps = set(), set()
+    for _ in range(12):
+        state = obj.state(obj.joint_values_from_links([rng.choice(obj.orientation_degrees) for _ in range(5)]))
+        goal = obj.configuration_atoms(obj.joint_values_from_links([rng.choice(obj.orientation_degrees)
+                                                                    for _ in range(5)]))
+        outcome = plan(obj, state, goal, config)
+        assert outcome.solved
+        for _ in range(2):  # a step is kept from its second grounding on: both paths, each plan twice
+            now = state
+            statics = grounder.statics(now)
+            for step in outcome.steps:
+                fresh = ground_action(domain, step, now)
+                assert grounder.ground(step, now, statics=statics) == fresh
+                now = apply(now, fresh)
+                if step.startswith("(rotate"):
+                    name, turned, _, joint, *_ = step.strip("()").split()
+                    turns.add((name, turned, joint))
+                    steps.add(step)
+    kept = grounder._bindings_of  # shared per action and the parameters its conditional effects name
+    assert 0 < len(kept) <= len(turns) < len(steps) / 2
+
+
 def test_a_step_of_a_large_absolute_object_grounds_in_its_state_as_a_fresh_one():
     """Past `Grounder.MAX_CANDIDATES` static bindings (40 joints x 18 orientations) a conditional step is ground in
     its state each time instead of kept: still the action `ground_action` gives, refused where it does not apply,
