@@ -26,6 +26,11 @@ from .val_runs import check_piece
 log = logging.getLogger(__name__)
 
 BACKGROUND_NICE = 10  # the later pieces' VAL processes run this much nicer than the service
+# The later pieces' thread starts its work this long after it is started: the answer it follows is still being sent
+# then, and the thread's first piece (the store's checks of its steps, its problem written) is Python that would hold
+# the interpreter's lock for up to its switch interval (5 ms) while the answer waits (`planhrc service-bench --parts
+# history --formulation bimanual`: 2.2 ms of a 16 ms re-plan, at the median, went to that wait)
+START_DELAY_S = 0.02
 
 Recorder = Callable[[PieceVerdict], None]
 # The checks of a piece's steps besides VAL (the store's, of their actions and expected states): None when they
@@ -42,8 +47,9 @@ class LaterPieces:
 
     def __init__(self, domain: str, pieces: Sequence[tuple[int, int]], build: Callable[[int, int], ValPiece],
                  timeout_s: float, accepted: Sequence[tuple[int, int]], nice: int = BACKGROUND_NICE,
-                 check: Callable[..., ValidationResult] | None = None) -> None:
+                 check: Callable[..., ValidationResult] | None = None, start_delay_s: float = START_DELAY_S) -> None:
         self.domain = domain
+        self.start_delay_s = start_delay_s
         self.pieces = tuple(pieces)
         self._build = build
         self.accepted = tuple(accepted)  # the step ranges of the pieces VAL accepted before the answer
@@ -72,9 +78,12 @@ class LaterPieces:
         threading.Thread(target=self._run_all, name="planhrc-val-later", daemon=True).start()
 
     def _run_all(self) -> None:
-        """The pieces one after another, in plan order (the next dispatch needs the earliest): one core for VAL
-        behind the answer, the other left to the service. Run at once, on the absolute 20 x 12 task, they held
-        both cores for most of the pause before a robot's next perception in the bench."""
+        """The pieces one after another, in plan order (the next dispatch needs the earliest), after
+        `START_DELAY_S`: one core for VAL behind the answer, the other left to the service. Run at once, on the
+        absolute 20 x 12 task, they held both cores for most of the pause before a robot's next perception in the
+        bench."""
+        with self._cond:  # woken at once by `cancel`
+            self._cond.wait_for(lambda: self._cancelled, self.start_delay_s)
         for index in range(len(self.pieces)):
             if self._cancelled:
                 with self._cond:
