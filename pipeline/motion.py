@@ -120,9 +120,10 @@ def step_text(action: ActionSpec) -> str:
     return "(" + " ".join((action.name,) + tuple(action.params)) + ")"
 
 
-def first_motion_steps(obj: ArticulatedObject, actions: Sequence[ActionSpec], merge: bool) -> int:
+def first_motion_steps(obj: ArticulatedObject, actions: Sequence[ActionSpec] | Sequence[str], merge: bool) -> int:
     """How many plan steps the robot's first motion covers: 1, or with macro steps merged (`merge_macro_steps`)
-    the first run of steps on one joint, one turned link and one direction, short of a full turn."""
+    the first run of steps on one joint, one turned link and one direction, short of a full turn. The ground
+    actions or the plan's steps as PDDL text: the same answer (`action_motion`)."""
     if not actions:
         return 0
     if not merge:

@@ -4,8 +4,10 @@ hands back the plan with a handle on VAL's verdict (`PlannedTurn`), VAL already 
 
 For a plan VAL checks in one short run, VAL starts on the plan's steps as soon as `find_plan` has them, before the
 expected states are replayed, so that VAL runs on the other core beside the replay and whatever the caller does
-next (the store's checks of the plan, the start of its write). Likewise for a large task planned in a worker with
-the early answer: the worker sends the plan's steps before it replays them, and VAL starts on the first motion
+next (the store's checks of the plan, the start of its write). A plan checked with the early answer (VAL on its first
+motion before the answer) has that VAL started the same way, on the first motion read from the steps' text, its
+few steps replayed for the pieces' states, before the rest is replayed. Likewise for a large task planned in a worker
+with the early answer: the worker sends the plan's steps before it replays them, and VAL starts on the first motion
 here (`Validator.start_first`) while the worker replays the rest; only for objects of `EARLY_VAL_MIN_LINKS` links or
 more, whose replay is long enough to hide VAL behind it (for a smaller object the service's own replay of the first
 motion costs more than it saves: docs/results/validation-speed/large-warm-up.md).
@@ -130,18 +132,34 @@ def _planned(request: ReplanRequest, config: PlanningConfig, validator: Validato
                                                            deadline_at=deadline_at))
     if isinstance(found, PlanOutcome):
         return found, None, None
-    started = None
+    started: ValCheck | None = None
+    first: FirstPieces | None = None
     if validator.beside(found.task):
         begun = _guarded(obj, config, lambda: validator.start_whole(found.task, found.steps))
         if isinstance(begun, PlanOutcome):
             return begun, None, None
         started = begun
+    else:
+        first = _first_started(validator, obj, init, found.task, found.steps, deadline_at)
     try:
-        return _guarded(obj, config, lambda: stages.expect(obj, init, goal, found, deadline_at)), started, None
+        return _guarded(obj, config, lambda: stages.expect(obj, init, goal, found, deadline_at)), started, first
     except BaseException:
         if started is not None:
             started.cancel()
+        if first is not None:
+            first.cancel()
         raise
+
+
+def _first_started(validator: Validator, obj: ArticulatedObject, init: State, task: PddlTask,
+                   steps: tuple[str, ...], deadline_at: float) -> FirstPieces | None:
+    """VAL on the plan's first motion started before the rest is replayed (`Validator.start_first`), or None (VAL
+    then starts once the outcome is here, `Validator.check`)."""
+    try:
+        return validator.start_first(obj, init, task, steps, deadline_at)
+    except Exception:
+        log.exception("VAL on the first motion of a plan of %s could not start early", obj.ident)
+        return None
 
 
 def _planned_in_pool(request: ReplanRequest, config: PlanningConfig, validator: Validator, pool: LargeTaskPlanning
@@ -160,11 +178,7 @@ def _planned_in_pool(request: ReplanRequest, config: PlanningConfig, validator: 
     begun: list[FirstPieces] = []
 
     def steps_known(task: PddlTask, steps: tuple[str, ...]) -> None:
-        try:
-            first = validator.start_first(obj, request.init, task, steps, request.deadline_at)
-        except Exception:  # VAL starts after the outcome instead
-            log.exception("VAL on the first motion of a plan of %s could not start early", obj.ident)
-            return
+        first = _first_started(validator, obj, request.init, task, steps, request.deadline_at)
         if first is not None:
             begun.append(first)
 

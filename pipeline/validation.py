@@ -177,19 +177,18 @@ class Validator:
     def start_first(self, obj: ArticulatedObject, init: State, task: PddlTask, steps: Sequence[str],
                     deadline_at: float) -> FirstPieces | None:
         """VAL on the first motion of a plan whose steps are known and whose expected states are not yet (planned
-        in a worker, which replays them meanwhile), started now, as the early answer would start it (`check`):
-        its first steps replayed here from `init`, as many as one motion can take. None when the early answer
-        would not check the plan so (VAL off, no early answer, no conditional effects, a plan short of a piece
-        after its first motion), or the first motion is not decided by those steps."""
+        here or in a worker, replayed meanwhile), started now, as the early answer would start it (`check`): the
+        first motion read from the steps' text (a step's motion is its action and arguments), its steps replayed
+        here from `init`. None when the early answer would not check the plan so (VAL off, no early answer, no
+        conditional effects, a plan short of a piece after its first motion)."""
         if not (self.early_answer and steps and has_conditional_effects(task.validation_domain)):
             return None
-        # one motion turns less than a full turn, each step at least 360 / orientations: it ends within these
-        prefix = tuple(steps[:obj.orientations + 1])
+        first = first_motion_steps(obj, steps, self.merge_macro_steps)
+        if len(steps) - first < MIN_PIECE_STEPS:
+            return None
+        prefix = tuple(steps[:first])
         actions, states = replay(read_domain_model(self.config.tbox_path, obj.formulation.value), init, prefix,
                                  deadline_at)
-        first = first_motion_steps(obj, actions, self.merge_macro_steps)
-        if (first >= len(prefix) and len(prefix) < len(steps)) or len(steps) - first < MIN_PIECE_STEPS:
-            return None
         pieces = self._first_pieces(obj, task, steps, states, first)
         checks = val_runs.start_runs(task, [(p.problem, p.steps) for p in pieces], self.armed)
         return FirstPieces(tuple(steps), actions, tuple(states[i] for i in range(first + 1)), first, pieces, checks)
