@@ -68,17 +68,27 @@ class Relaxed:
     actions: Mapping[str, tuple[tuple[str, ...], tuple[_Block, ...]]]
 
 
-class StaticFacts:
-    """A problem's static facts, found by predicate and by one argument (`matching`)."""
+class Facts:
+    """Facts found by predicate and by one argument (`matching`): a problem's static facts, or the facts of a
+    relaxed run, which only grows (`add`)."""
 
-    def __init__(self, atoms: Iterable[Atom]) -> None:
+    def __init__(self, atoms: Iterable[Atom] = ()) -> None:
         self._all: dict[str, list[tuple[str, ...]]] = {}
         self._by: dict[tuple[str, int, str], list[tuple[str, ...]]] = {}
+        self._seen: set[Atom] = set()
         for atom in atoms:
-            values = atom[1:]
-            self._all.setdefault(atom[0], []).append(values)
-            for pos, value in enumerate(values):
-                self._by.setdefault((atom[0], pos, value), []).append(values)
+            self.add(atom)
+
+    def add(self, atom: Atom) -> bool:
+        """Add a fact; False when it was there."""
+        if atom in self._seen:
+            return False
+        self._seen.add(atom)
+        values = atom[1:]
+        self._all.setdefault(atom[0], []).append(values)
+        for pos, value in enumerate(values):
+            self._by.setdefault((atom[0], pos, value), []).append(values)
+        return True
 
     def matching(self, predicate: str, pos: int | None, value: str) -> Sequence[tuple[str, ...]]:
         """The facts of `predicate` (their arguments) whose argument `pos` (0-based) is `value`; all of them when
@@ -115,17 +125,17 @@ def relaxed_of(domain: str) -> Relaxed | None:
     return Relaxed(frozenset(types), fluent, actions) if types else None
 
 
-def held_objects(relaxed: Relaxed, static: StaticFacts, initial: Iterable[Atom],
+def held_objects(relaxed: Relaxed, static: Facts, initial: Iterable[Atom],
                  steps: Sequence[str], objects: Mapping[str, Sequence[str]]) -> set[str] | None:
     """The objects the relaxed run of `steps` keeps (see the module's note), from the problem's `static` facts,
     its `initial` fluent facts and its `objects` by type; None when a step is not an action of the domain or lacks
     arguments (VAL says so on the whole problem). Stops as soon as every object of the droppable types is kept (a
     large object's initial facts name every orientation: nothing to run)."""
     droppable = {name for kind in relaxed.types for name in objects.get(kind, ())}
-    held: dict[str, set[tuple[str, ...]]] = {}
+    held = Facts()
     kept: set[str] = set()
     for atom in initial:
-        held.setdefault(atom[0], set()).add(atom[1:])
+        held.add(atom)
         kept.update(atom[1:])
     for step in steps:
         kept.update(step.strip().strip("()").lower().split()[1:])
@@ -144,15 +154,15 @@ def held_objects(relaxed: Relaxed, static: StaticFacts, initial: Iterable[Atom],
                 kept.update(found[v] for v in block.variables)
                 added.extend(tuple(found.get(term, term) for term in atom) for atom in block.add)
         for atom in added:
-            held.setdefault(atom[0], set()).add(atom[1:])
-            kept.update(atom[1:])
+            if held.add(atom):
+                kept.update(atom[1:])
         if droppable <= kept:
             return kept
     return kept
 
 
-def _bindings(condition: Sequence[Literal], binding: Mapping[str, str], fluent: frozenset[str],
-              static: StaticFacts, held: Mapping[str, set[tuple[str, ...]]]) -> Iterator[dict[str, str]]:
+def _bindings(condition: Sequence[Literal], binding: Mapping[str, str], fluent: frozenset[str], static: Facts,
+              held: Facts) -> Iterator[dict[str, str]]:
     """Every extension of `binding` under which each literal of `condition` is a static or a held fact."""
     if not condition:
         yield dict(binding)
@@ -161,14 +171,10 @@ def _bindings(condition: Sequence[Literal], binding: Mapping[str, str], fluent: 
     best = max(range(len(condition)), key=lambda i: sum(not a.startswith("?") or a in binding
                                                         for a in condition[i].args))
     literal, rest = condition[best], (*condition[:best], *condition[best + 1:])
-    candidates: Iterable[tuple[str, ...]]
-    if literal.predicate in fluent:
-        candidates = held.get(literal.predicate, ())
-    else:
-        pos = next((i for i, a in enumerate(literal.args) if not a.startswith("?") or a in binding), None)
-        candidates = static.matching(literal.predicate, pos,
-                                     "" if pos is None else binding.get(literal.args[pos], literal.args[pos]))
-    for values in candidates:
+    pos = next((i for i, a in enumerate(literal.args) if not a.startswith("?") or a in binding), None)
+    facts = held if literal.predicate in fluent else static
+    for values in facts.matching(literal.predicate, pos,
+                                 "" if pos is None else binding.get(literal.args[pos], literal.args[pos])):
         if len(values) != len(literal.args):
             continue
         extended = dict(binding)

@@ -38,7 +38,7 @@ from typing import Sequence
 from planhrc.model import EQUALITY, Atom
 
 from .errors import PlannerError
-from .held import Relaxed, StaticFacts, held_objects, relaxed_of
+from .held import Facts, Relaxed, held_objects, relaxed_of
 from .operators import normalise_domain
 from .pddl import parse_domain
 
@@ -184,10 +184,10 @@ def _never_held(relaxed: Relaxed, read: _Problem, steps: Sequence[str], dropped:
 
 
 @lru_cache(maxsize=8)
-def _static_facts(lines: str) -> StaticFacts:
+def _static_facts(lines: str) -> Facts:
     """A problem's static facts (`lines`, as the problem writes them), indexed; kept for the last few problems,
     as `_statics_of`."""
-    return StaticFacts(_atom(line) for line in lines.splitlines())
+    return Facts(_atom(line) for line in lines.splitlines())
 
 
 @lru_cache(maxsize=8)
