@@ -59,12 +59,7 @@ class _Reach:
 class _Scope:
     types: frozenset[str]  # the quantified types: objects of these may be dropped
     reach: dict[str, dict[str, _Reach]]  # action -> type -> how a step reaches its objects
-    predicates: frozenset[str]  # the static predicates the reach reads
-
-    @property
-    def prefixes(self) -> tuple[str, ...]:
-        """How a fact of those predicates starts, as the problem writes it."""
-        return tuple(f"    ({name} " for name in sorted(self.predicates))
+    fluent: frozenset[str]  # the predicates some action changes: the rest are the problem's static facts
 
 
 @dataclass(frozen=True)
@@ -150,8 +145,7 @@ def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
 def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str]) -> set[str] | None:
     """The objects of the scope's types that no step reaches; None when a step is not an action of the domain or
     lacks arguments."""
-    prefixes = scope.prefixes
-    statics = _statics_of("\n".join(line for line, _ in read.init if line.startswith(prefixes)))
+    statics = _static_facts(_static_lines(read, scope.fluent))
     reached: dict[str, set[str]] = {kind: set() for kind in scope.types}
     for step in steps:
         name, *args = step.strip().strip("()").lower().split()
@@ -162,11 +156,12 @@ def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str]) -> set[str] 
             try:
                 reached[kind].update(args[i] for i in reach.parameters)
                 for predicate, pos, others in reach.literals:
-                    fixed = [""] * (len(others) + 1)
-                    for at, param in others:
-                        fixed[at - 1] = args[param]
-                    key = tuple(fixed[:pos - 1] + fixed[pos:])
-                    reached[kind].update(statics.get((predicate, pos, key), ()))
+                    fixed = [(at - 1, args[param]) for at, param in others]
+                    first_at, first_value = fixed[0] if fixed else (None, "")
+                    reached[kind].update(values[pos - 1] for values in statics.matching(predicate, first_at,
+                                                                                       first_value)
+                                         if len(values) == len(others) + 1
+                                         and all(values[at] == value for at, value in fixed))
             except IndexError:
                 return None
     return {name for kind in scope.types for name in read.objects.get(kind, ()) if name not in reached[kind]}
@@ -175,7 +170,7 @@ def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str]) -> set[str] 
 def _never_held(relaxed: Relaxed, read: _Problem, steps: Sequence[str], dropped: set[str]) -> set[str]:
     """The objects of the relaxed run's types, of the problem without `dropped`, that the run does not keep."""
     initial = [atom for _, atom in read.init if atom and atom[0] in relaxed.fluent and dropped.isdisjoint(atom[1:])]
-    static = _static_facts("\n".join(line for line, atom in read.init if atom and atom[0] not in relaxed.fluent))
+    static = _static_facts(_static_lines(read, relaxed.fluent))
     objects = {kind: [n for n in names if n not in dropped] for kind, names in read.objects.items()}
     kept = held_objects(relaxed, static, initial, steps, objects)
     if kept is None:
@@ -183,24 +178,17 @@ def _never_held(relaxed: Relaxed, read: _Problem, steps: Sequence[str], dropped:
     return {name for kind in relaxed.types for name in objects.get(kind, ()) if name not in kept}
 
 
+def _static_lines(read: _Problem, fluent: frozenset[str]) -> str:
+    """The problem's static facts (those of predicates no action changes) as it writes them."""
+    return "\n".join(line for line, atom in read.init if atom and atom[0] not in fluent)
+
+
 @lru_cache(maxsize=8)
 def _static_facts(lines: str) -> Facts:
-    """A problem's static facts (`lines`, as the problem writes them), indexed; kept for the last few problems,
-    as `_statics_of`."""
+    """A problem's static facts (`lines`, as the problem writes them), indexed, for both narrowings. Kept for the
+    last few problems: the pieces of a plan, and an object's re-plans, share their static facts (20,000 lines of an
+    absolute 200-link problem)."""
     return Facts(_atom(line) for line in lines.splitlines())
-
-
-@lru_cache(maxsize=8)
-def _statics_of(lines: str) -> dict[tuple[str, int, tuple[str, ...]], frozenset[str]]:
-    """The static facts of the reach's predicates (`lines`, as the problem writes them), by predicate, a position
-    and the other arguments: the values at that position. Kept for the last few problems: the pieces of a plan,
-    and an object's re-plans, share their static facts (20,000 lines of an absolute 200-link problem)."""
-    found: dict[tuple[str, int, tuple[str, ...]], set[str]] = {}
-    for line in lines.splitlines():
-        atom = _atom(line)
-        for pos in range(1, len(atom)):
-            found.setdefault((atom[0], pos, atom[1:pos] + atom[pos + 1:]), set()).add(atom[pos])
-    return {key: frozenset(values) for key, values in found.items()}
 
 
 def _atom(text: str) -> tuple[str, ...]:
@@ -240,5 +228,4 @@ def _scope_of(domain: str) -> _Scope | None:
     reach = {op.name: {kind: _Reach(tuple(i for i, (_, t) in enumerate(op.parameters) if t == kind),
                                     tuple(literals.get((op.name, kind), ()))) for kind in types}
              for op in operators}
-    predicates = frozenset(lit[0] for (_, kind), found in literals.items() if kind in types for lit in found)
-    return _Scope(frozenset(types), reach, predicates)
+    return _Scope(frozenset(types), reach, frozenset(fluent))
