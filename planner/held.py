@@ -33,7 +33,8 @@ that state, hence in F_(t-2) and the static facts: the relaxed run found its bin
   change; a fluent fact on a dropped object never holds), and that literal held initially.
 
 So VAL accepts the steps on the narrowed problem exactly when it accepts them on the whole one, right steps and
-wrong ones alike.
+wrong ones alike. The run reads the validation domain's text (`planner.pddl`) and joins its own facts; it does not
+use the replay's grounding (`planhrc.transition`), whose expected states VAL is there to check.
 """
 from __future__ import annotations
 
