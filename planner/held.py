@@ -45,8 +45,7 @@ from typing import Iterable, Iterator, Mapping, Sequence
 from planhrc.model import EQUALITY, Atom, Literal
 
 from .errors import PlannerError
-from .operators import normalise_domain
-from .pddl import parse_domain
+from .operators import read_operators
 
 
 @dataclass(frozen=True)
@@ -105,14 +104,13 @@ def relaxed_of(domain: str) -> Relaxed | None:
     subtype a quantifier ranges over, a quantified variable of every type in no positive literal, or a domain the
     in-process reader refuses)."""
     try:
-        parsed = parse_domain(domain)
-        operators = normalise_domain(parsed)
+        read = read_operators(domain)
     except PlannerError:
         return None
+    operators, fluent = read.operators, read.fluent
     types = {kind for op in operators for block in op.effects for _, kind in block.variables}
-    if not types or any(parent in types for _, parent in parsed.types):
+    if not types or any(parent in types for _, parent in read.types):
         return None
-    fluent = frozenset(atom[0] for op in operators for block in op.effects for atom in block.add + block.delete)
     actions: dict[str, tuple[tuple[str, ...], tuple[_Block, ...]]] = {}
     for op in operators:
         blocks = []

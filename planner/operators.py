@@ -10,11 +10,12 @@ literals, equality and conditional effects (`or`, `exists`, `imply`, numeric flu
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 from planhrc.model import EQUALITY, Atom, Literal
 
 from .errors import PlannerError
-from .pddl import ActionSchema, Domain, SExpr, format_sexpr, parse_typed_list
+from .pddl import ActionSchema, Domain, SExpr, format_sexpr, parse_domain, parse_typed_list
 
 
 class UnsupportedPddlError(PlannerError):
@@ -39,6 +40,26 @@ class Operator:
 
 def normalise_domain(domain: Domain) -> tuple[Operator, ...]:
     return tuple(normalise_action(action) for action in domain.actions)
+
+
+@dataclass(frozen=True)
+class DomainOperators:
+    """A domain's text read once for the narrowings of VAL's problems (`planner.scope`, `planner.held`): its
+    declared types (type, parent), its operators and the predicates some operator changes."""
+
+    types: tuple[tuple[str, str], ...]
+    operators: tuple[Operator, ...]
+    fluent: frozenset[str]
+
+
+@lru_cache(maxsize=8)
+def read_operators(text: str) -> DomainOperators:
+    """`text` parsed and normalised, kept for the last few domains; PlannerError when it is outside what is read
+    here."""
+    domain = parse_domain(text)
+    operators = normalise_domain(domain)
+    fluent = frozenset(atom[0] for op in operators for block in op.effects for atom in block.add + block.delete)
+    return DomainOperators(domain.types, operators, fluent)
 
 
 def normalise_action(schema: ActionSchema) -> Operator:

@@ -39,8 +39,7 @@ from planhrc.model import EQUALITY, Atom
 
 from .errors import PlannerError
 from .held import Facts, Relaxed, held_objects, relaxed_of
-from .operators import normalise_domain
-from .pddl import parse_domain
+from .operators import read_operators
 
 _OBJECTS, _INIT, _GOAL, _CLOSE = "  (:objects\n", "  (:init\n", "  (:goal (and\n", "  )\n"
 
@@ -59,7 +58,6 @@ class _Reach:
 class _Scope:
     types: frozenset[str]  # the quantified types: objects of these may be dropped
     reach: dict[str, dict[str, _Reach]]  # action -> type -> how a step reaches its objects
-    fluent: frozenset[str]  # the predicates some action changes: the rest are the problem's static facts
 
 
 @dataclass(frozen=True)
@@ -126,26 +124,29 @@ def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
     read = _Problem.read(problem)
     if read is None:
         return problem
+    scope, relaxed = _scope_of(domain), relaxed_of(domain)
+    if scope is None and relaxed is None:
+        return problem
+    # the static facts (of the predicates no action changes), indexed once for both narrowings
+    statics = _static_facts("\n".join(line for line, atom in read.init
+                                      if atom and atom[0] not in read_operators(domain).fluent))
     dropped: set[str] = set()
-    scope = _scope_of(domain)
     if scope is not None:
-        unreached = _unreached(scope, read, steps)
+        unreached = _unreached(scope, read, steps, statics)
         if unreached is None:
             return problem  # a step VAL refuses on the whole problem
         if unreached and read.goal_holds_initially(unreached, set()):
             dropped |= unreached
-    relaxed = relaxed_of(domain)
     if relaxed is not None:
-        never = _never_held(relaxed, read, steps, dropped)
+        never = _never_held(relaxed, read, steps, dropped, statics)
         if never and read.goal_holds_initially(never, dropped):
             dropped |= never
     return read.without(dropped) if dropped else problem
 
 
-def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str]) -> set[str] | None:
-    """The objects of the scope's types that no step reaches; None when a step is not an action of the domain or
-    lacks arguments."""
-    statics = _static_facts(_static_lines(read, scope.fluent))
+def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str], statics: Facts) -> set[str] | None:
+    """The objects of the scope's types that no step reaches (by the problem's `statics`); None when a step is not
+    an action of the domain or lacks arguments."""
     reached: dict[str, set[str]] = {kind: set() for kind in scope.types}
     for step in steps:
         name, *args = step.strip().strip("()").lower().split()
@@ -167,20 +168,15 @@ def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str]) -> set[str] 
     return {name for kind in scope.types for name in read.objects.get(kind, ()) if name not in reached[kind]}
 
 
-def _never_held(relaxed: Relaxed, read: _Problem, steps: Sequence[str], dropped: set[str]) -> set[str]:
+def _never_held(relaxed: Relaxed, read: _Problem, steps: Sequence[str], dropped: set[str], static: Facts
+                ) -> set[str]:
     """The objects of the relaxed run's types, of the problem without `dropped`, that the run does not keep."""
     initial = [atom for _, atom in read.init if atom and atom[0] in relaxed.fluent and dropped.isdisjoint(atom[1:])]
-    static = _static_facts(_static_lines(read, relaxed.fluent))
     objects = {kind: [n for n in names if n not in dropped] for kind, names in read.objects.items()}
     kept = held_objects(relaxed, static, initial, steps, objects)
     if kept is None:
         return set()
     return {name for kind in relaxed.types for name in objects.get(kind, ()) if name not in kept}
-
-
-def _static_lines(read: _Problem, fluent: frozenset[str]) -> str:
-    """The problem's static facts (those of predicates no action changes) as it writes them."""
-    return "\n".join(line for line, atom in read.init if atom and atom[0] not in fluent)
 
 
 @lru_cache(maxsize=8)
@@ -201,13 +197,12 @@ def _scope_of(domain: str) -> _Scope | None:
     """What `narrow_problem` needs of a domain, or None when its quantified effects are not all bound by static
     literals on the action's parameters (nothing is then dropped)."""
     try:
-        parsed = parse_domain(domain)
-        operators = normalise_domain(parsed)
+        read = read_operators(domain)
     except PlannerError:
         return None
-    fluent = {atom[0] for op in operators for block in op.effects for atom in block.add + block.delete}
+    operators, fluent = read.operators, read.fluent
     types = {kind for op in operators for block in op.effects for _, kind in block.variables}
-    if not types or any(parent in types for _, parent in parsed.types):
+    if not types or any(parent in types for _, parent in read.types):
         return None  # no quantified effect, or a subtype a quantifier also ranges over
     literals: dict[tuple[str, str], list[tuple[str, int, tuple[tuple[int, int], ...]]]] = {}
     for op in operators:
@@ -228,4 +223,4 @@ def _scope_of(domain: str) -> _Scope | None:
     reach = {op.name: {kind: _Reach(tuple(i for i, (_, t) in enumerate(op.parameters) if t == kind),
                                     tuple(literals.get((op.name, kind), ()))) for kind in types}
              for op in operators}
-    return _Scope(frozenset(types), reach, frozenset(fluent))
+    return _Scope(frozenset(types), reach)
