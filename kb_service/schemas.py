@@ -363,8 +363,8 @@ class DecisionPublic(BaseModel):
         "state), replan (a new plan was made), no_plan (no goal, or no plan could be found), "
         "human_help_requested (the robot cannot act: `help` says what the human should do; the execution waits "
         "for the next perception), incomplete_perception (some links were not seen: `unseen_links`; nothing "
-        "was stored or changed) or robot_skill (no plan fits where the object lies, one fits where the robot can "
-        "slide it: `skill` says where; the worker does it and perceives again).",
+        "was stored or changed) or robot_skill (the plan's turns are made where the robot slides the object first, "
+        "or the plan slides it before its next step: `skill` says where; the worker does it and perceives again).",
         examples=["continue", "resume"],
     )
     plan_id: str | None = Field(description="Plan being followed after the decision.", examples=["obj1_plan_1"])

@@ -29,7 +29,7 @@ This module only re-exports the public names.
 """
 from __future__ import annotations
 
-from .config import PlanningConfig, PlanOutcome, config_from_settings, deadline_from, problem_name, time_left
+from .config import LaterSlide, PlanningConfig, PlanOutcome, config_from_settings, deadline_from, problem_name, time_left
 from .motion import MacroStep, PlanStep, action_motion, first_motion_steps, merge_macro_steps, move_of, step_text
 from .order import Ordered, Refusal, order_steps, steps_of
 from .pieces import (MIN_PIECE_STEPS, ValPiece, early_answer_first_piece, early_pieces, piece_bounds, piece_of,

@@ -42,6 +42,14 @@ def config_from_settings(settings: Settings) -> PlanningConfig:
 
 
 @dataclass(frozen=True)
+class LaterSlide:
+    """A slide a placed object's plan makes between two of its turns: before step `before_step` (1-based, > 1)."""
+
+    before_step: int
+    slide: Slide
+
+
+@dataclass(frozen=True)
 class PlanOutcome:
     """What one run of the pipeline produced.
 
@@ -64,6 +72,7 @@ class PlanOutcome:
     help: tuple[HelpItem, ...] = ()  # no feasible order: what the human could do instead
     ordering: str = ""  # what the ordering did, in words (empty when the object is not placed)
     slide: Slide | None = None  # the plan's turns are made after the robot has slid the object there
+    later_slides: tuple[LaterSlide, ...] = ()  # slides between the plan's turns (`order.LaterSlide`)
 
     @property
     def solved(self) -> bool:

@@ -15,6 +15,7 @@ from planhrc.motion_search import Hands, NoWork, Slide, Work, alphabet_of, plan_
 from planhrc.ordering import ANTICLOCKWISE, CLOCKWISE, HelpItem, Move, Placement, first_obstacle, help_for
 from planhrc.transition import StateIndex, apply, ground_action
 
+from .config import LaterSlide
 from .motion import move_of
 
 # What share of the planning time left the search takes (after VAL_RESERVE_S kept for grounding, replaying and
@@ -27,12 +28,14 @@ UNBOUNDED_SEARCH_S = 8.0
 
 @dataclass(frozen=True)
 class Ordered:
-    """The plan's steps as the robot will do them, what the search found in words, and the slide that comes first
-    (None: the robot turns where the object lies)."""
+    """The plan's steps as the robot will do them, what the search found in words, the slide that comes first
+    (None: the robot turns where the object lies) and those between its turns (relative and absolute objects:
+    a bimanual robot's hands make room before the first turn only)."""
 
     steps: tuple[str, ...]
     sentence: str
     slide: Slide | None = None
+    later_slides: tuple[LaterSlide, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -61,14 +64,31 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
     grounded = (bimanual_steps(obj, model, init, work.turns) if obj.formulation is Formulation.BIMANUAL
                 else steps_of(obj, model, init, work.turns))
     slide = work.motions[0] if work.motions and isinstance(work.motions[0], Slide) else None
-    return Ordered(grounded, _sentence(work, len(steps), len(grounded)), slide)
+    later = later_slides(work)
+    return Ordered(grounded, _sentence(work, slide, later, len(grounded)), slide, later)
 
 
-def _sentence(work: Work, planned: int, steps: int) -> str:
-    """What the search found, for the decision's reason: its length beside the planner's and the unconstrained
-    shortest, the robot's time and the proof."""
-    first = f"{work.slides[0].sentence()} first, then " if work.slides else ""
-    return f"{first}{steps} steps that keep every configuration on the table and within reach ({work.sentence()})"
+def later_slides(work: Work) -> tuple[LaterSlide, ...]:
+    """The slides of `work` that come after its first turn, each with the step it comes before (one step per
+    turn: a relative or absolute object's plan)."""
+    out: list[LaterSlide] = []
+    turns = 0
+    for motion in work.motions:
+        if isinstance(motion, Slide):
+            if turns:
+                out.append(LaterSlide(turns + 1, motion))
+        else:
+            turns += 1
+    return tuple(out)
+
+
+def _sentence(work: Work, slide: Slide | None, later: Sequence[LaterSlide], steps: int) -> str:
+    """What the search found, for the decision's reason: the slides and where they come, its length beside the
+    planner's and the unconstrained shortest, the robot's time and the proof."""
+    first = f"{slide.sentence()} first, then " if slide is not None else ""
+    between = "".join(f"; before step {s.before_step}, {s.slide.sentence()}" for s in later)
+    return (f"{first}{steps} steps that keep every configuration on the table and within reach{between} "
+            f"({work.sentence()})")
 
 
 def hands_of(obj: ArticulatedObject, init: State) -> Hands:

@@ -19,8 +19,8 @@ from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
 from planhrc.vocabulary import PlanningStatus
 
-from .config import (PlanningConfig, PlanOutcome, config_from_settings, deadline_from, over_deadline, problem_name,
-                     time_left)
+from .config import (LaterSlide, PlanningConfig, PlanOutcome, config_from_settings, deadline_from, over_deadline,
+                     problem_name, time_left)
 from .order import Refusal, order_steps, steps_of
 from .val_runs import validate
 
@@ -80,6 +80,7 @@ class Found:
     started: float  # time.perf_counter() when the pipeline began
     config: PlanningConfig
     slide: Slide | None = None  # the robot slides the object there before the plan's first turn
+    later_slides: tuple[LaterSlide, ...] = ()  # and between its turns
 
     @property
     def steps(self) -> tuple[str, ...]:
@@ -114,7 +115,7 @@ def find_plan(obj: ArticulatedObject, init: State, goal: State, config: Planning
         return PlanOutcome(status, message, result.planner, None, timings=timings, task=task,
                            attempts=result.attempts)
 
-    ordering, slide = "", None
+    ordering, slide, later = "", None, ()
     if placement is not None:
         t = time.perf_counter()
         ordered = order_steps(obj, model, init, result.plan, placement, deadline_at)
@@ -122,9 +123,9 @@ def find_plan(obj: ArticulatedObject, init: State, goal: State, config: Planning
         if isinstance(ordered, Refusal):
             return PlanOutcome(PlanningStatus.UNSOLVABLE, ordered.message, result.planner, None, timings=timings,
                                task=task, attempts=result.attempts, help=ordered.help)
-        ordering, slide = ordered.sentence, ordered.slide
+        ordering, slide, later = ordered.sentence, ordered.slide, ordered.later_slides
         result = replace(result, plan=ordered.steps, optimal=None)
-    return Found(task, model, result, ordering, timings, t0, config, slide)
+    return Found(task, model, result, ordering, timings, t0, config, slide, later)
 
 
 def expect(obj: ArticulatedObject, init: State, goal: State, found: Found, deadline_at: float) -> PlanOutcome:
@@ -148,7 +149,7 @@ def expect(obj: ArticulatedObject, init: State, goal: State, found: Found, deadl
     timings["pipeline"] = time.perf_counter() - found.started
     return PlanOutcome(PlanningStatus.SOLVED, result.message, result.planner, result.optimal, actions, states,
                        timings, found.task, result.attempts, tuple(result.plan), ordering=found.ordering,
-                       slide=found.slide)
+                       slide=found.slide, later_slides=found.later_slides)
 
 
 def plan_moves(obj: ArticulatedObject, init: State, goal: State, moves: Sequence[Move],

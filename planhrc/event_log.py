@@ -60,6 +60,16 @@ class SkillRequest(JsonRecord):
     """What the robot does, in words."""
 
 
+@dataclass(frozen=True)
+class PlannedSkill(JsonRecord):
+    """A robot skill a plan makes between two of its turns: before its step `before_step`."""
+
+    before_step: int
+    """The plan's step (1-based) the skill comes before."""
+    skill: SkillRequest
+    """The skill."""
+
+
 class EventData(JsonRecord):
     """The data of an event, one record per kind (`DATA`)."""
 
@@ -132,7 +142,9 @@ class DecisionData(EventData):
     help: tuple[HelpItem, ...] | None = None
     """`human_help_requested`: what the human is asked to do."""
     skill: SkillRequest | None = None
-    """`robot_skill`: the slide asked for before the plan's turns (`plan_id`)."""
+    """`robot_skill`: the slide asked for before the plan's (`plan_id`) turns, or one it makes between them."""
+    later_skills: tuple[PlannedSkill, ...] = ()
+    """A re-plan: the slides its plan makes between its turns (relative and absolute objects)."""
     gave_up: str | None = None
     """A help request a worker's give-up became: the worker's reason."""
 

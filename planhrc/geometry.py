@@ -301,10 +301,18 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
     cell = cell or Cell()
     values = _check_angles(geometry, angles)
     m = measure_configurations(geometry, np.asarray([values]), cell, (tolerance,), min_fold_gap_deg)
+    reasons = reasons_of(m, 0, geometry, cell, reach_links, tolerance)
+    return Feasibility(not reasons, tuple(reasons))
+
+
+def reasons_of(m: Measures, row: int, geometry: ObjectGeometry, cell: Cell, reach_links: Collection[int] | None,
+               tolerance: Tolerance) -> list[Infeasibility]:
+    """Every problem of configuration `row` of `m` (`measure_configurations` with `tolerance` among its
+    tolerances), as `configuration_feasible` names them: one batch of measures serves many configurations."""
     n = geometry.n_links
-    points, outside, off = m.points[0], m.outside[tolerance.clearance_m][0], m.off[tolerance.clearance_m][0]
+    points, outside, off = m.points[row], m.outside[tolerance.clearance_m][row], m.off[tolerance.clearance_m][row]
     x0, x1, y0, y1 = cell.table.bounds(margin_m=geometry.link_width_m / 2.0 + tolerance.clearance_m)
-    short = m.reach[0]
+    short = m.reach[row]
     checked = range(1, n + 1) if reach_links is None else sorted(k for k in set(reach_links) if 1 <= k <= n)
     reach = set(checked)
     reasons: list[Infeasibility] = []
@@ -316,24 +324,24 @@ def configuration_feasible(geometry: ObjectGeometry, angles: Sequence[float], ce
                         f"link {k} comes within {tolerance.clearance_m - d:.2f} m of the table's edge")
             end = points[k - 1] if outside[k - 1] >= outside[k] else points[k]
             reasons.append(Infeasibility(Infeasible.OFF_TABLE, k, sentence, d, _edge(end, (x0, x1, y0, y1))))
-        if m.inside[0, k - 1]:
+        if m.inside[row, k - 1]:
             reasons.append(Infeasibility(Infeasible.INSIDE_ROBOT, k, f"link {k} lies inside the robot's body",
                                          against="the robot's body"))
         if k in reach and short[k - 1] > 1e-9:
             d = float(short[k - 1])
             reasons.append(Infeasibility(Infeasible.OUT_OF_REACH, k, f"link {k} unreachable: {d:.2f} m beyond reach",
                                          d, "the arms' reach"))
-    for fold in np.flatnonzero(m.folds[0]):  # neighbours fold onto each other
+    for fold in np.flatnonzero(m.folds[row]):  # neighbours fold onto each other
         reasons.append(Infeasibility(Infeasible.OVERLAP, int(fold) + 2,
                                      f"link {int(fold) + 2} folds back onto link {int(fold) + 1}",
                                      against=f"link {int(fold) + 1}"))
     i, j = m.pairs
-    close = m.close[tolerance.overlap_m][0]
+    close = m.close[tolerance.overlap_m][row]
     for pi, pj in zip(i[close], j[close]):
         reasons.append(Infeasibility(Infeasible.OVERLAP, int(pj) + 1,
                                      f"link {int(pj) + 1} overlaps link {int(pi) + 1}",
                                      against=f"link {int(pi) + 1}"))
-    return Feasibility(not reasons, tuple(reasons))
+    return reasons
 
 
 def _edge(point: np.ndarray, bounds: tuple[float, float, float, float]) -> str:

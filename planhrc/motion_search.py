@@ -16,9 +16,11 @@ The search runs A* over (offsets, place, hands):
   a physical turn needs), problems the start already has excused as long as no turn makes them worse; never a turn
   the robot refused from that state before;
 * **a slide** of the whole object to another place (`slide_feasible`: two links held by the two
-  arms, every 2 cm of the way on the table and clear of the robot), among the places of a grid of `SLIDE_GRID_M`
-  around where it lies, at most `MAX_SLIDE_M` at a time; a slide changes where the object lies, not the state of
-  the domain;
+  arms, every 2 cm of the way on the table and clear of the robot, the way measured in one batch), among the places
+  of a grid of `SLIDE_GRID_M` around where it lies, at most `MAX_SLIDE_M` at a time, where the configuration rests
+  (all the places from one configuration measured in one batch); before the first turn or between any two (a
+  bimanual robot: before its first turn only, its hands would let go of the links its plan's steps hold); a slide
+  changes where the object lies, not the state of the domain;
 * **the hands** (`Hands`): a turn that goes on with the motion under way (the same joint, the same direction) is
   merged with it into one motion, as the worker executes it; a bimanual robot centres its hands on a joint, grasps,
   turns and releases, each a cost of its own.
@@ -46,8 +48,8 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from planhrc.geometry import (PLANNING, ROOMY, STRICT, Cell, Feasibility, ObjectGeometry, Tolerance,
-                              configuration_feasible, link_centres, measure_configurations, reach_shortfall)
+from planhrc.geometry import (PLANNING, ROOMY, STRICT, Cell, Feasibility, ObjectGeometry, Tolerance, link_centres,
+                              measure_configurations, reach_shortfall, reasons_of)
 from planhrc.judge import Baseline, TurnJudge
 from planhrc.model import ArticulatedObject, Formulation
 from planhrc.ordering import ANTICLOCKWISE, CLOCKWISE, Move, Placement
@@ -165,17 +167,32 @@ class NoWork:
 def slide_feasible(placement: Placement, to_xy: Sequence[float], links: tuple[int, int]) -> Feasibility:
     """Whether the robot can slide the object from where it lies to base point `to_xy` holding `links`: both within
     reach before and after, and every configuration on the way (every 2 cm) on the table, clear of the robot and
-    unfolded as drawn (problems the object has where it lies, no worse, excused)."""
+    unfolded as drawn (problems the object has where it lies, no worse, excused). Every configuration of the way,
+    and where it starts (for what is excused), is measured in one batch; the first one with a new problem is named
+    (where it ends first, then from the start on)."""
     geometry, angles, cell = placement.geometry, placement.link_deg, placement.cell
-    baseline = Baseline.of(geometry, angles, cell)
-    start = np.asarray(geometry.base_point_xy)
+    start = np.asarray(geometry.base_point_xy, dtype=float)
     shift = np.asarray(to_xy, dtype=float) - start
     n = max(1, int(math.ceil(float(np.linalg.norm(shift)) / SLIDE_INCREMENT_M)))
+    values = np.asarray([tuple(float(a) for a in angles)] * (n + 1), dtype=float)
+    bases = start[None, :] + shift[None, :] * (np.arange(n + 1, dtype=float)[:, None] / n)
+    m = measure_configurations(geometry, values, cell, (STRICT,), base_points=bases)
+    # a slide moves every link alike: it neither folds nor overlaps links the start does not; what it can add is a
+    # link past the table's edge (STRICT) or in the robot's body on the way, or a held link out of reach at its end
+    off = m.off[STRICT.clearance_m]
+    off_start = np.where(off[0] > STRICT.overhang_m + 1e-9, off[0] + 1e-3, STRICT.overhang_m + 1e-9)
+    bad = (off[1:] > off_start[None, :]).any(axis=1) | (m.inside[1:] & ~m.inside[0][None, :]).any(axis=1)
+    held = [k - 1 for k in links if 1 <= k <= geometry.n_links]
+    short = m.reach
+    short_start = np.where(short[0] > 1e-9, short[0] + 1e-3, 1e-9)
+    bad[-1] |= bool((short[-1, held] > short_start[held]).any())
+    if not bad.any():
+        return Feasibility(True)
+    baseline = Baseline({(STRICT, r.code, r.link): r.distance_m
+                         for r in reasons_of(m, 0, geometry, cell, None, STRICT)})
     for i in (n, *range(1, n)):
-        placed = geometry.placed(start + shift * i / n)
-        result = configuration_feasible(placed, angles, cell, reach_links=links if i == n else (),
-                                        tolerance=STRICT)
-        new = tuple(r for r in result.reasons if not baseline.excused(r))
+        reasons = reasons_of(m, i, geometry, cell, links if i == n else (), STRICT)
+        new = tuple(r for r in reasons if not baseline.excused(r))
         if new:
             return Feasibility(False, new)
     return Feasibility(True)
@@ -518,8 +535,10 @@ class _Astar:
             if batch:
                 self.expansions += len(batch)
                 self._expand_turns(batch)
-                if len(space.places) > 1 and batch[0][0] == start:  # room is made first, before any turn
-                    self._list_slides(start)
+                if len(space.places) > 1:  # room is made before any turn, or (not bimanual) between any two
+                    for node, _, _ in batch:
+                        if node == start or not self.hands.bimanual:
+                            self._list_slides(node)
         self.exhausted = True
         return None
 
@@ -575,9 +594,17 @@ class _Astar:
         space = self.space
         origin = space.places[node.place]
         extra = _ms(space.costs.release_s) if self.hands.bimanual and node.grasped else 0
-        for p, to in enumerate(space.places):
-            if p == node.place or math.dist(origin, to) > MAX_SLIDE_M + 1e-9:
+        near = [p for p, to in enumerate(space.places)
+                if p != node.place and math.dist(origin, to) <= MAX_SLIDE_M + 1e-9]
+        if not near:
+            return
+        judge = space.judge
+        rests = resting_places(space.placement.geometry, space.angles(node.offsets), space.placement.cell,
+                               [space.places[p] for p in near], judge.rest, judge.excused(judge.rest))
+        for p, ok in zip(near, rests):
+            if not ok:  # the object may not rest there: no slide there from this configuration
                 continue
+            to = space.places[p]
             after = _Node(node.offsets, p, -1 if not self.hands.bimanual else node.joint, 0, False)
             cost = g + extra + _slide_ms(space.costs, origin, to)
             best = self._best.get(after)
@@ -598,15 +625,9 @@ class _Astar:
         from_here = Placement(space.placement.geometry.placed(origin), here, space.placement.cell)
         self.slide_checks += 1
         links = grip_links(from_here, to)
-        if links is None or not slide_feasible(from_here, to, links).ok or not self._rests(to, here):
+        if links is None or not slide_feasible(from_here, to, links).ok:  # where it rests: `_expand_slides`
             return
         self._push(after, cost, tight, (before, Slide(to_xy=to, links=links, distance_m=math.dist(origin, to))))
-
-    def _rests(self, where: Sequence[float], angles: Sequence[float]) -> bool:
-        """Whether the object may rest at `where` with `angles` as the plan's configurations rest."""
-        judge = self.space.judge
-        return bool(resting_places(self.space.placement.geometry, angles, self.space.placement.cell, [where],
-                                   judge.rest, judge.excused(judge.rest))[0])
 
     def _path(self, node: _Node) -> list[Motion]:
         path: list[Motion] = []

@@ -19,7 +19,7 @@ from planhrc.motion_search import (MAX_SLIDE_M, SKILL_COSTS, Hands, NoWork, Slid
                                    grip_links, plan_work, resting_places, slide_feasible, target_offsets,
                                    unconstrained_steps)
 from planhrc.ordering import Move, Placement
-from planhrc.motion_search import alphabet_of
+from planhrc.motion_search import alphabet_of, offsets_between
 
 CELL = Cell()
 
@@ -31,8 +31,8 @@ def _ms(seconds: float) -> int:
 def brute_force(placement: Placement, alphabet: tuple[Move, ...], target: tuple[int, ...], orientations: int,
                 costs: SkillCosts, slides: bool) -> int | None:
     """The least robot time (ms) from offsets 0 to `target`: Dijkstra over (offsets, place, motion under way),
-    every turn judged by `judge_turn` (resting with the planning clearance), slides (from the start only) by
-    `slide_feasible`; None when the goal cannot be reached."""
+    every turn judged by `judge_turn` (resting with the planning clearance), slides (from any configuration, to
+    any place of the grid within one slide) by `slide_feasible`; None when the goal cannot be reached."""
     step = 360 // orientations
     base = tuple(float(a) for a in placement.link_deg)
     baseline = Baseline.of(placement.geometry, placement.link_deg, placement.cell)
@@ -70,18 +70,20 @@ def brute_force(placement: Placement, alphabet: tuple[Move, ...], target: tuple[
                 if cost < best.get(after, math.inf):
                     best[after] = cost
                     heapq.heappush(frontier, (cost, next(tie), after))
-        if node == start:
-            for p, to in enumerate(places[1:], start=1):
-                if math.dist(places[0], to) > MAX_SLIDE_M + 1e-9:
+        if slides:  # from any configuration: before the first turn or between two
+            origin = places[place]
+            from_here = Placement(placement.geometry.placed(origin), here, placement.cell)
+            for p, to in enumerate(places):
+                if p == place or math.dist(origin, to) > MAX_SLIDE_M + 1e-9:
                     continue
-                links = grip_links(placement, to)
-                if links is None or not slide_feasible(placement, to, links).ok:
+                links = grip_links(from_here, to)
+                if links is None or not slide_feasible(from_here, to, links).ok:
                     continue
                 if not resting_places(placement.geometry, here, placement.cell, [to], PLANNING,
                                       TurnJudge(placement.geometry, placement.cell, baseline).excused(PLANNING))[0]:
                     continue
                 after = (offsets, p, (-1, 0))
-                cost = g + _ms(costs.slide_s + costs.slide_s_per_m * math.dist(places[0], to))
+                cost = g + _ms(costs.slide_s + costs.slide_s_per_m * math.dist(origin, to))
                 if cost < best.get(after, math.inf):
                     best[after] = cost
                     heapq.heappush(frontier, (cost, next(tie), after))
@@ -133,6 +135,7 @@ def test_the_search_finds_the_least_robot_time_an_exhaustive_search_finds(formul
         offsets = [0] * len(alphabet)
         for motion in work.motions:
             if isinstance(motion, Slide):
+                assert slide_feasible(Placement(geometry, angles, CELL), motion.to_xy, motion.links).ok
                 geometry = geometry.placed(motion.to_xy)
                 continue
             assert judge_turn(geometry, angles, motion.turned, motion.held, motion.delta_deg, CELL, baseline,
@@ -144,6 +147,53 @@ def test_the_search_finds_the_least_robot_time_an_exhaustive_search_finds(formul
         assert tuple(offsets) == target
         assert len(work.turns) >= unconstrained_steps(target, orientations) == work.unconstrained_steps
     assert found >= 2  # the comparison is not empty
+
+
+def test_a_plan_slides_the_object_between_its_turns_where_that_takes_the_least_robot_time():
+    # the demo's random absolute task 1016 after the human turned l4 (its numbers kept here, on the grid): with a
+    # slide before the first turn at most, no order of the turns keeps the table's margin (an exhaustive search
+    # allowed only that proved it); one slide after the first turn and one before the last two do
+    obj = make_object("o", "absolute", 5, 8)
+    start, goal = (90.0, 90.0, 90.0, 135.0, 135.0), (315.0, 90.0, 0.0, 135.0, 90.0)
+    placement = Placement(ObjectGeometry.of(obj, (0.608, 0.386)), start, grid_deg=obj.step)
+    target = offsets_between(obj, start, goal)
+    work = plan_work(placement, alphabet_of(obj), target, 8, expansions=10**6)
+    assert isinstance(work, Work) and work.exact, work
+    kinds = [isinstance(m, Slide) for m in work.motions]
+    assert any(kinds[1:]), work.motions  # a slide after the first turn
+    later = pipeline.order.later_slides(work)
+    assert later and all(s.before_step > 1 for s in later)
+    assert [s.before_step for s in later] == [sum(not k for k in kinds[:i]) + 1 for i, k in enumerate(kinds)
+                                              if k and any(not x for x in kinds[:i])]
+
+
+def test_a_slide_is_judged_in_one_batch_as_one_configuration_at_a_time():
+    """`slide_feasible` measures every configuration of the way at once; here each is judged on its own by
+    `configuration_feasible`, the problems where the object lies excused, as the robot's judge does."""
+    rng = np.random.default_rng(5)
+    verdicts = {True: 0, False: 0}
+    for trial in range(150):
+        n = int(rng.integers(2, 7))
+        geometry = ObjectGeometry((0.155,) * n, (float(rng.uniform(0.3, 0.9)), float(rng.uniform(-0.6, 0.6))))
+        angles = tuple(float(v) for v in rng.integers(0, 8, n) * 45 + rng.normal(0, 3, n))
+        to = (float(geometry.base_point_xy[0] + rng.uniform(-0.3, 0.3)),
+              float(geometry.base_point_xy[1] + rng.uniform(-0.3, 0.3)))
+        links = tuple(sorted(int(v) for v in rng.choice(np.arange(1, n + 1), 2, replace=False)))
+        baseline = Baseline.of(geometry, angles, CELL)
+        start, shift = np.asarray(geometry.base_point_xy), np.asarray(to) - np.asarray(geometry.base_point_xy)
+        steps = max(1, int(math.ceil(float(np.linalg.norm(shift)) / 0.02)))
+        want: tuple = ()
+        for i in (steps, *range(1, steps)):
+            result = configuration_feasible(geometry.placed(start + shift * i / steps), angles, CELL,
+                                            reach_links=links if i == steps else ())
+            want = tuple(r for r in result.reasons if not baseline.excused(r))
+            if want:
+                break
+        got = slide_feasible(Placement(geometry, angles, CELL), to, links)
+        assert got.ok == (not want), (geometry, angles, to, links, want)
+        assert [(r.code, r.link) for r in got.reasons] == [(r.code, r.link) for r in want]
+        verdicts[got.ok] += 1
+    assert min(verdicts.values()) >= 20, verdicts  # both verdicts, many times
 
 
 def test_the_batched_judge_gives_the_one_judges_verdicts():

@@ -40,7 +40,7 @@ def _take(context: Context, object_id: str) -> NextAction | None:
         if not 1 <= execution.next_step <= len(plan.actions):
             return None
         action = plan.actions[execution.next_step - 1]
-        merge = merges(context.settings.merge_macro_steps, context.memory.of(store, object_id).split_plans, plan.id)
+        merge = merges(context.settings.merge_macro_steps, context.memory.of(store, object_id), plan.id)
         if execution.status == DISPATCHED and execution.dispatched_action_id == action.id:
             return next_action(merge, obj, plan, action)
         data = DispatchData(plan_id=plan.id, action_id=action.id, step=action.step)

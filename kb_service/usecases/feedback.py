@@ -90,8 +90,7 @@ def _give_feedback(context: Context, request: FeedbackRequest) -> FeedbackResult
         if execution.status == ExecutionStatus.DISPATCHED:
             accepted = Accepted.CURRENT
             plan, _ = context.views.get(store, execution.plan_id)
-            split_plans = memo.split_plans
-            last = (last_step(merges(context.settings.merge_macro_steps, split_plans, plan.id), obj, plan, action)
+            last = (last_step(merges(context.settings.merge_macro_steps, memo, plan.id), obj, plan, action)
                     if plan else action.step)
             done = tuple(a for a in plan.actions if action.step <= a.step <= last) if plan else done
             next_step = last + 1 if outcome == ActionOutcome.SUCCEEDED else action.step

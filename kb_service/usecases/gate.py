@@ -26,7 +26,7 @@ def val_gate(context: Context, obj: ArticulatedObject, plan: StoredPlan, action:
     no verdict comes by `deadline_at`."""
     store, validator = context.store, context.validator
     memo = context.memory.of(store, obj.ident)
-    last = last_step(merges(context.settings.merge_macro_steps, memo.split_plans, plan.id), obj, plan, action)
+    last = last_step(merges(context.settings.merge_macro_steps, memo, plan.id), obj, plan, action)
     waited: set[int] = set()
     while True:
         memo = context.memory.of(store, obj.ident)  # the verdicts recorded meanwhile

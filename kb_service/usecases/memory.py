@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 from planhrc.cooperation import FailureHistory, PlanView
 from planhrc.event_log import (DecisionData, EventData, EventKind, FeedbackData, GoalSetData, ObjectCreatedData,
-                               ValVerdictData)
+                               PlannedSkill, ValVerdictData)
 from planhrc.model import Atom
 from planhrc.pipeline import PieceRecord
 from planhrc.ordering import RefusedMotion
@@ -44,6 +44,26 @@ class ObjectMemo:
     slide_from_xy: tuple[float, float] | None = None  # where the object's base point was when the last was asked
     step_deg: int = 0  # the object's orientation step (from its creation)
     control: frozenset[Atom] | None = None  # bimanual: the robot's control facts after the last feedback (None: none)
+    later_skills: tuple[PlannedSkill, ...] = ()  # the slides plan `later_plan_id` makes between its turns
+    later_plan_id: str | None = None
+
+    def skill_before(self, plan_id: str, step: int) -> PlannedSkill | None:
+        """The slide plan `plan_id` makes before its step `step`, if any."""
+        if plan_id != self.later_plan_id:
+            return None
+        return next((s for s in self.later_skills if s.before_step == step), None)
+
+    def skill_steps(self, plan_id: str) -> frozenset[int]:
+        """The steps plan `plan_id` slides the object before."""
+        if plan_id != self.later_plan_id:
+            return frozenset()
+        return frozenset(s.before_step for s in self.later_skills)
+
+    def next_skill_step(self, plan_id: str, step: int) -> int | None:
+        """The first step at or after `step` that plan `plan_id` makes a slide before, if any."""
+        if plan_id != self.later_plan_id:
+            return None
+        return min((s.before_step for s in self.later_skills if s.before_step >= step), default=None)
 
     @property
     def where(self) -> tuple[float, float] | None:
@@ -99,6 +119,8 @@ def _read(memo: ObjectMemo, kind: str, data: EventData) -> ObjectMemo:
         if data.remedy and failure is not None:
             failure = replace(failure, tried=failure.tried + (data.remedy,))
         split = memo.split_plans | {data.plan_id} if data.remedy == Remedy.SPLIT and data.plan_id else None
+        if data.problem_id is not None:  # a re-plan: its plan's slides between turns (none: none)
+            memo = replace(memo, later_skills=data.later_skills, later_plan_id=data.plan_id)
         return replace(
             memo, val=piece_record_of(data) or memo.val,
             perceived_state_id=data.perceived_state_id or memo.perceived_state_id,

@@ -2,7 +2,9 @@
 step below, which takes what the perception found (`seen.Seen`) and a decision and returns it, or a better one, for
 the object as it lies now.
 
-* `recheck_at`: going on with the plan, checked at the base point as measured now (re-plan if it leaves the table);
+* `slide_due`: going on with the plan where it slides the object before its next step: the slide first;
+* `recheck_at`: going on with the plan, checked at the base point as measured now (re-plan if it leaves the table),
+  up to the next slide it makes;
 * `escalate`: after a failure of the motion it would dispatch, not the same motion again (`cooperation.escalate`);
 * `gate_decision`: a motion VAL refused is not dispatched (re-plan).
 
@@ -41,19 +43,39 @@ def decision_for(context: Context, seen: Seen) -> Decision:
     return decision
 
 
+def slide_due(context: Context, seen: Seen, decision: Decision) -> Decision:
+    """A decision to go on with the plan at a step the plan makes a slide before (`ObjectMemo.later_skills`)
+    becomes that slide (`robot_skill`): the robot slides the object and perceives again, and the next decision goes
+    on with the step. Right after a slide it is not asked again (the next perception shows where the object lies:
+    `recheck_at` judges the rest from there)."""
+    plan, memo = seen.plan, seen.memo
+    if plan is None or decision.next_step is None or decision.kind not in DISPATCHING:
+        return decision
+    if memo.last_decision == DecisionKind.ROBOT_SKILL:
+        return decision
+    planned = memo.skill_before(plan.id, decision.next_step)
+    if planned is None:
+        return decision
+    return Decision(kind=DecisionKind.ROBOT_SKILL, next_step=decision.next_step,
+                    matched_expected_step=decision.matched_expected_step,
+                    reason=f"{decision.reason}; the plan makes room before a_{decision.next_step}: "
+                           f"{planned.skill.sentence}")
+
+
 def recheck_at(context: Context, seen: Seen, decision: Decision) -> Decision:
     """A decision to go on with the current plan, checked where the object lies now, as measured: the motion it
     would dispatch is judged as the worker will judge it (`planhrc.judge.judge_motion`, from the measured pose)
     and must not be one the robot refused from this state before; the rest of the plan must not put a link past
     the table's edge or inside the robot with the base point at `base` (the plan was checked where the base point
-    was then). Otherwise the plan is not dispatched as is: re-plan."""
+    was then), up to the next slide the plan makes (its turns after it are made where the slide takes the object).
+    Otherwise the plan is not dispatched as is: re-plan."""
     obj, base, plan, memo = seen.obj, seen.base, seen.plan, seen.memo
     if base is None or plan is None or decision.next_step is None or decision.kind not in DISPATCHING:
         return decision
     if not 1 <= decision.next_step <= len(plan.actions):
         return decision
     geometry, pose = ObjectGeometry.of(obj, base), tuple(float(v) for v in seen.perception.raw_deg)
-    merge = merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
+    merge = merges(context.settings.merge_macro_steps, memo, plan.id)
     motion = next_action(merge, obj, plan, plan.actions[decision.next_step - 1])
     move = Move(motion.name, motion.turned_link_index, motion.held_link_index, motion.joint_index, motion.delta_deg)
     refused = next((r for r in memo.refused if r.forbids(geometry, pose, move)), None)
@@ -64,7 +86,9 @@ def recheck_at(context: Context, seen: Seen, decision: Decision) -> Decision:
         return _replan(decision, f"{decision.reason}; but with the base point measured at ({base[0]:.3f}, "
                                  f"{base[1]:.3f}) and the links as measured, turning link {move.turned} by "
                                  f"{move.delta_deg:+d}° ({motion.id}) would end with {why}: re-plan")
-    rest = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step) if a.step >= decision.next_step]
+    until = memo.next_skill_step(plan.id, decision.next_step + 1) or len(plan.actions) + 1
+    rest = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
+            if decision.next_step <= a.step < until]
     step, problem = leaves_the_table(Placement(geometry, pose), rest)
     if step is None or problem is None:
         return decision
@@ -88,7 +112,7 @@ def escalate(context: Context, seen: Seen, decision: Decision) -> Decision:
         return decision
     action = plan.actions[decision.next_step - 1]
     motion = action_motion(obj, action)
-    merge = merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
+    merge = merges(context.settings.merge_macro_steps, memo, plan.id)
     macro = last_step(merge, obj, plan, action) - action.step + 1
     reachable = _reachable(seen.perception, obj, seen.base, motion["turned_link_index"], motion["held_link_index"])
     return escalate_failure(decision, failure, (motion["joint_index"], motion["turned_link_index"]), macro,
@@ -109,7 +133,7 @@ def gate_decision(context: Context, seen: Seen, decision: Decision) -> Decision:
 
 
 # The refinement steps, in the order `decision_for` takes them.
-STEPS: tuple[Callable[[Context, Seen, Decision], Decision], ...] = (recheck_at, escalate, gate_decision)
+STEPS: tuple[Callable[[Context, Seen, Decision], Decision], ...] = (slide_due, recheck_at, escalate, gate_decision)
 
 
 def _replan(decision: Decision, reason: str) -> Decision:

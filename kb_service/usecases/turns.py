@@ -8,15 +8,16 @@ from dataclasses import dataclass
 from typing import Mapping
 
 from planhrc.cooperation import Decision, PlanView
-from planhrc.event_log import DecisionData, SkillRequest
+from planhrc.event_log import DecisionData, PlannedSkill, SkillRequest
 from planhrc.geometry import ObjectGeometry
 from planhrc.model import snap_angle
+from planhrc.motion_search import Slide
 from planhrc.ordering import Placement, help_for
 from planhrc.pipeline import EarlyAnswer, move_of
 from planhrc.vocabulary import DecisionKind, ExecutionStatus, PlanningStatus, Remedy, Skill
 
 from ..store import Execution, StoredPlan, StoredState
-from .actions import last_step, merges, next_action
+from .actions import Merging, last_step, merges, next_action
 from .context import Context
 from .memory import ObjectMemo
 from .refine import whole_turn_deg
@@ -38,11 +39,13 @@ class Written:
     ordering: str = ""
     early: EarlyAnswer | None = None
     adopted: tuple[StoredPlan, PlanView] | None = None
+    later_skills: tuple[PlannedSkill, ...] = ()
 
 
 def follow(context: Context, seen: Seen, perceived: StoredState, decision: Decision) -> Written:
-    """Goal reached, continue or resume: the execution moves within the current plan; or the human is asked to do
-    the next motion, and the execution waits for the next perception."""
+    """Goal reached, continue or resume: the execution moves within the current plan; or the robot first makes the
+    slide its plan makes before the next step (`robot_skill`), or the human is asked to do the next motion, and the
+    execution waits for the next perception."""
     store, obj, execution, plan, memo = context.store, seen.obj, seen.execution, seen.plan, seen.memo
     if decision.kind == DecisionKind.GOAL_REACHED:
         store.set_execution(obj.ident, Execution(execution.plan_id, None, ExecutionStatus.GOAL_REACHED,
@@ -52,8 +55,15 @@ def follow(context: Context, seen: Seen, perceived: StoredState, decision: Decis
                                  matched_expected_step=decision.matched_expected_step, reason=decision.reason))
     assert plan is not None and decision.next_step is not None
     # a split remedy dispatches this plan's steps one by one from now on (its event says so too, for the memo)
-    merge = decision.remedy != Remedy.SPLIT and merges(context.settings.merge_macro_steps, memo.split_plans, plan.id)
+    merge = merges(context.settings.merge_macro_steps and decision.remedy != Remedy.SPLIT, memo, plan.id)
     action = plan.actions[decision.next_step - 1]
+    if decision.kind == DecisionKind.ROBOT_SKILL:  # a slide the plan makes before this step (`refine.slide_due`)
+        planned = memo.skill_before(plan.id, decision.next_step)
+        assert planned is not None  # `refine.slide_due` decides a slide only where the plan makes one
+        store.set_execution(obj.ident, Execution(plan.id, decision.next_step, IDLE, None))
+        return Written(turn=Turn(decision=DecisionKind.ROBOT_SKILL, plan_id=plan.id, perceived_state_id=perceived.id,
+                                 next_action=None, matched_expected_step=decision.matched_expected_step,
+                                 reason=decision.reason, skill=planned.skill))
     if decision.kind == DecisionKind.HUMAN_HELP_REQUESTED:
         last = last_step(merge, obj, plan, action)
         moves = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
@@ -80,7 +90,8 @@ def adopt(context: Context, seen: Seen, perceived: StoredState, decision: Decisi
     """Store the re-planning's problem and, when solved (and, with VAL on, accepted by VAL: the whole plan, or
     with the early answer its first motion), its plan with expected states; move the execution. A plan whose turns
     come after a slide is answered with the slide (`robot_skill`): the robot slides the object, perceives again and
-    goes on with the plan from its first step. With the early answer the decision's event names the plan's pieces
+    goes on with the plan from its first step; the slides it makes between its turns are in the decision's event
+    (`later_skills`), each asked for before its step (`refine.slide_due`). With the early answer the decision's event names the plan's pieces
     and those accepted (`decision_data`): the record the dispatch gate starts from, through a restart."""
     store, obj, goal, outcome, early = context.store, seen.obj, seen.goal, new.outcome, new.early
     assert goal is not None  # a re-plan is decided towards a goal
@@ -88,8 +99,10 @@ def adopt(context: Context, seen: Seen, perceived: StoredState, decision: Decisi
 
     def written(turn: Turn, behind: EarlyAnswer | None = None,
                 adopted: tuple[StoredPlan, PlanView] | None = None) -> Written:
+        later = tuple(PlannedSkill(before_step=s.before_step, skill=_slide_request(s.slide))
+                      for s in outcome.later_slides) if adopted is not None else ()
         return Written(turn=turn, problem_id=problem.id, planning_status=outcome.status, timings=outcome.timings,
-                       ordering=outcome.ordering, early=behind, adopted=adopted)
+                       ordering=outcome.ordering, early=behind, adopted=adopted, later_skills=later)
 
     if outcome.solved and outcome.actions:
         plan = store.add_plan(problem.id, outcome.planner, outcome.actions, outcome.expected_states, new.checks)
@@ -102,12 +115,13 @@ def adopt(context: Context, seen: Seen, perceived: StoredState, decision: Decisi
         if outcome.slide is not None:  # the plan's turns are made where the robot slides the object first
             store.set_execution(obj.ident, Execution(plan.id, 1, IDLE, None))  # nothing dispatched before it
             slide = outcome.slide
-            skill = SkillRequest(Skill.SLIDE, slide.to_xy, slide.links, slide.sentence())
+            skill = _slide_request(slide)
             turn = Turn(decision=DecisionKind.ROBOT_SKILL, plan_id=plan.id, perceived_state_id=perceived.id,
                         next_action=None, matched_expected_step=decision.matched_expected_step,
                         reason=f"{reason}; the robot makes room first: {slide.sentence()}", skill=skill)
             return written(turn, early, (plan, view))
-        action = next_action(context.settings.merge_macro_steps, obj, plan, plan.actions[0])
+        breaks = frozenset(s.before_step for s in outcome.later_slides)
+        action = next_action(Merging(context.settings.merge_macro_steps, breaks), obj, plan, plan.actions[0])
         turn = Turn(decision=DecisionKind.REPLAN, plan_id=plan.id, perceived_state_id=perceived.id,
                     next_action=action, matched_expected_step=decision.matched_expected_step, reason=reason)
         return written(turn, early, (plan, view))
@@ -145,7 +159,11 @@ def decision_data(written: Written, goal_state_id: str | None, remedy: Remedy | 
         problem_id=written.problem_id if written.planning_status is not None else None,
         timings={k: round(v, 6) for k, v in (written.timings or {}).items()}
         if written.planning_status is not None else None,
-        ordering=written.ordering, help=turn.help, skill=turn.skill)
+        ordering=written.ordering, help=turn.help, skill=turn.skill, later_skills=written.later_skills)
+
+
+def _slide_request(slide: Slide) -> SkillRequest:
+    return SkillRequest(Skill.SLIDE, slide.to_xy, slide.links, slide.sentence())
 
 
 def _failure_words(memo: ObjectMemo) -> str | None:
