@@ -64,7 +64,8 @@ def constrained(formulation: str, orientations: int, start: Sequence[float], goa
             "constrained_steps": len(placed.actions) if placed.solved else None,
             "constrained_validated": placed.validated, "constrained": placed.ordering or placed.message,
             "constrained_exact": "(exhaustive search)" in placed.ordering,
-            "constrained_slide": placed.slide is not None, "search_s": round(time.perf_counter() - t, 3)}
+            "constrained_slide": placed.slide is not None, "constrained_later_slides": len(placed.later_slides),
+            "search_s": round(time.perf_counter() - t, 3)}
 
 
 def run_bench(tasks: int, formulations: Sequence[str], modes: Sequence[str], seed: int, out_dir: Path,

@@ -24,6 +24,9 @@ from .motion import move_of
 SEARCH_SHARE = 0.8
 VAL_RESERVE_S = 2.0
 UNBOUNDED_SEARCH_S = 8.0
+# Of the search's time, what the search with a slide before the first turn at most takes; when it finds no plan, the
+# search with slides between turns too has the rest (`order_steps`).
+FIRST_SLIDE_SHARE = 0.6
 
 
 @dataclass(frozen=True)
@@ -49,14 +52,23 @@ class Refusal:
 def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, steps: Sequence[str],
                 placement: Placement, deadline_at: float | None = None) -> Ordered | Refusal:
     """The robot's plan reaching the end of the planner's `steps` (the same state of the domain) in the least robot
-    time the table allows, or within the bound the search states (`planhrc.motion_search`), grounded from `init`."""
+    time the table allows, or within the bound the search states (`planhrc.motion_search`), grounded from `init`:
+    with a slide before the first turn at most; only when there is no such plan (or none was found in its share of
+    the time), with slides between turns too (not a bimanual robot's). A slide half-way is a physical motion from a
+    configuration the robot has not just planned from, so it is the fallback, not the first choice."""
     moves = [m for m in (move_of(obj, step) for step in steps) if m.delta_deg]
     alphabet = alphabet_of(obj)
     target = target_offsets(alphabet, moves, obj.orientations, obj.step)
     if target is None:
         return Refusal("the plan turns a joint the robot does not turn", ())
-    work = plan_work(placement, alphabet, target, obj.orientations, hands=hands_of(obj, init),
-                     slides=placement.slides, deadline_at=search_deadline(deadline_at, SEARCH_SHARE))
+    hands = hands_of(obj, init)
+    end = search_deadline(deadline_at, SEARCH_SHARE)
+    between = placement.slides and not hands.bimanual
+    first_end = time.monotonic() + FIRST_SLIDE_SHARE * max(0.0, end - time.monotonic()) if between else end
+    work = plan_work(placement, alphabet, target, obj.orientations, hands=hands, slides=placement.slides,
+                     deadline_at=first_end)
+    if isinstance(work, NoWork) and between:  # no plan that makes room first only: room made between turns too
+        work = plan_work(placement, alphabet, target, obj.orientations, hands=hands, between=True, deadline_at=end)
     if isinstance(work, NoWork):
         step, problem = first_obstacle(placement, moves)
         return Refusal(f"no plan of the robot's turns{' and slides' if placement.slides else ''} stays on the table "

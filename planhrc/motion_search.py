@@ -18,9 +18,9 @@ The search runs A* over (offsets, place, hands):
 * **a slide** of the whole object to another place (`slide_feasible`: two links held by the two
   arms, every 2 cm of the way on the table and clear of the robot, the way measured in one batch), among the places
   of a grid of `SLIDE_GRID_M` around where it lies, at most `MAX_SLIDE_M` at a time, where the configuration rests
-  (all the places from one configuration measured in one batch); before the first turn or between any two (a
-  bimanual robot: before its first turn only, its hands would let go of the links its plan's steps hold); a slide
-  changes where the object lies, not the state of the domain;
+  (all the places from one configuration measured in one batch); before the first turn, and with `between`
+  between any two too (not for a bimanual robot: its hands would let go of the links its plan's steps hold); a
+  slide changes where the object lies, not the state of the domain;
 * **the hands** (`Hands`): a turn that goes on with the motion under way (the same joint, the same direction) is
   merged with it into one motion, as the worker executes it; a bimanual robot centres its hands on a joint, grasps,
   turns and releases, each a cost of its own.
@@ -128,6 +128,7 @@ class Work:
     unconstrained_steps: int
     expansions: int
     tight_rests: int = 0  # resting configurations closer than ROOMY's clearance to the table's edges
+    room: str = ""  # the plans searched among, in words: "" (slides between turns too), or what they were limited to
 
     @property
     def turns(self) -> tuple[Move, ...]:
@@ -149,8 +150,9 @@ class Work:
         what = f"{turns} turn step{'s' if turns != 1 else ''}"
         if slides:
             what += f" and {slides} slide{'s' if slides != 1 else ''}"
-        proof = ("the least robot time the table allows (exhaustive search)" if self.exact else
-                 f"at most {self.bound:.2f}x the least robot time the table allows")
+        among = f", {self.room}" if self.room else ""
+        proof = (f"the least robot time the table allows{among} (exhaustive search)" if self.exact else
+                 f"at most {self.bound:.2f}x the least robot time the table allows{among}")
         return (f"{what}, {self.cost_s:.1f} s of robot time, {proof}; the shortest plan with no table around it has "
                 f"{self.unconstrained_steps} steps")
 
@@ -277,6 +279,7 @@ class _Space:
     step_deg: int
     base: tuple[float, ...]  # the link orientations where the object lies (offsets 0)
     goal_extra_ms: tuple[int, ...] = ()  # per place: the least slide time to where the goal fits (0: it fits here)
+    between: bool = False  # slides between turns too, not only before the first
 
     def angles(self, offsets: Sequence[int]) -> tuple[float, ...]:
         turn = [0.0] * len(self.base)
@@ -291,19 +294,21 @@ def _ms(seconds: float) -> int:
 
 
 def plan_work(placement: Placement, alphabet: Sequence[Move], target: Sequence[int], orientations: int, *,
-              hands: Hands = Hands(), costs: SkillCosts = SKILL_COSTS, slides: bool = True,
+              hands: Hands = Hands(), costs: SkillCosts = SKILL_COSTS, slides: bool = True, between: bool = False,
               rest: Tolerance = PLANNING, expansions: int = EXPANSIONS,
               deadline_at: float | None = None) -> Work | NoWork:
     """The least robot time plan from where the object lies (offsets 0, `placement`) to `target` (see the module's
-    note): exact when the exhaustive search finishes within `expansions` and `deadline_at` (`time.monotonic()`),
-    else bounded (`Work.bound`); `NoWork` when no plan exists or none was found in time."""
+    note), with a slide before the first turn (`slides`) and, with `between` (not for a bimanual robot), between any
+    two: exact when the exhaustive search finishes within `expansions` and `deadline_at` (`time.monotonic()`), else
+    bounded (`Work.bound`); `NoWork` when no plan exists or none was found in time."""
+    between = between and slides and not hands.bimanual
     alphabet, target = tuple(alphabet), tuple(t % orientations for t in target)
     step = 360 // orientations
     baseline = Baseline.of(placement.geometry, placement.link_deg, placement.cell)
     places = _places(placement, slides)
     space = _Space(placement=placement, alphabet=alphabet, orientations=orientations, target=target, costs=costs,
                    judge=TurnJudge(placement.geometry, placement.cell, baseline, rest, ROOMY_CHECK), places=places,
-                   step_deg=step, base=tuple(float(a) for a in placement.link_deg))
+                   step_deg=step, base=tuple(float(a) for a in placement.link_deg), between=between)
     space.goal_extra_ms = _goal_extra(space, rest)
     free = unconstrained_steps(target, orientations)
     if all(extra < 0 for extra in space.goal_extra_ms):
@@ -317,7 +322,8 @@ def plan_work(placement: Placement, alphabet: Sequence[Move], target: Sequence[i
     if found is not None:
         return _work(space, found, exact=True, lower_ms=found.g_ms, free=free, expansions=exhaustive.expansions)
     if exhaustive.exhausted:
-        return NoWork(reason="no sequence of the robot's turns and slides reaches the goal with every configuration on "
+        slid = "turns and slides" if between else ("turns, after a slide," if slides else "turns")
+        return NoWork(reason=f"no sequence of the robot's {slid} reaches the goal with every configuration on "
                       "the table, out of the robot's body, within reach and unfolded", exhausted=True,
                       expansions=exhaustive.expansions)
     lower = exhaustive.lower_bound_ms()
@@ -535,9 +541,9 @@ class _Astar:
             if batch:
                 self.expansions += len(batch)
                 self._expand_turns(batch)
-                if len(space.places) > 1:  # room is made before any turn, or (not bimanual) between any two
+                if len(space.places) > 1:  # room is made before any turn, or (`between`) between any two
                     for node, _, _ in batch:
-                        if node == start or not self.hands.bimanual:
+                        if node == start or space.between:
                             self._list_slides(node)
         self.exhausted = True
         return None
@@ -639,5 +645,7 @@ class _Astar:
 
 
 def _work(space: _Space, found: _Found, *, exact: bool, lower_ms: int, free: int, expansions: int) -> Work:
+    room = ("" if space.between else "with no slide" if len(space.places) == 1 else
+            "room made before the first turn only")
     return Work(motions=tuple(found.path), cost_s=found.g_ms / 1000.0, lower_bound_s=lower_ms / 1000.0, exact=exact,
-                unconstrained_steps=free, expansions=expansions, tight_rests=found.tight)
+                unconstrained_steps=free, expansions=expansions, tight_rests=found.tight, room=room)

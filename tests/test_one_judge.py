@@ -5,7 +5,6 @@ longer plan through intermediate configurations, or room made by sliding the obj
 from __future__ import annotations
 
 import warnings
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -137,14 +136,11 @@ def test_a_plan_whose_steps_fit_in_no_order_goes_through_intermediate_configurat
     obj = make_object("o", "relative", 5, 8)
     start, goal = perceive(obj, DETOUR_START), perceive(obj, DETOUR_GOAL)
     goal_atoms = frozenset(a for a in goal.atoms if a[0] == "hasorientation")
-    # no slide allowed (the robot has slid the object as often as a goal allows): the plan turns round the table
-    placement = Placement(ObjectGeometry.of(obj, DETOUR_BASE), tuple(DETOUR_START), grid_deg=obj.step, slides=False)
+    placement = Placement(ObjectGeometry.of(obj, DETOUR_BASE), tuple(DETOUR_START), grid_deg=obj.step)
     optimal = pipeline.plan(obj, start.atoms, goal_atoms)  # not placed: the planner's own (optimal) plan
     moves = [pipeline.move_of(obj, s) for s in optimal.steps]
     assert not feasible_alternative(placement, moves, obj.orientations)[0].found  # no order, no other way round
 
-    slid = pipeline.plan(obj, start.atoms, goal_atoms, placement=replace(placement, slides=True))
-    assert slid.solved and len(slid.actions) == len(optimal.actions) and slid.later_slides  # or makes room half-way
     outcome = pipeline.plan(obj, start.atoms, goal_atoms, placement=placement)
     assert outcome.solved and outcome.validated, outcome.message  # VAL checked the longer plan like any
     assert len(outcome.actions) > len(optimal.actions)
