@@ -5,7 +5,7 @@ with three or more links changed, 5 links x 8 orientations, the object placed wi
 the worker against one `planhrc serve` (a separate process, on the embedded store): once with nobody beside the
 robot (`--scenario none`: a help request ends the task) and once with the random human of the demo (three
 interventions; the human helps when asked). Per task it records whether the goal was reached, the help requests,
-the plan steps the robot executed, the robot's skills (slides), the states perceived off the table and the time to
+the plan steps the robot executed, the robot's skills (`slides`: slides and straightenings), the states perceived off the table and the time to
 the goal; beside them, computed for the task's start by the same pipeline the service runs, the shortest plan with
 no table around it (`unconstrained`) and the robot's plan that fits the table (`constrained`: its length, robot time,
 and whether the search proved it the least robot time, `exact`).
@@ -93,7 +93,7 @@ def run_bench(tasks: int, formulations: Sequence[str], modes: Sequence[str], see
                 print(f"[robot-bench] {task.formulation} {mode} {task_seed}: "
                       f"{'reached' if row['reached'] else row['stop_reason']}, {row['help_requests']} help "
                       f"requests, {row['executed_steps']} steps (constrained {row['constrained_steps']}, "
-                      f"unconstrained {row['unconstrained_steps']}), {row['slides']} slides, "
+                      f"unconstrained {row['unconstrained_steps']}), {row['slides']} skills, "
                       f"{row['time_to_goal_s']:.1f} s", flush=True)
 
     if kb_url is None:
@@ -177,8 +177,9 @@ def table(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def markdown(lines: Sequence[dict[str, Any]]) -> str:
     head = ("| formulation | beside it | reached without a help request | help requests | executed steps | "
-            "constrained shortest (exact) | ratio | unconstrained shortest | slides | states off the table | "
-            "time to goal, median s | plans: exact, bounded |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n")
+            "constrained shortest (exact) | ratio | unconstrained shortest | skills (slides, straightenings) | "
+            "states off the table | time to goal, median s | plans: exact, bounded |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|\n")
     body = ""
     for line in lines:
         ratio = (f"{line['executed_steps'] / line['constrained_steps']:.2f}" if line["constrained_steps"] else "-")

@@ -333,20 +333,28 @@ class HelpRequestPublic(BaseModel):
 
 class SkillRequestPublic(BaseModel):
     model_config = schema_config(
-        "A robot skill the service asks for before the plan's rotations: it changes where the object lies, not the "
-        "state of the domain; the worker does it and perceives again.",
+        "A robot skill the service asks for besides the plan's rotations: it changes where the object lies or how "
+        "far its links are off the orientation grid, not the state of the domain; the worker does it and perceives "
+        "again.",
         {"name": "slide", "base_point_xy": [0.62, 0.05], "links": [1, 5],
          "sentence": "slide the object 12 cm towards the table's middle"},
     )
 
     name: Skill = Field(description="slide: slide the whole object with both arms, holding `links`, until its base "
-                        "point lies at `base_point_xy`.", examples=["slide"])
+                        "point lies at `base_point_xy`; straighten: make `turns`.", examples=["slide"])
     base_point_xy: list[float] = Field(min_length=2, max_length=2, description="Where the object's base point p1 "
                                        "should lie afterwards, [x, y] in metres in the robot's frame.",
                                        examples=[[0.62, 0.05]])
-    links: list[int] = Field(description="The links the arms hold (1-based).", examples=[[1, 5]])
+    links: list[int] = Field(description="The links the arms hold (1-based); straighten: the links turned.",
+                             examples=[[1, 5]])
     sentence: str = Field(description="The request in words, with why.",
                           examples=["slide the object 12 cm towards the table's middle"])
+    turns: list[tuple[int, int, float]] = Field(
+        default_factory=list, exclude_if=lambda turns: not turns,  # a slide's request reads as it always has
+        description="straighten: each turn [turned link, held link (0 = the table), degrees "
+        "(+ clockwise seen from above)], in order, each less than one orientation step: links a turn dragged off the "
+        "orientation grid back onto it (the base point stays); absent for a slide.",
+        examples=[[[1, 0, -12.9], [3, 2, 15.3]]])
 
 
 class DecisionPublic(BaseModel):

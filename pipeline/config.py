@@ -73,6 +73,8 @@ class PlanOutcome:
     ordering: str = ""  # what the ordering did, in words (empty when the object is not placed)
     slide: Slide | None = None  # the plan's turns are made after the robot has slid the object there
     later_slides: tuple[LaterSlide, ...] = ()  # slides between the plan's turns (`order.LaterSlide`)
+    # no plan where the links lie, one once these turns (turned link, held link, degrees) put them back on the grid
+    straighten: tuple[tuple[int, int, float], ...] = ()
 
     @property
     def solved(self) -> bool:

@@ -5,13 +5,17 @@ steps of the domain for VAL and the replay. When no such plan exists, the refusa
 human."""
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass
-from typing import Sequence
+from dataclasses import dataclass, replace
+from typing import Iterator, Sequence
 
 from planhrc.model import (HAS_ORIENTATION, HOLDING, IN_CENTRE, KEEPER, ArticulatedObject, DomainModelSpec,
                            Formulation, State, orientation_name)
-from planhrc.motion_search import Hands, NoWork, Slide, Work, alphabet_of, plan_work, target_offsets
+from planhrc.geometry import PLANNING, rotated
+from planhrc.judge import Baseline, judge_turn
+from planhrc.motion_search import (Hands, NoWork, Slide, Work, alphabet_of, grip_links, places_about, plan_work,
+                                   slide_feasible, target_offsets)
 from planhrc.ordering import ANTICLOCKWISE, CLOCKWISE, HelpItem, Move, Placement, first_obstacle, help_for
 from planhrc.transition import StateIndex, apply, ground_action
 
@@ -27,6 +31,9 @@ UNBOUNDED_SEARCH_S = 8.0
 # Of the search's time, what the search with a slide before the first turn at most takes; when it finds no plan, the
 # search with slides between turns too has the rest (`order_steps`).
 FIRST_SLIDE_SHARE = 0.6
+# A joint at least this far off the orientation grid (a turn dragged the object) is turned back onto it when no plan
+# fits where the links lie (`straightening`); the perception's ordinary error is a degree or two.
+STRAIGHTEN_MIN_DEG = 6.0
 
 
 @dataclass(frozen=True)
@@ -42,6 +49,26 @@ class Ordered:
 
 
 @dataclass(frozen=True)
+class Straighten:
+    """No plan fits where the links lie, one fits once links dragged off the orientation grid are turned back onto
+    it: the turns (turned link, held link, degrees, in order) and what the search found from there, in words."""
+
+    turns: tuple[tuple[int, int, float], ...]
+    sentence: str
+    slide: Slide | None = None  # where the robot slides the object first, for room to straighten it
+
+
+@dataclass(frozen=True)
+class Fix:
+    """Links turned back onto the orientation grid (`turns`), where the object lies or after `slide`, and where
+    they then lie."""
+
+    turns: tuple[tuple[int, int, float], ...]
+    slide: Slide | None
+    placement: Placement
+
+
+@dataclass(frozen=True)
 class Refusal:
     """No plan the robot can carry out on this table: why, and what to ask the human."""
 
@@ -50,12 +77,14 @@ class Refusal:
 
 
 def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, steps: Sequence[str],
-                placement: Placement, deadline_at: float | None = None) -> Ordered | Refusal:
+                placement: Placement, deadline_at: float | None = None) -> Ordered | Straighten | Refusal:
     """The robot's plan reaching the end of the planner's `steps` (the same state of the domain) in the least robot
     time the table allows, or within the bound the search states (`planhrc.motion_search`), grounded from `init`:
     with a slide before the first turn at most; only when there is no such plan (or none was found in its share of
     the time), with slides between turns too (not a bimanual robot's). A slide half-way is a physical motion from a
-    configuration the robot has not just planned from, so it is the fallback, not the first choice."""
+    configuration the robot has not just planned from, so it is the fallback, not the first choice. When neither
+    finds a plan and a turn dragged links off the orientation grid, the links turned back onto it
+    (`straightening`) are searched from: a plan there is answered with the straightening (`Straighten`)."""
     moves = [m for m in (move_of(obj, step) for step in steps) if m.delta_deg]
     alphabet = alphabet_of(obj)
     target = target_offsets(alphabet, moves, obj.orientations, obj.step)
@@ -63,12 +92,17 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
         return Refusal("the plan turns a joint the robot does not turn", ())
     hands = hands_of(obj, init)
     end = search_deadline(deadline_at, SEARCH_SHARE)
-    between = placement.slides and not hands.bimanual
-    first_end = time.monotonic() + FIRST_SLIDE_SHARE * max(0.0, end - time.monotonic()) if between else end
-    work = plan_work(placement, alphabet, target, obj.orientations, hands=hands, slides=placement.slides,
-                     deadline_at=first_end)
-    if isinstance(work, NoWork) and between:  # no plan that makes room first only: room made between turns too
-        work = plan_work(placement, alphabet, target, obj.orientations, hands=hands, between=True, deadline_at=end)
+    work = _search(obj, placement, alphabet, target, hands, end)
+    if isinstance(work, NoWork) and placement.straightens and not hands.bimanual:
+        for fix in straightenings(obj, placement):
+            again = _search(obj, fix.placement, alphabet, target, hands, end)
+            if isinstance(again, Work):
+                done = ", ".join(f"link {t} by {d:+.1f}°" for t, _, d in fix.turns)
+                first = f"{fix.slide.sentence()}, then " if fix.slide is not None else ""
+                return Straighten(fix.turns, f"{first}links off the orientation grid turned back onto it ({done}), "
+                                  f"then {_sentence(again, None, later_slides(again), len(again.turns))}", fix.slide)
+            if time.monotonic() > end:
+                break
     if isinstance(work, NoWork):
         step, problem = first_obstacle(placement, moves)
         return Refusal(f"no plan of the robot's turns{' and slides' if placement.slides else ''} stays on the table "
@@ -78,6 +112,52 @@ def order_steps(obj: ArticulatedObject, model: DomainModelSpec, init: State, ste
     slide = work.motions[0] if work.motions and isinstance(work.motions[0], Slide) else None
     later = later_slides(work)
     return Ordered(grounded, _sentence(work, slide, later, len(grounded)), slide, later)
+
+
+def _search(obj: ArticulatedObject, placement: Placement, alphabet: Sequence[Move], target: Sequence[int],
+            hands: Hands, end: float) -> Work | NoWork:
+    """The search with a slide first at most, then (relative, absolute) with slides between turns too, by `end`."""
+    between = placement.slides and not hands.bimanual
+    first_end = time.monotonic() + FIRST_SLIDE_SHARE * max(0.0, end - time.monotonic()) if between else end
+    work = plan_work(placement, alphabet, target, obj.orientations, hands=hands, slides=placement.slides,
+                     deadline_at=first_end)
+    if isinstance(work, NoWork) and between:  # no plan that makes room first only: room made between turns too
+        work = plan_work(placement, alphabet, target, obj.orientations, hands=hands, between=True, deadline_at=end)
+    return work
+
+
+def straightenings(obj: ArticulatedObject, placement: Placement) -> Iterator[Fix]:
+    """The turns that bring every joint at least `STRAIGHTEN_MIN_DEG` off the orientation grid back onto it (in
+    joint order, each turn the joint's downstream link, the link before it held; absolute: link 1 against the
+    table), made where the object lies, else after a slide to a place of the search's grid nearest first (with
+    `placement.slides`), wherever the one judge accepts each from where the ones before leave the object (resting
+    with the planning clearance); none when no joint is that far off."""
+    step, cell = obj.step, placement.cell
+    angles = tuple(float(a) for a in placement.link_deg)
+    off = [((a + step / 2.0) % step) - step / 2.0 for a in angles]  # each link's angle less the nearest on the grid
+    if obj.formulation is Formulation.ABSOLUTE:
+        joints = [(k, k - 1, off[k - 1] - (off[k - 2] if k > 1 else 0.0)) for k in range(1, obj.n_links + 1)]
+    else:
+        joints = [(k + 1, k, off[k] - off[k - 1]) for k in range(1, obj.n_links)]
+    turns = tuple((turned, held, round(-d, 2)) for turned, held, d in joints if abs(d) >= STRAIGHTEN_MIN_DEG)
+    if not turns:
+        return
+    origin = placement.geometry.base_point_xy
+    for to in places_about(placement, placement.slides):
+        slide = None
+        if to != tuple(float(v) for v in origin):
+            links = grip_links(placement, to)
+            if links is None or not slide_feasible(placement, to, links).ok:
+                continue
+            slide = Slide(to_xy=to, links=links, distance_m=math.dist(origin, to))
+        geometry = placement.geometry.placed(to)
+        baseline, here = Baseline.of(geometry, angles, cell), angles
+        for turned, held, delta in turns:
+            if not judge_turn(geometry, here, turned, held, delta, cell, baseline, rest=PLANNING).ok:
+                break
+            geometry, here = rotated(geometry, here, turned, held, delta)
+        else:
+            yield Fix(turns, slide, replace(placement, geometry=geometry, link_deg=here))
 
 
 def later_slides(work: Work) -> tuple[LaterSlide, ...]:

@@ -21,7 +21,7 @@ from planhrc.vocabulary import PlanningStatus
 
 from .config import (LaterSlide, PlanningConfig, PlanOutcome, config_from_settings, deadline_from, over_deadline,
                      problem_name, time_left)
-from .order import Refusal, order_steps, steps_of
+from .order import Refusal, Straighten, order_steps, steps_of
 from .val_runs import validate
 
 
@@ -123,6 +123,10 @@ def find_plan(obj: ArticulatedObject, init: State, goal: State, config: Planning
         if isinstance(ordered, Refusal):
             return PlanOutcome(PlanningStatus.UNSOLVABLE, ordered.message, result.planner, None, timings=timings,
                                task=task, attempts=result.attempts, help=ordered.help)
+        if isinstance(ordered, Straighten):  # a plan fits once the robot has straightened the links: that first
+            return PlanOutcome(PlanningStatus.UNSOLVABLE, f"no plan fits where the links lie: {ordered.sentence}",
+                               result.planner, None, timings=timings, task=task, attempts=result.attempts,
+                               straighten=ordered.turns, slide=ordered.slide)
         ordering, slide, later = ordered.sentence, ordered.slide, ordered.later_slides
         result = replace(result, plan=ordered.steps, optimal=None)
     return Found(task, model, result, ordering, timings, t0, config, slide, later)

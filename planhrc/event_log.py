@@ -48,16 +48,19 @@ XY = tuple[float, float]
 @dataclass(frozen=True)
 class SkillRequest(JsonRecord):
     """A robot skill asked for (`DecisionKind.ROBOT_SKILL`): slide the object, its base point to `base_point_xy`,
-    holding links `links`; why in words."""
+    holding links `links`; or straighten it, turning links back onto the orientation grid (`turns`, in order, the
+    base point staying where it lies); why in words."""
 
     name: Skill
-    """The skill (`slide`)."""
+    """The skill (`slide`, `straighten`)."""
     base_point_xy: XY
     """Where the object's base point is to be, in metres."""
     links: tuple[int, ...]
-    """The links the robot holds."""
+    """The links the robot holds (straighten: the links it turns)."""
     sentence: str
     """What the robot does, in words."""
+    turns: tuple[tuple[int, int, float], ...] = ()
+    """straighten: each turn (the turned link, the held one, 0 = the table; degrees, + clockwise), in order."""
 
 
 @dataclass(frozen=True)

@@ -305,7 +305,7 @@ def plan_work(placement: Placement, alphabet: Sequence[Move], target: Sequence[i
     alphabet, target = tuple(alphabet), tuple(t % orientations for t in target)
     step = 360 // orientations
     baseline = Baseline.of(placement.geometry, placement.link_deg, placement.cell)
-    places = _places(placement, slides)
+    places = places_about(placement, slides)
     space = _Space(placement=placement, alphabet=alphabet, orientations=orientations, target=target, costs=costs,
                    judge=TurnJudge(placement.geometry, placement.cell, baseline, rest, ROOMY_CHECK), places=places,
                    step_deg=step, base=tuple(float(a) for a in placement.link_deg), between=between)
@@ -342,7 +342,7 @@ def plan_work(placement: Placement, alphabet: Sequence[Move], target: Sequence[i
                   exhausted=False, expansions=spent)
 
 
-def _places(placement: Placement, slides: bool) -> tuple[tuple[float, float], ...]:
+def places_about(placement: Placement, slides: bool) -> tuple[tuple[float, float], ...]:
     """Where the object may lie: where it lies, then (with slides) a grid about it within one slide's reach,
     nearest first."""
     x0, y0 = (float(v) for v in placement.geometry.base_point_xy)
@@ -386,7 +386,7 @@ def room_for_goal(geometry: ObjectGeometry, angles: Sequence[float], cell: Cell,
                   rest: Tolerance = PLANNING) -> tuple[float, float] | None:
     """Where a goal configuration `angles` rests with `rest`'s clearance: the object's base point when it does
     there, else the nearest place the robot can slide it to where it does (None: nowhere)."""
-    places = _places(Placement(geometry, tuple(float(a) for a in angles), cell), slides)
+    places = places_about(Placement(geometry, tuple(float(a) for a in angles), cell), slides)
     fits = resting_places(geometry, angles, cell, places, rest)
     return next((p for p, ok in zip(places, fits) if ok), None)
 

@@ -82,6 +82,7 @@ class Placement:
     refused: frozenset["RefusedMotion"] = frozenset()
     grid_deg: int = 1  # the orientation step: what a help request's orientations are rounded to (`link_deg` is measured)
     slides: bool = True  # whether the robot may slide the object first to make room (`planhrc.motion_search`)
+    straightens: bool = True  # whether the robot may turn links dragged off the grid back first (`pipeline.order`)
 
 
 @dataclass(frozen=True)

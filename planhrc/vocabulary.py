@@ -38,6 +38,7 @@ class Skill(StrEnum):
     not change the state of the domain, only where the object lies."""
 
     SLIDE = "slide"  # slide the whole object with both arms, its base point to a place nearer the table's middle
+    STRAIGHTEN = "straighten"  # turn links dragged off the orientation grid back onto it (each less than a step)
 
 
 class ExecutionStatus(StrEnum):

@@ -19,6 +19,7 @@ from planhrc.robot_sim.regrasp import perform_with_regrasp
 from planhrc.robot_sim.scene import Scene
 from planhrc.robot_sim.skills import ActionResult, Interrupt, Robot, RotationAction
 from planhrc.robot_sim.slide import SlideResult, slide
+from planhrc.robot_sim.straighten import straighten
 from planhrc.vocabulary import ActionOutcome, FailureReason, Infeasible, Skill
 
 log = logging.getLogger(__name__)
@@ -123,8 +124,17 @@ def _slide(scene: Scene, robot: Robot, skill: dict[str, Any]) -> SlideResult:
     return slide(scene, robot, (to[0], to[1]), [int(k) for k in skill.get("links") or ()])
 
 
+def _straighten(scene: Scene, robot: Robot, skill: dict[str, Any]) -> SlideResult:
+    try:
+        turns = [(int(t), int(h), float(d)) for t, h, d in skill.get("turns") or ()]
+    except (TypeError, ValueError):
+        return SlideResult(ActionOutcome.FAILED, None, "straighten: turns must be [turned, held, degrees]", 0.0)
+    return straighten(scene, robot, turns)
+
+
 # the skills the service may ask for besides rotations (`planhrc.vocabulary.Skill`), one module each
-SKILLS: dict[str, Callable[[Scene, Robot, dict[str, Any]], SlideResult]] = {Skill.SLIDE: _slide}
+SKILLS: dict[str, Callable[[Scene, Robot, dict[str, Any]], SlideResult]] = {Skill.SLIDE: _slide,
+                                                                            Skill.STRAIGHTEN: _straighten}
 
 
 def perform_skill(scene: Scene, robot: Robot, skill: dict[str, Any]) -> str:

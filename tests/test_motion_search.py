@@ -15,7 +15,7 @@ from planhrc import pipeline
 from planhrc.geometry import PLANNING, ROOMY, STRICT, Cell, ObjectGeometry, configuration_feasible
 from planhrc.judge import Baseline, TurnJudge, judge_turn
 from planhrc.model import make_object, perceive
-from planhrc.motion_search import (MAX_SLIDE_M, SKILL_COSTS, Hands, NoWork, Slide, SkillCosts, Work, _places,
+from planhrc.motion_search import (MAX_SLIDE_M, SKILL_COSTS, Hands, NoWork, Slide, SkillCosts, Work, places_about,
                                    grip_links, plan_work, resting_places, slide_feasible, target_offsets,
                                    unconstrained_steps)
 from planhrc.ordering import Move, Placement
@@ -37,7 +37,7 @@ def brute_force(placement: Placement, alphabet: tuple[Move, ...], target: tuple[
     step = 360 // orientations
     base = tuple(float(a) for a in placement.link_deg)
     baseline = Baseline.of(placement.geometry, placement.link_deg, placement.cell)
-    places = _places(placement, slides)
+    places = places_about(placement, slides)
 
     def angles(offsets: tuple[int, ...]) -> tuple[float, ...]:
         turn = [0.0] * len(base)

@@ -9,6 +9,7 @@ import pytest
 from pybullet_utils.bullet_client import BulletClient
 
 from planhrc.client import KBClient
+from planhrc.robot_sim.acting import perform_skill
 from planhrc.robot_sim.regrasp import perform_with_regrasp, regrasp_skill
 from planhrc.robot_sim.scene import ARMS, SceneSpec, arm_joints, build_scene, set_arm_joints
 from planhrc.robot_sim.skills import Command, Robot, RotationAction, Unreachable, execute, rotate_skill
@@ -53,6 +54,20 @@ def test_both_arms_slide_the_object_towards_the_middle_keeping_its_shape(cell):
     x, y = scene.base_point()
     assert abs(x - TARGET[0]) < 0.03 and abs(y - TARGET[1]) < 0.03  # measured where it was asked to go
     assert _bent(before, scene.link_orientations_deg()) < 6.0  # the links between were dragged along, not bent
+    assert not scene.off_table_links()
+
+
+def test_the_robot_straightens_links_a_turn_dragged_off_the_orientation_grid(cell):
+    # absolute random task 1018 after a 270-degree turn dragged the object (its numbers kept here), slid to where
+    # the service found room to straighten it: links 1, 2 and 5 lie 13 to 16 degrees off the 45-degree grid
+    dragged = (192.88, 240.79, 315.51, 181.1, 121.8)
+    scene, robot = cell(SceneSpec(initial_orientations_deg=dragged, base_point_xy=(0.785, 0.1025)))
+    off = [((a + 22.5) % 45.0) - 22.5 for a in scene.link_orientations_deg()]
+    assert max(abs(v) for v in off) > 12.0
+    done = perform_skill(scene, robot, {"name": "straighten", "turns": [[1, 0, -12.88], [3, 2, 15.28], [5, 4, 14.3]]})
+    assert done.startswith("straighten succeeded"), done
+    off = [((a + 22.5) % 45.0) - 22.5 for a in scene.link_orientations_deg()]
+    assert max(abs(v) for v in off) < 6.0, off  # every link within the perception's snapping of the grid
     assert not scene.off_table_links()
 
 

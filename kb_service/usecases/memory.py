@@ -16,7 +16,7 @@ from planhrc.event_log import (DecisionData, EventData, EventKind, FeedbackData,
 from planhrc.model import Atom
 from planhrc.pipeline import PieceRecord
 from planhrc.ordering import RefusedMotion
-from planhrc.vocabulary import Accepted, ActionOutcome, DecisionKind, Remedy
+from planhrc.vocabulary import Accepted, ActionOutcome, DecisionKind, Remedy, Skill
 
 from ..store import KnowledgeStore, StoredPlan
 from .log import piece_record_of, read_event, verdict_of
@@ -40,7 +40,9 @@ class ObjectMemo:
     last_decision: str | None = None  # the kind of the last decision logged
     val: PieceRecord | None = None  # the latest plan adopted with only its first motion validated, and its verdicts
     refused: tuple[RefusedMotion, ...] = ()  # turns the robot refused, each from a state: never proposed again
-    slides: int = 0  # robot skills (slides) asked for since the goal was set
+    slides: int = 0  # slides asked for since the goal was set
+    straightens: int = 0  # straightenings asked for since the goal was set
+    last_skill: Skill | None = None  # the skill of the last robot_skill decision
     slide_from_xy: tuple[float, float] | None = None  # where the object's base point was when the last was asked
     step_deg: int = 0  # the object's orientation step (from its creation)
     control: frozenset[Atom] | None = None  # bimanual: the robot's control facts after the last feedback (None: none)
@@ -101,7 +103,8 @@ def _read(memo: ObjectMemo, kind: str, data: EventData) -> ObjectMemo:
     if isinstance(data, ObjectCreatedData):
         return replace(memo, base_point_xy=data.base_point_xy, step_deg=data.step_deg)
     if isinstance(data, GoalSetData):
-        return replace(memo, goal_state_id=data.goal_state_id, failure=None, slides=0, slide_from_xy=None)
+        return replace(memo, goal_state_id=data.goal_state_id, failure=None, slides=0, slide_from_xy=None,
+                       straightens=0)
     if isinstance(data, FeedbackData):
         refused = memo.refused
         if data.refusal is not None:
@@ -114,8 +117,11 @@ def _read(memo: ObjectMemo, kind: str, data: EventData) -> ObjectMemo:
         return memo
     if isinstance(data, DecisionData):
         failure = memo.failure
-        if kind == DecisionKind.ROBOT_SKILL:
-            memo = replace(memo, slides=memo.slides + 1, slide_from_xy=data.base_point_xy or memo.where)
+        if kind == DecisionKind.ROBOT_SKILL and data.skill is not None and data.skill.name == Skill.STRAIGHTEN:
+            memo = replace(memo, straightens=memo.straightens + 1, last_skill=Skill.STRAIGHTEN)
+        elif kind == DecisionKind.ROBOT_SKILL:
+            memo = replace(memo, slides=memo.slides + 1, slide_from_xy=data.base_point_xy or memo.where,
+                           last_skill=Skill.SLIDE)
         if data.remedy and failure is not None:
             failure = replace(failure, tried=failure.tried + (data.remedy,))
         split = memo.split_plans | {data.plan_id} if data.remedy == Remedy.SPLIT and data.plan_id else None

@@ -21,7 +21,7 @@ from planhrc.judge import judge_motion
 from planhrc.model import ArticulatedObject, Formulation, Perception
 from planhrc.ordering import Move, Placement, RefusedMotion, leaves_the_table
 from planhrc.pipeline import ReplanRequest, action_motion, move_of
-from planhrc.vocabulary import ActionOutcome, DecisionKind, Remedy
+from planhrc.vocabulary import ActionOutcome, DecisionKind, Remedy, Skill
 
 from .actions import last_step, merges, next_action
 from .context import Context
@@ -154,13 +154,15 @@ def replan_request(seen: Seen, decision: Decision) -> ReplanRequest:
         turned = other_way(obj, [move_of(obj, a.spec) for a in rest], memo.failure)
         moves = tuple(turned) if turned is not None else None
     return ReplanRequest(obj=obj, init=seen.perception.atoms, goal=seen.goal.atoms, deadline_at=seen.deadline_at,
-                         placement=placement(obj, seen.perception.raw_deg, base, memo.refused, may_slide(memo, base)),
+                         placement=placement(obj, seen.perception.raw_deg, base, memo.refused, may_slide(memo, base),
+                                             memo.straightens < MAX_STRAIGHTENS),
                          moves=moves)
 
 
 # Slides asked for per goal: room is made a few times at most (a slide the object ends short of, a human's move may
 # need another); a plan that still does not fit goes to the human.
 MAX_SLIDES = 4
+MAX_STRAIGHTENS = 2  # straightenings asked for per goal (`pipeline.order.straightening`)
 
 
 def may_slide(memo: ObjectMemo, base: Base) -> bool:
@@ -168,20 +170,22 @@ def may_slide(memo: ObjectMemo, base: Base) -> bool:
     times per goal, and not again right after a slide that left the base point where it was (it did not work)."""
     if base is None or memo.slides >= MAX_SLIDES:
         return False
-    if memo.last_decision == DecisionKind.ROBOT_SKILL and memo.slide_from_xy is not None:
+    if memo.last_decision == DecisionKind.ROBOT_SKILL and memo.last_skill == Skill.SLIDE and memo.slide_from_xy:
         return math.dist(base, memo.slide_from_xy) > 0.02
     return True
 
 
 def placement(obj: ArticulatedObject, link_deg: Sequence[float], base: Base,
-              refused: Sequence[RefusedMotion] = (), slides: bool = True) -> Placement | None:
+              refused: Sequence[RefusedMotion] = (), slides: bool = True, straightens: bool = True
+              ) -> Placement | None:
     """Where a placed object lies with its links at `link_deg` (as measured: the one judge's pose) and its base
     point at `base`, with the turns the robot refused before and whether it may slide the object first (None for
     an abstract one: no geometric checks)."""
     if base is None:
         return None
     return Placement(ObjectGeometry.of(obj, base), tuple(float(v) for v in link_deg),
-                     whole_turn_deg=whole_turn_deg(obj), refused=frozenset(refused), grid_deg=obj.step, slides=slides)
+                     whole_turn_deg=whole_turn_deg(obj), refused=frozenset(refused), grid_deg=obj.step, slides=slides,
+                     straightens=straightens)
 
 
 def whole_turn_deg(obj: ArticulatedObject) -> int:

@@ -91,8 +91,11 @@ def adopt(context: Context, seen: Seen, perceived: StoredState, decision: Decisi
     with the early answer its first motion), its plan with expected states; move the execution. A plan whose turns
     come after a slide is answered with the slide (`robot_skill`): the robot slides the object, perceives again and
     goes on with the plan from its first step; the slides it makes between its turns are in the decision's event
-    (`later_skills`), each asked for before its step (`refine.slide_due`). With the early answer the decision's event names the plan's pieces
-    and those accepted (`decision_data`): the record the dispatch gate starts from, through a restart."""
+    (`later_skills`), each asked for before its step (`refine.slide_due`). No plan where the links lie but one once
+    links a turn dragged off the grid are back on it: the straightening is asked for (`robot_skill`, after a slide
+    when it needs room), no plan stored; the next perception plans from there. With the early answer the
+    decision's event names the plan's pieces and those accepted (`decision_data`): the record the dispatch gate
+    starts from, through a restart."""
     store, obj, goal, outcome, early = context.store, seen.obj, seen.goal, new.outcome, new.early
     assert goal is not None  # a re-plan is decided towards a goal
     problem = store.add_problem(obj.ident, perceived.id, goal.id)
@@ -129,6 +132,16 @@ def adopt(context: Context, seen: Seen, perceived: StoredState, decision: Decisi
         store.set_execution(obj.ident, Execution(None, None, ExecutionStatus.GOAL_REACHED, None))
         return written(Turn(decision=DecisionKind.GOAL_REACHED, plan_id=None, perceived_state_id=perceived.id,
                             next_action=None, matched_expected_step=None, reason=outcome.message))
+    if outcome.straighten:  # a plan fits once links a turn dragged off the grid are back on it: that first
+        store.set_execution(obj.ident, Execution(None, None, IDLE, None))
+        base = seen.base or (0.0, 0.0)
+        skill = (_slide_request(outcome.slide) if outcome.slide is not None else  # room to straighten it first
+                 SkillRequest(Skill.STRAIGHTEN, (float(base[0]), float(base[1])),
+                              tuple(t for t, _, _ in outcome.straighten), outcome.message, outcome.straighten))
+        first = "slides the object to straighten the links there" if outcome.slide else "straightens the links first"
+        return written(Turn(decision=DecisionKind.ROBOT_SKILL, plan_id=None, perceived_state_id=perceived.id,
+                            next_action=None, matched_expected_step=decision.matched_expected_step,
+                            reason=f"{decision.reason}; {outcome.message}; the robot {first}", skill=skill))
     if outcome.help:  # a plan exists but the robot cannot carry it out on this table: ask the human
         store.set_execution(obj.ident, Execution(None, None, IDLE, None))
         reason = f"{decision.reason}; {outcome.message}; the robot asks the human for help"
