@@ -115,7 +115,8 @@ def find_plan(obj: ArticulatedObject, init: State, goal: State, config: Planning
         return PlanOutcome(status, message, result.planner, None, timings=timings, task=task,
                            attempts=result.attempts)
 
-    ordering, slide, later = "", None, ()
+    ordering, slide = "", None
+    later: tuple[LaterSlide, ...] = ()
     if placement is not None:
         t = time.perf_counter()
         ordered = order_steps(obj, model, init, result.plan, placement, deadline_at)
