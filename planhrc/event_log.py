@@ -21,7 +21,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any, Literal, Mapping
+from typing import Annotated, Any, Literal, Mapping
+
+from pydantic import Field
 
 from planhrc.json_record import JsonRecord, RecordError
 from planhrc.model import Atom, Formulation
@@ -59,8 +61,9 @@ class SkillRequest(JsonRecord):
     """The links the robot holds (straighten: the links it turns)."""
     sentence: str
     """What the robot does, in words."""
-    turns: tuple[tuple[int, int, float], ...] = ()
-    """straighten: each turn (the turned link, the held one, 0 = the table; degrees, + clockwise), in order."""
+    turns: Annotated[tuple[tuple[int, int, float], ...], Field(exclude_if=lambda turns: not turns)] = ()
+    """straighten: each turn (the turned link, the held one, 0 = the table; degrees, + clockwise), in order (a
+    slide's request has none, and reads as it always has)."""
 
 
 @dataclass(frozen=True)
