@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 from typing import Iterator, Sequence
 
 from planhrc.model import (HAS_ORIENTATION, HOLDING, IN_CENTRE, KEEPER, ArticulatedObject, DomainModelSpec,
-                           Formulation, State, orientation_name)
+                           Formulation, State, orientation_name, snap_angle)
 from planhrc.geometry import PLANNING, rotated
 from planhrc.judge import Baseline, judge_turn
 from planhrc.motion_search import (Hands, NoWork, Slide, Work, alphabet_of, grip_links, places_about, plan_work,
@@ -132,9 +132,10 @@ def straightenings(obj: ArticulatedObject, placement: Placement) -> Iterator[Fix
     table), made where the object lies, else after a slide to a place of the search's grid nearest first (with
     `placement.slides`), wherever the one judge accepts each from where the ones before leave the object (resting
     with the planning clearance); none when no joint is that far off."""
-    step, cell = obj.step, placement.cell
+    cell = placement.cell
     angles = tuple(float(a) for a in placement.link_deg)
-    off = [((a + step / 2.0) % step) - step / 2.0 for a in angles]  # each link's angle less the nearest on the grid
+    # each link's angle less the nearest orientation of the object's grid (as a perception snaps it)
+    off = [((a - snap_angle(a, obj.orientations)) + 180.0) % 360.0 - 180.0 for a in angles]
     if obj.formulation is Formulation.ABSOLUTE:
         joints = [(k, k - 1, off[k - 1] - (off[k - 2] if k > 1 else 0.0)) for k in range(1, obj.n_links + 1)]
     else:
