@@ -12,7 +12,7 @@ from typing import Callable, Iterator, Mapping, Sequence
 import numpy as np
 import pybullet
 
-from planhrc.geometry import configuration_feasible, rotated
+from planhrc.geometry import PLANNING, configuration_feasible, rotated
 from planhrc.robot_sim.handling import SWEEP_HAZARDS, joint_angles, shorter, turn_order, turn_path
 from planhrc.robot_sim.errors import SimError
 from planhrc.robot_sim.scenarios import HumanEvent
@@ -90,14 +90,17 @@ def _feasible_after(scene: Scene, link: int, delta: float, robot_turn: RobotTurn
                     queued: Sequence[HumanMove] = ()) -> bool:
     """Whether turning `link` (after the human's `queued` moves) keeps the object on the table, clear of the
     robot's body and not overlapping, all the way (with the tolerance of a physical move,
-    `planhrc.geometry.EXECUTION`), and leaves it feasible as drawn (`planhrc.geometry.STRICT`: on the table, not
-    merely hanging over its edge), together with the robot's rotation under way (`robot_turn`: its sweep, from
-    where it started, with the human's turns made, and its end). The human reaches anywhere; whether the robot
-    can reach afterwards is the robot's matter."""
+    `planhrc.geometry.EXECUTION`), and leaves it feasible with the clearance the robot's plans keep
+    (`planhrc.geometry.PLANNING`: 1.5 cm from the table's edges, so that the human's physical turn, a degree or two
+    off, still ends on the table), together with the robot's rotation under way (`robot_turn`: its sweep, from
+    where it started, with the human's turns made, and its end). A problem the object has already (judged the
+    same way) does not stop a move. The human reaches anywhere; whether the robot can reach afterwards is the
+    robot's matter."""
     base, theta = scene.configuration()
     cell = scene.spec.cell()
     geometry, values = scene.spec.geometry(base), tuple(theta)
     before = baseline_problems(geometry, values, cell)
+    before_end = baseline_problems(geometry, values, cell, PLANNING)
     moves = [(m.turned, m.held, m.delta_deg) for m in queued]
     for turned, held, d in moves:
         geometry, values = rotated(geometry, values, turned, held, d)
@@ -112,8 +115,8 @@ def _feasible_after(scene: Scene, link: int, delta: float, robot_turn: RobotTurn
                         before) is not None:
             return False
         geometry, values = rotated(geometry, values, robot_turn.turned, robot_turn.held, robot_turn.delta_deg)
-    return not any(r.code in HAZARDS and (r.code, r.link) not in before
-                   for r in configuration_feasible(geometry, values, cell).reasons)
+    return not any(r.code in HAZARDS and (r.code, r.link) not in before_end
+                   for r in configuration_feasible(geometry, values, cell, tolerance=PLANNING).reasons)
 
 
 def safe_way(scene: Scene, turned: int, held: int, delta_deg: float) -> float | None:

@@ -343,10 +343,12 @@ def is_feasible(spec: SceneSpec, orientations_deg: Sequence[float], base_point_x
 HAZARDS = (Infeasible.OFF_TABLE, Infeasible.INSIDE_ROBOT, Infeasible.OVERLAP)
 
 
-def baseline_problems(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell
-                      ) -> frozenset[tuple[Infeasible, int]]:
-    """(code, link) of the problems a configuration has already (strictly): acting on it does not cause them."""
-    return frozenset((r.code, r.link) for r in configuration_feasible(geometry, orientations_deg, cell).reasons)
+def baseline_problems(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell,
+                      tolerance: Tolerance = STRICT) -> frozenset[tuple[Infeasible, int]]:
+    """(code, link) of the problems a configuration has already (strictly, or judged with `tolerance`): acting on
+    it does not cause them."""
+    return frozenset((r.code, r.link)
+                     for r in configuration_feasible(geometry, orientations_deg, cell, tolerance=tolerance).reasons)
 
 
 def added_hazards(geometry: ObjectGeometry, orientations_deg: Sequence[float], cell: Cell,

@@ -73,6 +73,36 @@ def test_a_considerate_human_leaves_the_object_on_the_table_not_hanging_over_its
         client.disconnect()
 
 
+def test_a_considerate_human_keeps_the_clearance_the_robot_keeps_from_the_tables_edge():
+    """A move ending on the table as drawn but under 1.5 cm from its edge is one a physical turn a degree or two
+    off takes past the edge: a considerate human makes another (a random episode beside the robot: the human's
+    move ended less than 5 mm past the edge)."""
+    from planhrc.geometry import PLANNING
+    from planhrc.robot_sim.human import HumanContext, choose_move
+    from planhrc.robot_sim.scenarios import HumanEvent
+
+    base = (0.66, 0.3875)  # straight, along -y; turning l4 by -45 brings link 5's end within 1.5 cm of the far edge
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    scene = build_scene(client, SceneSpec(load_robot=False, base_point_xy=base))
+    try:
+        cell, geometry = scene.spec.cell(), scene.spec.geometry(base)
+        _, theta = scene.configuration()
+        assert configuration_feasible(geometry, theta, cell, tolerance=PLANNING).ok
+        ahead = rotated(geometry, theta, 4, 3, -45.0)
+        assert configuration_feasible(*ahead, cell, reach_links=()).ok  # on the table as drawn
+        assert [(r.code, r.link) for r in configuration_feasible(*ahead, cell, reach_links=(),
+                                                                  tolerance=PLANNING).reasons] == [("off_table", 5)]
+        event = HumanEvent(at_step=1, when="before", link=4, direction=-1, keep_workable=True)
+        move = choose_move(scene, event, HumanContext(step_deg=45.0))
+        assert move is not None and (move.turned, move.delta_deg) != (4, -45.0)
+        end = rotated(geometry, theta, move.turned, move.held, move.delta_deg)
+        kept = configuration_feasible(*end, cell, reach_links=(), tolerance=PLANNING)
+        assert kept.ok, kept.sentence()
+    finally:
+        scene.close()
+        client.disconnect()
+
+
 def test_a_human_acting_during_a_robot_turn_counts_the_rest_of_that_turn():
     from planhrc.robot_sim.human import HumanContext, RobotTurn, choose_move
     from planhrc.robot_sim.scenarios import HumanEvent
