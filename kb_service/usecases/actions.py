@@ -49,4 +49,5 @@ def next_action(merge: Merging, obj: ArticulatedObject, plan: StoredPlan, action
 def merges(merge_macro_steps: bool, memo: ObjectMemo, plan_id: str) -> Merging:
     """Whether the motions of plan `plan_id` are merged macro steps: the setting, unless a merged motion of that
     plan failed (remedy split: its steps go out one by one); and the steps the plan slides the object before."""
-    return Merging(merge_macro_steps and plan_id not in memo.split_plans, memo.skill_steps(plan_id))
+    breaks = frozenset(s.before_step for s in memo.planned_skills(plan_id))
+    return Merging(merge_macro_steps and plan_id not in memo.split_plans, breaks)

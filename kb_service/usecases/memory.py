@@ -49,23 +49,13 @@ class ObjectMemo:
     later_skills: tuple[PlannedSkill, ...] = ()  # the slides plan `later_plan_id` makes between its turns
     later_plan_id: str | None = None
 
+    def planned_skills(self, plan_id: str) -> tuple[PlannedSkill, ...]:
+        """The slides plan `plan_id` makes between its turns (none for any other plan)."""
+        return self.later_skills if plan_id == self.later_plan_id else ()
+
     def skill_before(self, plan_id: str, step: int) -> PlannedSkill | None:
         """The slide plan `plan_id` makes before its step `step`, if any."""
-        if plan_id != self.later_plan_id:
-            return None
-        return next((s for s in self.later_skills if s.before_step == step), None)
-
-    def skill_steps(self, plan_id: str) -> frozenset[int]:
-        """The steps plan `plan_id` slides the object before."""
-        if plan_id != self.later_plan_id:
-            return frozenset()
-        return frozenset(s.before_step for s in self.later_skills)
-
-    def next_skill_step(self, plan_id: str, step: int) -> int | None:
-        """The first step at or after `step` that plan `plan_id` makes a slide before, if any."""
-        if plan_id != self.later_plan_id:
-            return None
-        return min((s.before_step for s in self.later_skills if s.before_step >= step), default=None)
+        return next((s for s in self.planned_skills(plan_id) if s.before_step == step), None)
 
     @property
     def where(self) -> tuple[float, float] | None:

@@ -86,7 +86,8 @@ def recheck_at(context: Context, seen: Seen, decision: Decision) -> Decision:
         return _replan(decision, f"{decision.reason}; but with the base point measured at ({base[0]:.3f}, "
                                  f"{base[1]:.3f}) and the links as measured, turning link {move.turned} by "
                                  f"{move.delta_deg:+d}° ({motion.id}) would end with {why}: re-plan")
-    until = memo.next_skill_step(plan.id, decision.next_step + 1) or len(plan.actions) + 1
+    until = min((s.before_step for s in memo.planned_skills(plan.id) if s.before_step > decision.next_step),
+                default=len(plan.actions) + 1)
     rest = [move_of(obj, a.spec) for a in sorted(plan.actions, key=lambda a: a.step)
             if decision.next_step <= a.step < until]
     step, problem = leaves_the_table(Placement(geometry, pose), rest)
