@@ -10,9 +10,7 @@ How a new plan is checked (`Validator.check`), by what VAL costs on its domain:
 * **the early answer** (setting `val_early_answer`, a domain with conditional effects, a plan longer than its
   first motion by a piece at least): VAL on the first motion only before the answer, in `val_pieces` pieces at
   once; the rest in `later.LaterPieces`, checked behind the answer once the plan is stored (`follow`), each
-  verdict handed to the caller's recorder (the service writes it to the object's log). A first motion of steps
-  without conditional effects (a bimanual grasp, release or move to the centre) costs VAL its fixed cost only, as
-  one short run does: its handle says `read_in_write` too. A plan planned elsewhere
+  verdict handed to the caller's recorder (the service writes it to the object's log). A plan planned elsewhere
   (a planning worker) may have its first motion's VAL started as soon as its steps are known (`start_first`: the
   first motion's steps replayed here), beside the replay of the rest; `check` keeps those runs only for an outcome
   whose steps, first actions and expected states are the ones they were made from (`FirstPieces.matches`), and
@@ -34,7 +32,6 @@ from planhrc.transition import replay
 from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.fast_downward import has_conditional_effects
-from planhrc.planner.operators import plain_actions
 from planhrc.translator.domain import read_domain_model
 from planhrc.translator.translate import PddlTask, translate
 from planhrc.vocabulary import PlanningStatus
@@ -96,7 +93,7 @@ class VerdictHandle:
                  accepted: PlanOutcome | None = None, config: PlanningConfig | None = None, deadline_at: float = 0.0,
                  later: LaterPieces | None = None, read_in_write: bool = False) -> None:
         self.plan = plan  # as planned, before VAL's verdict
-        self.read_in_write = read_in_write  # a short run: read the verdict inside the write, briefly
+        self.read_in_write = read_in_write  # one short run: read the verdict inside the write, briefly
         self._checks = tuple(checks)
         self._what = what
         self._accepted = accepted or plan
@@ -269,11 +266,9 @@ class Validator:
         except BaseException:
             later.cancel()
             raise
-        plain = plain_actions(task.validation_domain)
-        short = all(action.name.lower() in plain for action in outcome.actions[:before[-1].last])
         return VerdictHandle(outcome, checks, what=f"its first {before[-1].last} steps",
                              accepted=replace(outcome, validated_steps=before[-1].last), config=self.config,
-                             deadline_at=deadline_at, later=later, read_in_write=short)
+                             deadline_at=deadline_at, later=later)
 
     # -- plans behind the answer --------------------------------------------------------------------------------
     def follow(self, object_id: str, plan_id: str | None, handle: VerdictHandle | None, record: Recorder,

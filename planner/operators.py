@@ -62,19 +62,6 @@ def read_operators(text: str) -> DomainOperators:
     return DomainOperators(domain.types, operators, fluent)
 
 
-@lru_cache(maxsize=8)
-def plain_actions(text: str) -> frozenset[str]:
-    """The names of the domain's actions whose every effect is unconditional and unquantified (no `when`, no
-    `forall`): a step of one costs VAL next to nothing beyond its fixed cost. None of them when the domain is outside
-    what is read here."""
-    try:
-        operators = read_operators(text).operators
-    except PlannerError:
-        return frozenset()
-    return frozenset(op.name for op in operators
-                     if all(not block.variables and not block.condition for block in op.effects))
-
-
 def normalise_action(schema: ActionSchema) -> Operator:
     where = f"action {schema.name}"
     precondition = tuple(literals(schema.precondition, f"{where}: precondition"))

@@ -239,33 +239,6 @@ def test_the_early_answer_on_the_planning_pool_path(tmp_path):
         assert all(v.data["verdict"] == "accepted" for v in kinds(kb, oid, "val_verdict"))
 
 
-@pytest.mark.parametrize("formulation, read_in_write", [("bimanual", True), ("absolute", False)])
-def test_a_first_motion_without_conditional_effects_is_read_in_the_write_as_one_short_run_is(formulation,
-                                                                                          read_in_write):
-    """A bimanual plan from links no hand holds begins with a grasp (or a move to the centre): a step without
-    conditional effects, which VAL checks at its fixed cost, as it checks a relative plan in one short run; its
-    verdict is read inside the write. An absolute plan's first motion turns joints (quantified conditional effects):
-    its verdict is waited for before the write. Either way the first motion alone is checked before the answer."""
-    from planhrc.pipeline import ReplanRequest, Validator, config_from_settings, plan_for_service
-
-    obj = make_object("bar", formulation, LINKS, K)
-    config = config_from_settings(make_settings())
-    validator = Validator(config, early_answer=True, merge_macro_steps=True, armed=False)
-    try:
-        n = obj.n_joints
-        init, goal = obj.state(START[:n]), obj.configuration_atoms(GOAL[:n])
-        planned = plan_for_service(ReplanRequest(obj, init, goal, time.monotonic() + 60), config, validator)
-        first = planned.outcome.actions[0].name
-        assert (first in ("grasplinks", "movetocentre")) == (formulation == "bimanual")
-        assert planned.verdict.read_in_write is read_in_write
-        checked = planned.verdict.outcome(None)
-        assert checked is not None and checked.solved and not checked.validated
-        assert 0 < checked.validated_steps < len(checked.actions)  # the first motion only, the rest behind
-        planned.verdict.cancel()
-    finally:
-        validator.close()
-
-
 # -- the parts ---------------------------------------------------------------------------------------------------
 def test_piece_bounds_put_the_first_motion_alone_then_cut_the_rest():
     assert pipeline.piece_bounds(40, 2, 3) == [(0, 3), (3, 21), (21, 40)]
