@@ -16,7 +16,16 @@
    not the start-up the server did once) and closes its copy of the descriptor: the reader then sees end-of-file.
    The server writes one byte when it is ready and exits when the other end of its socket closes; a run dies with
    the server (parent-death signal), so no run outlives the service that asked for it.
-   Without PLANHRC_VALFORK_FD the library does nothing: `Validate` runs as usual. */
+   Without PLANHRC_VALFORK_FD the library does nothing: `Validate` runs as usual.
+
+   Past the domain (PLANHRC_VALFORK_AFTER, the path of a problem that is not there, with PLANHRC_VALFORK_PLAN, a
+   plan's): the process runs VAL's `main` itself, on `Validate DOMAIN AFTER PLAN`, as a run would, and serves
+   requests only when VAL opens AFTER: VAL has then read and parsed the domain, and does nothing before that open
+   that depends on the problem or the plan (it reads its files in order: the domain, the problem, the plan). A run
+   is forked right there: it opens the request's problem in place of AFTER (and later the request's plan in place
+   of PLAN) and goes on with VAL's `main` from that point, so it does what `Validate DOMAIN PROBLEM PLAN` does once
+   the domain is parsed, without parsing it again. A request names the same three files, and its domain must be the
+   server's (else it is refused). */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <errno.h>
@@ -97,8 +106,10 @@ static void reap(int sig) {
     errno = saved;
 }
 
-static int serve(start_fn real, main_fn main_, char *argv0, int ctl, void (*init)(void), void (*fini)(void),
-                 void (*rtld_fini)(void), void *stack_end) {
+/* Serve requests on `ctl` until its other end closes (then exit). Returns only in a run, forked for a request, with
+   the request's arguments (argv0 first, NULL-terminated; `*argc` of them), its standard output and error the
+   request's descriptor. With `domain`, a request must name three files, the first `domain`. */
+static char **serve(int ctl, char *argv0, const char *domain, int *argc) {
     for (int i = 0; i < MAX_RUNS; i++) run_out[i] = -1;
     sigset_t chld, old;
     sigemptyset(&chld);
@@ -111,6 +122,7 @@ static int serve(start_fn real, main_fn main_, char *argv0, int ctl, void (*init
     signal(SIGPIPE, SIG_IGN); /* a run's status written after its reader has gone (a cancelled check) */
     pid_t server = getpid();
     static char buf[MAX_REQUEST];
+    static char *args[MAX_ARGS + 2];
     write_all(ctl, "R", 1);
     for (;;) {
         union {
@@ -132,23 +144,23 @@ static int serve(start_fn real, main_fn main_, char *argv0, int ctl, void (*init
         struct cmsghdr *c = CMSG_FIRSTHDR(&msg);
         if (c && c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_RIGHTS && c->cmsg_len == CMSG_LEN(sizeof(int)))
             memcpy(&out, CMSG_DATA(c), sizeof(int));
-        char *argv[MAX_ARGS + 2];
-        int argc = 0, nice_by = 0, fits = 1;
-        argv[argc++] = argv0;
+        int count = 0, nice_by = 0, fits = 1;
+        args[count++] = argv0;
         for (char *p = buf; p < buf + n; p += strlen(p) + 1) {
             if (p == buf) nice_by = atoi(p);
-            else if (argc <= MAX_ARGS) argv[argc++] = p;
+            else if (count <= MAX_ARGS) args[count++] = p;
             else fits = 0;
         }
-        argv[argc] = NULL;
+        args[count] = NULL;
+        if (domain != NULL && (count != 4 || strcmp(args[1], domain) != 0)) fits = 0;
         pid_t run = -1;
         sigprocmask(SIG_BLOCK, &chld, &old);
         int slot = -1;
         for (int i = 0; i < MAX_RUNS && slot < 0; i++)
             if (run_pid[i] == 0) slot = i;
-        if (out >= 0 && argc > 1 && fits && slot >= 0 && (msg.msg_flags & (MSG_TRUNC | MSG_CTRUNC)) == 0) {
+        if (out >= 0 && count > 1 && fits && slot >= 0 && (msg.msg_flags & (MSG_TRUNC | MSG_CTRUNC)) == 0) {
             run = fork();
-            if (run == 0) { /* the run: VAL's own start-up and main, on the request's arguments */
+            if (run == 0) { /* the run: VAL's own start-up and main, or the rest of main, on the request's files */
                 struct sigaction dfl;
                 memset(&dfl, 0, sizeof dfl);
                 dfl.sa_handler = SIG_DFL;
@@ -162,7 +174,8 @@ static int serve(start_fn real, main_fn main_, char *argv0, int ctl, void (*init
                 close(ctl);
                 if (dup2(out, 1) < 0 || dup2(out, 2) < 0) _exit(127);
                 if (out > 2) close(out);
-                _exit(real(main_, argc, argv, init, fini, rtld_fini, stack_end));
+                *argc = count;
+                return args;
             }
             if (run > 0) { /* also here: the group exists when the reply arrives */
                 setpgid(run, run);
@@ -178,6 +191,40 @@ static int serve(start_fn real, main_fn main_, char *argv0, int ctl, void (*init
     }
 }
 
+/* Past the domain: the server's descriptor, its domain, the paths that stand for a run's problem and plan; in a
+   run, the request's problem and plan. */
+static int after_ctl = -1;
+static char *after_domain, *after_problem, *after_plan, *run_problem, *run_plan;
+static char after_argv0[4096];
+static char **val_argv; /* VAL's arguments: a run writes its plan's path over the plan's stand-in, which VAL prints */
+
+typedef FILE *(*fopen_fn)(const char *, const char *);
+
+/* VAL opens a file (`fopen` or `fopen64`, as its C++ library calls it): past the domain, the problem's stand-in is
+   where the server serves (a run goes on from here with its own problem), and a run's plan stand-in is its plan. */
+static FILE *opened(const char *which, const char *path, const char *mode) {
+    fopen_fn real = (fopen_fn)dlsym(RTLD_NEXT, which);
+    if (real == NULL) {
+        errno = ENOSYS;
+        return NULL;
+    }
+    if (path != NULL && after_problem != NULL) {
+        if (run_problem == NULL && after_ctl >= 0 && strcmp(path, after_problem) == 0) {
+            int count = 0;
+            char **args = serve(after_ctl, after_argv0, after_domain, &count);
+            run_problem = args[2];
+            run_plan = args[3];
+            if (strlen(run_plan) <= strlen(val_argv[3])) strcpy(val_argv[3], run_plan);
+            return real(run_problem, mode);
+        }
+        if (run_plan != NULL && after_plan != NULL && strcmp(path, after_plan) == 0) return real(run_plan, mode);
+    }
+    return real(path, mode);
+}
+
+FILE *fopen(const char *path, const char *mode) { return opened("fopen", path, mode); }
+FILE *fopen64(const char *path, const char *mode) { return opened("fopen64", path, mode); }
+
 int __libc_start_main(main_fn main_, int argc, char **argv, void (*init)(void), void (*fini)(void),
                       void (*rtld_fini)(void), void *stack_end) {
     start_fn real = (start_fn)dlsym(RTLD_NEXT, "__libc_start_main");
@@ -185,6 +232,23 @@ int __libc_start_main(main_fn main_, int argc, char **argv, void (*init)(void), 
     if (real == NULL) _exit(127);
     if (fd == NULL || *fd == '\0') return real(main_, argc, argv, init, fini, rtld_fini, stack_end);
     int ctl = atoi(fd);
+    const char *after = getenv("PLANHRC_VALFORK_AFTER"), *plan = getenv("PLANHRC_VALFORK_PLAN");
+    if (after != NULL && *after != '\0') { /* past the domain: VAL's main, served from its problem's open */
+        if (argc != 4 || plan == NULL || strcmp(argv[2], after) != 0 || strcmp(argv[3], plan) != 0) _exit(127);
+        after_ctl = ctl;
+        after_domain = strdup(argv[1]);
+        after_problem = strdup(after);
+        after_plan = strdup(plan);
+        snprintf(after_argv0, sizeof after_argv0, "%s", argv[0]);
+        val_argv = argv;
+        unsetenv("PLANHRC_VALFORK_FD");
+        unsetenv("PLANHRC_VALFORK_AFTER");
+        unsetenv("PLANHRC_VALFORK_PLAN");
+        if (after_domain == NULL || after_problem == NULL || after_plan == NULL) _exit(127);
+        return real(main_, argc, argv, init, fini, rtld_fini, stack_end);
+    }
     unsetenv("PLANHRC_VALFORK_FD");
-    return serve(real, main_, argc > 0 ? argv[0] : "Validate", ctl, init, fini, rtld_fini, stack_end);
+    int count = 0;
+    char **args = serve(ctl, argc > 0 ? argv[0] : "Validate", NULL, &count); /* returns in a run only */
+    _exit(real(main_, count, args, init, fini, rtld_fini, stack_end));
 }

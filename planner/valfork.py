@@ -8,6 +8,13 @@ run that calls VAL's unchanged `main` on the request's files, so it reads and ch
 `Validate DOMAIN PROBLEM PLAN` does, and writes the same output (the tests compare them). A run is an ordinary
 `ValRun` from there (`ForkedProcess` stands for its Popen).
 
+A server past a domain (`start(domain=...)`) goes further, as AFL's deferred fork server does: it runs VAL's `main`
+on `Validate DOMAIN <problem stand-in> <plan stand-in>` and serves requests only when VAL opens the problem's
+stand-in, the domain read and parsed (VAL reads its files in order). Each run goes on from that `fopen`, on the
+request's problem and then its plan, so it does what `Validate DOMAIN PROBLEM PLAN` does after the domain, without
+parsing the domain again: the same output byte for byte (the run writes its plan's path over the stand-in that VAL
+prints), the same exit code. A request must name the server's own domain file.
+
 The server ends when this process closes its socket or dies (it reads end-of-file), and its runs die with it
 (parent-death signal). Without a C compiler, on a platform without glibc, or when the server does not start, there
 is no server: the checks run as before (`start`: None).
@@ -39,6 +46,9 @@ TRAILER = b"\nplanhrc-valfork-status "  # the server writes it, the run's status
 START_TIMEOUT_S = 5.0  # how long the server may take to be ready
 REPLY_TIMEOUT_S = 5.0  # how long a request may wait for the run's pid
 COMPILE_TIMEOUT_S = 60.0
+# A server past a domain: room in its plan's stand-in for a run's plan path, written over it so that the run's
+# output names its own plan, as `Validate`'s does
+PLAN_PATH_ROOM = 1024
 
 
 class ForkServerError(PlannerError, OSError):
@@ -111,7 +121,8 @@ class ForkServer:
     """One `Validate` process serving forked runs (see the module's note); thread-safe. `start()` makes one, or
     None when it cannot be had here."""
 
-    def __init__(self, proc: subprocess.Popen[bytes], sock: socket.socket) -> None:
+    def __init__(self, proc: subprocess.Popen[bytes], sock: socket.socket, domain: str | None = None) -> None:
+        self.domain = domain  # the domain file it is past (its runs' first file), or None: any files
         self._proc = proc
         self._sock = sock
         self._lock = threading.Lock()
@@ -122,7 +133,9 @@ class ForkServer:
         return self._proc.pid
 
     @classmethod
-    def start(cls, folder: Path | None = None) -> ForkServer | None:
+    def start(cls, folder: Path | None = None, domain: str | None = None) -> ForkServer | None:
+        """A server (None when none can be had here); with `domain` (a domain file's absolute path), one past that
+        domain (see the module's note), whose runs must name it."""
         lib = library(folder)
         if lib is None:
             return None
@@ -131,8 +144,14 @@ class ForkServer:
         env = val_env(binary)
         env.update({"LD_PRELOAD": str(lib), "PLANHRC_VALFORK_FD": str(theirs.fileno()),
                     "LD_BIND_NOW": "1"})  # every symbol bound once, here, rather than lazily in each run
+        argv = [str(binary)]
+        if domain is not None:  # stand-ins for a run's problem and plan, paths no file has
+            stand_in = f"{domain}.{os.getpid()}-{threading.get_ident()}"
+            stand_ins = [f"{stand_in}-problem.absent", f"{stand_in}-plan.absent" + "/" * PLAN_PATH_ROOM]
+            env.update({"PLANHRC_VALFORK_AFTER": stand_ins[0], "PLANHRC_VALFORK_PLAN": stand_ins[1]})
+            argv += [domain, *stand_ins]
         try:
-            proc = subprocess.Popen([str(binary)], env=env, pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+            proc = subprocess.Popen(argv, env=env, pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
         except OSError as exc:
             ours.close()
@@ -152,7 +171,7 @@ class ForkServer:
             _stop(proc)
             return None
         ours.settimeout(REPLY_TIMEOUT_S)
-        return cls(proc, ours)
+        return cls(proc, ours, domain)
 
     def run(self, files: Sequence[str]) -> ForkedProcess:
         """A run of VAL on `files` (absolute paths: domain, problem, plan), started now."""

@@ -88,7 +88,7 @@ class ValRun:
     `verdict(t)` waits up to t seconds (None: until VAL answers) and gives the result, or None while VAL still
     runs; it may be asked again. `result(t)` waits and raises PlannerError when VAL does not answer in time
     (the process group is killed). `cancel()` kills the run; every way out removes the run's files (`files`:
-    domain, problem, plan) and, when given, their folder `tmp`.
+    domain, problem, plan; but not those of `shared`, a fork server's domain) and, when given, their folder `tmp`.
 
     The verdict's `cpu_s` is the CPU (user + system) the run used on this check, as the kernel counted it when the
     run was reaped: a process of this one is reaped here with `os.wait4` (the same wait as `Popen.wait`, with the
@@ -99,12 +99,13 @@ class ValRun:
 
     def __init__(self, proc: subprocess.Popen[bytes] | ForkedRun, files: Sequence[str], tmp: str | None, *,
                  nice: int = 0, on_start: Callable[[int], None] | None = None, piped_problem: str | None = None,
-                 spent_s: float | None = 0.0) -> None:
+                 spent_s: float | None = 0.0, shared: Sequence[str] = ()) -> None:
         self._start = time.perf_counter()
         self._proc = proc
         self._spent_s = spent_s
         self._piped_problem = piped_problem  # the problem's text when VAL read it from a pipe (an armed run)
         self._files = list(files)
+        self._shared = frozenset(shared)
         self._tmp = tmp
         self._removed = False
         self._nice = nice
@@ -211,7 +212,7 @@ class ValRun:
 
     def _cleanup(self) -> None:
         if not self._removed:
-            remove_files(self._files, self._tmp)
+            remove_files([f for f in self._files if f not in self._shared], self._tmp)
             self._removed = True
 
 

@@ -1,5 +1,5 @@
 """VAL's fork server (`planner.valfork`): its runs write what `Validate` started on its own writes, with the same
-exit code; the CPU the server gives after a run's status is what the kernel counted for the run; a cancelled or
+exit code, from VAL's start-up or from past a domain; the CPU the server gives after a run's status is what the kernel counted for the run; a cancelled or
 killed run leaves the server serving; nothing outlives the owner; without a C compiler the checks go on as before."""
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from planhrc.planner.armed import ArmedValidators
 from planhrc.planner.errors import PlannerError
 from planhrc.planner.validate import (VAL_ADDRESS_SPACE_BYTES, VAL_FILES, ValRun, plan_text, val_env,
                                       validate_binary)
-from planhrc.planner.valfork import ForkedProcess, ForkServer, library
+from planhrc.planner.valfork import ForkedProcess, ForkServer, ForkServerError, library
 from tests.processes import alive, left_alive, pids_of_a_killed_owner, reaped_cpu_s
 from tests.test_val_runs import DOMAIN, PAPER_ABSOLUTE, _task
 
@@ -76,6 +76,63 @@ def test_a_forked_run_writes_what_validate_on_its_own_writes(server, tmp_path, f
         assert forked == cold, name
     assert _cold(_files(tmp_path / "whole", domain, problem, plan))[1] == 0
     assert b"Plan valid" in _forked(server, [str(tmp_path / "whole" / n) for n in VAL_FILES])[0]
+
+
+@pytest.fixture(scope="module")
+def past_servers(tmp_path_factory):
+    """A server past each domain of the tests, its domain's file beside it."""
+    folder = tmp_path_factory.mktemp("past")
+    servers = {}
+    for name, text in (("relative", DOMAIN), ("absolute", PAPER_ABSOLUTE)):
+        path = folder / f"{name}-domain.pddl"
+        path.write_text(text)
+        servers[name] = ForkServer.start(domain=str(path))
+        assert servers[name] is not None and servers[name].domain == str(path)
+    yield servers
+    for past in servers.values():
+        past.close()
+
+
+def _past_files(past: ForkServer, folder: Path, problem: str, plan: list[str]) -> list[str]:
+    files = _files(folder, "", problem, plan)
+    assert past.domain is not None
+    os.unlink(files[0])
+    files[0] = past.domain
+    return files
+
+
+@pytest.mark.parametrize("formulation", ["relative", "absolute"])
+def test_a_run_past_the_domain_writes_what_validate_on_its_own_writes(past_servers, tmp_path, formulation):
+    """Right plans, wrong ones, a plan naming an action the domain lacks, a problem VAL cannot parse, a missing
+    plan: byte for byte and exit code for exit code what `Validate DOMAIN PROBLEM PLAN` gives (the plan's path
+    included, which VAL prints), one run after another on the same server."""
+    past = past_servers[formulation]
+    problem, plan = _task(formulation)
+    swapped = [plan[1], plan[0], *plan[2:]] if len(plan) > 2 else plan[:-1]
+    unknown = ["(fly obj1_l1 obj1_l2)", *plan]
+    broken = problem.replace("(:init", "(:init (", 1)
+    cases = [("whole", problem, plan), ("short", problem, plan[:-1]), ("swapped", problem, swapped),
+             ("unknown", problem, unknown), ("broken", broken, plan), ("whole-again", problem, plan)]
+    codes = set()
+    for name, text, steps in cases:
+        files = _past_files(past, tmp_path / name, text, steps)
+        forked, cold = _forked(past, files), _cold(files)
+        assert forked == cold, name
+        codes.add(cold[1])
+    files = _past_files(past, tmp_path / "no-plan", problem, plan)
+    files[2] = str(tmp_path / "no-such-plan.txt")
+    assert _forked(past, files) == _cold(files)
+    assert len(codes) > 1 and b"Plan valid" in _forked(past, _past_files(past, tmp_path / "w", problem, plan))[0]
+
+
+def test_a_server_past_a_domain_refuses_a_run_on_another(past_servers, tmp_path):
+    problem, plan = _task()
+    other = _files(tmp_path, DOMAIN, problem, plan)  # the same text, another file: not what the server parsed
+    with pytest.raises(ForkServerError, match="refused"):
+        past_servers["relative"].run(other)
+    assert past_servers["relative"].alive()
+    assert _forked(past_servers["relative"], _past_files(past_servers["relative"], tmp_path / "ok", problem,
+                                                         plan))[1] == 0
 
 
 def test_a_forked_run_s_status_carries_the_cpu_the_kernel_counted_for_it(server, tmp_path):
@@ -162,7 +219,8 @@ def test_a_forked_run_cannot_take_the_hosts_memory(server, tmp_path):
         proc.stdout.close()
 
 
-def test_the_server_and_its_runs_end_with_their_owner_killed_with_sigkill(tmp_path):
+@pytest.mark.parametrize("past", [False, True], ids=["from-start-up", "past-the-domain"])
+def test_the_server_and_its_runs_end_with_their_owner_killed_with_sigkill(tmp_path, past):
     """The owner holds the server's socket: when it dies the server reads end-of-file and exits, and a run still
     going (here waiting on a problem nobody writes) dies with the server."""
     problem, plan = _task()
@@ -172,7 +230,7 @@ def test_the_server_and_its_runs_end_with_their_owner_killed_with_sigkill(tmp_pa
     script = textwrap.dedent(f"""
         import time
         from planhrc.planner.valfork import ForkServer
-        forks = ForkServer.start()
+        forks = ForkServer.start(domain={files[0]!r} if {past!r} else None)
         proc = forks.run({files!r})
         print(forks.pid, proc.pid, flush=True)
         time.sleep(60)
@@ -188,15 +246,24 @@ def test_checks_run_on_the_fork_server_and_arm_without_a_c_compiler(monkeypatch)
     try:
         assert forking.start(DOMAIN, problem, plan).verdict(None).valid
         assert not forking.start(DOMAIN, problem, plan[:-1]).verdict(None).valid
-        assert forking.counts == {"forked": 2, "armed": 0, "cold": 0}
-        assert forking.armed_count() == 0  # nothing armed beside the server
+        assert forking.counts["forked"] + forking.counts["past"] == 2
+        assert forking.counts["armed"] == forking.counts["cold"] == 0
+        assert forking.armed_count() == 0  # nothing armed beside the servers
+        deadline = time.monotonic() + 30
+        while forking.past_count() == 0 and time.monotonic() < deadline:  # started off the checks' thread
+            time.sleep(0.01)
+        assert forking.past_count() == 1
+        before = forking.counts["past"]
+        assert not forking.start(DOMAIN, problem, plan[1:]).verdict(None).valid
+        assert forking.start(DOMAIN, problem, plan).verdict(None).valid
+        assert forking.counts["past"] == before + 2  # once the domain's server is up, its checks run past it
     finally:
         forking.close()
     monkeypatch.setattr("planhrc.planner.valfork.library", lambda folder=None: None)
     armed = ArmedValidators(arm_delay_s=0.0)
     try:
         assert armed.start(DOMAIN, problem, plan).verdict(None).valid
-        assert armed.counts == {"forked": 0, "armed": 0, "cold": 1} and not armed.forking
+        assert armed.counts == {"forked": 0, "past": 0, "armed": 0, "cold": 1} and not armed.forking
     finally:
         armed.close()
 

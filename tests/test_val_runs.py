@@ -134,12 +134,12 @@ def test_an_armed_process_gives_the_verdict_of_a_cold_run(formulation):
     armed = ArmedValidators(arm_delay_s=0.0, forking=False)
     try:
         assert armed.start(domain, problem, plan).verdict(None).valid  # cold: nothing armed yet
-        assert armed.counts == {"forked": 0, "armed": 0, "cold": 1}
+        assert armed.counts == {"forked": 0, "past": 0, "armed": 0, "cold": 1}
         _armed_once(armed, domain)
         good = armed.start(domain, problem, plan).verdict(None)
         _armed_once(armed, domain)
         bad = armed.start(domain, problem, plan[:-1]).verdict(None)
-        assert armed.counts == {"forked": 0, "armed": 2, "cold": 1}
+        assert armed.counts == {"forked": 0, "past": 0, "armed": 2, "cold": 1}
         assert good.valid
         assert not bad.valid and bad.reason == validate_plan(domain, problem, plan[:-1]).reason
     finally:
