@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import replace
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Iterable, Protocol, Sequence
 
 from planhrc.model import ArticulatedObject
 from planhrc.planner.armed import ArmedValidators
@@ -83,9 +83,10 @@ def start_val(task: PddlTask, steps: Sequence[str], armed: ArmedValidators | Non
     return start_validation(task.validation_domain, task.problem, steps)
 
 
-def start_runs(task: PddlTask, pieces: Sequence[tuple[str, Sequence[str]]], armed: ArmedValidators | None = None
+def start_runs(task: PddlTask, pieces: Iterable[tuple[str, Sequence[str]]], armed: ArmedValidators | None = None
                ) -> tuple[ValCheck, ...]:
-    """One VAL run per (problem, steps) piece, all started now."""
+    """One VAL run per (problem, steps) piece, all started now, each as soon as `pieces` gives it (a piece built
+    lazily has VAL under way on the pieces before it meanwhile)."""
     checks: list[ValCheck] = []
     try:
         for problem, steps in pieces:

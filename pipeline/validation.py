@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 import threading
 from dataclasses import dataclass, replace
-from typing import Sequence
+from typing import Iterator, Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, State
 from planhrc.transition import replay
@@ -189,8 +189,7 @@ class Validator:
         prefix = tuple(steps[:first])
         actions, states = replay(read_domain_model(self.config.tbox_path, obj.formulation.value), init, prefix,
                                  deadline_at)
-        pieces = self._first_pieces(obj, task, steps, states, first)
-        checks = val_runs.start_runs(task, [(p.problem, p.steps) for p in pieces], self.armed)
+        pieces, checks = self._start_first_pieces(obj, task, steps, states, first)
         return FirstPieces(tuple(steps), actions, tuple(states[i] for i in range(first + 1)), first, pieces, checks)
 
     def check(self, obj: ArticulatedObject, outcome: PlanOutcome, deadline_at: float,
@@ -240,11 +239,24 @@ class Validator:
         return piece_bounds(n_steps, self.config.val_pieces, first, max(1, self.config.val_pieces),
                             max(self.config.val_pieces, rest // LATER_PIECE_STEPS))
 
-    def _first_pieces(self, obj: ArticulatedObject, task: PddlTask, steps: Sequence[str], states: Sequence[State],
-                      first: int) -> tuple[ValPiece, ...]:
-        """The pieces of the first motion (`first` steps) VAL checks before the early answer."""
-        return tuple(piece_of(obj, task.problem, steps, states, a + 1, b, task.validation_domain)
-                     for a, b in self._bounds(len(steps), first) if b <= first)
+    def _first_bounds(self, n_steps: int, first: int) -> list[tuple[int, int]]:
+        """The pieces of the first motion (`first` steps) as `_bounds` cuts them."""
+        return [(a, b) for a, b in self._bounds(n_steps, first) if b <= first]
+
+    def _start_first_pieces(self, obj: ArticulatedObject, task: PddlTask, steps: Sequence[str],
+                            states: Sequence[State], first: int
+                            ) -> tuple[tuple[ValPiece, ...], tuple[val_runs.ValCheck, ...]]:
+        """The pieces of the first motion (`first` steps) VAL checks before the early answer, and VAL's runs on
+        them: each started as soon as its piece is built, so that VAL checks a piece while the next is built."""
+        built: list[ValPiece] = []
+
+        def pieces() -> Iterator[tuple[str, tuple[str, ...]]]:
+            for a, b in self._first_bounds(len(steps), first):
+                built.append(piece_of(obj, task.problem, steps, states, a + 1, b, task.validation_domain))
+                yield built[-1].problem, built[-1].steps
+
+        checks = val_runs.start_runs(task, pieces(), self.armed)
+        return tuple(built), checks
 
     def _check_first(self, obj: ArticulatedObject, outcome: PlanOutcome, task: PddlTask, first: int,
                      deadline_at: float, started: FirstPieces | None = None) -> VerdictHandle:
@@ -252,19 +264,20 @@ class Validator:
         (VAL's cost grows with the steps of such a domain, so pieces at once answer sooner than one run; with
         `started`, those runs already under way), the rest of the plan left to `LaterPieces`."""
         bounds = self._bounds(len(outcome.steps), first)
-        before = (started.pieces if started is not None
-                  else self._first_pieces(obj, task, outcome.steps, outcome.expected_states, first))
+        if started is None:
+            before, checks = self._start_first_pieces(obj, task, outcome.steps, outcome.expected_states, first)
+        else:
+            before, checks = started.pieces, started.checks
 
         def build(a: int, b: int) -> ValPiece:
             return piece_of(obj, task.problem, outcome.steps, outcome.expected_states, a, b, task.validation_domain)
 
-        later = LaterPieces(task.validation_domain, tuple((a + 1, b) for a, b in bounds[len(before):]), build,
-                            self.config.deadline_s, accepted=tuple((p.first, p.last) for p in before))
         try:
-            checks = (started.checks if started is not None
-                      else val_runs.start_runs(task, [(p.problem, p.steps) for p in before], self.armed))
+            later = LaterPieces(task.validation_domain, tuple((a + 1, b) for a, b in bounds[len(before):]), build,
+                                self.config.deadline_s, accepted=tuple((p.first, p.last) for p in before))
         except BaseException:
-            later.cancel()
+            for check in checks:
+                check.cancel()
             raise
         return VerdictHandle(outcome, checks, what=f"its first {before[-1].last} steps",
                              accepted=replace(outcome, validated_steps=before[-1].last), config=self.config,

@@ -15,7 +15,7 @@ import pytest
 from planhrc.kb_service import usecases
 from planhrc.kb_service.store import checks
 from planhrc.kb_service.usecases import GoalRequest, NewObject
-from planhrc.pipeline import MIN_PIECE_STEPS, later, val_runs, validation
+from planhrc.pipeline import MIN_PIECE_STEPS, later, piece_of, val_runs, validation
 from planhrc.model import make_object
 from tests.servers import TOKEN, serving, token_client
 from tests.test_val_gate import adoption, kinds, perceived, service
@@ -241,8 +241,20 @@ def test_a_replan_from_a_planning_worker_starts_val_on_its_first_motion_before_t
     obj, goal, init, config, validator = _a_random_task_with_the_early_answer(links, k, rng)
     order: list[tuple[str, tuple[tuple[str, tuple[str, ...]], ...]]] = []
     real_start = val_runs.start_runs
-    monkeypatch.setattr(val_runs, "start_runs", lambda task, pieces, armed=None: (
-        order.append(("val", tuple((p, tuple(s)) for p, s in pieces))), real_start(task, pieces, armed))[1])
+
+    def start_runs(task, pieces, armed=None):  # each piece recorded as VAL starts on it
+        seen: list[tuple[str, tuple[str, ...]]] = []
+
+        def recorded():
+            for problem, steps in pieces:
+                seen.append((problem, tuple(steps)))
+                yield problem, steps
+
+        checks = real_start(task, recorded(), armed)
+        order.append(("val", tuple(seen)))
+        return checks
+
+    monkeypatch.setattr(val_runs, "start_runs", start_runs)
     try:
         with PlanningPool(1, 1) as pool:
             real_plan = pool.plan
@@ -260,7 +272,9 @@ def test_a_replan_from_a_planning_worker_starts_val_on_its_first_motion_before_t
             assert [what for what, _ in order] == ["val", "outcome"]  # VAL began before the replay came back
             first = early_answer_first_piece(obj, outcome, True)
             assert first is not None and planned.verdict.steps_before_answer == first
-            cut = validator._first_pieces(obj, outcome.task, outcome.steps, outcome.expected_states, first)
+            cut = [piece_of(obj, outcome.task.problem, outcome.steps, outcome.expected_states, a + 1, b,
+                            outcome.task.validation_domain) for a, b in validator._first_bounds(len(outcome.steps),
+                                                                                                  first)]
             assert order[0][1] == tuple((p.problem, p.steps) for p in cut)  # what the early answer checks
             assert verdict is not None and verdict.solved and verdict.validated_steps == first
             planned.verdict.cancel()
