@@ -1,6 +1,7 @@
-"""VAL's fork server (`planner.valfork`): its runs write what `Validate` started on its own writes, with the same
-exit code, from VAL's start-up or from past a domain; the CPU the server gives after a run's status is what the kernel counted for the run; a cancelled or
-killed run leaves the server serving; nothing outlives the owner; without a C compiler the checks go on as before."""
+"""VAL's fork server (`planner.valfork`): its runs write what `Validate` started on its own writes, with the same exit
+code, from VAL's start-up or from past a domain; the CPU the server gives after a run's status is what the kernel
+counted for the run; a cancelled or killed run leaves the server serving; nothing outlives the owner; without a C
+compiler the checks go on as before."""
 from __future__ import annotations
 
 import os
