@@ -129,11 +129,18 @@ def judge(outcome: PlanOutcome, checks: Sequence[ValCheck], config: PlanningConf
 
 
 def check_piece(domain: str, piece: ValPiece, timeout_s: float, nice: int = 0,
-                on_start: Callable[[int], None] | None = None, raising: bool = False) -> ValidationResult:
-    """VAL on one piece, waited for; a VAL that does not finish within `timeout_s` (or cannot run) is a refusal
-    saying so, or with `raising` the PlannerError."""
+                on_start: Callable[[int], None] | None = None, raising: bool = False,
+                armed: ArmedValidators | None = None) -> ValidationResult:
+    """VAL on one piece (on `armed`'s VAL when given: a fork server's run, its start-up and the domain's parse done
+    once), waited for; a VAL that does not finish within `timeout_s` (or cannot run) is a refusal saying so, or
+    with `raising` the PlannerError."""
     try:
-        return validate_plan(domain, piece.problem, piece.steps, timeout_s, nice=nice, on_start=on_start)
+        if armed is None:
+            return validate_plan(domain, piece.problem, piece.steps, timeout_s, nice=nice, on_start=on_start)
+        run = armed.start(domain, piece.problem, piece.steps, nice=nice)
+        if on_start is not None:
+            on_start(run.pid)
+        return run.result(timeout_s)
     except PlannerError as exc:
         if raising:
             raise

@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import threading
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Iterator, Sequence
 
 from planhrc.model import ActionSpec, ArticulatedObject, State
@@ -274,7 +275,8 @@ class Validator:
 
         try:
             later = LaterPieces(task.validation_domain, tuple((a + 1, b) for a, b in bounds[len(before):]), build,
-                                self.config.deadline_s, accepted=tuple((p.first, p.last) for p in before))
+                                self.config.deadline_s, accepted=tuple((p.first, p.last) for p in before),
+                                check=partial(val_runs.check_piece, armed=self.armed))
         except BaseException:
             for check in checks:
                 check.cancel()
@@ -329,7 +331,7 @@ class Validator:
         left = time_left(deadline_at)
         if left <= 0:
             raise PlannerError("no time left for VAL")
-        result = val_runs.check_piece(task.validation_domain, piece, left, raising=True)
+        result = val_runs.check_piece(task.validation_domain, piece, left, raising=True, armed=self.armed)
         verdict = Verdict(result.valid, "Plan valid" if result.valid else result.reason)
         return PieceVerdict(number, first, last, verdict, result.seconds, result.cpu_s)
 

@@ -15,7 +15,7 @@ import pytest
 from planhrc.kb_service import usecases
 from planhrc.kb_service.store import checks
 from planhrc.kb_service.usecases import GoalRequest, NewObject
-from planhrc.pipeline import MIN_PIECE_STEPS, later, piece_of, val_runs, validation
+from planhrc.pipeline import MIN_PIECE_STEPS, piece_of, val_runs, validation
 from planhrc.model import make_object
 from tests.servers import TOKEN, serving, token_client
 from tests.test_val_gate import adoption, kinds, perceived, service
@@ -37,9 +37,10 @@ def _joint_index(step: str) -> int:
 def val_runs_seen(monkeypatch):
     """Every VAL run a re-plan starts, as (problem, steps, before the answer?), in the order they start."""
     seen: list[tuple[str, tuple[str, ...], bool]] = []
-    real_start, real_check = val_runs.start_runs, later.check_piece
+    real_start, real_check = val_runs.start_runs, val_runs.check_piece
 
     def start_runs(task, pieces, armed=None):
+        pieces = list(pieces)
         seen.extend((problem, tuple(steps), True) for problem, steps in pieces)
         return real_start(task, pieces, armed)
 
@@ -48,7 +49,7 @@ def val_runs_seen(monkeypatch):
         return real_check(domain, piece, *args, **kwargs)
 
     monkeypatch.setattr(val_runs, "start_runs", start_runs)
-    monkeypatch.setattr(later, "check_piece", check_piece)
+    monkeypatch.setattr(val_runs, "check_piece", check_piece)
     return seen
 
 

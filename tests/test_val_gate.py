@@ -24,7 +24,7 @@ from planhrc.kb_service.usecases import (Context, FeedbackRequest, GoalRequest, 
                                         give_feedback, perceive, take_next_action)
 from planhrc.event_log import DecisionData
 from planhrc.kb_service.usecases.log import piece_record_of, read_event
-from planhrc.pipeline import PieceRecord, Verdict, gate, later, stages
+from planhrc.pipeline import PieceRecord, Verdict, gate, stages, val_runs
 from planhrc.model import make_object
 from planhrc.paths import default_tbox_path
 from planhrc.settings import make_settings
@@ -72,13 +72,13 @@ def adoption(kb: SqliteStore, oid: str, plan_id: str):
 def held_back(monkeypatch):
     """VAL on the later pieces waits until the test sets the event (then runs the real VAL)."""
     release = threading.Event()
-    real = later.check_piece
+    real = val_runs.check_piece
 
     def slow(*args, **kwargs):
         release.wait(60)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(later, "check_piece", slow)
+    monkeypatch.setattr(val_runs, "check_piece", slow)
     yield release
     release.set()
 
