@@ -119,10 +119,13 @@ def _health_worst_wait(server: Server, during: Callable[[], Any]) -> tuple[float
 
 
 def bench_history(checkpoints: list[int], samples: int, links: int, orientations: int, formulation: str,
-                  read_timeout: float, seed: int) -> list[dict[str, Any]]:
+                  read_timeout: float, seed: int, validate: bool = True) -> list[dict[str, Any]]:
+    """The history part; `validate` False: the service with VAL off (`PLANHRC_VALIDATE_PLANS=false`), what a
+    re-plan costs without its check, to set the check's share apart (not a product's figure: no plan is checked)."""
     rng = random.Random(seed)
     rows = []
-    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp)) as server, \
+    env = {} if validate else {"PLANHRC_VALIDATE_PLANS": "false"}
+    with tempfile.TemporaryDirectory(prefix="planhrc-sbench-") as tmp, running_service(Path(tmp), env) as server, \
             client_of(server, read_timeout) as client:
         obj = create_object(client, links, orientations, formulation, "history")
         set_goal(client, obj, random_angles(rng, links, orientations))
@@ -150,7 +153,8 @@ def bench_history(checkpoints: list[int], samples: int, links: int, orientations
                                "status": status if times[-1] != float("inf") else "timeout"}
             slowest = max(READ_ROUTES, key=lambda n: reads[n]["max_ms"])
             worst_health, _ = _health_worst_wait(server, lambda: _timed_get(client, _read_paths(obj, last_seq)[slowest]))
-            row: dict[str, Any] = {"perceptions": checkpoint, "replan": {**summary_ms(lat), "server_cpu_ms": cpu_ms},
+            row: dict[str, Any] = {"perceptions": checkpoint, "validated": validate,
+                                   "replan": {**summary_ms(lat), "server_cpu_ms": cpu_ms},
                    "reads": reads,
                    "slowest_read": slowest, "health_worst_ms_during_slowest_read": round(worst_health * 1000, 2),
                    "rss_mb": round(rss_mb(server.pid), 1)}
@@ -326,6 +330,9 @@ def add_service_bench_parser(subparsers: SubParsers) -> argparse.ArgumentParser:
     p.add_argument("--scale-size", type=_int_list, default=[20, 12], help="scale-out: links,orientations (20,12)")
     p.add_argument("--scale-clients", type=_positive_int, default=8, help="scale-out: closed-loop clients (8)")
     p.add_argument("--scale-seconds", type=float, default=20.0, help="scale-out: seconds per configuration (20)")
+    p.add_argument("--without-val", action="store_true",
+                   help="history: the service with VAL off, no plan checked (what a re-plan costs without its "
+                   "check, beside a run with it; not a product's figure)")
     p.add_argument("--read-timeout", type=float, default=120.0, help="seconds before a read counts as a timeout")
     p.add_argument("--seed", type=int, default=7)
     p.add_argument("--out", type=Path, default=None, help="also write service-bench.json and .md here")
@@ -353,7 +360,7 @@ def run_service_bench(args: argparse.Namespace) -> int:
             report["objects"] = bench_objects(args.objects, args.samples, args.links, args.orientations, args.seed)
         if "history" in parts:
             report["history"] = bench_history(args.checkpoints, args.samples, args.links, args.orientations,
-                                              args.formulation, args.read_timeout, args.seed)
+                                              args.formulation, args.read_timeout, args.seed, not args.without_val)
         if "side-by-side" in parts:
             checkpoints = sorted(args.checkpoints)
             report["side_by_side"] = bench_history_side_by_side(
@@ -398,6 +405,9 @@ def markdown(report: dict[str, Any]) -> str:
                   f"| {r['rss_mb']} MB |" for r in report["objects"]]
         lines.append("")
     if "history" in report:
+        if not all(r.get("validated", True) for r in report["history"]):
+            lines += ["**VAL off** (`--without-val`): no plan of these re-plans was checked; what a re-plan costs "
+                      "without its check, not a product's figure.", ""]
         lines += ["Reads: p95 of 20 requests each (`ontology`, the current ABox as RDF/XML: the worst of 3).", "",
                   "| perceptions on one object | re-plan p50 | p95 | server CPU | " + " | ".join(READ_ROUTES)
                   + " | /health worst wait | RSS |", "|---" * (6 + len(READ_ROUTES)) + "|"]

@@ -49,6 +49,21 @@ def test_service_bench_re_plans_a_bimanual_object_with_the_robot_acting(tmp_path
     assert row["replan"]["n"] >= 3 and row["replan"]["p50_ms"] > 0
 
 
+def test_service_bench_without_val_says_so_in_its_rows_and_its_table(tmp_path):
+    """`--without-val` (what a re-plan costs without its check) is never mistaken for a product's figure: each
+    history row says the plans were not validated, and the table opens with it; a run with VAL says nothing."""
+    for flag in ([], ["--without-val"]):
+        out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "history",
+                              "--checkpoints", "6", "--samples", "5", "--links", "4", "--orientations", "8",
+                              *flag, "--out", str(tmp_path / str(len(flag)))],
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        (row,) = json.loads(out.stdout)["history"]
+        table = (tmp_path / str(len(flag)) / "service-bench.md").read_text()
+        assert row["replan"]["n"] >= 1 and row["validated"] is (not flag)
+        assert ("VAL off" in table) is bool(flag)
+
+
 def test_service_bench_side_by_side_measures_both_histories_in_one_run(tmp_path):
     out = subprocess.run([sys.executable, "-m", "planhrc.cli", "service-bench", "--parts", "side-by-side",
                           "--checkpoints", "2,6", "--samples", "5", "--links", "4", "--orientations", "4",
