@@ -43,6 +43,7 @@ MAX_DOMAINS = 4  # domains kept armed at once (the least recently used one is dr
 READY_WAIT_S = 2.0  # how long the arming thread watches a new process reach its problem
 FIRST_LOOK_S = 0.004  # the arming thread's first look at a new process, a little after VAL has read a short domain
 FORK_SERVER_STARTS = 3  # a fork server that went away is started again this many times at most, then checks arm
+PAST_STARTS_KEPT = 64  # domains whose servers past them were started, remembered (a count each) to stop retrying
 
 
 class _Armed:
@@ -171,7 +172,7 @@ class ArmedValidators:
         # fork servers past a domain (`planner.valfork`), most recently used last, and the domains to start one for
         self._past: OrderedDict[str, ForkServer] = OrderedDict()
         self._past_wanted: set[str] = set()
-        self._past_starts: dict[str, int] = {}
+        self._past_starts: OrderedDict[str, int] = OrderedDict()  # the last domains' starts (bounded: weeks of them)
 
     def start(self, domain: str, problem: str, plan: Sequence[str], *, nice: int = 0) -> ValRun:
         """A VAL run on the plan, on an armed process of `domain` when there is one ready, else started cold;
@@ -259,6 +260,9 @@ class ArmedValidators:
             if self._closed or domain in self._past:
                 return
             self._past_starts[domain] = self._past_starts.get(domain, 0) + 1
+            self._past_starts.move_to_end(domain)
+            while len(self._past_starts) > PAST_STARTS_KEPT:
+                self._past_starts.popitem(last=False)
             path = os.path.join(self._scratch(), f"p{self._made}-domain.pddl")
         try:
             write_file(path, domain)

@@ -284,3 +284,26 @@ def test_a_library_that_fails_to_compile_is_not_kept(monkeypatch, tmp_path):
     folder.mkdir()
     assert library(folder) is None
     assert not list(folder.iterdir())
+
+
+def test_servers_past_many_domains_stay_bounded(monkeypatch):
+    """Weeks of domains: at most `max_domains` servers past a domain run at once (the least recently used stopped,
+    its domain's file removed), and the starts remembered per domain stay bounded too."""
+    from planhrc.planner import armed as armed_module
+
+    forking = ArmedValidators(arm_delay_s=0.0, max_domains=2)
+    try:
+        domains = [DOMAIN.replace("(domain ", f"(domain d{i}-", 1) for i in range(3)]
+        for domain in domains:
+            forking._start_past(domain)
+        assert forking.past_count() == 2
+        assert sorted(p.domain is not None and os.path.exists(p.domain) for p in forking._past.values()) == [True] * 2
+        files = {p.domain for p in forking._past.values()}
+        monkeypatch.setattr(armed_module.ForkServer, "start", classmethod(lambda cls, folder=None, domain=None: None))
+        for i in range(armed_module.PAST_STARTS_KEPT + 20):  # no server can be had for these: nothing left behind
+            forking._start_past(f"(define (domain many-{i}))")
+        assert len(forking._past_starts) == armed_module.PAST_STARTS_KEPT
+        assert forking.past_count() == 2 and {p.domain for p in forking._past.values()} == files
+        assert sorted(os.listdir(os.path.dirname(next(iter(files))))) == sorted(os.path.basename(f) for f in files)
+    finally:
+        forking.close()
