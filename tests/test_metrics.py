@@ -133,13 +133,13 @@ def val_runs_cpu_s(service: int, servers: list[int]) -> float:
 
 @pytest.mark.integration
 def test_val_s_cpu_is_what_the_kernel_counted_for_val_s_runs(tmp_path):
-    """A real `planhrc serve` (the whole plan checked before the answer) re-planning a relative object, whose
-    checks are runs of its VAL fork server, and an absolute one, whose checks are VAL processes it starts and
-    waits for itself (cold runs). After each re-plan `/metrics` counts one more verdict and one more observation
-    of VAL's CPU, whose sum has grown. And the sum is the CPU the kernel counted for those runs, not the
-    service's own: what the fork server and the service itself waited for grew by as much (within the kernel's
-    clock ticks; the service's planners run in its own process here, so VAL's are the only children it waits
-    for)."""
+    """A real `planhrc serve` (the whole plan checked before the answer) re-planning a relative object, whose checks
+    are runs of its VAL fork servers (from the start-up, then past the domain), and an absolute one, whose checks
+    are VAL processes it starts and waits for itself (cold runs). After each re-plan `/metrics` counts one more
+    verdict and one more observation of VAL's CPU, whose sum has grown. And the sum is the CPU the kernel counted
+    for those runs, not the service's own: what the fork server and the service itself waited for grew by as much
+    (within the kernel's clock ticks; the service's planners run in its own process here, so VAL's are the only
+    children it waits for)."""
     with served(tmp_path / "kb.sqlite3", env={"PLANHRC_VAL_EARLY_ANSWER": "false"}) as server, \
             httpx.Client(base_url=server.url, timeout=60) as client:
         before = val_series(client.get("/metrics").text)
@@ -165,7 +165,7 @@ def test_val_s_cpu_is_what_the_kernel_counted_for_val_s_runs(tmp_path):
                 before = now
         assert replans >= 10
         servers = val_fork_servers(server.pid)
-        assert len(servers) == 1
+        assert 1 <= len(servers) <= 2  # the fork server, and the one past the relative domain once it is up
         counted = val_runs_cpu_s(server.pid, servers) - kernel_before
         tick = 1 / os.sysconf("SC_CLK_TCK")  # four counts (user and system, of two processes), each in whole ticks
         assert abs(before["cpu_sum"] - counted) <= 4 * tick + 0.001, (before, counted)
