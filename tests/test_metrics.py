@@ -137,7 +137,7 @@ def test_val_s_cpu_is_what_the_kernel_counted_for_val_s_runs(tmp_path):
     are runs of its VAL fork servers (from the start-up, then past the domain), and an absolute one, whose checks
     are VAL processes it starts and waits for itself (cold runs). After each re-plan `/metrics` counts one more
     verdict and one more observation of VAL's CPU, whose sum has grown. And the sum is the CPU the kernel counted
-    for those runs, not the service's own: what the fork server and the service itself waited for grew by as much
+    for those runs, not the service's own: what the fork servers and the service itself waited for grew by as much
     (within the kernel's clock ticks; the service's planners run in its own process here, so VAL's are the only
     children it waits for)."""
     with served(tmp_path / "kb.sqlite3", env={"PLANHRC_VAL_EARLY_ANSWER": "false"}) as server, \
@@ -167,8 +167,8 @@ def test_val_s_cpu_is_what_the_kernel_counted_for_val_s_runs(tmp_path):
         servers = val_fork_servers(server.pid)
         assert 1 <= len(servers) <= 2  # the fork server, and the one past the relative domain once it is up
         counted = val_runs_cpu_s(server.pid, servers) - kernel_before
-        tick = 1 / os.sysconf("SC_CLK_TCK")  # four counts (user and system, of two processes), each in whole ticks
-        assert abs(before["cpu_sum"] - counted) <= 4 * tick + 0.001, (before, counted)
+        tick = 1 / os.sysconf("SC_CLK_TCK")  # user and system of the service and each server, each in whole ticks
+        assert abs(before["cpu_sum"] - counted) <= 2 * (1 + len(servers)) * tick + 0.001, (before, counted)
         assert 'planhrc_val_cpu_seconds_bucket{le="+Inf"}' in client.get("/metrics").text
 
 
