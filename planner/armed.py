@@ -183,22 +183,16 @@ class ArmedValidators:
         if forks is not None:
             past = self._past_server(domain)
             if past is not None:
-                try:
-                    run = self._forked(past, domain, problem, plan, nice)
-                    self._count("past")
+                run = self._served(past, "past", domain, problem, plan, nice)
+                if run is not None:
                     return run
-                except OSError as exc:  # that server went away: the plain one takes the check
-                    log.warning("VAL's fork server past a domain could not take a check (%s)", exc)
-                    self._drop_past(domain, past)
-            try:
-                run = self._forked(forks, domain, problem, plan, nice)
-                self._count("forked")
+                self._drop_past(domain, past)  # that server went away: the plain one takes the check
+            run = self._served(forks, "forked", domain, problem, plan, nice)
+            if run is not None:
                 return run
-            except OSError as exc:  # the server went away: started again by the next check
-                log.warning("VAL's fork server could not take a check (%s): starting VAL cold", exc)
-                self._drop_fork_server(forks)
-                self._count("cold")
-                return start_validation(domain, problem, plan, nice=nice)
+            self._drop_fork_server(forks)  # the server went away: started again by the next check
+            self._count("cold")
+            return start_validation(domain, problem, plan, nice=nice)
         with self._lock:
             if self._closed:
                 return start_validation(domain, problem, plan, nice=nice)
@@ -295,6 +289,17 @@ class ArmedValidators:
             if self._forks is forks:
                 self._forks = None
         forks.close()
+
+    def _served(self, forks: ForkServer, kind: str, domain: str, problem: str, plan: Sequence[str], nice: int
+                ) -> ValRun | None:
+        """A check as a run of `forks`, counted as `kind`; None when that server could not take it."""
+        try:
+            run = self._forked(forks, domain, problem, plan, nice)
+        except OSError as exc:
+            log.warning("VAL's fork server (%s) could not take a check (%s)", kind, exc)
+            return None
+        self._count(kind)
+        return run
 
     def _forked(self, forks: ForkServer, domain: str, problem: str, plan: Sequence[str], nice: int) -> ValRun:
         """A check as a run of the fork server, its files in the folder the armed processes use: all three, or
