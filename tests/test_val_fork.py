@@ -307,3 +307,27 @@ def test_servers_past_many_domains_stay_bounded(monkeypatch):
         assert sorted(os.listdir(os.path.dirname(next(iter(files))))) == sorted(os.path.basename(f) for f in files)
     finally:
         forking.close()
+
+
+def test_checks_go_on_when_the_fork_servers_are_killed():
+    """Both servers killed (SIGKILL): the next check is refused by neither, it runs cold and gives VAL's verdict;
+    the checks after it have their servers again."""
+    problem, plan = _task()
+    forking = ArmedValidators(arm_delay_s=0.0)
+    try:
+        assert forking.start(DOMAIN, problem, plan).verdict(None).valid
+        deadline = time.monotonic() + 30
+        while forking.past_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        servers = [forking._forks, *forking._past.values()]
+        assert len(servers) == 2 and all(s is not None for s in servers)
+        for killed in servers:
+            os.kill(killed.pid, signal.SIGKILL)
+            killed._proc.wait()
+        before = dict(forking.counts)
+        assert not forking.start(DOMAIN, problem, plan[:-1]).verdict(None).valid  # refused by VAL, not by a server
+        assert forking.counts["cold"] == before["cold"] + 1 and forking.past_count() == 0
+        assert forking.start(DOMAIN, problem, plan).verdict(None).valid
+        assert forking.counts["forked"] + forking.counts["past"] == before["forked"] + before["past"] + 1
+    finally:
+        forking.close()
