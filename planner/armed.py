@@ -306,15 +306,13 @@ class ArmedValidators:
         the problem and the plan on a server past the domain (whose domain file is the server's)."""
         with self._lock:
             prefix = os.path.join(self._scratch(), f"f{self._made}-")
-        files = [prefix + name for name in VAL_FILES]
-        if forks.domain is not None:
-            files[0] = forks.domain
-        ours = files[1:] if forks.domain is not None else files  # removed with the run
+        shared = () if forks.domain is None else (forks.domain,)  # the server's own domain file: not the run's
+        ours = [prefix + name for name in VAL_FILES[len(shared):]]  # written here, removed with the run
+        texts = (domain, problem, plan_text(plan))[len(shared):]
         try:
-            for path, text in zip(files, (domain, problem, plan_text(plan))):
-                if path in ours:
-                    write_file(path, text)
-            return ValRun(forks.run(files), files, None, nice=nice, shared=files[:len(files) - len(ours)])
+            for path, text in zip(ours, texts):
+                write_file(path, text)
+            return ValRun(forks.run([*shared, *ours]), [*shared, *ours], None, nice=nice, shared=shared)
         except BaseException:
             remove_files(ours, None)
             raise

@@ -195,7 +195,6 @@ static char **serve(int ctl, char *argv0, const char *domain, int *argc) {
    run, the request's problem and plan. */
 static int after_ctl = -1;
 static char *after_domain, *after_problem, *after_plan, *run_problem, *run_plan;
-static char after_argv0[4096];
 static char **val_argv; /* VAL's arguments: a run writes its plan's path over the plan's stand-in, which VAL prints */
 
 typedef FILE *(*fopen_fn)(const char *, const char *);
@@ -211,7 +210,7 @@ static FILE *opened(const char *which, const char *path, const char *mode) {
     if (path != NULL && after_problem != NULL) {
         if (run_problem == NULL && after_ctl >= 0 && strcmp(path, after_problem) == 0) {
             int count = 0;
-            char **args = serve(after_ctl, after_argv0, after_domain, &count);
+            char **args = serve(after_ctl, val_argv[0], after_domain, &count);
             run_problem = args[2];
             run_plan = args[3];
             if (strlen(run_plan) <= strlen(val_argv[3])) strcpy(val_argv[3], run_plan);
@@ -239,7 +238,6 @@ int __libc_start_main(main_fn main_, int argc, char **argv, void (*init)(void), 
         after_domain = strdup(argv[1]);
         after_problem = strdup(after);
         after_plan = strdup(plan);
-        snprintf(after_argv0, sizeof after_argv0, "%s", argv[0]);
         val_argv = argv;
         unsetenv("PLANHRC_VALFORK_FD");
         unsetenv("PLANHRC_VALFORK_AFTER");
