@@ -2,13 +2,14 @@
 that VAL's verdicts on the pieces say what one run on the whole plan says (`validation_pieces`)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Sequence
 
 from planhrc.control import possible_control
-from planhrc.model import CONTROL_PREDICATES, HAS_ORIENTATION, ArticulatedObject, State, format_atom
+from planhrc.model import CONTROL_PREDICATES, HAS_ORIENTATION, ArticulatedObject, Atom, State, format_atom
 from planhrc.planner.fast_downward import has_conditional_effects
-from planhrc.planner.scope import narrow_problem
+from planhrc.planner.scope import ProblemParts, narrow_parts, narrow_problem
 
 from .config import PlanOutcome
 from .motion import first_motion_steps
@@ -89,13 +90,21 @@ def piece_of(obj: ArticulatedObject, task_problem: str, steps: Sequence[str], st
     the last piece. With the validation `domain`, the problem leaves out the objects the piece's steps cannot reach
     (`planner.scope.narrow_problem`: VAL's answer is the same, and a piece late in a plan costs VAL much less)."""
     a, b = first - 1, last
-    if b == len(steps):
-        problem = task_problem if a == 0 else _problem_text(obj, states[a], None, task_problem)
+    piece_steps = tuple(steps[a:b])
+    if a == 0 and b == len(steps):
+        problem = task_problem
+        if domain is not None:
+            problem = narrow_problem(domain, problem, piece_steps)
+        return ValPiece(first, last, problem, piece_steps)
+    goal = None if b == len(steps) else states[b]
+    parts = _piece_parts(obj, states[a], goal, task_problem)
+    if parts is None:  # a task text of another shape: written, then read again to be narrowed
+        problem = _problem_text(obj, states[a], goal, task_problem)
+        if domain is not None:
+            problem = narrow_problem(domain, problem, piece_steps)
     else:
-        problem = _problem_text(obj, states[a], states[b], task_problem)
-    if domain is not None:
-        problem = narrow_problem(domain, problem, steps[a:b])
-    return ValPiece(first, last, problem, tuple(steps[a:b]))
+        problem = parts.text() if domain is None else narrow_parts(domain, parts, piece_steps)
+    return ValPiece(first, last, problem, piece_steps)
 
 
 def early_answer_first_piece(obj: ArticulatedObject, outcome: PlanOutcome, merge: bool) -> int | None:
@@ -120,16 +129,47 @@ def _problem_text(obj: ArticulatedObject, start: State, exact_goal: State | None
     static = "".join(line for line in init.splitlines(keepends=True)
                      if not line.startswith(_FLUENT_LINES) and line != _CLOSE)
     fluents = "".join(f"    {format_atom(a)}\n" for a in sorted(_fluents(start)))
-    if exact_goal is None:
-        goal_text = _GOAL + goal
-    else:
-        wanted = _fluents(exact_goal)
-        goal_text = (_GOAL + "".join(f"    {format_atom(a)}\n" for a in sorted(wanted))
-                     + "".join(f"    (not {format_atom((HAS_ORIENTATION, o, j))})\n" for j in obj.joints
-                               for o in obj.orientation_names if (HAS_ORIENTATION, o, j) not in wanted)
-                     + "".join(f"    (not {format_atom(a)})\n" for a in sorted(possible_control(obj) - wanted))
-                     + "  ))\n)\n")
+    goal_text = _GOAL + (goal if exact_goal is None else "".join(line for line, _, _ in _exact_goal(obj, exact_goal)))
     return head + _INIT + static + fluents + _CLOSE + goal_text
+
+
+def _exact_goal(obj: ArticulatedObject, exact_goal: State) -> list[tuple[str, bool, Atom | None]]:
+    """The goal's lines (and the problem's close) for the goal `exact_goal` exactly: each of its fluent atoms, and
+    the negation of every other one; each with whether it is negated and its atom, as `ProblemParts.read` reads
+    them (None: the close's lines)."""
+    wanted = _fluents(exact_goal)
+    return ([(f"    {format_atom(a)}\n", False, a) for a in sorted(wanted)]
+            + [(f"    (not {format_atom(a)})\n", True, a) for a in (
+                (HAS_ORIENTATION, o, j) for j in obj.joints for o in obj.orientation_names)
+               if a not in wanted]
+            + [(f"    (not {format_atom(a)})\n", True, a) for a in sorted(possible_control(obj) - wanted)]
+            + [("  ))\n", False, None), (")\n", False, None)])
+
+
+def _piece_parts(obj: ArticulatedObject, start: State, exact_goal: State | None, task_problem: str
+                 ) -> ProblemParts | None:
+    """The parts (`planner.scope.ProblemParts`) of the problem `_problem_text` writes, built from the task's parts
+    (read once for all the pieces of its plans) and the states, without writing that text and reading it again;
+    None for a task text of another shape (`_problem_text` is then written and read)."""
+    task = _task_parts(task_problem)
+    if task is None:
+        return None
+    parts, static = task
+    init = static + [(f"    {format_atom(a)}", a) for a in sorted(_fluents(start))]
+    if exact_goal is None:
+        return replace(parts, init=init)
+    return replace(parts, init=init, goal=_exact_goal(obj, exact_goal))
+
+
+@lru_cache(maxsize=8)
+def _task_parts(task_problem: str) -> tuple[ProblemParts, list[tuple[str, Atom]]] | None:
+    """A task problem's parts and its static init facts (every init fact but the fluents), or None when the parts
+    do not give the text back, or the text has lines between its init and its goal (`_problem_text` would move
+    them): kept for the last few tasks, whose plans' pieces are built from them."""
+    parts = ProblemParts.read(task_problem)
+    if parts is None or parts.middle or parts.text() != task_problem:
+        return None
+    return parts, [(line, atom) for line, atom in parts.init if not line.startswith(_FLUENT_LINES)]
 
 
 # The parts of a problem written by `translator.problem.write_problem` that `_problem_text` cuts at.

@@ -61,11 +61,14 @@ class _Scope:
 
 
 @dataclass(frozen=True)
-class _Problem:
+class ProblemParts:
     """A problem's text cut where `narrow_problem` edits it: its objects by type, its init facts and its goal
-    literals, each with its line and read once."""
+    literals, each with its line and read once; `text()` is the text they were read from. A caller that writes a
+    problem from parts of another (`pipeline.pieces`) builds its parts directly rather than writing the text and
+    reading it again."""
 
     head: str
+    objects_text: str  # the objects' lines, as read
     objects: dict[str, list[str]]
     between: str
     init: list[tuple[str, Atom]]  # (line, fact)
@@ -73,7 +76,7 @@ class _Problem:
     goal: list[tuple[str, bool, Atom | None]]  # (line with its end, negated, atom; None: not a literal's line)
 
     @classmethod
-    def read(cls, problem: str) -> _Problem | None:
+    def read(cls, problem: str) -> ProblemParts | None:
         try:
             head, rest = problem.split(_OBJECTS, 1)
             objects_text, rest = rest.split(_CLOSE, 1)
@@ -92,7 +95,14 @@ class _Problem:
             text = line.strip()
             negated = text.startswith("(not ")
             goal.append((line, negated, _atom(text[5:-1] if negated else text) if line.startswith("    (") else None))
-        return cls(head, objects, between, [(line, _atom(line)) for line in init_text.splitlines()], middle, goal)
+        return cls(head, objects_text, objects, between, [(line, _atom(line)) for line in init_text.splitlines()],
+                   middle, goal)
+
+    def text(self) -> str:
+        """The problem's text, as `read` cuts it: the text read, for a text of the shape `write_problem` writes."""
+        return (self.head + _OBJECTS + self.objects_text + _CLOSE + self.between + _INIT
+                + "".join(f"{line}\n" for line, _ in self.init) + _CLOSE + self.middle + _GOAL
+                + "".join(line for line, _, _ in self.goal))
 
     def goal_holds_initially(self, dropped: set[str], before: set[str]) -> bool:
         """Whether every goal literal naming an object of `dropped` (and none of `before`, dropped already) holds
@@ -121,30 +131,41 @@ def narrow_problem(domain: str, problem: str, steps: Sequence[str]) -> str:
     nothing can be dropped or the domain, the text or a step does not allow it."""
     if not steps:
         return problem
-    read = _Problem.read(problem)
+    read = ProblemParts.read(problem)
     if read is None:
         return problem
+    return narrow_parts(domain, read, steps, problem)
+
+
+def narrow_parts(domain: str, read: ProblemParts, steps: Sequence[str], text: str | None = None) -> str:
+    """`narrow_problem` on a problem's parts: the narrowed text, or the whole problem's (`text`, else
+    `read.text()`) when nothing can be dropped."""
+    def whole() -> str:
+        return text if text is not None else read.text()
+
+    if not steps:
+        return whole()
     scope, relaxed = _scope_of(domain), relaxed_of(domain)
     if scope is None and relaxed is None:
-        return problem
+        return whole()
     # the static facts (of the predicates no action changes), indexed once for both narrowings
-    statics = _static_facts("\n".join(line for line, atom in read.init
-                                      if atom and atom[0] not in read_operators(domain).fluent))
+    fluent = read_operators(domain).fluent
+    statics = _static_facts("\n".join(line for line, atom in read.init if atom and atom[0] not in fluent))
     dropped: set[str] = set()
     if scope is not None:
         unreached = _unreached(scope, read, steps, statics)
         if unreached is None:
-            return problem  # a step VAL refuses on the whole problem
+            return whole()  # a step VAL refuses on the whole problem
         if unreached and read.goal_holds_initially(unreached, set()):
             dropped |= unreached
     if relaxed is not None:
         never = _never_held(relaxed, read, steps, dropped, statics)
         if never and read.goal_holds_initially(never, dropped):
             dropped |= never
-    return read.without(dropped) if dropped else problem
+    return read.without(dropped) if dropped else whole()
 
 
-def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str], statics: Facts) -> set[str] | None:
+def _unreached(scope: _Scope, read: ProblemParts, steps: Sequence[str], statics: Facts) -> set[str] | None:
     """The objects of the scope's types that no step reaches (by the problem's `statics`); None when a step is not
     an action of the domain or lacks arguments."""
     reached: dict[str, set[str]] = {kind: set() for kind in scope.types}
@@ -168,7 +189,7 @@ def _unreached(scope: _Scope, read: _Problem, steps: Sequence[str], statics: Fac
     return {name for kind in scope.types for name in read.objects.get(kind, ()) if name not in reached[kind]}
 
 
-def _never_held(relaxed: Relaxed, read: _Problem, steps: Sequence[str], dropped: set[str], static: Facts
+def _never_held(relaxed: Relaxed, read: ProblemParts, steps: Sequence[str], dropped: set[str], static: Facts
                 ) -> set[str]:
     """The objects of the relaxed run's types, of the problem without `dropped`, that the run does not keep."""
     initial = [atom for _, atom in read.init if atom and atom[0] in relaxed.fluent and dropped.isdisjoint(atom[1:])]

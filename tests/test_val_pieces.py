@@ -6,6 +6,7 @@ import pytest
 from planhrc import pipeline
 from planhrc.model import make_object
 from planhrc.pipeline import config_from_settings, plan, validation_pieces
+from planhrc.pipeline import pieces as pieces_module
 from planhrc.planner.scope import narrow_problem
 from planhrc.planner.validate import validate_pieces, validate_plan
 from planhrc.settings import make_settings
@@ -107,3 +108,34 @@ def test_short_plans_and_one_piece_use_one_run():
     few = replace(outcome, steps=outcome.steps[:pipeline.MIN_PIECE_STEPS],
                   expected_states=outcome.expected_states[:pipeline.MIN_PIECE_STEPS + 1])
     assert len(validation_pieces(obj, few, 4)) == 1
+
+
+@pytest.mark.parametrize("formulation", ["relative", "absolute", "bimanual"])
+def test_a_piece_built_from_the_tasks_parts_is_the_problem_written_then_narrowed(formulation):
+    """`piece_of` builds a piece's problem from the task's parts, read once, rather than writing the problem's text
+    and reading it again to narrow it: the text, byte for byte, of the way it replaces (`_problem_text`, then
+    `narrow_problem`), for every piece of a plan, the last piece (the task's goal) and a task text of another
+    shape (written and read as before)."""
+    obj = make_object("obj1", formulation, 6, 12)
+    config = config_from_settings(make_settings(validate_plans=False))
+    init = obj.state(obj.joint_values_from_links([0, 90, 180, 270, 0, 90]))
+    goal = obj.configuration_atoms(obj.joint_values_from_links([180, 0, 330, 30, 180, 240]))
+    outcome = plan(obj, init, goal, config)
+    assert outcome.solved and len(outcome.steps) >= 4
+    task, steps, states = outcome.task, outcome.steps, outcome.expected_states
+
+    def written(problem, a, b, domain):
+        text = pieces_module._problem_text(obj, states[a - 1], None if b == len(steps) else states[b], problem)
+        return text if domain is None else narrow_problem(domain, text, steps[a - 1:b])
+
+    spaced = task.problem.replace("  (:goal (and\n", "\n  (:goal (and\n", 1)  # a line before the goal
+    compared = 0
+    for a in range(2, len(steps) + 1):
+        for b in sorted({a, min(a + 2, len(steps)), len(steps)}):
+            for problem, domain in ((task.problem, task.validation_domain), (task.problem, None),
+                                    (spaced, task.validation_domain)):
+                piece = pieces_module.piece_of(obj, problem, steps, states, a, b, domain)
+                assert piece.problem == written(problem, a, b, domain)
+                assert piece.steps == tuple(steps[a - 1:b])
+                compared += 1
+    assert compared >= 3 * 2 * (len(steps) - 1)
