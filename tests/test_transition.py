@@ -211,6 +211,30 @@ def test_a_step_with_conditional_effects_grounds_as_a_fresh_one_in_every_state_a
             grounder.ground(step, state, statics=statics)  # the last step again: its joint has moved on
 
 
+def test_the_static_facts_of_one_problem_are_one_set_whatever_objects_hold_them():
+    """`Grounder.statics` gives the set it gave last for equal static facts, so that what is kept for them is found
+    by identity: states of one problem whose atoms are other objects (a planning worker's jobs come unpickled)
+    share one set; another problem's facts get their own, and the steps ground as fresh ones either way."""
+    import pickle
+
+    from planhrc.transition import Grounder, ground_action
+
+    domain = read_domain_model(default_tbox_path(), "absolute")
+    grounder = Grounder(domain)
+    obj = make_object("o", "absolute", 5, 8)
+    state = obj.state([0, 45, 90, 135, 180])
+    first = grounder.statics(state)
+    copied = pickle.loads(pickle.dumps(obj.state([90, 90, 0, 45, 315])))  # the same statics, new objects
+    assert grounder.statics(copied) is first
+    other = make_object("o", "absolute", 6, 8).state([0] * 6)
+    assert grounder.statics(other) is not first and grounder.statics(other) == frozenset(
+        a for a in other if a[0] not in {"hasorientation"})
+    step = "(rotateclockwise o_l3 o_l2 o_j3 deg_0 deg_45)"  # j3 at 0 in both states
+    for s in (copied, obj.state([90, 0, 0, 45, 315])):
+        for _ in range(2):  # the second time from what was kept
+            assert grounder.ground(step, s, statics=grounder.statics(s)) == ground_action(domain, step, s)
+
+
 def test_bimanual_turns_that_differ_only_in_orientations_and_grippers_share_their_bindings():
     """A bimanual turn's conditional effect names only its turned link and joint: steps that differ in their
     orientations or grippers share the bindings the static facts allow (one set per action, link and joint), and
