@@ -10,8 +10,10 @@ perception: the HTTP status, the wall time to the answer, which is the time to t
 answer names one (a re-plan is answered once VAL accepted its first motion, and the store checked it), the plan's
 length and how many of its steps were checked before the answer (the first motion, or the whole plan when it was
 checked in one piece) against how many behind it, and the re-plan's stages as the service timed them (translate,
-plan, expected states: the replay of every step, which the store needs whole; VAL before the answer). A 503 is the
-deadline passing; it is reported, never retried.
+plan, expected states: the replay of every step, which the store needs whole; VAL before the answer), and the
+service process's own CPU seconds to the answer and behind it, until the later pieces have their verdicts (VAL's
+and the planning worker's CPU are theirs, not counted). A 503 is the deadline passing; it is reported, never
+retried.
 
 With `--stage-cpu`, each size's re-plan stages on the answer's path are first run once in the bench's own process
 and their CPU seconds reported (`stage_cpu`: the planning worker's translation, planning, replay and packing, the
@@ -30,7 +32,7 @@ from typing import Any, Sequence
 
 import httpx
 
-from planhrc.bench.cpu import Settle
+from planhrc.bench.cpu import Settle, process_cpu_s
 from planhrc.bench.grid import machine_info, write_json_and_table
 from planhrc.bench.service_calls import TOKEN, create_object, random_angles, running_service, set_goal
 from planhrc.event_log import DecisionData, data_of
@@ -61,10 +63,12 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
         settle = Settle(client, ident)
         time.sleep(first_after_s)
         for _ in range(runs):
+            before = process_cpu_s(server.pid)[0]
             t = time.perf_counter()
             r = client.post(f"/objects/{ident}/perceptions",
                             json={"link_orientations_deg": random_angles(rng, links, orientations)})
             row: dict[str, Any] = {"status": r.status_code, "seconds": round(time.perf_counter() - t, 3)}
+            answered = process_cpu_s(server.pid)[0]
             if r.status_code == 200:
                 answer = r.json()
                 row["decision"] = answer["decision"]
@@ -88,8 +92,12 @@ def measure_size(links: int, orientations: int, formulation: str, runs: int, see
                 row["stages_s"] = {k: round(float(timings[k]), 3) for k in STAGES if k in timings}
             else:
                 row["detail"] = str(r.json().get("detail", ""))[:160]
-            rows.append(row)
             settle.wait(limit_s=600.0)
+            # the service's own CPU (not VAL's, nor the planning worker's), to the answer and then behind it until
+            # the plan's later pieces have their verdicts (the bench's own probes of `settle` included)
+            row["service_cpu_s"] = {"to_answer": round(answered - before, 2),
+                                    "behind": round(process_cpu_s(server.pid)[0] - answered, 2)}
+            rows.append(row)
     return {"links": links, "orientations": orientations, "formulation": formulation, "first_after_s": first_after_s,
             "rows": rows}
 
@@ -160,8 +168,9 @@ def markdown(report: dict[str, Any]) -> str:
                          + " | ".join(str(row["cpu_s"].get(k, "-")) for k in CPU_STAGES) + " |")
         lines.append("")
     lines += ["| object | perception | HTTP | seconds | first validated action s | decision | plan steps | "
-              "checked before the answer | translate / plan / expected states / VAL s |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "checked before the answer | translate / plan / expected states / VAL s | "
+              "service CPU s: to the answer / behind it |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for size in report["sizes"]:
         for i, row in enumerate(size["rows"], start=1):
             stages = row.get("stages_s") or {}
@@ -169,8 +178,13 @@ def markdown(report: dict[str, Any]) -> str:
             lines.append(f"| {size['links']} x {size['orientations']} {size['formulation']} | {i} | {row['status']} | "
                          f"{row['seconds']} | {row.get('first_validated_action_s', '-')} | "
                          f"{row.get('decision', row.get('detail', '-'))} | {row.get('plan_steps', '-')} | "
-                         f"{row.get('accepted_before_answer', '-')} | {said} |")
+                         f"{row.get('accepted_before_answer', '-')} | {said} | {_cpu(row)} |")
     return "\n".join(lines)
+
+
+def _cpu(row: dict[str, Any]) -> str:
+    cpu = row.get("service_cpu_s")
+    return f"{cpu['to_answer']} / {cpu['behind']}" if cpu else "-"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -26,4 +26,6 @@ def test_a_small_absolute_object_is_answered_with_its_validated_first_motion(tmp
     assert 1 <= rows[0]["accepted_before_answer"] <= rows[0]["plan_steps"]
     assert rows[0]["first_validated_action_s"] == rows[0]["seconds"]  # the answer names a validated first motion
     assert set(rows[0]["stages_s"]) >= {"translate", "plan", "expected_states"}
+    # the service's own CPU, to the answer (it planned and checked the plan) and behind it
+    assert all(r["service_cpu_s"]["to_answer"] > 0 and r["service_cpu_s"]["behind"] >= 0 for r in rows)
     assert "| 6 x 8 absolute | 1 | 200 |" in (tmp_path / "large.md").read_text()
