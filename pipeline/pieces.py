@@ -91,19 +91,15 @@ def piece_of(obj: ArticulatedObject, task_problem: str, steps: Sequence[str], st
     (`planner.scope.narrow_problem`: VAL's answer is the same, and a piece late in a plan costs VAL much less)."""
     a, b = first - 1, last
     piece_steps = tuple(steps[a:b])
-    if a == 0 and b == len(steps):
-        problem = task_problem
-        if domain is not None:
-            problem = narrow_problem(domain, problem, piece_steps)
-        return ValPiece(first, last, problem, piece_steps)
+    whole = a == 0 and b == len(steps)  # the task's own problem
     goal = None if b == len(steps) else states[b]
-    parts = _piece_parts(obj, states[a], goal, task_problem)
-    if parts is None:  # a task text of another shape: written, then read again to be narrowed
-        problem = _problem_text(obj, states[a], goal, task_problem)
+    parts = None if whole else _piece_parts(obj, states[a], goal, task_problem)
+    if parts is not None:
+        problem = parts.text() if domain is None else narrow_parts(domain, parts, piece_steps)
+    else:  # the task's problem, or a task text of another shape: written, then read again to be narrowed
+        problem = task_problem if whole else _problem_text(obj, states[a], goal, task_problem)
         if domain is not None:
             problem = narrow_problem(domain, problem, piece_steps)
-    else:
-        problem = parts.text() if domain is None else narrow_parts(domain, parts, piece_steps)
     return ValPiece(first, last, problem, piece_steps)
 
 
