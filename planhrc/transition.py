@@ -450,7 +450,7 @@ class Grounder:
                             statics: frozenset[Atom] | None) -> ActionSpec:
         entry = self._conditional[step]
         statics = self.statics(state) if statics is None and entry is not None else statics
-        if entry is None or entry.statics != statics:
+        if entry is None or (entry.statics is not statics and entry.statics != statics):
             action = ground_action(self.domain, step, state, index)
             if entry is not None:  # other static facts (another problem's): ground for these from now on
                 self._conditional[step] = self._compile(action, statics if statics is not None else
